@@ -1,0 +1,14 @@
+//! Petzval core library: lens optics (prescriptions, exact tracing, paraxial analysis, apertures),
+//! cameras and sensors. Data flows one way: lens file → [`Lens`] → [`Camera`].
+
+mod error;
+pub mod optics;
+
+pub use error::{Error, Result};
+pub use optics::aperture::{Aperture, ApertureMask, ApertureShape};
+pub use optics::glass::Material;
+pub use optics::import::{load_lens_file, read_prescription};
+pub use optics::lens::{Absorbed, Lens, LensSurface, Ray, StopMode, TraceDirection, Traced};
+pub use optics::library::{library_lens, load_lens, LIBRARY};
+pub use optics::paraxial::ParaxialData;
+pub use optics::prescription::Prescription;

@@ -1,0 +1,225 @@
+//! Aperture stop shapes: circle, straight or curved blades, anamorphic ratio, image mask.
+//!
+//! | name | type | unit | default |
+//! |---|---|---|---|
+//! | `shape` | [`ApertureShape`] | — | circle |
+//! | `rotation_rad` | f64, rotation of blades or mask | radians | 0 |
+//! | `anamorphic_ratio` | f64: height / width of the opening; x is divided by it (Blender's `aperture_ratio`) | — | 1 |
+//!
+//! The opening is given by its circumradius `R` (the stop semi-diameter at the current
+//! f-number): a circle of radius R, a regular polygon with vertices on the circle of radius R,
+//! or a mask image spanning the square [−R, R]².
+
+use crate::error::{Error, Result};
+use std::path::Path;
+use std::sync::Arc;
+
+/// A grey-level transmission mask (row 0 = top = +y).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ApertureMask {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Transmission per pixel in [0, 1], row-major from the top.
+    pub transmission: Vec<f32>,
+    /// Where it came from (for metadata).
+    pub path: String,
+}
+
+impl ApertureMask {
+    /// Loads a PNG (luminance, or alpha when present and not opaque) or EXR (luminance) mask.
+    pub fn load(path: &Path) -> Result<Self> {
+        let err = |m: String| Error::ApertureImage { path: path.to_path_buf(), message: m };
+        let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+        let (width, height, transmission) = if ext == "exr" {
+            let img = exr::prelude::read_first_rgba_layer_from_file(
+                path,
+                |res, _| (res.width(), res.height(), vec![0f32; res.width() * res.height()]),
+                |(w, _, px), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+                    px[pos.y() * *w + pos.x()] = 0.2126 * r + 0.7152 * g + 0.0722 * b;
+                },
+            )
+            .map_err(|e| err(e.to_string()))?;
+            let (w, h, px) = img.layer_data.channel_data.pixels;
+            (w, h, px)
+        } else {
+            let img = image::open(path).map_err(|e| err(e.to_string()))?;
+            let rgba = img.to_rgba32f();
+            let (w, h) = (rgba.width() as usize, rgba.height() as usize);
+            let has_alpha = rgba.pixels().any(|p| p.0[3] < 1.0);
+            let px = rgba
+                .pixels()
+                .map(|p| {
+                    let [r, g, b, a] = p.0;
+                    if has_alpha { a } else { 0.2126 * r + 0.7152 * g + 0.0722 * b }
+                })
+                .collect();
+            (w, h, px)
+        };
+        if width == 0 || height == 0 {
+            return Err(err("empty image".into()));
+        }
+        let transmission: Vec<f32> =
+            transmission.into_iter().map(|v| if v.is_finite() { v.clamp(0.0, 1.0) } else { 0.0 }).collect();
+        if transmission.iter().all(|v| *v <= 0.0) {
+            return Err(err("the mask is entirely black: no light would pass".into()));
+        }
+        Ok(ApertureMask { width, height, transmission, path: path.display().to_string() })
+    }
+
+    /// Transmission at normalised coordinates u, v in [−1, 1] (v up); 0 outside.
+    pub fn lookup(&self, u: f64, v: f64) -> f64 {
+        if !(-1.0..=1.0).contains(&u) || !(-1.0..=1.0).contains(&v) {
+            return 0.0;
+        }
+        let x = (((u + 1.0) * 0.5 * self.width as f64) as usize).min(self.width - 1);
+        let y = (((1.0 - v) * 0.5 * self.height as f64) as usize).min(self.height - 1);
+        self.transmission[y * self.width + x] as f64
+    }
+}
+
+/// The shape of the stop opening.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ApertureShape {
+    /// A circle.
+    Circle,
+    /// A regular polygon of `count` blades; `curvature` 0 = straight, 1 = circular arcs.
+    Blades {
+        /// Number of blades (≥ 3).
+        count: u32,
+        /// Blade curvature in [0, 1].
+        curvature: f64,
+    },
+    /// A transmission mask spanning [−R, R]².
+    Mask(Arc<ApertureMask>),
+}
+
+/// The stop opening: shape, rotation and anamorphic squeeze.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Aperture {
+    /// Shape.
+    pub shape: ApertureShape,
+    /// Rotation (radians, counter-clockwise seen from the film).
+    pub rotation_rad: f64,
+    /// Height / width of the opening.
+    pub anamorphic_ratio: f64,
+}
+
+impl Default for Aperture {
+    fn default() -> Self {
+        Aperture { shape: ApertureShape::Circle, rotation_rad: 0.0, anamorphic_ratio: 1.0 }
+    }
+}
+
+impl Aperture {
+    /// Transmission in [0, 1] of the point (x, y) on the stop plane for circumradius `radius_mm`.
+    #[inline]
+    pub fn transmission(&self, x: f64, y: f64, radius_mm: f64) -> f64 {
+        // 1. Undo the anamorphic squeeze and normalise by the circumradius.
+        let u = x * self.anamorphic_ratio / radius_mm;
+        let v = y / radius_mm;
+        match &self.shape {
+            ApertureShape::Circle => {
+                if u * u + v * v <= 1.0 {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+            ApertureShape::Blades { count, curvature } => {
+                if inside_blades(u, v, *count, *curvature, self.rotation_rad) {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+            ApertureShape::Mask(mask) => {
+                let (s, c) = self.rotation_rad.sin_cos();
+                // rotate the point into the mask's frame
+                mask.lookup(c * u + s * v, -s * u + c * v)
+            }
+        }
+    }
+
+    /// Whether the opening is symmetric under every rotation about the axis.
+    pub fn is_circular(&self) -> bool {
+        matches!(self.shape, ApertureShape::Circle) && self.anamorphic_ratio == 1.0
+    }
+
+    /// Radius of a circle that contains the whole opening, as a multiple of the circumradius.
+    pub fn bounding_radius_factor(&self) -> f64 {
+        let base = match self.shape {
+            ApertureShape::Mask(_) => std::f64::consts::SQRT_2,
+            _ => 1.0,
+        };
+        base * (1.0 / self.anamorphic_ratio).max(1.0)
+    }
+}
+
+/// Point-in-polygon for a regular N-gon of circumradius 1 whose first vertex is at `rotation`,
+/// with blade edges bowed outwards into circular arcs by `curvature`.
+fn inside_blades(u: f64, v: f64, count: u32, curvature: f64, rotation: f64) -> bool {
+    let r2 = u * u + v * v;
+    if r2 > 1.0 {
+        return false;
+    }
+    let n = count as f64;
+    let half = std::f64::consts::PI / n;
+    // 1. Angle to the nearest edge normal (normals lie halfway between vertices).
+    let phi = v.atan2(u) - rotation - half;
+    let sector = (phi / (2.0 * half)).round();
+    let alpha = phi - sector * 2.0 * half;
+    let r = r2.sqrt();
+    let along = r * alpha.cos(); // distance along the edge normal
+    let apothem = half.cos();
+    if curvature <= 0.0 {
+        return along <= apothem;
+    }
+    // 2. Curved blade: an arc of radius 1/curvature through both vertices.
+    let rho = 1.0 / curvature;
+    let s = half.sin();
+    let d = apothem - (rho * rho - s * s).sqrt(); // arc centre along the normal
+    let across = r * alpha.sin();
+    (along - d).powi(2) + across * across <= rho * rho
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hexagon_area_matches_formula() {
+        let ap = Aperture { shape: ApertureShape::Blades { count: 6, curvature: 0.0 }, rotation_rad: 0.3, anamorphic_ratio: 1.0 };
+        let n = 800;
+        let mut inside = 0usize;
+        for i in 0..n {
+            for j in 0..n {
+                let x = -1.0 + 2.0 * (i as f64 + 0.5) / n as f64;
+                let y = -1.0 + 2.0 * (j as f64 + 0.5) / n as f64;
+                if ap.transmission(x, y, 1.0) > 0.0 {
+                    inside += 1;
+                }
+            }
+        }
+        let area = 4.0 * inside as f64 / (n * n) as f64;
+        let expected = 0.5 * 6.0 * (2.0 * std::f64::consts::PI / 6.0).sin();
+        assert!((area - expected).abs() < 5e-3, "{area} vs {expected}");
+    }
+
+    #[test]
+    fn fully_curved_blades_are_a_circle() {
+        let ap = Aperture { shape: ApertureShape::Blades { count: 5, curvature: 1.0 }, rotation_rad: 0.0, anamorphic_ratio: 1.0 };
+        for k in 0..360 {
+            let a = (k as f64).to_radians();
+            assert!(ap.transmission(0.999 * a.cos(), 0.999 * a.sin(), 1.0) > 0.0);
+        }
+    }
+
+    #[test]
+    fn anamorphic_ratio_narrows_x() {
+        let ap = Aperture { anamorphic_ratio: 2.0, ..Default::default() };
+        assert_eq!(ap.transmission(0.6, 0.0, 1.0), 0.0);
+        assert_eq!(ap.transmission(0.0, 0.9, 1.0), 1.0);
+    }
+}

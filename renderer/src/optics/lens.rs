@@ -1,0 +1,461 @@
+//! A lens system built from a validated prescription, and exact sequential ray tracing (f64) in
+//! both directions.
+//!
+//! Frame: millimetres, z along the optical axis from the first surface's vertex, positive
+//! towards the film; x to the right and y up as seen from the film looking at the scene.
+//!
+//! | name | type | unit | default |
+//! |---|---|---|---|
+//! | `stop_semi_diameter_mm` | f64, current stop opening (circumradius) | mm | file's `stop_semi_diameter_mm`, else widest |
+//! | `wavelength_nm` (per trace) | f64 | nm | primary wavelength |
+
+use super::aperture::{Aperture, ApertureMask, ApertureShape};
+use super::glass::{Material, WAVELENGTH_D_NM};
+use super::paraxial::{self, ParaxialData};
+use super::prescription::{self, ApertureShapeSpec, Prescription, SourceMap, DEFAULT_WAVELENGTHS_NM};
+use super::surface::{refract, Shape};
+use crate::error::{Error, Result};
+use glam::{DVec2, DVec3};
+use std::path::Path;
+use std::sync::Arc;
+
+/// A ray in the lens frame (mm); `direction` is a unit vector.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ray {
+    /// Origin.
+    pub origin: DVec3,
+    /// Unit direction.
+    pub direction: DVec3,
+}
+
+impl Ray {
+    /// A ray; the direction is normalised.
+    pub fn new(origin: DVec3, direction: DVec3) -> Ray {
+        Ray { origin, direction: direction.normalize() }
+    }
+}
+
+/// Which way a ray travels through the lens.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TraceDirection {
+    /// From the scene (front) to the film (back).
+    SceneToFilm,
+    /// From the film (back) to the scene (front): rendering.
+    FilmToScene,
+}
+
+/// Why a ray did not make it through.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Absorbed {
+    /// Missed surface `i` (no intersection, or hit behind the ray).
+    Missed(usize),
+    /// Hit surface `i` outside its semi-diameter.
+    Clipped(usize),
+    /// Total internal reflection at surface `i`.
+    TotalInternalReflection(usize),
+    /// Blocked by the stop opening.
+    Stop,
+}
+
+/// What came out of the lens.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Traced {
+    /// The outgoing ray, starting on the last surface it crossed.
+    pub ray: Ray,
+    /// Stop transmission (1 inside a hard-edged opening; grey levels for a mask).
+    pub transmission: f64,
+    /// Where the ray crossed the stop plane (x, y).
+    pub stop_point: DVec2,
+}
+
+/// Whether the stop opening clips rays.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StopMode {
+    /// Apply the current opening and shape.
+    Apply,
+    /// Only the stop's housing clips (for baking tables with the stop open).
+    Open,
+}
+
+/// One surface of a built lens.
+#[derive(Debug, Clone)]
+pub struct LensSurface {
+    /// Vertex position on the axis.
+    pub z_mm: f64,
+    /// Distance to the next surface.
+    pub thickness_mm: f64,
+    /// Geometry.
+    pub shape: Shape,
+    /// Clear semi-diameter (the stop's: its widest opening).
+    pub semi_diameter_mm: f64,
+    /// Medium after the surface.
+    pub material_after: Material,
+    /// This is the aperture stop.
+    pub is_stop: bool,
+    /// Mechanical radius (stop housing; equals the semi-diameter otherwise).
+    pub housing_semi_diameter_mm: f64,
+}
+
+/// A lens system ready to trace. Immutable; [`Lens::with_stop_semi_diameter`] and
+/// [`Lens::stopped_down`] return new lenses, and [`Lens::rebuild`] is the one entry point that
+/// rebuilds from an edited prescription (used by fitting).
+#[derive(Debug, Clone)]
+pub struct Lens {
+    prescription: Prescription,
+    source_label: String,
+    surfaces: Vec<LensSurface>,
+    stop_index: usize,
+    stop_semi_diameter_mm: f64,
+    aperture: Aperture,
+    primary_wavelength_nm: f64,
+    wavelengths_nm: Vec<f64>,
+    /// Index after each surface at the primary wavelength.
+    primary_index_after: Vec<f64>,
+    paraxial: Option<ParaxialData>,
+    rotationally_symmetric: bool,
+}
+
+impl Lens {
+    /// Builds from a prescription. `map` names the file in errors; `base_dir` resolves a mask
+    /// image path.
+    pub fn new(p: Prescription, map: &SourceMap, base_dir: Option<&Path>) -> Result<Lens> {
+        // 1. Field checks and material look-up.
+        let resolved = prescription::resolve(&p, map)?;
+        // 2. Surfaces with absolute positions.
+        let mut z = 0.0;
+        let mut surfaces = Vec::with_capacity(resolved.len());
+        for r in &resolved {
+            let s = &r.spec;
+            let shape = Shape {
+                curvature_per_mm: if s.radius_mm == 0.0 { 0.0 } else { 1.0 / s.radius_mm },
+                conic: s.conic,
+                aspheric: s.aspheric.clone(),
+                cylinder: s.cylinder,
+            };
+            surfaces.push(LensSurface {
+                z_mm: z,
+                thickness_mm: s.thickness_mm,
+                shape,
+                semi_diameter_mm: s.semi_diameter_mm,
+                material_after: r.material_after.clone(),
+                is_stop: s.stop,
+                housing_semi_diameter_mm: s.housing_semi_diameter_mm.unwrap_or(s.semi_diameter_mm),
+            });
+            z += s.thickness_mm;
+        }
+        check_geometry(&surfaces, map)?;
+        let stop_index = surfaces.iter().position(|s| s.is_stop).unwrap_or(0);
+        // 3. Aperture shape.
+        let a = &p.aperture;
+        let shape = match a.shape {
+            ApertureShapeSpec::Circle => ApertureShape::Circle,
+            ApertureShapeSpec::Blades => ApertureShape::Blades { count: a.blades.unwrap_or(6), curvature: a.blade_curvature },
+            ApertureShapeSpec::Image => {
+                let rel = a.image.clone().unwrap_or_default();
+                let path = match base_dir {
+                    Some(d) => d.join(&rel),
+                    None => rel.into(),
+                };
+                ApertureShape::Mask(Arc::new(ApertureMask::load(&path)?))
+            }
+        };
+        let aperture = Aperture { shape, rotation_rad: a.rotation_deg.to_radians(), anamorphic_ratio: a.anamorphic_ratio };
+        let primary = p.lens.primary_wavelength_nm.unwrap_or(WAVELENGTH_D_NM);
+        let wavelengths = p.lens.wavelengths_nm.clone().unwrap_or_else(|| DEFAULT_WAVELENGTHS_NM.to_vec());
+        let primary_index_after = surfaces.iter().map(|s| s.material_after.index(primary)).collect();
+        let rotationally_symmetric = surfaces.iter().all(|s| s.shape.is_rotationally_symmetric());
+        let stop_open = p.lens.stop_semi_diameter_mm.unwrap_or(surfaces[stop_index].semi_diameter_mm);
+        let mut lens = Lens {
+            prescription: p,
+            source_label: map.file.clone(),
+            surfaces,
+            stop_index,
+            stop_semi_diameter_mm: stop_open,
+            aperture,
+            primary_wavelength_nm: primary,
+            wavelengths_nm: wavelengths,
+            primary_index_after,
+            paraxial: None,
+            rotationally_symmetric,
+        };
+        // 4. Precompute first-order data.
+        lens.paraxial = Some(paraxial::analyse(&lens, primary).map_err(|e| Error::lens_file(&map.file, 0, "surface", e.to_string()))?);
+        Ok(lens)
+    }
+
+    /// Parses and builds a lens from our TOML text.
+    pub fn from_toml(text: &str, file: &str, base_dir: Option<&Path>) -> Result<Lens> {
+        let (p, map) = prescription::parse_toml(text, file)?;
+        Lens::new(p, &map, base_dir)
+    }
+
+    /// Rebuilds from an edited prescription, keeping the current stop opening when it still fits.
+    pub fn rebuild(&self, p: Prescription) -> Result<Lens> {
+        let map = SourceMap::new(self.source_label.clone(), vec![]);
+        let lens = Lens::new(p, &map, None)?;
+        let r = self.stop_semi_diameter_mm.min(lens.surfaces[lens.stop_index].semi_diameter_mm);
+        lens.with_stop_semi_diameter(r)
+    }
+
+    /// The prescription this lens was built from.
+    pub fn prescription(&self) -> &Prescription {
+        &self.prescription
+    }
+    /// Lens name.
+    pub fn name(&self) -> &str {
+        &self.prescription.lens.name
+    }
+    /// Where the lens was loaded from (file path or `library:NAME`).
+    pub fn source_label(&self) -> &str {
+        &self.source_label
+    }
+    /// Surfaces, front to back.
+    pub fn surfaces(&self) -> &[LensSurface] {
+        &self.surfaces
+    }
+    /// Index of the aperture stop.
+    pub fn stop_index(&self) -> usize {
+        self.stop_index
+    }
+    /// Current stop opening (circumradius).
+    pub fn stop_semi_diameter_mm(&self) -> f64 {
+        self.stop_semi_diameter_mm
+    }
+    /// Widest stop opening.
+    pub fn max_stop_semi_diameter_mm(&self) -> f64 {
+        self.surfaces[self.stop_index].semi_diameter_mm
+    }
+    /// The stop's shape.
+    pub fn aperture(&self) -> &Aperture {
+        &self.aperture
+    }
+    /// Primary wavelength.
+    pub fn primary_wavelength_nm(&self) -> f64 {
+        self.primary_wavelength_nm
+    }
+    /// Design wavelengths.
+    pub fn wavelengths_nm(&self) -> &[f64] {
+        &self.wavelengths_nm
+    }
+    /// First-order data at the primary wavelength and current stop.
+    pub fn paraxial(&self) -> &ParaxialData {
+        self.paraxial.as_ref().expect("paraxial data is computed in Lens::new")
+    }
+    /// Whether every surface is rotationally symmetric (no cylinders).
+    pub fn is_rotationally_symmetric(&self) -> bool {
+        self.rotationally_symmetric
+    }
+    /// Whether any glass disperses.
+    pub fn has_dispersion(&self) -> bool {
+        self.surfaces.iter().any(|s| s.material_after.is_dispersive())
+    }
+    /// z of the last surface's vertex.
+    pub fn last_vertex_z_mm(&self) -> f64 {
+        self.surfaces.last().map(|s| s.z_mm).unwrap_or(0.0)
+    }
+    /// Distance from the last vertex to the design image plane (the file's last thickness, or the
+    /// paraxial back focal length when that is 0).
+    pub fn design_back_focus_mm(&self) -> f64 {
+        let t = self.surfaces.last().map(|s| s.thickness_mm).unwrap_or(0.0);
+        if t > 0.0 {
+            t
+        } else {
+            self.paraxial().bfl_mm
+        }
+    }
+    /// Largest clear semi-diameter of the last (film-side) surface.
+    pub fn rear_semi_diameter_mm(&self) -> f64 {
+        self.surfaces.last().map(|s| s.semi_diameter_mm).unwrap_or(0.0)
+    }
+
+    /// Index of the medium before surface `i` (scene side).
+    #[inline]
+    pub fn index_before(&self, i: usize, wavelength_nm: f64) -> f64 {
+        if i == 0 {
+            1.0
+        } else {
+            self.index_after(i - 1, wavelength_nm)
+        }
+    }
+
+    /// Index of the medium after surface `i` (film side).
+    #[inline]
+    pub fn index_after(&self, i: usize, wavelength_nm: f64) -> f64 {
+        if wavelength_nm == self.primary_wavelength_nm {
+            self.primary_index_after[i]
+        } else {
+            self.surfaces[i].material_after.index(wavelength_nm)
+        }
+    }
+
+    /// A copy with the stop opened or closed to `semi_diameter_mm`.
+    pub fn with_stop_semi_diameter(&self, semi_diameter_mm: f64) -> Result<Lens> {
+        let max = self.max_stop_semi_diameter_mm();
+        if !(semi_diameter_mm.is_finite() && semi_diameter_mm > 0.0 && semi_diameter_mm <= max * (1.0 + 1e-12)) {
+            return Err(Error::Optics(format!(
+                "stop semi-diameter {semi_diameter_mm} mm is outside (0, {max}] mm for lens '{}'",
+                self.name()
+            )));
+        }
+        let mut lens = self.clone();
+        lens.stop_semi_diameter_mm = semi_diameter_mm.min(max);
+        lens.paraxial = Some(paraxial::analyse(&lens, lens.primary_wavelength_nm)?);
+        Ok(lens)
+    }
+
+    /// A copy stopped to f-number `f_number` (object at infinity). Errors when the lens cannot
+    /// open that wide.
+    pub fn stopped_down(&self, f_number: f64) -> Result<Lens> {
+        let r = paraxial::stop_radius_for_f_number(self, f_number)?;
+        let max = self.max_stop_semi_diameter_mm();
+        if r > max * (1.0 + 1e-9) {
+            let widest = f_number * r / max;
+            return Err(Error::Optics(format!(
+                "lens '{}' cannot open to f/{f_number}: its widest aperture is f/{widest:.3}",
+                self.name()
+            )));
+        }
+        self.with_stop_semi_diameter(r.min(max))
+    }
+
+    /// A copy with a different stop shape.
+    pub fn with_aperture(&self, aperture: Aperture) -> Lens {
+        let mut lens = self.clone();
+        lens.aperture = aperture;
+        lens
+    }
+
+    /// Traces a ray through every surface. `None` when absorbed.
+    #[inline]
+    pub fn trace(&self, ray: &Ray, wavelength_nm: f64, direction: TraceDirection) -> Option<Traced> {
+        self.trace_detailed(ray, wavelength_nm, direction, StopMode::Apply).ok()
+    }
+
+    /// Traces a ray through every surface, saying where it was absorbed.
+    pub fn trace_detailed(
+        &self,
+        ray: &Ray,
+        wavelength_nm: f64,
+        direction: TraceDirection,
+        stop: StopMode,
+    ) -> Result<Traced, Absorbed> {
+        let n = self.surfaces.len();
+        let mut o = ray.origin;
+        let mut d = ray.direction;
+        let mut transmission = 1.0;
+        let mut stop_point = DVec2::ZERO;
+        for step in 0..n {
+            let i = match direction {
+                TraceDirection::SceneToFilm => step,
+                TraceDirection::FilmToScene => n - 1 - step,
+            };
+            let s = &self.surfaces[i];
+            // 1. Intersect in the surface's local frame.
+            let local = DVec3::new(o.x, o.y, o.z - s.z_mm);
+            let t = s.shape.intersect(local, d).ok_or(Absorbed::Missed(i))?;
+            let p = local + t * d;
+            let r2 = p.x * p.x + p.y * p.y;
+            // 2. Clip by the housing / clear aperture.
+            if s.is_stop {
+                if r2 > s.housing_semi_diameter_mm * s.housing_semi_diameter_mm {
+                    return Err(Absorbed::Clipped(i));
+                }
+                stop_point = DVec2::new(p.x, p.y);
+                if stop == StopMode::Apply {
+                    let tr = self.aperture.transmission(p.x, p.y, self.stop_semi_diameter_mm);
+                    if tr <= 0.0 {
+                        return Err(Absorbed::Stop);
+                    }
+                    transmission *= tr;
+                }
+                o = DVec3::new(p.x, p.y, p.z + s.z_mm);
+                continue;
+            }
+            if r2 > s.semi_diameter_mm * s.semi_diameter_mm {
+                return Err(Absorbed::Clipped(i));
+            }
+            // 3. Refract.
+            let (n1, n2) = match direction {
+                TraceDirection::SceneToFilm => (self.index_before(i, wavelength_nm), self.index_after(i, wavelength_nm)),
+                TraceDirection::FilmToScene => (self.index_after(i, wavelength_nm), self.index_before(i, wavelength_nm)),
+            };
+            if n1 != n2 {
+                let normal = s.shape.normal(p).ok_or(Absorbed::Missed(i))?;
+                d = refract(d, normal, n1, n2).ok_or(Absorbed::TotalInternalReflection(i))?;
+            }
+            o = DVec3::new(p.x, p.y, p.z + s.z_mm);
+        }
+        if !(o.is_finite() && d.is_finite()) {
+            return Err(Absorbed::Missed(n));
+        }
+        Ok(Traced { ray: Ray { origin: o, direction: d }, transmission, stop_point })
+    }
+
+    /// Paraxial image distance from the last vertex for an object `distance_mm` in front of
+    /// the entrance pupil (`None` = infinity). Errors when no real image forms.
+    pub fn focus_image_distance_mm(&self, distance_mm: Option<f64>) -> Result<f64> {
+        match distance_mm {
+            None => Ok(self.paraxial().bfl_mm),
+            Some(d) => {
+                if !(d.is_finite() && d > 0.0) {
+                    return Err(Error::Optics(format!("focus distance must be positive, got {d} mm")));
+                }
+                let object_z = self.paraxial().entrance_pupil_z_mm - d;
+                if object_z >= 0.0 {
+                    return Err(Error::Optics(format!(
+                        "cannot focus at {:.4} m: the object would be behind the front element",
+                        d * 1e-3
+                    )));
+                }
+                paraxial::image_distance_mm(self, object_z, self.primary_wavelength_nm).map_err(|_| {
+                    Error::Optics(format!(
+                        "cannot focus at {:.4} m: closer than the lens's front focal point ({:.4} m from the entrance pupil)",
+                        d * 1e-3,
+                        (self.paraxial().entrance_pupil_z_mm - self.paraxial().front_focal_z_mm) * 1e-3
+                    ))
+                })
+            }
+        }
+    }
+}
+
+/// Checks that the surfaces are real: sag defined over each clear aperture and no two
+/// consecutive surfaces crossing inside their common aperture.
+fn check_geometry(surfaces: &[LensSurface], map: &SourceMap) -> Result<()> {
+    for (i, s) in surfaces.iter().enumerate() {
+        if s.shape.sag(s.semi_diameter_mm, 0.0).is_none() || s.shape.sag(0.0, s.semi_diameter_mm).is_none() {
+            return Err(map.surface_error(
+                i,
+                "semi_diameter_mm",
+                format!("{} mm is larger than the surface's radius of curvature allows", s.semi_diameter_mm),
+            ));
+        }
+    }
+    for i in 0..surfaces.len().saturating_sub(1) {
+        let (a, b) = (&surfaces[i], &surfaces[i + 1]);
+        let r_max = a.semi_diameter_mm.min(b.semi_diameter_mm);
+        // Surfaces may touch (a contact ring), but must not cross by more than 1 µm.
+        for k in 0..=64 {
+            let r = r_max * k as f64 / 64.0;
+            for (x, y) in [(r, 0.0), (0.0, r)] {
+                let za = a.z_mm + a.shape.sag(x, y).unwrap_or(0.0);
+                let zb = b.z_mm + b.shape.sag(x, y).unwrap_or(0.0);
+                if zb < za - 1e-3 {
+                    let what = if a.material_after == Material::Air { "air gap" } else { "element" };
+                    return Err(map.surface_error(
+                        i,
+                        "thickness_mm",
+                        format!(
+                            "surfaces {} and {} intersect at height {:.3} mm ({what} thickness {:.4} mm < 0)",
+                            i + 1,
+                            i + 2,
+                            r,
+                            zb - za
+                        ),
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,12 @@
+//! Lens optics: glass, prescriptions and importers, surfaces, exact tracing, apertures,
+//! paraxial analysis, exit-pupil bounds and the embedded lens library.
+
+pub mod aperture;
+pub mod glass;
+pub mod import;
+pub mod lens;
+pub mod library;
+pub mod paraxial;
+pub mod prescription;
+pub mod pupil;
+pub mod surface;

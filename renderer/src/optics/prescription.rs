@@ -1,0 +1,483 @@
+//! The Petzval lens file format (TOML): parse into typed structs, validate, then build a [`Lens`].
+//!
+//! Lengths are in millimetres. Surfaces are listed front (scene side) to back (film side).
+//!
+//! `[lens]` table:
+//!
+//! | name | type | unit | default |
+//! |---|---|---|---|
+//! | `name` | string | — | required |
+//! | `source` | string: patent number, book and page, and where the data came from | — | required |
+//! | `notes` | string | — | `""` |
+//! | `focal_length_mm` | f64, design focal length (metadata; the traced value is computed) | mm | none |
+//! | `f_number` | f64, design f-number (metadata) | — | none |
+//! | `wavelengths_nm` | list of f64, design wavelengths | nm | `[486.1327, 587.5618, 656.2725]` |
+//! | `primary_wavelength_nm` | f64 | nm | 587.5618 |
+//! | `stop_semi_diameter_mm` | f64: the stop's opening as shipped (≤ its `semi_diameter_mm`) | mm | the stop's `semi_diameter_mm` |
+//!
+//! `[[surface]]` tables:
+//!
+//! | name | type | unit | default |
+//! |---|---|---|---|
+//! | `radius_mm` | f64; 0 = plane; positive = centre of curvature towards the film | mm | 0 |
+//! | `thickness_mm` | f64, axial distance to the next surface (last: to the design image plane) | mm | required |
+//! | `material` | `"air"`, a catalogue glass name, or `{ nd = .., vd = .. }` (medium after the surface) | — | `"air"` |
+//! | `semi_diameter_mm` | f64, clear semi-diameter (for the stop: its widest opening) | mm | required |
+//! | `conic` | f64, conic constant k | — | 0 |
+//! | `aspheric` | list of f64: A4, A6, A8, ... (coefficients of r⁴, r⁶, ...) | mm^(1-2i) | `[]` |
+//! | `cylinder` | `"x"` or `"y"`: the surface is curved only along this axis (anamorphic) | — | none |
+//! | `stop` | bool: this surface is the aperture stop (a plane) | — | false |
+//! | `housing_semi_diameter_mm` | f64: mechanical radius around the stop opening | mm | stop `semi_diameter_mm` |
+//!
+//! `[aperture]` table (shape of the stop opening):
+//!
+//! | name | type | unit | default |
+//! |---|---|---|---|
+//! | `shape` | `"circle"`, `"blades"` or `"image"` | — | `"circle"` |
+//! | `blades` | u32 ≥ 3 (with `shape = "blades"`) | — | 6 |
+//! | `rotation_deg` | f64 | degrees | 0 |
+//! | `blade_curvature` | f64 in [0, 1]: 0 straight blades, 1 circular | — | 0 |
+//! | `anamorphic_ratio` | f64 > 0: opening height / width (Blender's aperture ratio) | — | 1 |
+//! | `image` | path of a PNG or EXR mask, relative to the lens file (with `shape = "image"`) | — | none |
+
+use super::glass::Material;
+use crate::error::{Error, Result};
+use serde::{Deserialize, Serialize};
+
+/// Default design wavelengths: F, d, C.
+pub const DEFAULT_WAVELENGTHS_NM: [f64; 3] = [486.1327, 587.5618, 656.2725];
+
+/// A whole lens file.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Prescription {
+    /// Metadata.
+    pub lens: LensMeta,
+    /// The stop's shape.
+    #[serde(default, skip_serializing_if = "ApertureSpec::is_default")]
+    pub aperture: ApertureSpec,
+    /// Surfaces, front to back.
+    #[serde(rename = "surface")]
+    pub surfaces: Vec<SurfaceSpec>,
+}
+
+/// The `[lens]` table.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, Default)]
+#[serde(deny_unknown_fields)]
+pub struct LensMeta {
+    /// Short name, e.g. `double-gauss-50mm`.
+    pub name: String,
+    /// Citation: patent number or book and page, and the data set it came through.
+    pub source: String,
+    /// Free text.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub notes: String,
+    /// Design focal length (metadata).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub focal_length_mm: Option<f64>,
+    /// Design f-number (metadata).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub f_number: Option<f64>,
+    /// Design wavelengths.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wavelengths_nm: Option<Vec<f64>>,
+    /// Primary wavelength.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub primary_wavelength_nm: Option<f64>,
+    /// Stop opening as shipped (≤ the stop's semi-diameter).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stop_semi_diameter_mm: Option<f64>,
+}
+
+/// A `[[surface]]` table.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, Default)]
+#[serde(deny_unknown_fields)]
+pub struct SurfaceSpec {
+    /// Radius of curvature; 0 = plane.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub radius_mm: f64,
+    /// Distance to the next surface.
+    pub thickness_mm: f64,
+    /// Medium after this surface.
+    #[serde(default, skip_serializing_if = "MaterialSpec::is_air")]
+    pub material: MaterialSpec,
+    /// Clear semi-diameter.
+    pub semi_diameter_mm: f64,
+    /// Conic constant.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub conic: f64,
+    /// Even aspheric coefficients A4, A6, ...
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub aspheric: Vec<f64>,
+    /// Cylindrical surface: curved only along this axis.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cylinder: Option<CylinderAxis>,
+    /// This surface is the aperture stop.
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub stop: bool,
+    /// Mechanical housing radius around the stop.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub housing_semi_diameter_mm: Option<f64>,
+}
+
+/// Axis along which a cylindrical surface is curved.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum CylinderAxis {
+    /// Curved along x (power in the x–z plane).
+    X,
+    /// Curved along y (power in the y–z plane).
+    Y,
+}
+
+/// The medium after a surface.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(untagged)]
+pub enum MaterialSpec {
+    /// `"air"` or a catalogue name.
+    Name(String),
+    /// A model glass.
+    Model(ModelGlass),
+}
+
+/// `{ nd = .., vd = .. }`.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ModelGlass {
+    /// Index at the d line.
+    pub nd: f64,
+    /// Abbe number; 0 = no dispersion.
+    #[serde(default)]
+    pub vd: f64,
+}
+
+impl Default for MaterialSpec {
+    fn default() -> Self {
+        MaterialSpec::Name("air".into())
+    }
+}
+
+impl MaterialSpec {
+    fn is_air(&self) -> bool {
+        matches!(self, MaterialSpec::Name(n) if n.eq_ignore_ascii_case("air"))
+    }
+}
+
+/// Shape of the stop opening.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum ApertureShapeSpec {
+    /// A circle.
+    #[default]
+    Circle,
+    /// A regular polygon of blades.
+    Blades,
+    /// A mask image.
+    Image,
+}
+
+/// The `[aperture]` table.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ApertureSpec {
+    /// Shape.
+    #[serde(default)]
+    pub shape: ApertureShapeSpec,
+    /// Blade count.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub blades: Option<u32>,
+    /// Rotation of the shape.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub rotation_deg: f64,
+    /// Blade curvature 0..1.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub blade_curvature: f64,
+    /// Height / width of the opening.
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub anamorphic_ratio: f64,
+    /// Mask image path.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub image: Option<String>,
+}
+
+impl Default for ApertureSpec {
+    fn default() -> Self {
+        ApertureSpec {
+            shape: ApertureShapeSpec::Circle,
+            blades: None,
+            rotation_deg: 0.0,
+            blade_curvature: 0.0,
+            anamorphic_ratio: 1.0,
+            image: None,
+        }
+    }
+}
+
+impl ApertureSpec {
+    fn is_default(&self) -> bool {
+        *self == ApertureSpec::default()
+    }
+}
+
+fn one() -> f64 {
+    1.0
+}
+fn is_one(v: &f64) -> bool {
+    *v == 1.0
+}
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+fn is_false(v: &bool) -> bool {
+    !*v
+}
+
+/// Where a prescription came from, to name in error messages.
+#[derive(Debug, Clone)]
+pub struct SourceMap {
+    /// File name shown in errors.
+    pub file: String,
+    /// 1-based line of each surface's table (0 when unknown).
+    pub surface_lines: Vec<usize>,
+    /// The file's text when it is our TOML (used to find a field's own line).
+    text: Option<String>,
+    /// Line of the `[aperture]` table.
+    pub aperture_line: usize,
+    /// Line of the `[lens]` table.
+    pub lens_line: usize,
+}
+
+impl SourceMap {
+    /// A map for a prescription built in memory or by an importer: surface `i` is on `lines[i]`.
+    pub fn new(file: impl Into<String>, surface_lines: Vec<usize>) -> Self {
+        SourceMap { file: file.into(), surface_lines, text: None, aperture_line: 0, lens_line: 0 }
+    }
+
+    /// Line of `field` inside surface `index` (falls back to the table's line).
+    pub fn surface_field_line(&self, index: usize, field: &str) -> usize {
+        let start = self.surface_lines.get(index).copied().unwrap_or(0);
+        if let (Some(text), true) = (&self.text, start > 0) {
+            for (i, line) in text.lines().enumerate().skip(start) {
+                let t = line.trim_start();
+                if t.starts_with('[') {
+                    break;
+                }
+                if t.starts_with(field) && t[field.len()..].trim_start().starts_with('=') {
+                    return i + 1;
+                }
+            }
+        }
+        start
+    }
+
+    /// An error about field `field` of surface `index`.
+    pub fn surface_error(&self, index: usize, field: &str, message: impl Into<String>) -> Error {
+        Error::lens_file(
+            &self.file,
+            self.surface_field_line(index, field),
+            format!("surface[{}].{}", index + 1, field),
+            message,
+        )
+    }
+}
+
+/// Parses our TOML lens format. `file` names the file in error messages.
+pub fn parse_toml(text: &str, file: &str) -> Result<(Prescription, SourceMap)> {
+    // 1. Typed parse: serde reports unknown or missing fields with a byte span.
+    let p: Prescription = toml::from_str(text).map_err(|e| {
+        let line = e.span().map(|s| line_of(text, s.start)).unwrap_or(0);
+        let msg = e.message().to_string();
+        let field = field_from_message(&msg).unwrap_or_else(|| "toml".into());
+        Error::lens_file(file, line, field, msg)
+    })?;
+    // 2. Remember where each table starts, for validation errors.
+    let mut surface_lines = Vec::new();
+    let mut aperture_line = 0;
+    let mut lens_line = 0;
+    for (i, line) in text.lines().enumerate() {
+        let t = line.trim();
+        if t.starts_with("[[surface]]") {
+            surface_lines.push(i + 1);
+        } else if t.starts_with("[aperture]") {
+            aperture_line = i + 1;
+        } else if t.starts_with("[lens]") {
+            lens_line = i + 1;
+        }
+    }
+    let map = SourceMap {
+        file: file.into(),
+        surface_lines,
+        text: Some(text.to_string()),
+        aperture_line,
+        lens_line,
+    };
+    Ok((p, map))
+}
+
+fn line_of(text: &str, byte: usize) -> usize {
+    text[..byte.min(text.len())].bytes().filter(|&b| b == b'\n').count() + 1
+}
+
+fn field_from_message(msg: &str) -> Option<String> {
+    // serde: "missing field `thickness_mm`" / "unknown field `foo`, expected ..."
+    let start = msg.find('`')? + 1;
+    let end = start + msg[start..].find('`')?;
+    Some(msg[start..end].to_string())
+}
+
+/// Serialises a prescription to our TOML format.
+pub fn to_toml(p: &Prescription) -> String {
+    toml::to_string(p).unwrap_or_default()
+}
+
+/// A validated, resolved surface (materials looked up).
+#[derive(Debug, Clone)]
+pub(crate) struct ResolvedSurface {
+    pub spec: SurfaceSpec,
+    pub material_after: Material,
+}
+
+/// Checks every field and resolves materials. Geometry checks (intersecting elements) happen
+/// in [`super::lens::Lens::new`], where surface shapes exist.
+pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedSurface>> {
+    let lens_err = |field: &str, msg: String| {
+        Error::lens_file(&map.file, map.lens_line, format!("lens.{field}"), msg)
+    };
+    if p.lens.name.trim().is_empty() {
+        return Err(lens_err("name", "must not be empty".into()));
+    }
+    for (field, v) in [
+        ("focal_length_mm", p.lens.focal_length_mm),
+        ("f_number", p.lens.f_number),
+        ("primary_wavelength_nm", p.lens.primary_wavelength_nm),
+        ("stop_semi_diameter_mm", p.lens.stop_semi_diameter_mm),
+    ] {
+        if let Some(v) = v {
+            if !v.is_finite() {
+                return Err(lens_err(field, format!("must be a finite number, got {v}")));
+            }
+        }
+    }
+    if let Some(w) = p.lens.primary_wavelength_nm {
+        if !(380.0..=780.0).contains(&w) {
+            return Err(lens_err("primary_wavelength_nm", format!("{w} nm is outside 380..780 nm")));
+        }
+    }
+    if let Some(ws) = &p.lens.wavelengths_nm {
+        if let Some(w) = ws.iter().find(|w| !(380.0..=780.0).contains(*w)) {
+            return Err(lens_err("wavelengths_nm", format!("{w} nm is outside 380..780 nm")));
+        }
+    }
+    if p.surfaces.len() < 2 {
+        return Err(Error::lens_file(&map.file, 0, "surface", "a lens needs at least two surfaces"));
+    }
+    let stops: Vec<usize> = p.surfaces.iter().enumerate().filter(|(_, s)| s.stop).map(|(i, _)| i).collect();
+    match stops.len() {
+        0 => {
+            return Err(Error::lens_file(
+                &map.file,
+                0,
+                "surface.stop",
+                "no aperture stop: mark one surface with `stop = true`",
+            ))
+        }
+        1 => {}
+        _ => {
+            return Err(map.surface_error(stops[1], "stop", "more than one aperture stop"));
+        }
+    }
+    let mut out = Vec::with_capacity(p.surfaces.len());
+    for (i, s) in p.surfaces.iter().enumerate() {
+        let finite = |field: &str, v: f64| -> Result<()> {
+            if v.is_finite() {
+                Ok(())
+            } else {
+                Err(map.surface_error(i, field, format!("must be a finite number, got {v}")))
+            }
+        };
+        finite("radius_mm", s.radius_mm)?;
+        finite("thickness_mm", s.thickness_mm)?;
+        finite("semi_diameter_mm", s.semi_diameter_mm)?;
+        finite("conic", s.conic)?;
+        for a in &s.aspheric {
+            finite("aspheric", *a)?;
+        }
+        if s.thickness_mm < 0.0 {
+            return Err(map.surface_error(i, "thickness_mm", format!("negative thickness {}", s.thickness_mm)));
+        }
+        if s.semi_diameter_mm <= 0.0 {
+            return Err(map.surface_error(i, "semi_diameter_mm", format!("must be positive, got {}", s.semi_diameter_mm)));
+        }
+        if s.stop {
+            if s.radius_mm != 0.0 || s.conic != 0.0 || !s.aspheric.is_empty() || s.cylinder.is_some() {
+                return Err(map.surface_error(i, "radius_mm", "the aperture stop must be a plane"));
+            }
+            let housing = s.housing_semi_diameter_mm.unwrap_or(s.semi_diameter_mm);
+            finite("housing_semi_diameter_mm", housing)?;
+            if s.semi_diameter_mm > housing {
+                return Err(map.surface_error(
+                    i,
+                    "semi_diameter_mm",
+                    format!("stop opening {} mm is larger than its housing {} mm", s.semi_diameter_mm, housing),
+                ));
+            }
+            if let Some(open) = p.lens.stop_semi_diameter_mm {
+                if open <= 0.0 || open > s.semi_diameter_mm {
+                    return Err(lens_err(
+                        "stop_semi_diameter_mm",
+                        format!("{open} mm must be in (0, {}] (the stop's widest opening)", s.semi_diameter_mm),
+                    ));
+                }
+            }
+        } else if s.housing_semi_diameter_mm.is_some() {
+            return Err(map.surface_error(i, "housing_semi_diameter_mm", "only the stop has a housing radius"));
+        }
+        let material_after = match &s.material {
+            MaterialSpec::Name(n) => Material::from_catalog(n)
+                .map_err(|e| map.surface_error(i, "material", e.to_string()))?,
+            MaterialSpec::Model(m) => {
+                if !(m.nd.is_finite() && (1.0..=3.0).contains(&m.nd)) {
+                    return Err(map.surface_error(i, "material", format!("nd = {} must be in [1, 3]", m.nd)));
+                }
+                if !(m.vd.is_finite() && m.vd >= 0.0) {
+                    return Err(map.surface_error(i, "material", format!("vd = {} must be >= 0", m.vd)));
+                }
+                if m.nd == 1.0 {
+                    Material::Air
+                } else {
+                    Material::Model { nd: m.nd, vd: m.vd }
+                }
+            }
+        };
+        if s.stop && material_after != Material::Air {
+            return Err(map.surface_error(i, "material", "the aperture stop must be followed by air"));
+        }
+        out.push(ResolvedSurface { spec: s.clone(), material_after });
+    }
+    // Aperture table.
+    let a = &p.aperture;
+    let ap_err = |field: &str, msg: String| Error::lens_file(&map.file, map.aperture_line, format!("aperture.{field}"), msg);
+    if !(a.anamorphic_ratio.is_finite() && a.anamorphic_ratio > 0.0) {
+        return Err(ap_err("anamorphic_ratio", format!("must be positive, got {}", a.anamorphic_ratio)));
+    }
+    if !(0.0..=1.0).contains(&a.blade_curvature) {
+        return Err(ap_err("blade_curvature", format!("must be in [0, 1], got {}", a.blade_curvature)));
+    }
+    if !a.rotation_deg.is_finite() {
+        return Err(ap_err("rotation_deg", "must be finite".into()));
+    }
+    match a.shape {
+        ApertureShapeSpec::Blades => {
+            if a.blades.unwrap_or(6) < 3 {
+                return Err(ap_err("blades", "needs at least 3 blades".into()));
+            }
+        }
+        ApertureShapeSpec::Image => {
+            if a.image.is_none() {
+                return Err(ap_err("image", "shape = \"image\" needs `image = \"mask.png\"`".into()));
+            }
+        }
+        ApertureShapeSpec::Circle => {}
+    }
+    Ok(out)
+}

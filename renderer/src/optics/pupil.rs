@@ -1,0 +1,1 @@
+//! Exit-pupil bounds (stub, being written).
