@@ -1,1 +1,46 @@
-fn main() {}
+//! `petzval`: render scenes through real camera lenses.
+//!
+//! Data flows one way: lens file → lens → camera; scene → integrator → film → EXR/PNG.
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+mod bench;
+mod lens_cmd;
+
+/// Command line.
+#[derive(Parser)]
+#[command(name = "petzval", version, about = "Render scenes through real camera lenses")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Lens library, analysis, drawing and tracing.
+    Lens {
+        #[command(subcommand)]
+        command: lens_cmd::LensCommand,
+    },
+    /// Benchmarks (print tables; see docs/performance.md).
+    Bench {
+        #[command(subcommand)]
+        command: bench::BenchCommand,
+    },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Lens { command } => lens_cmd::run(command),
+        Command::Bench { command } => bench::run(command),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

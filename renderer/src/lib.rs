@@ -2,9 +2,11 @@
 //! cameras and sensors. Data flows one way: lens file → [`Lens`] → [`Camera`].
 
 mod error;
+mod io;
 pub mod optics;
 
 pub use error::{Error, Result};
+pub use io::write_atomic;
 pub use optics::aperture::{Aperture, ApertureMask, ApertureShape};
 pub use optics::glass::Material;
 pub use optics::import::{load_lens_file, read_prescription};

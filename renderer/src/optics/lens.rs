@@ -339,6 +339,26 @@ impl Lens {
         direction: TraceDirection,
         stop: StopMode,
     ) -> Result<Traced, Absorbed> {
+        self.trace_visiting(ray, wavelength_nm, direction, stop, |_| {})
+    }
+
+    /// Traces a ray and also returns every surface hit point (for drawing).
+    pub fn trace_path(&self, ray: &Ray, wavelength_nm: f64, direction: TraceDirection) -> (Vec<DVec3>, Result<Traced, Absorbed>) {
+        let mut points = vec![ray.origin];
+        let r = self.trace_visiting(ray, wavelength_nm, direction, StopMode::Apply, |p| points.push(p));
+        (points, r)
+    }
+
+    /// The trace kernel: `visit` sees each surface hit point (lens frame).
+    #[inline]
+    fn trace_visiting<F: FnMut(DVec3)>(
+        &self,
+        ray: &Ray,
+        wavelength_nm: f64,
+        direction: TraceDirection,
+        stop: StopMode,
+        mut visit: F,
+    ) -> Result<Traced, Absorbed> {
         let n = self.surfaces.len();
         let mut o = ray.origin;
         let mut d = ray.direction;
@@ -354,6 +374,7 @@ impl Lens {
             let local = DVec3::new(o.x, o.y, o.z - s.z_mm);
             let t = s.shape.intersect(local, d).ok_or(Absorbed::Missed(i))?;
             let p = local + t * d;
+            visit(DVec3::new(p.x, p.y, p.z + s.z_mm));
             let r2 = p.x * p.x + p.y * p.y;
             // 2. Clip by the housing / clear aperture.
             if s.is_stop {

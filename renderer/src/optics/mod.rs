@@ -10,3 +10,4 @@ pub mod paraxial;
 pub mod prescription;
 pub mod pupil;
 pub mod surface;
+pub mod draw;
