@@ -14,3 +14,5 @@ pub use optics::lens::{Absorbed, Lens, LensSurface, Ray, StopMode, TraceDirectio
 pub use optics::library::{library_lens, load_lens, LIBRARY};
 pub use optics::paraxial::ParaxialData;
 pub use optics::prescription::Prescription;
+pub mod camera;
+pub use camera::{Camera, CameraRay, FocusPlane, PinholeCamera, RealisticCamera, Sensor, ThickLensCamera, ThinLensCamera};
