@@ -1,1 +1,4 @@
-//! Integration tests of the renderer crate.
+//! Integration tests of the renderer crate (one binary; modules per area).
+
+mod camera;
+mod optics;

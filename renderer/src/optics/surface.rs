@@ -80,6 +80,12 @@ impl Shape {
 
     /// Unit normal at a point on the surface (pointing towards +z on axis).
     pub fn normal(&self, p: DVec3) -> Option<DVec3> {
+        if self.conic == 0.0 && self.aspheric.is_empty() && self.cylinder.is_none() {
+            // Sphere: (−c x, −c y, 1 − c z) is already unit length on the surface, since
+            // c(x² + y² + z²) − 2z = 0 there.
+            let c = self.curvature_per_mm;
+            return Some(DVec3::new(-c * p.x, -c * p.y, 1.0 - c * p.z));
+        }
         let (_, slope) = self.sag_and_slope(self.r2(p.x, p.y))?;
         let (gx, gy) = match self.cylinder {
             None => (2.0 * p.x * slope, 2.0 * p.y * slope),
@@ -196,9 +202,8 @@ pub fn refract(d: DVec3, n: DVec3, n1: f64, n2: f64) -> Option<DVec3> {
         return None;
     }
     let cos_t = (1.0 - sin2_t).sqrt();
-    let out = eta * d + (eta * cos_i - cos_t) * n;
-    // Renormalise to keep |d| = 1 over many surfaces.
-    Some(out / out.length())
+    // Unit length by construction (to rounding) when d and n are unit vectors.
+    Some(eta * d + (eta * cos_i - cos_t) * n)
 }
 
 #[cfg(test)]
