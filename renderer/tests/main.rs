@@ -1,4 +1,5 @@
 //! Integration tests of the renderer crate (one binary; modules per area).
 
+mod aperture;
 mod camera;
 mod optics;
