@@ -2,8 +2,13 @@
 //! cameras and sensors. Data flows one way: lens file → [`Lens`] → [`Camera`].
 
 mod error;
-mod io;
+pub mod io;
+pub mod film;
 pub mod optics;
+// pub mod render; (enabled once the integrator lands)
+pub mod sampler;
+pub mod spectral;
+pub mod scene;
 
 pub use error::{Error, Result};
 pub use io::write_atomic;

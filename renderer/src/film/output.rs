@@ -1,0 +1,98 @@
+//! Output files: EXR (RGBA plus optional depth, normal and albedo channels, and metadata) with
+//! the `exr` crate, and a PNG preview (exposure, sRGB or filmic tone mapping). Both are written
+//! to a temporary name and renamed.
+
+use super::Image;
+use crate::error::{Error, Result};
+use crate::io::write_atomic;
+use crate::scene::texture::linear_to_srgb;
+use exr::prelude::*;
+use std::path::Path;
+
+/// Which extra EXR channels to write.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ExrLayers {
+    /// `Z` (depth in metres).
+    pub depth: bool,
+    /// `normal.X/Y/Z`.
+    pub normal: bool,
+    /// `albedo.R/G/B`.
+    pub albedo: bool,
+}
+
+/// Render metadata stored in the EXR header (as `petzval/KEY` text attributes).
+pub type Metadata = Vec<(String, String)>;
+
+/// Tone mapping for the PNG preview.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ToneMap {
+    /// Clamp and apply the sRGB transfer function ("Standard" in Blender).
+    #[default]
+    Srgb,
+    /// A filmic curve (Narkowicz's ACES fit) before sRGB encoding.
+    Filmic,
+}
+
+fn text(s: &str) -> Text {
+    let ascii: String = s.chars().map(|c| if (c as u32) < 256 && c != '\0' { c } else { '?' }).collect();
+    Text::new_or_none(&ascii).unwrap_or_else(|| Text::from("?"))
+}
+
+/// Writes `image` as an EXR file.
+pub fn write_exr(path: &Path, image: &Image, layers: ExrLayers, metadata: &Metadata) -> Result<()> {
+    let (w, h) = (image.width as usize, image.height as usize);
+    let chan = |name: &str, f: &dyn Fn(usize) -> f32| AnyChannel::new(name, FlatSamples::F32((0..w * h).map(f).collect()));
+    let mut channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = SmallVec::new();
+    for (k, name) in ["R", "G", "B", "A"].iter().enumerate() {
+        channels.push(chan(name, &|i| image.rgba[i][k]));
+    }
+    if layers.depth {
+        channels.push(chan("Z", &|i| image.depth[i]));
+    }
+    if layers.normal {
+        for (k, name) in ["normal.X", "normal.Y", "normal.Z"].iter().enumerate() {
+            channels.push(chan(name, &|i| image.normal[i][k]));
+        }
+    }
+    if layers.albedo {
+        for (k, name) in ["albedo.R", "albedo.G", "albedo.B"].iter().enumerate() {
+            channels.push(chan(name, &|i| image.albedo[i][k]));
+        }
+    }
+    let layer = Layer::new((w, h), LayerAttributes::default(), Encoding::SMALL_LOSSLESS, AnyChannels::sort(channels));
+    let mut img = exr::image::Image::from_layer(layer);
+    for (k, v) in metadata {
+        img.attributes.other.insert(text(&format!("petzval/{k}")), AttributeValue::Text(text(v)));
+    }
+    let mut buf = std::io::Cursor::new(Vec::new());
+    img.write().to_buffered(&mut buf).map_err(|e| Error::io(path, std::io::Error::other(e.to_string())))?;
+    write_atomic(path, buf.get_ref())
+}
+
+/// Narkowicz's fit of the ACES filmic curve.
+fn filmic(x: f32) -> f32 {
+    let (a, b, c, d, e) = (2.51, 0.03, 2.43, 0.59, 0.14);
+    ((x * (a * x + b)) / (x * (c * x + d) + e)).clamp(0.0, 1.0)
+}
+
+/// Writes an 8-bit sRGB PNG preview with `exposure_stops` and tone mapping.
+pub fn write_png(path: &Path, image: &Image, exposure_stops: f32, tone: ToneMap) -> Result<()> {
+    let scale = 2f32.powf(exposure_stops);
+    let mut bytes = Vec::with_capacity(image.rgba.len() * 3);
+    for p in &image.rgba {
+        for c in &p[..3] {
+            let v = (c * scale).max(0.0);
+            let v = match tone {
+                ToneMap::Srgb => v.min(1.0),
+                ToneMap::Filmic => filmic(v),
+            };
+            bytes.push((linear_to_srgb(v) * 255.0 + 0.5).clamp(0.0, 255.0) as u8);
+        }
+    }
+    let buf = image::RgbImage::from_raw(image.width, image.height, bytes)
+        .ok_or_else(|| Error::io(path, std::io::Error::other("image size mismatch")))?;
+    let mut out = std::io::Cursor::new(Vec::new());
+    buf.write_to(&mut out, image::ImageFormat::Png).map_err(|e| Error::io(path, std::io::Error::other(e.to_string())))?;
+    write_atomic(path, out.get_ref())
+}
