@@ -1,0 +1,353 @@
+//! `petzval render`: scene file (or the built-in demo) → camera → integrator → film → EXR/PNG.
+
+use clap::Args;
+use glam::{DAffine3, DVec2, DVec3};
+use indicatif::{ProgressBar, ProgressStyle};
+use petzval_renderer::film::{write_exr, write_png, ExrLayers, Metadata, PixelFilter, ToneMap};
+use petzval_renderer::integrator::RenderScene;
+use petzval_renderer::render::{render, CameraRig, RenderSettings};
+use petzval_renderer::scene::{demo, gltf_load, Environment, Scene, SceneCamera};
+use petzval_renderer::{load_lens, Aperture, ApertureMask, ApertureShape, Camera, Error, PinholeCamera, RealisticCamera, Sensor, ThickLensCamera, ThinLensCamera};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+/// Options of `petzval render`.
+#[derive(Args, Debug)]
+pub struct RenderArgs {
+    /// Scene file (.gltf or .glb). Without one, the built-in demo is rendered.
+    pub scene: Option<PathBuf>,
+    /// Output EXR file.
+    #[arg(short, long, default_value = "render.exr")]
+    pub output: PathBuf,
+    /// Also write a PNG preview (default: the EXR path with .png).
+    #[arg(long)]
+    pub png: Option<PathBuf>,
+    /// Do not write the PNG preview.
+    #[arg(long)]
+    pub no_png: bool,
+    /// Lens: a library name, a lens file, `thin` or `pinhole` (default: thin for scene files, the demo's lens for the demo).
+    #[arg(long)]
+    pub lens: Option<String>,
+    /// Lens model for library lenses: exact (trace every surface) or thick (thick-lens approximation).
+    #[arg(long, default_value = "exact")]
+    pub lens_model: String,
+    /// f-number (default: 2.8 for thin, the lens's own for real lenses).
+    #[arg(long)]
+    pub fstop: Option<f64>,
+    /// Focus distance in metres from the camera (default: autofocus on the image centre).
+    #[arg(long)]
+    pub focus: Option<f64>,
+    /// Sensor tilt about the horizontal axis (degrees).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub tilt_x: f64,
+    /// Sensor tilt about the vertical axis (degrees).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub tilt_y: f64,
+    /// Sensor shift right (mm).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub shift_x: f64,
+    /// Sensor shift up (mm).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub shift_y: f64,
+    /// Aperture: circle, blades:N[:ROTATION_DEG] or image:PATH.
+    #[arg(long)]
+    pub aperture: Option<String>,
+    /// Focal length for thin/pinhole (default: from the scene camera's field of view).
+    #[arg(long)]
+    pub focal_length: Option<f64>,
+    /// Sensor width (mm); spans the larger image dimension.
+    #[arg(long, default_value_t = 36.0)]
+    pub sensor_width: f64,
+    /// Samples per pixel.
+    #[arg(long, default_value_t = 64)]
+    pub spp: u32,
+    /// Resolution WxH.
+    #[arg(long, default_value = "960x640")]
+    pub resolution: String,
+    /// Seed.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u32,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Stop after this many seconds (the last pass finishes first).
+    #[arg(long)]
+    pub time_limit: Option<f64>,
+    /// Scene camera by name (default: the first).
+    #[arg(long)]
+    pub camera: Option<String>,
+    /// Environment: R,G,B radiance or an equirectangular .exr.
+    #[arg(long)]
+    pub environment: Option<String>,
+    /// Environment strength multiplier.
+    #[arg(long, default_value_t = 1.0)]
+    pub environment_strength: f32,
+    /// Maximum path depth.
+    #[arg(long, default_value_t = 8)]
+    pub max_depth: u32,
+    /// Trace one wavelength per camera ray (lens dispersion); default: on only for dispersive lenses with --spectral.
+    #[arg(long)]
+    pub spectral: bool,
+    /// PNG exposure in stops.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub exposure: f32,
+    /// PNG tone mapping.
+    #[arg(long, default_value = "srgb")]
+    pub tonemap: String,
+    /// Extra EXR channels: comma-separated depth,normal,albedo.
+    #[arg(long, default_value = "depth")]
+    pub aovs: String,
+    /// Natural vignetting (cos⁴) for thin and pinhole cameras: on (physical) or off (as Cycles).
+    #[arg(long, default_value = "on")]
+    pub natural_vignetting: String,
+    /// Pixel filter width in pixels (Blackman–Harris; 0 = box 1 px).
+    #[arg(long, default_value_t = 1.5)]
+    pub filter_width: f32,
+}
+
+fn camera_err(field: &str, message: String) -> Error {
+    Error::Camera { field: field.into(), message }
+}
+
+fn parse_resolution(s: &str) -> Result<(u32, u32), Error> {
+    let bad = || camera_err("resolution", format!("expected WxH such as 1920x1080, got '{s}'"));
+    let (w, h) = s.split_once('x').ok_or_else(bad)?;
+    Ok((w.trim().parse().map_err(|_| bad())?, h.trim().parse().map_err(|_| bad())?))
+}
+
+/// Parses `--aperture`.
+pub fn parse_aperture(s: &str) -> Result<Aperture, Error> {
+    let bad = |m: &str| camera_err("aperture", format!("{m} (got '{s}'; expected circle, blades:N[:ROTATION_DEG] or image:PATH)"));
+    if s == "circle" {
+        return Ok(Aperture::default());
+    }
+    if let Some(rest) = s.strip_prefix("blades:") {
+        let mut it = rest.split(':');
+        let n: u32 = it.next().and_then(|v| v.parse().ok()).ok_or_else(|| bad("blade count must be a whole number"))?;
+        if n < 3 {
+            return Err(bad("at least 3 blades"));
+        }
+        let rot: f64 = match it.next() {
+            Some(r) => r.parse().map_err(|_| bad("rotation must be a number of degrees"))?,
+            None => 0.0,
+        };
+        return Ok(Aperture { shape: ApertureShape::Blades { count: n, curvature: 0.0 }, rotation_rad: rot.to_radians(), anamorphic_ratio: 1.0 });
+    }
+    if let Some(path) = s.strip_prefix("image:") {
+        let mask = ApertureMask::load(std::path::Path::new(path))?;
+        return Ok(Aperture { shape: ApertureShape::Mask(Arc::new(mask)), rotation_rad: 0.0, anamorphic_ratio: 1.0 });
+    }
+    Err(bad("unknown aperture"))
+}
+
+fn parse_environment(s: &str, strength: f32) -> Result<Environment, Error> {
+    if s.to_ascii_lowercase().ends_with(".exr") {
+        return petzval_renderer::scene::environment::load_environment_exr(std::path::Path::new(s), strength, 0.0);
+    }
+    let v: Vec<f32> = s.split(',').map(|c| c.trim().parse::<f32>()).collect::<Result<_, _>>().map_err(|_| camera_err("environment", format!("expected R,G,B or FILE.exr, got '{s}'")))?;
+    let c = match v.as_slice() {
+        [g] => glam::Vec3::splat(*g),
+        [r, g, b] => glam::Vec3::new(*r, *g, *b),
+        _ => return Err(camera_err("environment", format!("expected R,G,B or FILE.exr, got '{s}'"))),
+    };
+    if !c.is_finite() || c.min_element() < 0.0 {
+        return Err(camera_err("environment", format!("must be finite and non-negative, got '{s}'")));
+    }
+    Ok(Environment::Constant(c * strength))
+}
+
+/// Runs `petzval render`.
+pub fn run(args: RenderArgs) -> Result<(), Error> {
+    if let Some(t) = args.threads {
+        if t == 0 {
+            return Err(camera_err("threads", "must be at least 1".into()));
+        }
+        let _ = rayon::ThreadPoolBuilder::new().num_threads(t).build_global();
+    }
+    let (width, height) = parse_resolution(&args.resolution)?;
+    // 1. Scene (file or demo) and the shot's defaults.
+    let (mut scene, demo_shot): (Scene, Option<demo::DemoShot>) = match &args.scene {
+        Some(path) => (gltf_load::load_gltf(path)?, None),
+        None => {
+            let (s, shot) = demo::demo_scene();
+            (s, Some(shot))
+        }
+    };
+    for w in &scene.warnings {
+        eprintln!("warning: {w}");
+    }
+    if let Some(env) = &args.environment {
+        scene.environment = parse_environment(env, args.environment_strength)?;
+    }
+    let scene_cam: SceneCamera = match &args.camera {
+        Some(name) => scene.cameras.iter().find(|c| &c.name == name).cloned().ok_or_else(|| {
+            let names: Vec<&str> = scene.cameras.iter().map(|c| c.name.as_str()).collect();
+            camera_err("camera", format!("no camera named '{name}' in the scene (cameras: {})", names.join(", ")))
+        })?,
+        None => scene.cameras.first().cloned().ok_or_else(|| camera_err("camera", "the scene has no camera; add one in the glTF file".into()))?,
+    };
+    let to_world = DAffine3::from_cols_array(&scene_cam.to_world.to_cols_array().map(|v| v as f64));
+    let t0 = std::time::Instant::now();
+    let render_scene = RenderScene::new(scene)?;
+    eprintln!("scene: {} triangles, BVH built in {:.2} s", render_scene.triangle_count(), t0.elapsed().as_secs_f64());
+    // 2. Sensor: the width spans the larger image dimension (Blender's automatic fit).
+    let aspect = width as f64 / height as f64;
+    let (sw, sh) = if width >= height { (args.sensor_width, args.sensor_width / aspect) } else { (args.sensor_width * aspect, args.sensor_width) };
+    let tilt_x = if args.tilt_x == 0.0 { demo_shot.as_ref().map(|d| d.tilt_x_deg).unwrap_or(0.0) } else { args.tilt_x };
+    let sensor = Sensor { width_mm: sw, height_mm: sh, shift_mm: DVec2::new(args.shift_x, args.shift_y), tilt_x_deg: tilt_x, tilt_y_deg: args.tilt_y };
+    sensor.validate()?;
+    let lens_name = args.lens.clone().or_else(|| demo_shot.as_ref().map(|d| d.lens.to_string())).unwrap_or_else(|| "thin".into());
+    let aperture = match (&args.aperture, &demo_shot) {
+        (Some(a), _) => Some(parse_aperture(a)?),
+        (None, Some(d)) => Some(Aperture { shape: ApertureShape::Blades { count: d.blades, curvature: 0.0 }, rotation_rad: d.blade_rotation_deg.to_radians(), anamorphic_ratio: 1.0 }),
+        (None, None) => None,
+    };
+    let fstop = args.fstop.or_else(|| demo_shot.as_ref().map(|d| d.f_number));
+    // 3. Focus: given, the demo's, or autofocus on what the image centre sees.
+    let focus_m = match (args.focus, &demo_shot) {
+        (Some(f), _) => Some(f),
+        (None, Some(d)) => Some(d.focus_distance_m),
+        (None, None) => {
+            let o = to_world.translation.as_vec3();
+            let d = to_world.transform_vector3(DVec3::NEG_Z).normalize().as_vec3();
+            let f = render_scene.intersect(o, d, f32::INFINITY).map(|h| h.t as f64);
+            match f {
+                Some(f) => eprintln!("autofocus: {f:.3} m (the surface at the image centre)"),
+                None => eprintln!("autofocus: nothing at the image centre, focusing at infinity"),
+            }
+            f
+        }
+    };
+    let vignetting = match args.natural_vignetting.as_str() {
+        "on" => true,
+        "off" => false,
+        v => return Err(camera_err("natural_vignetting", format!("expected on or off, got '{v}'"))),
+    };
+    // Focal length for thin/pinhole from the scene camera's field of view.
+    let fov_focal = || {
+        let tan_half_y = (scene_cam.yfov_rad as f64 * 0.5).tan();
+        if width >= height { 0.5 * sw / (tan_half_y * aspect) } else { 0.5 * sh / tan_half_y }
+    };
+    let (camera, lens_label, focal_mm, f_number) = match lens_name.as_str() {
+        "pinhole" => {
+            let f = args.focal_length.unwrap_or_else(fov_focal);
+            let mut c = PinholeCamera::new(sensor, f)?;
+            c.natural_vignetting = vignetting;
+            (Camera::Pinhole(c), "pinhole".to_string(), f, f64::INFINITY)
+        }
+        "thin" => {
+            let f = args.focal_length.unwrap_or_else(fov_focal);
+            let n = fstop.unwrap_or(2.8);
+            let mut c = ThinLensCamera::new(sensor, f, n, focus_m, aperture.clone().unwrap_or_default())?;
+            c.natural_vignetting = vignetting;
+            (Camera::ThinLens(c), "thin".to_string(), f, n)
+        }
+        name => {
+            if args.focal_length.is_some() {
+                eprintln!("note: --focal-length is ignored for a real lens; '{name}' brings its own focal length");
+            }
+            let mut lens = load_lens(name)?;
+            if let Some(n) = fstop {
+                lens = lens.stopped_down(n)?;
+            }
+            if let Some(a) = &aperture {
+                lens = lens.with_aperture(a.clone());
+            }
+            let f = lens.paraxial().efl_mm;
+            let n = lens.paraxial().f_number;
+            let label = lens.name().to_string();
+            let cam = match args.lens_model.as_str() {
+                "exact" => Camera::Realistic(RealisticCamera::new(sensor, lens, focus_m)?),
+                "thick" => Camera::ThickLens(ThickLensCamera::new(sensor, &lens, None, focus_m, aperture.clone().unwrap_or_else(|| lens.aperture().clone()))?),
+                m => return Err(camera_err("lens_model", format!("expected exact or thick, got '{m}'"))),
+            };
+            (cam, label, f, n)
+        }
+    };
+    let rig = CameraRig { camera, to_world };
+    if let Some(p) = rig.camera.focus_plane() {
+        if let Some(j) = p.hinge_distance_m {
+            eprintln!("tilted focus plane: hinge line {j:.3} m from the lens, {:.1}° to the sensor", p.angle_to_sensor_deg);
+        }
+    }
+    // 4. Render with a progress bar; Ctrl-C stops and keeps what converged.
+    let spectral = args.spectral;
+    let settings = RenderSettings {
+        width,
+        height,
+        spp: args.spp,
+        seed: args.seed,
+        max_depth: args.max_depth,
+        spectral,
+        time_limit: args.time_limit.map(Duration::from_secs_f64),
+        filter: if args.filter_width > 0.0 { PixelFilter::BlackmanHarris { width_px: args.filter_width } } else { PixelFilter::Box { width_px: 1.0 } },
+    };
+    settings.validate()?;
+    let interrupted = Arc::new(AtomicBool::new(false));
+    {
+        let flag = interrupted.clone();
+        let _ = ctrlc::set_handler(move || {
+            if flag.swap(true, Ordering::SeqCst) {
+                std::process::exit(130);
+            }
+            eprintln!("\ninterrupted: finishing and writing what has converged (Ctrl-C again to quit)");
+        });
+    }
+    let bar = ProgressBar::new(1000);
+    bar.set_style(ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {percent}% ETA {eta}").unwrap_or_else(|_| ProgressStyle::default_bar()));
+    let progress = |f: f32| {
+        bar.set_position((f * 1000.0) as u64);
+        !interrupted.load(Ordering::Relaxed)
+    };
+    let result = render(&render_scene, &rig, &settings, &progress)?;
+    bar.finish_and_clear();
+    eprintln!(
+        "rendered {}x{} at {} spp in {:.2} s ({}, {:.2} M camera rays/s){}",
+        width,
+        height,
+        result.spp_done,
+        result.seconds,
+        lens_label,
+        result.camera_rays as f64 / result.seconds / 1e6,
+        if result.complete { "" } else { " — stopped early" }
+    );
+    if result.dropped_samples > 0 {
+        eprintln!("warning: {} non-finite samples were dropped", result.dropped_samples);
+    }
+    // 5. Output with metadata.
+    let s = rig.camera.sensor();
+    let metadata: Metadata = vec![
+        ("lens".into(), lens_label.clone()),
+        ("lensModel".into(), rig.camera.model_name().into()),
+        ("focalLengthMM".into(), format!("{focal_mm:.4}")),
+        ("fNumber".into(), format!("{f_number:.4}")),
+        ("focusDistanceM".into(), focus_m.map(|f| format!("{f:.4}")).unwrap_or_else(|| "inf".into())),
+        ("tiltXDeg".into(), format!("{}", s.tilt_x_deg)),
+        ("tiltYDeg".into(), format!("{}", s.tilt_y_deg)),
+        ("shiftXMM".into(), format!("{}", s.shift_mm.x)),
+        ("shiftYMM".into(), format!("{}", s.shift_mm.y)),
+        ("sensorMM".into(), format!("{:.3}x{:.3}", s.width_mm, s.height_mm)),
+        ("spp".into(), format!("{}", result.spp_done)),
+        ("sppRequested".into(), format!("{}", args.spp)),
+        ("seed".into(), format!("{}", args.seed)),
+        ("spectral".into(), format!("{spectral}")),
+        ("complete".into(), if result.complete { "true".into() } else { "false: stopped early, partially converged".into() }),
+        ("renderSeconds".into(), format!("{:.3}", result.seconds)),
+    ];
+    let layers = ExrLayers { depth: args.aovs.contains("depth"), normal: args.aovs.contains("normal"), albedo: args.aovs.contains("albedo") };
+    write_exr(&args.output, &result.image, layers, &metadata)?;
+    eprintln!("wrote {}", args.output.display());
+    if !args.no_png {
+        let png = args.png.clone().unwrap_or_else(|| args.output.with_extension("png"));
+        let tone = match args.tonemap.as_str() {
+            "srgb" => ToneMap::Srgb,
+            "filmic" => ToneMap::Filmic,
+            t => return Err(camera_err("tonemap", format!("expected srgb or filmic, got '{t}'"))),
+        };
+        write_png(&png, &result.image, args.exposure, tone)?;
+        eprintln!("wrote {}", png.display());
+    }
+    Ok(())
+}
