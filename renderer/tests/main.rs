@@ -2,4 +2,5 @@
 
 mod aperture;
 mod camera;
+mod import;
 mod optics;

@@ -23,7 +23,19 @@ macro_rules! lenses {
 
 /// Every library lens, sorted by name.
 pub const LIBRARY: &[LibraryEntry] = lenses![
+    "angenieux-double-gauss-100mm",
+    "aspheric-fisheye-10mm",
     "biconvex-singlet-50mm",
+    "cooke-speed-panchro-25mm",
+    "double-gauss-50mm",
+    "fisheye-10mm",
+    "kodak-petzval-100mm",
+    "nikon-normal-52mm",
+    "petzval-portrait-100mm",
+    "schneider-anamorphic-31mm",
+    "telephoto-250mm",
+    "wide-22mm",
+    "zeiss-biotar-100mm",
 ];
 
 /// Loads a library lens by name.

@@ -161,6 +161,11 @@ impl MaterialSpec {
     fn is_air(&self) -> bool {
         matches!(self, MaterialSpec::Name(n) if n.eq_ignore_ascii_case("air"))
     }
+
+    /// Air, or a model glass of index 1 without dispersion.
+    fn is_air_like(&self) -> bool {
+        self.is_air() || matches!(self, MaterialSpec::Model(m) if m.nd == 1.0)
+    }
 }
 
 /// Shape of the stop opening.
@@ -451,6 +456,9 @@ pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedS
         };
         if s.stop && material_after != Material::Air {
             return Err(map.surface_error(i, "material", "the aperture stop must be followed by air"));
+        }
+        if s.stop && i > 0 && !p.surfaces[i - 1].material.is_air_like() {
+            return Err(map.surface_error(i - 1, "material", "the aperture stop must sit in air: the surface before it is followed by glass"));
         }
         out.push(ResolvedSurface { spec: s.clone(), material_after });
     }

@@ -133,12 +133,28 @@ impl Shape {
             }
             -o.z / d.z
         } else {
-            // Stable root on the vertex-side sheet: t = C / (−B − sign(B)√disc).
+            // Both roots in stable form, t₁ = C / q and t₂ = q / A with q = −B − sign(B)√disc;
+            // keep the nearest one ahead of the ray on the sheet through the vertex
+            // ((1+k)·c·z ≤ 1). A ray starting beyond the centre of curvature meets the other
+            // sheet first, so the choice cannot be made from the sign of B alone.
             let q = -b - b.signum() * disc.sqrt();
-            if q == 0.0 {
-                return None;
+            let on_vertex_sheet = |t: f64| t.is_finite() && t >= 0.0 && k1 * c * (o.z + t * d.z) <= 1.0 + 1e-12;
+            let t1 = if q != 0.0 { cc / q } else { f64::INFINITY };
+            let t2 = if a != 0.0 { q / a } else { f64::INFINITY };
+            match (on_vertex_sheet(t1), on_vertex_sheet(t2)) {
+                (true, true) => t1.min(t2),
+                (true, false) => t1,
+                (false, true) => t2,
+                (false, false) => {
+                    if self.aspheric.is_empty() {
+                        return None;
+                    }
+                    if d.z.abs() < 1e-300 {
+                        return None;
+                    }
+                    -o.z / d.z
+                }
             }
-            cc / q
         };
         // 2. Aspheric terms: Newton on f(t) = z(t) − sag(ρ²(t)).
         if !self.aspheric.is_empty() {
@@ -173,10 +189,6 @@ impl Shape {
         }
         // 3. The hit must lie ahead and on the sheet through the vertex (|c z| < 1 side).
         if t < 0.0 || !t.is_finite() {
-            return None;
-        }
-        let p = o + t * d;
-        if c * p.z > 1.0 && self.conic > -1.0 && self.aspheric.is_empty() {
             return None;
         }
         Some(t)
@@ -246,6 +258,22 @@ mod tests {
         let p = o + t * d;
         assert!(((p - DVec3::new(0.0, 0.0, -20.0)).length() - 20.0).abs() < 1e-12);
         assert!(p.z > -1.0);
+    }
+
+    #[test]
+    fn origin_beyond_the_centre_of_curvature() {
+        // R < 0, ray starting more than |R| in front of the vertex
+        let s = sphere(-101.3);
+        let t = s.intersect(DVec3::new(0.0, 5.0, -150.0), DVec3::Z).unwrap();
+        let z = -150.0 + t;
+        let expected = -(101.3 - (101.3f64 * 101.3 - 25.0).sqrt());
+        assert!((z - expected).abs() < 1e-12, "{z} vs {expected}");
+        // R > 0, traced backwards from more than R behind the vertex
+        let s = sphere(40.0);
+        let t = s.intersect(DVec3::new(0.0, 3.0, 90.0), DVec3::NEG_Z).unwrap();
+        let z = 90.0 - t;
+        let expected = 40.0 - (1600.0f64 - 9.0).sqrt();
+        assert!((z - expected).abs() < 1e-12, "{z} vs {expected}");
     }
 
     #[test]

@@ -12,7 +12,7 @@ mod pbrt;
 mod zemax;
 
 pub use lentil::import_lentil;
-pub use pbrt::import_pbrt;
+pub use pbrt::{import_pbrt, import_pbrt_axpos};
 pub use zemax::import_zemax;
 
 /// Reads a lens file of any supported format, chosen by extension: `.toml` (ours), `.dat`

@@ -59,16 +59,10 @@ struct Row {
 pub fn import_pbrt(text: &str, file: &str, name: &str) -> Result<(Prescription, SourceMap)> {
     let (header, rows) = parse(text, file)?;
     let axpos_header = header.iter().any(|(_, h)| h.to_ascii_lowercase().contains("axpos"));
-    let convention = if axpos_header
-        && rows.len() >= 2
-        && rows[0].thickness == 0.0
-        && rows[rows.len() - 1].thickness > 0.0
-    {
-        Convention::Axpos
-    } else {
-        Convention::ToNext
-    };
-    build(header, rows, file, name, convention)
+    if axpos_header && rows.len() >= 2 && rows[0].thickness == 0.0 && rows[rows.len() - 1].thickness > 0.0 {
+        return import_pbrt_axpos(text, file, name);
+    }
+    build(header, rows, file, name, Convention::ToNext)
 }
 
 /// Imports a pbrt lens table in Kolb's "axpos" convention: column 2 is the distance from the
@@ -79,8 +73,11 @@ pub fn import_pbrt_axpos(text: &str, file: &str, name: &str) -> Result<(Prescrip
     build(header, rows, file, name, Convention::Axpos)
 }
 
-/// Splits the text into header comments (line, text) and data rows.
-fn parse(text: &str, file: &str) -> Result<(Vec<(usize, String)>, Vec<Row>)> {
+/// Header comments as (line, text).
+type Header = Vec<(usize, String)>;
+
+/// Splits the text into header comments and data rows.
+fn parse(text: &str, file: &str) -> Result<(Header, Vec<Row>)> {
     let mut header = Vec::new();
     let mut rows = Vec::new();
     const COLUMNS: [&str; 4] = ["radius", "thickness", "N", "aperture"];
@@ -168,7 +165,7 @@ fn parse(text: &str, file: &str) -> Result<(Vec<(usize, String)>, Vec<Row>)> {
 }
 
 fn build(
-    header: Vec<(usize, String)>,
+    header: Header,
     rows: Vec<Row>,
     file: &str,
     name: &str,
@@ -185,6 +182,17 @@ fn build(
                 "radius",
                 format!("a second aperture stop (radius 0; the first is on line {})", rows[stops[0]].line),
             ))
+        }
+    }
+    if stops[0] > 0 {
+        let before = &rows[stops[0] - 1];
+        if !(before.n == 0.0 || before.n == 1.0) {
+            return Err(Error::lens_file(
+                file,
+                rows[stops[0]].line,
+                "N",
+                format!("the aperture stop must sit in air, but the row before it (line {}) has glass N = {}", before.line, before.n),
+            ));
         }
     }
     let n = rows.len();
@@ -236,10 +244,10 @@ fn build(
     }
     source.push_str("via pbrt-v4 scenes (Apache-2.0)");
     let mut notes = vec![format!(
-        "Imported from the pbrt lens table {file} ({} convention); glass is modelled from N(d) alone (pbrt gives no dispersion).",
+        "Imported from the pbrt lens table {file}, reading column 2 as {}; glass is modelled from N(d) alone (pbrt gives no dispersion).",
         match convention {
-            Convention::ToNext => "thickness = distance to the next surface",
-            Convention::Axpos => "axpos = distance from the previous surface; back focus left to the paraxial value",
+            Convention::ToNext => "the distance to the next surface",
+            Convention::Axpos => "axpos, the distance from the previous surface (the back focus is left to the paraxial value)",
         }
     )];
     let mut p = Prescription {
@@ -256,9 +264,28 @@ fn build(
         surfaces,
     };
     notes.extend(fit_semi_diameters(&mut p));
-    p.lens.notes = notes.join(" ");
+    p.lens.notes = join_sentences(&notes);
     let map = SourceMap::new(file, rows.iter().map(|r| r.line).collect());
     Ok((p, map))
+}
+
+/// Joins notes into one paragraph, ending each with a full stop.
+pub(super) fn join_sentences<S: AsRef<str>>(parts: &[S]) -> String {
+    let mut out = String::new();
+    for p in parts {
+        let p = p.as_ref().trim();
+        if p.is_empty() {
+            continue;
+        }
+        if !out.is_empty() {
+            out.push(' ');
+        }
+        out.push_str(p);
+        if !p.ends_with(['.', '!', '?', ')']) {
+            out.push('.');
+        }
+    }
+    out
 }
 
 /// "Scaled to 50 mm from 100 mm" → 50.
@@ -432,18 +459,19 @@ pub(crate) fn fit_semi_diameters(p: &mut Prescription) -> Vec<String> {
             .into_iter()
             .filter(|&j| p.surfaces[j].semi_diameter_mm <= r_max)
             .collect();
-        for j in targets {
-            let old = p.surfaces[j].semi_diameter_mm;
+        let old = r_max;
+        for &j in &targets {
             p.surfaces[j].semi_diameter_mm = new;
-            notes.push(format!(
-                "Surface {} semi-diameter reduced from {} to {} mm: at the listed value the edges of surfaces {} and {} would cross ({what}).",
-                j + 1,
-                old,
-                new,
-                i + 1,
-                i + 2
-            ));
         }
+        let which = match targets.as_slice() {
+            [j] => format!("Surface {} semi-diameter", j + 1),
+            _ => format!("Surfaces {} and {} semi-diameters", i + 1, i + 2),
+        };
+        notes.push(format!(
+            "{which} reduced from {old} to {new} mm: at the listed value the edges of surfaces {} and {} would cross ({what}).",
+            i + 1,
+            i + 2
+        ));
     }
     // The stop's opening must still fit.
     if let Some(stop) = p.surfaces.iter().find(|s| s.stop) {

@@ -32,15 +32,16 @@
 //!   the `GLAS` line) as a model glass, with a note; without usable nd it is an error.
 //! - A surface with `DIAM 0` (or none) takes the larger semi-diameter of its nearest
 //!   neighbours that have one, with a note.
-//! - Our stop must be a plane followed by air. When the Zemax stop is a curved surface, a
-//!   plane stop of the same semi-diameter is inserted next to it, on its air side (before it
-//!   when the medium before is air, else after it), placed as close to its vertex as the
-//!   neighbouring surfaces' sags allow; the curved surface stays as a lens surface. A plane
-//!   air-to-air stop is kept as it is.
+//! - Our stop is a plane with air on both sides (the tracer does not refract there). When the
+//!   Zemax stop is curved or touches glass, a plane stop of the same semi-diameter is inserted
+//!   next to it on its air side (before it when the medium before is air, else after it),
+//!   placed as close to its vertex as the neighbouring surfaces' sags allow (a forward-bulging
+//!   surface pushes it forward by its largest forward sag); the Zemax surface stays as a lens
+//!   surface and `notes` gives the offset. A plane air-to-air stop is kept as it is.
 //! - Neighbouring surfaces whose edges cross are NOT adjusted (Zemax semi-diameters are
 //!   design data): validation reports them at the surface's `SURF` line.
 
-use super::pbrt::{shape_of, short, MAX_LENGTH_MM};
+use super::pbrt::{join_sentences, shape_of, short, MAX_LENGTH_MM};
 use crate::error::{Error, Result};
 use crate::optics::glass::Material;
 use crate::optics::prescription::{LensMeta, MaterialSpec, ModelGlass, Prescription, SourceMap, SurfaceSpec};
@@ -110,7 +111,7 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
     };
     let length = |v: f64, line: usize, field: &str, unit_mm: f64| -> Result<f64> {
         let mm = v * unit_mm;
-        if !(mm.abs() <= MAX_LENGTH_MM) {
+        if !mm.is_finite() || mm.abs() > MAX_LENGTH_MM {
             return Err(Error::lens_file(file, line, field, format!("{v} is implausibly large (limit {MAX_LENGTH_MM} mm)")));
         }
         Ok(mm)
@@ -224,7 +225,7 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
                     "PARM" => {
                         let k = num(tokens.get(1), line, "PARM")?;
                         let v = num(tokens.get(2), line, "PARM")?;
-                        if k >= 1.0 && k <= 64.0 && k.fract() == 0.0 {
+                        if (1.0..=64.0).contains(&k) && k.fract() == 0.0 {
                             s.parms.push((line, k as usize, v));
                         }
                     }
@@ -403,7 +404,7 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
             }
             let air_after = is_air(&spec.material);
             let air_before = specs.last().map(|p: &SurfaceSpec| is_air(&p.material)).unwrap_or(true);
-            if !curved && air_after {
+            if !curved && air_after && air_before {
                 spec.stop = true;
                 specs.push(spec);
                 lines.push(stop_line);
@@ -455,7 +456,7 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
                 });
                 lines.push(stop_line);
                 notes.push(format!(
-                    "The Zemax stop (SURF {}) is a curved surface with glass in front: a plane stop was inserted {d:.4} mm behind it.",
+                    "The Zemax stop (SURF {}) has glass in front of it: a plane stop was inserted {d:.4} mm behind it.",
                     s.number
                 ));
             } else {
@@ -502,7 +503,7 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
         lens: LensMeta {
             name: title,
             source,
-            notes: all_notes.join(" "),
+            notes: join_sentences(&all_notes),
             focal_length_mm: None,
             f_number,
             wavelengths_nm,
