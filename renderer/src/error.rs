@@ -48,6 +48,16 @@ pub enum Error {
         /// What is wrong.
         message: String,
     },
+    /// A scene file (glTF, environment EXR) that cannot be loaded.
+    #[error("{file}: {}{message}", location_prefix(.location))]
+    Scene {
+        /// The file.
+        file: String,
+        /// Where in the file, e.g. `mesh 2 'Cube', primitive 0` (empty for the whole file).
+        location: String,
+        /// What is wrong.
+        message: String,
+    },
     /// An aperture image that cannot be used.
     #[error("aperture image {path}: {message}")]
     ApertureImage {
@@ -56,6 +66,14 @@ pub enum Error {
         /// What is wrong.
         message: String,
     },
+}
+
+fn location_prefix(location: &str) -> String {
+    if location.is_empty() {
+        String::new()
+    } else {
+        format!("{location}: ")
+    }
 }
 
 /// Shorthand result type.
@@ -70,6 +88,11 @@ impl Error {
         message: impl Into<String>,
     ) -> Self {
         Error::LensFile { file: file.into(), line, field: field.into(), message: message.into() }
+    }
+
+    /// Builds an [`Error::Scene`].
+    pub fn scene(file: impl Into<String>, location: impl Into<String>, message: impl Into<String>) -> Self {
+        Error::Scene { file: file.into(), location: location.into(), message: message.into() }
     }
 
     /// Builds an [`Error::Io`].

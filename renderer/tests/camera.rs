@@ -7,7 +7,10 @@ const WL: f64 = 587.5618;
 
 /// Mean weight over a stratified lens grid: the irradiance from a uniform radiance-1 scene.
 fn irradiance(cam: &Camera, film: DVec2) -> f64 {
-    let n = 48;
+    irradiance_n(cam, film, 48)
+}
+
+fn irradiance_n(cam: &Camera, film: DVec2, n: usize) -> f64 {
     let mut sum = 0.0;
     for i in 0..n {
         for j in 0..n {
@@ -43,8 +46,9 @@ fn pinhole_and_thin_lens_show_cos4_falloff() {
 fn realistic_centre_is_normalised_and_corners_fall_off() {
     let lens = library_lens("double-gauss-50mm").unwrap().stopped_down(8.0).unwrap();
     let cam = Camera::Realistic(RealisticCamera::new(Sensor::default(), lens, None).unwrap());
-    let centre = irradiance(&cam, DVec2::new(0.5, 0.5));
-    assert!((centre - 1.0).abs() < 1e-9, "{centre}");
+    // the exposure constant is a 256² stratified integral; an independent 400² estimate agrees
+    let centre = irradiance_n(&cam, DVec2::new(0.5, 0.5), 400);
+    assert!((centre - 1.0).abs() < 2e-3, "{centre}");
     let corner = irradiance(&cam, DVec2::new(1.0, 1.0));
     // cos⁴ at 23.4° is 0.71; with pupil aberration and mechanical vignetting it is lower, not higher
     assert!(corner < 0.8 && corner > 0.2, "corner {corner}");
@@ -60,7 +64,9 @@ fn tilted_sensor_focus_plane_thin_lens_is_exact() {
     // hinge rule: J = f / sin(tilt)
     let j = 0.05 / 10f64.to_radians().sin();
     assert!((plane.hinge_distance_m.unwrap() - j).abs() < 1e-9, "{:?} vs {j}", plane.hinge_distance_m);
-    for film in [DVec2::new(0.5, 0.1), DVec2::new(0.5, 0.9), DVec2::new(0.2, 0.3)] {
+    // With the bottom of the sensor tilted away, the plane of focus swings down towards the
+    // ground: pixels below the centre see it in front of the camera.
+    for film in [DVec2::new(0.5, 0.55), DVec2::new(0.5, 0.9), DVec2::new(0.2, 0.75)] {
         let rays: Vec<_> = [DVec2::new(0.1, 0.5), DVec2::new(0.9, 0.5), DVec2::new(0.5, 0.1)]
             .iter()
             .filter_map(|u| cam.generate_ray(film, *u, WL))
@@ -80,7 +86,7 @@ fn sensor_tilted_30_degrees_realistic_focus_plane_verified_by_tracing() {
     let plane = cam.focus_plane().unwrap();
     assert!(plane.hinge_distance_m.is_some());
     let mut checked = 0;
-    for film in [DVec2::new(0.5, 0.5), DVec2::new(0.5, 0.3), DVec2::new(0.5, 0.7)] {
+    for film in [DVec2::new(0.5, 0.55), DVec2::new(0.5, 0.7), DVec2::new(0.3, 0.9)] {
         // best focus: the point along the bundle where its spread is smallest
         let rays: Vec<_> = (0..64)
             .filter_map(|k| {
@@ -112,3 +118,4 @@ fn sensor_tilted_30_degrees_realistic_focus_plane_verified_by_tracing() {
     }
     assert!(checked >= 2);
 }
+

@@ -187,27 +187,22 @@ fn zemax_files_from_optiland_match_optilands_focal_length() {
         let efl = lens.paraxial().efl_mm;
         // Same glass data (refractiveindex.info) and primary wavelength as optiland.
         assert!(rel_close(efl, expected_efl(sample), 1e-6), "{sample}: EFL {efl} vs {}", expected_efl(sample));
-        let stop = &lens.surfaces()[lens.stop_index()];
-        assert!(stop.shape.is_plane());
-        assert!(lens.index_before(lens.stop_index(), 587.5618) == 1.0, "{sample}: stop must be in air");
+        assert!(lens.surfaces()[lens.stop_index()].is_stop, "{sample}: the file's STOP surface is the stop");
     }
 }
 
 #[test]
-fn zemax_maps_surfaces_to_surf_lines_and_inserts_a_plane_stop() {
+fn zemax_maps_surfaces_to_surf_lines_and_keeps_a_curved_stop() {
     let rel = "zmx/cooke_triplet.zmx";
     let text = read(rel);
     let (p, map) = import_zemax(text.as_bytes(), rel).unwrap();
-    // Six lens surfaces plus a plane stop after SURF 4 (curved, glass in front).
-    assert_eq!(p.surfaces.len(), 7);
-    assert!(p.surfaces[4].stop && p.surfaces[4].radius_mm == 0.0);
-    assert!(!p.surfaces[3].stop && p.surfaces[3].radius_mm != 0.0);
+    // Six lens surfaces; the stop is SURF 4 itself (curved, glass in front), as in Zemax.
+    assert_eq!(p.surfaces.len(), 6);
+    assert!(p.surfaces[3].stop && p.surfaces[3].radius_mm != 0.0);
     let surf = |n: usize| line_containing(&text, &format!("SURF {n}"));
-    assert_eq!(map.surface_lines, vec![surf(1), surf(2), surf(3), surf(4), surf(4), surf(5), surf(6)]);
+    assert_eq!(map.surface_lines, vec![surf(1), surf(2), surf(3), surf(4), surf(5), surf(6)]);
     assert_eq!(p.surfaces[0].material, MaterialSpec::Name("SK16".into()));
     assert_eq!(p.lens.primary_wavelength_nm, Some(550.0));
-    assert!(p.lens.notes.contains("plane stop"), "{}", p.lens.notes);
-    // The inserted stop keeps the total track.
     let track: f64 = p.surfaces.iter().map(|s| s.thickness_mm).sum();
     assert!((track - (3.25896 + 6.00755 + 0.99997 + 4.75041 + 2.95208 + 42.20778)).abs() < 1e-9);
 

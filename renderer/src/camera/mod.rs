@@ -235,7 +235,7 @@ fn geometric_factor(film: DVec3, lens_pt: DVec3, film_normal: DVec3) -> f64 {
 
 /// Stratified estimate of the mean weight at the image centre, for exposure normalisation.
 fn centre_mean(mut raw: impl FnMut(DVec2) -> Option<f64>) -> f64 {
-    let n = 64;
+    let n = 256;
     let mut sum = 0.0;
     for i in 0..n {
         for j in 0..n {

@@ -389,13 +389,10 @@ impl Lens {
                     }
                     transmission *= tr;
                 }
-                o = DVec3::new(p.x, p.y, p.z + s.z_mm);
-                continue;
-            }
-            if r2 > s.semi_diameter_mm * s.semi_diameter_mm {
+            } else if r2 > s.semi_diameter_mm * s.semi_diameter_mm {
                 return Err(Absorbed::Clipped(i));
             }
-            // 3. Refract.
+            // 3. Refract (a stop is usually a plane in air, where nothing happens).
             let (n1, n2) = match direction {
                 TraceDirection::SceneToFilm => (self.index_before(i, wavelength_nm), self.index_after(i, wavelength_nm)),
                 TraceDirection::FilmToScene => (self.index_after(i, wavelength_nm), self.index_before(i, wavelength_nm)),

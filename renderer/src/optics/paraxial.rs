@@ -133,14 +133,12 @@ pub fn analyse(lens: &Lens, wavelength_nm: f64) -> Result<ParaxialData> {
     let last_z = lens.surfaces()[n - 1].z_mm;
     let sys = matrix(lens, 0, n, wavelength_nm, Meridian::Y, false);
     let sys_x = matrix(lens, 0, n, wavelength_nm, Meridian::X, false);
-    if sys.c.abs() < 1e-15 {
-        return Err(Error::Optics(format!("lens '{}' is afocal (zero optical power)", lens.name())));
-    }
-    // 1. Cardinal points from the system matrix.
-    let efl = -1.0 / sys.c;
+    // 1. Cardinal points from the system matrix (infinite for an afocal system such as a plate).
+    let afocal = sys.c.abs() < 1e-15;
+    let efl = if afocal { f64::INFINITY } else { -1.0 / sys.c };
     let efl_x = if sys_x.c.abs() < 1e-15 { f64::INFINITY } else { -1.0 / sys_x.c };
-    let bfl = -sys.a / sys.c;
-    let front_focal_z = sys.d / sys.c;
+    let bfl = if afocal { f64::INFINITY } else { -sys.a / sys.c };
+    let front_focal_z = if afocal { f64::NEG_INFINITY } else { sys.d / sys.c };
     let rear_focal_z = last_z + bfl;
     // 2. Pupils: images of the stop through the groups in front of and behind it.
     let s = lens.stop_index();

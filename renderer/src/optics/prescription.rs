@@ -26,7 +26,7 @@
 //! | `conic` | f64, conic constant k | — | 0 |
 //! | `aspheric` | list of f64: A4, A6, A8, ... (coefficients of r⁴, r⁶, ...) | mm^(1-2i) | `[]` |
 //! | `cylinder` | `"x"` or `"y"`: the surface is curved only along this axis (anamorphic) | — | none |
-//! | `stop` | bool: this surface is the aperture stop (a plane) | — | false |
+//! | `stop` | bool: this surface is the aperture stop (usually a plane in air; a curved or glass surface may be the stop, as in Zemax) | — | false |
 //! | `housing_semi_diameter_mm` | f64: mechanical radius around the stop opening | mm | stop `semi_diameter_mm` |
 //!
 //! `[aperture]` table (shape of the stop opening):
@@ -160,11 +160,6 @@ impl Default for MaterialSpec {
 impl MaterialSpec {
     fn is_air(&self) -> bool {
         matches!(self, MaterialSpec::Name(n) if n.eq_ignore_ascii_case("air"))
-    }
-
-    /// Air, or a model glass of index 1 without dispersion.
-    fn is_air_like(&self) -> bool {
-        self.is_air() || matches!(self, MaterialSpec::Model(m) if m.nd == 1.0)
     }
 }
 
@@ -414,9 +409,6 @@ pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedS
             return Err(map.surface_error(i, "semi_diameter_mm", format!("must be positive, got {}", s.semi_diameter_mm)));
         }
         if s.stop {
-            if s.radius_mm != 0.0 || s.conic != 0.0 || !s.aspheric.is_empty() || s.cylinder.is_some() {
-                return Err(map.surface_error(i, "radius_mm", "the aperture stop must be a plane"));
-            }
             let housing = s.housing_semi_diameter_mm.unwrap_or(s.semi_diameter_mm);
             finite("housing_semi_diameter_mm", housing)?;
             if s.semi_diameter_mm > housing {
@@ -454,12 +446,6 @@ pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedS
                 }
             }
         };
-        if s.stop && material_after != Material::Air {
-            return Err(map.surface_error(i, "material", "the aperture stop must be followed by air"));
-        }
-        if s.stop && i > 0 && !p.surfaces[i - 1].material.is_air_like() {
-            return Err(map.surface_error(i - 1, "material", "the aperture stop must sit in air: the surface before it is followed by glass"));
-        }
         out.push(ResolvedSurface { spec: s.clone(), material_after });
     }
     // Aperture table.

@@ -214,10 +214,7 @@ pub fn chief_ray_from_film(lens: &Lens, film: DVec3, wavelength_nm: f64) -> Opti
     let dir2 = if r > 0.0 { radial / r } else { DVec2::X };
     let stop_offset = |s: f64| -> Option<f64> {
         let aim = DVec3::new(dir2.x * s, dir2.y * s, rear_z);
-        let ray = Ray::new(film, aim - film);
-        lens.trace_detailed(&ray, wavelength_nm, TraceDirection::FilmToScene, StopMode::Open)
-            .ok()
-            .map(|t| t.stop_point.dot(dir2))
+        stop_crossing_from_film(lens, &Ray::new(film, aim - film), wavelength_nm).map(|p| p.dot(dir2))
     };
     // 2. Secant iterations on the aim radius.
     let mut s0 = r * scale;
@@ -253,4 +250,26 @@ pub fn field_angle_deg(lens: &Lens, film_x_mm: f64, film_y_mm: f64, film_z_mm: f
         Some(ray) => (-ray.direction.z).clamp(-1.0, 1.0).acos().to_degrees(),
         None => (film_x_mm.hypot(film_y_mm) / lens.paraxial().efl_mm.abs()).atan().to_degrees(),
     }
+}
+
+/// Where a ray from the film crosses the stop surface, ignoring every clear aperture (for
+/// aiming: the rim of an element behind the stop must not stop the search).
+fn stop_crossing_from_film(lens: &Lens, ray: &Ray, wavelength_nm: f64) -> Option<DVec2> {
+    let mut o = ray.origin;
+    let mut d = ray.direction;
+    for i in (lens.stop_index()..lens.surfaces().len()).rev() {
+        let s = &lens.surfaces()[i];
+        let local = DVec3::new(o.x, o.y, o.z - s.z_mm);
+        let t = s.shape.intersect(local, d)?;
+        let p = local + t * d;
+        if i == lens.stop_index() {
+            return Some(DVec2::new(p.x, p.y));
+        }
+        let (n1, n2) = (lens.index_after(i, wavelength_nm), lens.index_before(i, wavelength_nm));
+        if n1 != n2 {
+            d = super::surface::refract(d, s.shape.normal(p)?, n1, n2)?;
+        }
+        o = DVec3::new(p.x, p.y, p.z + s.z_mm);
+    }
+    None
 }

@@ -32,16 +32,12 @@
 //!   the `GLAS` line) as a model glass, with a note; without usable nd it is an error.
 //! - A surface with `DIAM 0` (or none) takes the larger semi-diameter of its nearest
 //!   neighbours that have one, with a note.
-//! - Our stop is a plane with air on both sides (the tracer does not refract there). When the
-//!   Zemax stop is curved or touches glass, a plane stop of the same semi-diameter is inserted
-//!   next to it on its air side (before it when the medium before is air, else after it),
-//!   placed as close to its vertex as the neighbouring surfaces' sags allow (a forward-bulging
-//!   surface pushes it forward by its largest forward sag); the Zemax surface stays as a lens
-//!   surface and `notes` gives the offset. A plane air-to-air stop is kept as it is.
+//! - The stop is the Zemax stop surface itself, curved or not and with glass around it or not,
+//!   as in Zemax: the tracer clips by the opening where the ray meets that surface, then refracts.
 //! - Neighbouring surfaces whose edges cross are NOT adjusted (Zemax semi-diameters are
 //!   design data): validation reports them at the surface's `SURF` line.
 
-use super::pbrt::{join_sentences, shape_of, short, MAX_LENGTH_MM};
+use super::pbrt::{join_sentences, short, MAX_LENGTH_MM};
 use crate::error::{Error, Result};
 use crate::optics::glass::Material;
 use crate::optics::prescription::{LensMeta, MaterialSpec, ModelGlass, Prescription, SourceMap, SurfaceSpec};
@@ -397,71 +393,14 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
             notes.push(format!("SURF {}: {}", s.number, s.comment));
         }
         if k == stop_k {
-            let stop_line = s.line;
-            let curved = spec.radius_mm != 0.0 || !spec.aspheric.is_empty();
-            if !curved {
+            // The stop is this surface itself, curved or not, with whatever media around it
+            // (as in Zemax): the tracer clips by the opening where the ray meets it, then refracts.
+            if spec.radius_mm == 0.0 && spec.aspheric.is_empty() {
                 spec.conic = 0.0; // a conic constant means nothing on a plane
             }
-            let air_after = is_air(&spec.material);
-            let air_before = specs.last().map(|p: &SurfaceSpec| is_air(&p.material)).unwrap_or(true);
-            if !curved && air_after && air_before {
-                spec.stop = true;
-                specs.push(spec);
-                lines.push(stop_line);
-            } else if air_before {
-                // Plane stop before the surface, in the air gap in front of it.
-                let stop_sd = spec.semi_diameter_mm;
-                let prev = specs.last();
-                let lo_shift = prev
-                    .map(|p| {
-                        let max_sag = max_sag(p, p.semi_diameter_mm.min(stop_sd));
-                        // distance from the previous vertex to its furthest (film-side) point
-                        p.thickness_mm - max_sag
-                    })
-                    .unwrap_or(f64::INFINITY); // room in front of the vertex
-                let min_sag_here = min_sag(&spec, spec.semi_diameter_mm.min(stop_sd)); // ≤ 0
-                // Place the plane d in front of the curved vertex: need d ≥ -min_sag_here and
-                // d ≤ lo_shift (the previous surface's rear-most point).
-                let d = (-min_sag_here).max(0.0);
-                let d = if d <= lo_shift { d } else { lo_shift.max(0.0) };
-                if let Some(p) = specs.last_mut() {
-                    p.thickness_mm -= d;
-                }
-                specs.push(SurfaceSpec {
-                    thickness_mm: d,
-                    semi_diameter_mm: stop_sd,
-                    stop: true,
-                    ..Default::default()
-                });
-                lines.push(stop_line);
-                notes.push(format!(
-                    "The Zemax stop (SURF {}) is not a plane in air: a plane stop was inserted {d:.4} mm in front of it.",
-                    s.number
-                ));
-                specs.push(spec);
-                lines.push(stop_line);
-            } else if air_after {
-                // Plane stop after the surface, in the air gap behind it.
-                let stop_sd = spec.semi_diameter_mm;
-                let d = max_sag(&spec, stop_sd).max(0.0).min(spec.thickness_mm);
-                let rest = spec.thickness_mm - d;
-                spec.thickness_mm = d;
-                specs.push(spec);
-                lines.push(stop_line);
-                specs.push(SurfaceSpec {
-                    thickness_mm: rest,
-                    semi_diameter_mm: stop_sd,
-                    stop: true,
-                    ..Default::default()
-                });
-                lines.push(stop_line);
-                notes.push(format!(
-                    "The Zemax stop (SURF {}) has glass in front of it: a plane stop was inserted {d:.4} mm behind it.",
-                    s.number
-                ));
-            } else {
-                return Err(Error::lens_file(file, stop_line, "STOP", "the stop lies inside glass (glass on both sides)"));
-            }
+            spec.stop = true;
+            specs.push(spec);
+            lines.push(s.line);
         } else {
             specs.push(spec);
             lines.push(s.line);
@@ -516,36 +455,3 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
     Ok((p, SourceMap::new(file, lines)))
 }
 
-fn is_air(m: &MaterialSpec) -> bool {
-    match m {
-        MaterialSpec::Name(n) => n.eq_ignore_ascii_case("air"),
-        MaterialSpec::Model(g) => g.nd == 1.0,
-    }
-}
-
-/// Largest sag of `s` over heights 0..=r (x and y), 0 where undefined.
-fn max_sag(s: &SurfaceSpec, r: f64) -> f64 {
-    sag_extreme(s, r, f64::max)
-}
-
-/// Smallest sag of `s` over heights 0..=r (x and y), 0 where undefined.
-fn min_sag(s: &SurfaceSpec, r: f64) -> f64 {
-    sag_extreme(s, r, f64::min)
-}
-
-fn sag_extreme(s: &SurfaceSpec, r: f64, pick: fn(f64, f64) -> f64) -> f64 {
-    let shape = shape_of(s);
-    let mut out = 0.0;
-    if !(r.is_finite() && r > 0.0) {
-        return out;
-    }
-    for k in 0..=256 {
-        let h = r * k as f64 / 256.0;
-        for (x, y) in [(h, 0.0), (0.0, h)] {
-            if let Some(z) = shape.sag(x, y) {
-                out = pick(out, z);
-            }
-        }
-    }
-    out
-}

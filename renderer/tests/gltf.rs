@@ -1,0 +1,328 @@
+//! glTF loading. Fixtures in `renderer/tests/data/gltf/` are written by
+//! `tests/scene/make_gltf_fixtures.py` (standard library only); expected values below are
+//! worked out by hand from the numbers in that script.
+
+use glam::{Vec2, Vec3, Vec4};
+use petzval_renderer::scene::gltf_load::{load_gltf, load_gltf_slice};
+use petzval_renderer::scene::texture::{srgb_to_linear, Wrap};
+use petzval_renderer::scene::{AlphaMode, Light, Material, Scene};
+use petzval_renderer::Error;
+use std::f32::consts::PI;
+use std::path::PathBuf;
+
+fn data(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/gltf").join(name)
+}
+
+fn load(name: &str) -> Scene {
+    load_gltf(&data(name)).unwrap_or_else(|e| panic!("{name}: {e}"))
+}
+
+fn load_err(name: &str) -> String {
+    match load_gltf(&data(name)) {
+        Ok(_) => panic!("{name} loaded but should fail"),
+        Err(e) => {
+            let msg = e.to_string();
+            assert!(msg.contains(name), "error does not name the file: {msg}");
+            msg
+        }
+    }
+}
+
+fn close(a: Vec3, b: Vec3) -> bool {
+    (a - b).abs().max_element() < 1e-5
+}
+
+fn rel_close(a: Vec3, b: Vec3) -> bool {
+    (a - b).abs().max_element() <= 1e-6 * b.abs().max_element()
+}
+
+/// The triangle whose vertex set equals `expected` (in any rotation of the order); returns its
+/// vertex indices in stored order.
+fn find_triangle(scene: &Scene, expected: [Vec3; 3]) -> [u32; 3] {
+    let m = &scene.mesh;
+    for t in &m.indices {
+        let p = t.map(|i| m.positions[i as usize]);
+        if expected.iter().all(|e| p.iter().any(|q| close(*q, *e))) {
+            return *t;
+        }
+    }
+    panic!("no triangle {expected:?} in {:?}", m.indices.iter().map(|t| t.map(|i| m.positions[i as usize])).collect::<Vec<_>>());
+}
+
+fn geometric_normal(scene: &Scene, t: [u32; 3]) -> Vec3 {
+    let p = t.map(|i| scene.mesh.positions[i as usize]);
+    (p[1] - p[0]).cross(p[2] - p[0]).normalize()
+}
+
+#[test]
+fn gltf_node_hierarchy_world_positions() {
+    let s = load("hierarchy.gltf");
+    // Child: world = T(1,0,0)·R_y(90°)·S(2)·T(0,0,1); R_y(90°) maps (x, y, z) to (z, y, −x).
+    // Vertex (0,0,0) → (0,0,1) → (1,0,0) → (2,0,0) → (3,0,0), and so on.
+    let child = find_triangle(&s, [Vec3::new(3.0, 0.0, 0.0), Vec3::new(3.0, 0.0, -2.0), Vec3::new(3.0, 2.0, 0.0)]);
+    // Mirror: world = T(1,0,0)·R_y(90°)·S(2)·S(−1,1,1).
+    let mirror = find_triangle(&s, [Vec3::new(1.0, 0.0, 0.0), Vec3::new(1.0, 0.0, 2.0), Vec3::new(1.0, 2.0, 0.0)]);
+    // MatrixNode: a translation by (0, 5, 0), no normals in the file.
+    let flat = find_triangle(&s, [Vec3::new(0.0, 5.0, 0.0), Vec3::new(1.0, 5.0, 0.0), Vec3::new(0.0, 6.0, 0.0)]);
+    assert_eq!(s.mesh.triangle_count(), 3, "NotInDefaultScene and the LINES primitive must be skipped");
+
+    // Normals (0,0,1) go to +x through the inverse transpose, also for the mirrored instance,
+    // whose winding is flipped so that the geometric normal agrees.
+    for t in [child, mirror] {
+        for &i in &t {
+            assert!(close(s.mesh.normals[i as usize], Vec3::X), "{:?}", s.mesh.normals[i as usize]);
+        }
+        assert!(close(geometric_normal(&s, t), Vec3::X), "winding of {t:?}");
+    }
+    // Computed flat normal, counter-clockwise winding.
+    for &i in &flat {
+        assert!(close(s.mesh.normals[i as usize], Vec3::Z));
+    }
+    assert!(close(geometric_normal(&s, flat), Vec3::Z));
+
+    // Every vertex has every attribute; tangents are zero when absent; no UV set 1.
+    let n = s.mesh.positions.len();
+    assert_eq!((s.mesh.normals.len(), s.mesh.tangents.len(), s.mesh.uv0.len()), (n, n, n));
+    assert!(s.mesh.uv1.is_empty());
+    assert!(s.mesh.tangents.iter().all(|t| *t == Vec4::ZERO));
+
+    // No material in the file: the glTF default.
+    assert_eq!(s.materials, vec![Material::default()]);
+    assert!(s.mesh.material_ids.iter().all(|&m| m == 0));
+    assert!(s.warnings.iter().any(|w| w.contains("NoNormals") && w.contains("primitive 1") && w.contains("Lines")), "{:?}", s.warnings);
+}
+
+#[test]
+fn gltf_textured_quad_material_and_texel_lookup() {
+    let s = load("textured_quad.gltf");
+    assert_eq!(s.materials.len(), 1);
+    let m = &s.materials[0];
+    assert_eq!(m.name, "Checker");
+    assert_eq!(m.base_color, Vec4::ONE);
+    assert_eq!((m.metallic, m.roughness), (0.25, 0.75));
+    assert_eq!(m.normal_scale, 0.5);
+    assert!(close(m.emissive, Vec3::new(4.0, 2.0, 1.0)), "emissive × KHR_materials_emissive_strength");
+    assert_eq!((m.specular, m.ior), (0.5, 1.33));
+    assert_eq!(m.alpha_mode, AlphaMode::Mask(0.3));
+    assert!(m.double_sided);
+
+    // Base colour: sRGB-decoded 4×2 checker, nearest, clamp / mirrored repeat.
+    let bc = m.base_color_texture.expect("base colour texture");
+    assert_eq!(bc.uv_set, 0);
+    let tex = &s.textures[bc.index];
+    assert_eq!((tex.width, tex.height, tex.bilinear), (4, 2, false));
+    assert_eq!((tex.wrap_s, tex.wrap_t), (Wrap::ClampToEdge, Wrap::MirroredRepeat));
+
+    // Texel lookup through the mesh: the quad maps (x, y) to uv ((x+1)/2, (1−y)/2).
+    let uv_at = |p: Vec2| -> Vec2 {
+        for t in &s.mesh.indices {
+            let q = t.map(|i| s.mesh.positions[i as usize].truncate());
+            let d = (q[1] - q[0]).perp_dot(q[2] - q[0]);
+            let b1 = (p - q[0]).perp_dot(q[2] - q[0]) / d;
+            let b2 = (q[1] - q[0]).perp_dot(p - q[0]) / d;
+            if b1 >= 0.0 && b2 >= 0.0 && b1 + b2 <= 1.0 {
+                let uv = t.map(|i| s.mesh.uv0[i as usize]);
+                return uv[0] * (1.0 - b1 - b2) + uv[1] * b1 + uv[2] * b2;
+            }
+        }
+        panic!("{p} not on the quad");
+    };
+    let texel = |p: Vec2| tex.sample(uv_at(p)) * m.base_color;
+    // Texel (0, 0) is red, (1, 1) is (255, 255, 0) with alpha 128, (3, 1) is (64, 32, 16).
+    assert!((texel(Vec2::new(-0.75, 0.5)) - Vec4::new(1.0, 0.0, 0.0, 1.0)).abs().max_element() < 1e-6);
+    let yellow = texel(Vec2::new(-0.25, -0.5));
+    assert!((yellow - Vec4::new(1.0, 1.0, 0.0, 128.0 / 255.0)).abs().max_element() < 1e-6, "{yellow}");
+    let brown = texel(Vec2::new(0.75, -0.5));
+    let expect = Vec4::new(srgb_to_linear(64.0 / 255.0), srgb_to_linear(32.0 / 255.0), srgb_to_linear(16.0 / 255.0), 1.0);
+    assert!((brown - expect).abs().max_element() < 1e-6, "{brown} vs {expect}");
+
+    // Metallic-roughness: linear (not sRGB-decoded), UV set 1, bilinear.
+    let mr = m.metallic_roughness_texture.expect("metallic-roughness texture");
+    assert_eq!(mr.uv_set, 1);
+    let mr_tex = &s.textures[mr.index];
+    assert!(mr_tex.bilinear);
+    assert!((mr_tex.texels[0] - Vec4::new(0.0, 128.0 / 255.0, 1.0, 1.0)).abs().max_element() < 1e-6);
+    // The same image as a normal map is its own (linear) texture; emissive is sRGB.
+    let nt = m.normal_texture.expect("normal texture");
+    assert_ne!(nt.index, mr.index);
+    assert_eq!(s.textures[nt.index].texels, mr_tex.texels);
+    let em = m.emissive_texture.expect("emissive texture");
+    assert_eq!(s.textures[em.index].texels, tex.texels);
+
+    // Vertex attributes.
+    assert_eq!(s.mesh.triangle_count(), 2);
+    assert!(s.mesh.tangents.iter().all(|t| *t == Vec4::new(1.0, 0.0, 0.0, 1.0)));
+    assert!(s.mesh.uv1.iter().all(|u| *u == Vec2::splat(0.5)));
+    assert!(s.mesh.normals.iter().all(|n| *n == Vec3::Z));
+
+    assert!(s.warnings.iter().any(|w| w.contains("KHR_texture_transform") && w.contains("emissiveTexture")), "{:?}", s.warnings);
+    assert!(s.warnings.iter().any(|w| w.contains("KHR_materials_clearcoat")), "{:?}", s.warnings);
+}
+
+#[test]
+fn gltf_lights_convert_to_blender_radiometric_units() {
+    let s = load("lights.gltf");
+    assert_eq!(s.lights.len(), 3);
+    // A Blender light of P watts was exported as P/(4π)·683 cd; here it is P/(4π) W/sr.
+    match s.lights[0] {
+        Light::Point { position, intensity, range } => {
+            assert!(close(position, Vec3::new(0.0, 3.0, 0.0)));
+            assert!(rel_close(intensity * 4.0 * PI, Vec3::new(1000.0, 500.0, 250.0)), "{intensity}");
+            assert_eq!(range, Some(20.0));
+        }
+        ref other => panic!("{other:?}"),
+    }
+    match s.lights[1] {
+        Light::Spot { position, direction, intensity, inner_cone_rad, outer_cone_rad, range } => {
+            assert!(close(position, Vec3::new(1.0, 2.0, 3.0)));
+            assert!(close(direction, Vec3::NEG_Y), "{direction}");
+            assert!(rel_close(intensity * 4.0 * PI, Vec3::splat(500.0)), "{intensity}");
+            assert!((inner_cone_rad - 0.2).abs() < 1e-6 && (outer_cone_rad - 0.5).abs() < 1e-6);
+            assert_eq!(range, None);
+        }
+        ref other => panic!("{other:?}"),
+    }
+    match s.lights[2] {
+        Light::Directional { direction, irradiance } => {
+            let h = std::f32::consts::FRAC_1_SQRT_2;
+            assert!(close(direction, Vec3::new(0.0, -h, -h)), "{direction}");
+            assert!(rel_close(irradiance, Vec3::new(3.0, 3.0, 1.5)), "{irradiance}");
+        }
+        ref other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn gltf_cameras() {
+    let s = load("camera.gltf");
+    assert_eq!(s.cameras.len(), 2, "the orthographic camera is skipped");
+    assert!(s.warnings.iter().any(|w| w.contains("orthographic") && w.contains("OrthoNode")), "{:?}", s.warnings);
+
+    let c = &s.cameras[0];
+    assert_eq!(c.name, "MainCam");
+    // world = T(0,1,0)·S(3)·T(0,0,2)·R_y(30°): position (0, 1, 6), scale removed.
+    assert!(close(c.to_world.translation.into(), Vec3::new(0.0, 1.0, 6.0)));
+    let (sin, cos) = (30f32).to_radians().sin_cos();
+    assert!(close(c.to_world.transform_vector3(Vec3::NEG_Z), Vec3::new(-sin, 0.0, -cos)));
+    assert!(close(c.to_world.transform_vector3(Vec3::Y), Vec3::Y));
+    assert!(close(c.to_world.transform_vector3(Vec3::X), Vec3::new(cos, 0.0, -sin)));
+    assert_eq!((c.yfov_rad, c.aspect_ratio, c.znear, c.zfar), (0.6, Some(1.5), 0.1, Some(100.0)));
+
+    let c = &s.cameras[1];
+    assert_eq!(c.name, "Unnamed node cam", "an unnamed node takes the camera's name");
+    assert_eq!((c.yfov_rad, c.aspect_ratio, c.zfar), (1.0, None, None));
+    assert!(close(c.to_world.translation.into(), Vec3::new(0.0, 0.0, 10.0)));
+}
+
+#[test]
+fn gltf_binary_glb_with_embedded_image() {
+    let s = load("box.glb");
+    assert_eq!(s.mesh.triangle_count(), 2);
+    let m = &s.materials[0];
+    assert_eq!(m.name, "Embedded");
+    assert_eq!((m.metallic, m.roughness, m.base_color), (1.0, 1.0, Vec4::ONE));
+    let tex = &s.textures[m.base_color_texture.unwrap().index];
+    assert_eq!((tex.width, tex.height, tex.bilinear), (4, 2, true));
+    assert_eq!(tex.texels[0], Vec4::new(1.0, 0.0, 0.0, 1.0));
+    assert!(tex.name.contains("checker-embedded"), "{}", tex.name);
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+}
+
+#[test]
+fn gltf_missing_texture_is_a_warning_with_fallback() {
+    let s = load("missing_texture.gltf");
+    let m = &s.materials[0];
+    let base = &s.textures[m.base_color_texture.unwrap().index];
+    assert_eq!((base.width, base.height), (1, 1));
+    assert_eq!(base.texels[0], Vec4::new(1.0, 0.0, 1.0, 1.0), "magenta fallback");
+    let normal = &s.textures[m.normal_texture.unwrap().index];
+    assert_eq!(normal.texels[0], Vec4::new(0.5, 0.5, 1.0, 1.0), "flat normal fallback");
+    let missing = s
+        .warnings
+        .iter()
+        .find(|w| w.contains("does_not_exist.png"))
+        .unwrap_or_else(|| panic!("{:?}", s.warnings));
+    assert!(missing.contains("missing_texture.gltf") && missing.contains("'Gone'"), "{missing}");
+    assert!(s.warnings.iter().any(|w| w.contains("not-an-image") && w.contains("decode")), "{:?}", s.warnings);
+    assert_eq!(s.mesh.triangle_count(), 2);
+}
+
+#[test]
+fn gltf_jpeg_texture() {
+    let dir = std::env::temp_dir().join(format!("petzval-gltf-jpeg-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let img = image::RgbImage::from_pixel(8, 8, image::Rgb([200, 100, 50]));
+    img.save(dir.join("tex.jpg")).unwrap();
+    let gltf_text = std::fs::read_to_string(data("missing_texture.gltf")).unwrap().replace("does_not_exist.png", "tex.jpg");
+    let path = dir.join("scene.gltf");
+    std::fs::write(&path, gltf_text).unwrap();
+    let s = load_gltf(&path).unwrap();
+    let tex = &s.textures[s.materials[0].base_color_texture.unwrap().index];
+    assert_eq!((tex.width, tex.height), (8, 8));
+    let expect = Vec3::new(200.0, 100.0, 50.0).map(|c| srgb_to_linear(c / 255.0));
+    assert!((tex.texels[27].truncate() - expect).abs().max_element() < 0.02, "{} vs {expect}", tex.texels[27]);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn gltf_non_finite_vertices() {
+    let s = load("nan_vertices.gltf");
+    assert_eq!(s.mesh.triangle_count(), 2);
+    assert!(s.mesh.positions.iter().all(|p| p.is_finite()));
+    assert!(s.warnings.iter().any(|w| w.contains("dropped 1 of 3 triangles") && w.contains("Partly NaN")), "{:?}", s.warnings);
+    let e = load_err("all_nan.gltf");
+    assert!(e.contains("non-finite"), "{e}");
+}
+
+#[test]
+fn gltf_interleaved_quantized_sparse_accessors() {
+    let s = load("accessors.gltf");
+    // Vertex 2 is (0, 7, 0) in the interleaved view and (0, 2, 0) after the sparse substitution.
+    let t = find_triangle(&s, [Vec3::ZERO, Vec3::new(3.0, 0.0, 0.0), Vec3::new(0.0, 2.0, 0.0)]);
+    let uv = t.map(|i| s.mesh.uv0[i as usize]);
+    assert!(uv.contains(&Vec2::ZERO) && uv.contains(&Vec2::new(1.0, 0.0)), "{uv:?}");
+    assert!(uv.iter().any(|u| (*u - Vec2::new(0.0, 32768.0 / 65535.0)).length() < 1e-6), "{uv:?}");
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+}
+
+#[test]
+fn gltf_bad_files_are_errors() {
+    for name in ["corrupt.gltf", "truncated.gltf", "truncated.glb"] {
+        load_err(name);
+    }
+    let e = load_err("missing_buffer.gltf");
+    assert!(e.contains("buffer 0") && e.contains("missing.bin"), "{e}");
+    let e = load_err("bad_indices.gltf");
+    assert!(e.contains("'BadMesh'") && e.contains("primitive 0") && e.contains("out of range"), "{e}");
+    let e = load_err("cycle.gltf");
+    assert!(e.contains("cycle"), "{e}");
+    match load_gltf(&data("no_such_file.gltf")) {
+        Err(Error::Io { path, .. }) => assert!(path.ends_with("no_such_file.gltf")),
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn gltf_truncated_and_mutated_inputs_never_panic() {
+    for name in ["box.glb", "hierarchy.gltf", "textured_quad.gltf", "lights.gltf", "camera.gltf", "accessors.gltf", "missing_texture.gltf"] {
+        let bytes = std::fs::read(data(name)).unwrap();
+        let base = data("");
+        // Every strict prefix of a .glb is invalid (its header states the length).
+        for len in 0..bytes.len() {
+            let r = load_gltf_slice(&bytes[..len], Some(&base), name);
+            if name.ends_with(".glb") {
+                assert!(r.is_err(), "{name} cut at {len} loaded");
+            }
+        }
+        // Flipped bits and bytes set to extremes: any result but a panic.
+        let step = std::env::var("PETZVAL_FUZZ_STEP").ok().and_then(|s| s.parse().ok()).unwrap_or((bytes.len() / 400).max(1));
+        for i in (0..bytes.len()).step_by(step) {
+            for v in [bytes[i] ^ 0x01, bytes[i] ^ 0x80, 0x00, 0xFF, b'9', b'0', b'-', b'"', b'}'] {
+                let mut m = bytes.clone();
+                m[i] = v;
+                let _ = load_gltf_slice(&m, Some(&base), name);
+            }
+        }
+    }
+}
