@@ -168,9 +168,8 @@ fn info_json(lens: &Lens, focus_m: Option<f64>, wavelength: Option<f64>, sensor:
     let film_z = lens.last_vertex_z_mm() + image_distance;
     let object_z = focus_m.map(|m| p.entrance_pupil_z_mm - m * 1e3);
     let (w, h) = sensor;
-    let fov = |x: f64, y: f64| 2.0 * pupil::field_angle_deg(lens, x, y, film_z);
-    let max_fstop = lens.stopped_down(1e-3).err().map(|_| ()).and(None::<f64>);
-    let _ = max_fstop;
+    let fov = |x: f64, y: f64| pupil::field_angle_deg(lens, x, y, film_z).map(|a| 2.0 * a);
+    let image_circle = pupil::image_circle_radius_mm(lens, film_z, 0.5 * w.hypot(h) * 1.5);
     let widest = lens.with_stop_semi_diameter(lens.max_stop_semi_diameter_mm())?.paraxial().f_number;
     Ok(json!({
         "name": lens.name(),
@@ -202,10 +201,12 @@ fn info_json(lens: &Lens, focus_m: Option<f64>, wavelength: Option<f64>, sensor:
         "has_dispersion": lens.has_dispersion(),
         "rotationally_symmetric": lens.is_rotationally_symmetric(),
         "sensor_mm": [w, h],
+        "image_circle_radius_mm": image_circle,
         "field_of_view_deg": {
             "horizontal": fov(0.5 * w, 0.0),
             "vertical": fov(0.0, 0.5 * h),
             "diagonal": fov(0.5 * w, 0.5 * h),
+"image_circle": pupil::field_angle_deg(lens, image_circle * (1.0 - 1e-9), 0.0, film_z).map(|a| 2.0 * a),
             "paraxial_diagonal": 2.0 * (0.5 * w.hypot(h) / p.efl_mm.abs()).atan().to_degrees(),
         },
         "thick_lens": {
@@ -234,15 +235,17 @@ fn print_info(v: &Value) {
     println!("  surfaces          {} (stop: surface {})", v["surface_count"], v["stop_index"].as_u64().unwrap_or(0) + 1);
     println!("  Petzval sum       {:.6} /mm", f("petzval_sum_per_mm"));
     let fov = &v["field_of_view_deg"];
+    let angle = |k: &str| fov[k].as_f64().map(|a| format!("{a:.2}°")).unwrap_or_else(|| "beyond the image circle".into());
     println!(
-        "  field of view     {:.2}° h × {:.2}° v, {:.2}° diagonal (paraxial {:.2}°) on {}×{} mm",
-        fov["horizontal"].as_f64().unwrap_or(0.0),
-        fov["vertical"].as_f64().unwrap_or(0.0),
-        fov["diagonal"].as_f64().unwrap_or(0.0),
+        "  field of view     {} h × {} v, {} diagonal (paraxial {:.2}°) on {}×{} mm",
+        angle("horizontal"),
+        angle("vertical"),
+        angle("diagonal"),
         fov["paraxial_diagonal"].as_f64().unwrap_or(0.0),
         v["sensor_mm"][0],
         v["sensor_mm"][1]
     );
+    println!("  image circle      radius {:.2} mm, {} across", f("image_circle_radius_mm"), angle("image_circle"));
 }
 
 fn export_json(lens: &Lens, wavelength: Option<f64>) -> Value {

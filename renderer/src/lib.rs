@@ -4,6 +4,7 @@
 mod error;
 pub mod io;
 pub mod film;
+pub mod integrator;
 pub mod optics;
 // pub mod render; (enabled once the integrator lands)
 pub mod sampler;
@@ -21,3 +22,4 @@ pub use optics::paraxial::ParaxialData;
 pub use optics::prescription::Prescription;
 pub mod camera;
 pub use camera::{Camera, CameraRay, FocusPlane, PinholeCamera, RealisticCamera, Sensor, ThickLensCamera, ThinLensCamera};
+pub use integrator::{PathSample, PathTracer, RenderScene, SurfaceHit};

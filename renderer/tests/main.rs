@@ -2,5 +2,7 @@
 
 mod aperture;
 mod camera;
+mod gltf;
 mod import;
+mod integrator;
 mod optics;

@@ -129,6 +129,7 @@ impl Lens {
             let shape = Shape {
                 curvature_per_mm: if s.radius_mm == 0.0 { 0.0 } else { 1.0 / s.radius_mm },
                 conic: s.conic,
+                a2: s.aspheric_r2,
                 aspheric: s.aspheric.clone(),
                 cylinder: s.cylinder,
             };

@@ -66,8 +66,8 @@ pub enum Meridian {
 fn meridian_curvature(lens: &Lens, i: usize, m: Meridian) -> f64 {
     let s = &lens.surfaces()[i].shape;
     match (s.cylinder, m) {
-        (None, _) => s.curvature_per_mm,
-        (Some(CylinderAxis::X), Meridian::X) | (Some(CylinderAxis::Y), Meridian::Y) => s.curvature_per_mm,
+        (None, _) => s.paraxial_curvature_per_mm(),
+        (Some(CylinderAxis::X), Meridian::X) | (Some(CylinderAxis::Y), Meridian::Y) => s.paraxial_curvature_per_mm(),
         _ => 0.0,
     }
 }
@@ -160,7 +160,7 @@ pub fn analyse(lens: &Lens, wavelength_nm: f64) -> Result<ParaxialData> {
     for i in 0..n {
         let n1 = lens.index_before(i, wavelength_nm);
         let n2 = lens.index_after(i, wavelength_nm);
-        petzval += lens.surfaces()[i].shape.curvature_per_mm * (n2 - n1) / (n1 * n2);
+        petzval += lens.surfaces()[i].shape.paraxial_curvature_per_mm() * (n2 - n1) / (n1 * n2);
     }
     Ok(ParaxialData {
         wavelength_nm,

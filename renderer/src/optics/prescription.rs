@@ -24,6 +24,7 @@
 //! | `material` | `"air"`, a catalogue glass name, or `{ nd = .., vd = .. }` (medium after the surface) | — | `"air"` |
 //! | `semi_diameter_mm` | f64, clear semi-diameter (for the stop: its widest opening) | mm | required |
 //! | `conic` | f64, conic constant k | — | 0 |
+//! | `aspheric_r2` | f64, coefficient A2 of r² (adds 2·A2 to the paraxial curvature) | 1/mm | 0 |
 //! | `aspheric` | list of f64: A4, A6, A8, ... (coefficients of r⁴, r⁶, ...) | mm^(1-2i) | `[]` |
 //! | `cylinder` | `"x"` or `"y"`: the surface is curved only along this axis (anamorphic) | — | none |
 //! | `stop` | bool: this surface is the aperture stop (usually a plane in air; a curved or glass surface may be the stop, as in Zemax) | — | false |
@@ -106,6 +107,9 @@ pub struct SurfaceSpec {
     /// Conic constant.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub conic: f64,
+    /// Coefficient of r² (Zemax EVENASPH PARM 1).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub aspheric_r2: f64,
     /// Even aspheric coefficients A4, A6, ...
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub aspheric: Vec<f64>,
@@ -399,6 +403,7 @@ pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedS
         finite("thickness_mm", s.thickness_mm)?;
         finite("semi_diameter_mm", s.semi_diameter_mm)?;
         finite("conic", s.conic)?;
+        finite("aspheric_r2", s.aspheric_r2)?;
         for a in &s.aspheric {
             finite("aspheric", *a)?;
         }

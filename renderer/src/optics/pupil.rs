@@ -243,13 +243,36 @@ pub fn chief_ray_from_film(lens: &Lens, film: DVec3, wavelength_nm: f64) -> Opti
 }
 
 /// Real field angle (degrees) seen by film point (x, y) on the film plane at `film_z_mm`: the
-/// angle of its chief ray in object space; paraxial estimate when the chief ray is vignetted.
-pub fn field_angle_deg(lens: &Lens, film_x_mm: f64, film_y_mm: f64, film_z_mm: f64) -> f64 {
+/// angle of its chief ray in object space; `None` outside the image circle (no chief ray).
+pub fn field_angle_deg(lens: &Lens, film_x_mm: f64, film_y_mm: f64, film_z_mm: f64) -> Option<f64> {
     let film = DVec3::new(film_x_mm, film_y_mm, film_z_mm);
-    match chief_ray_from_film(lens, film, lens.primary_wavelength_nm()) {
-        Some(ray) => (-ray.direction.z).clamp(-1.0, 1.0).acos().to_degrees(),
-        None => (film_x_mm.hypot(film_y_mm) / lens.paraxial().efl_mm.abs()).atan().to_degrees(),
+    chief_ray_from_film(lens, film, lens.primary_wavelength_nm()).map(|ray| (-ray.direction.z).clamp(-1.0, 1.0).acos().to_degrees())
+}
+
+/// Radius of the image circle on the film plane at `film_z_mm`: the largest film radius whose
+/// chief ray passes (searched up to `max_mm`).
+pub fn image_circle_radius_mm(lens: &Lens, film_z_mm: f64, max_mm: f64) -> f64 {
+    let ok = |r: f64| field_angle_deg(lens, r, 0.0, film_z_mm).is_some();
+    if ok(max_mm) {
+        return max_mm;
     }
+    // scan, then bisect the first failure (vignetting can be non-monotonic near the edge)
+    let steps = 64;
+    let mut lo = 0.0;
+    for k in 1..=steps {
+        let r = max_mm * k as f64 / steps as f64;
+        if ok(r) {
+            lo = r;
+        } else {
+            let mut hi = r;
+            for _ in 0..40 {
+                let mid = 0.5 * (lo + hi);
+                if ok(mid) { lo = mid } else { hi = mid }
+            }
+            return lo;
+        }
+    }
+    lo
 }
 
 /// Where a ray from the film crosses the stop surface, ignoring every clear aperture (for

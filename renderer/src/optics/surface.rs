@@ -17,6 +17,8 @@ pub struct Shape {
     pub curvature_per_mm: f64,
     /// Conic constant k.
     pub conic: f64,
+    /// Coefficient A2 of r² (Zemax EVENASPH PARM 1); adds 2·A2 to the paraxial curvature.
+    pub a2: f64,
     /// Aspheric coefficients A4, A6, ... of r⁴, r⁶, ...
     pub aspheric: Vec<f64>,
     /// Cylindrical: curved only along this axis.
@@ -26,12 +28,23 @@ pub struct Shape {
 impl Shape {
     /// A plane.
     pub fn plane() -> Self {
-        Shape { curvature_per_mm: 0.0, conic: 0.0, aspheric: Vec::new(), cylinder: None }
+        Shape { curvature_per_mm: 0.0, conic: 0.0, a2: 0.0, aspheric: Vec::new(), cylinder: None }
     }
 
     /// Whether the shape is a plane.
     pub fn is_plane(&self) -> bool {
-        self.curvature_per_mm == 0.0 && self.aspheric.iter().all(|a| *a == 0.0)
+        self.curvature_per_mm == 0.0 && !self.has_polynomial()
+    }
+
+    /// Whether polynomial (A2, A4, ...) terms are present.
+    #[inline]
+    pub fn has_polynomial(&self) -> bool {
+        self.a2 != 0.0 || self.aspheric.iter().any(|a| *a != 0.0)
+    }
+
+    /// Paraxial curvature c + 2·A2.
+    pub fn paraxial_curvature_per_mm(&self) -> f64 {
+        self.curvature_per_mm + 2.0 * self.a2
     }
 
     /// Whether the surface is rotationally symmetric about the axis.
@@ -60,8 +73,8 @@ impl Shape {
         }
         let root = radicand.sqrt();
         // c r² / (1 + √(1 − (1+k)c²r²)): no cancellation for small c.
-        let mut sag = c * r2 / (1.0 + root);
-        let mut slope = if root > 0.0 { 0.5 * c / root } else { f64::INFINITY };
+        let mut sag = c * r2 / (1.0 + root) + self.a2 * r2;
+        let mut slope = if root > 0.0 { 0.5 * c / root } else { f64::INFINITY } + self.a2;
         let mut power = r2; // r^(2j) for j = 1 → multiply before use
         for (j, a) in self.aspheric.iter().enumerate() {
             // term A_{2(j+2)} r^{2(j+2)} = A (r²)^(j+2)
@@ -80,7 +93,7 @@ impl Shape {
 
     /// Unit normal at a point on the surface (pointing towards +z on axis).
     pub fn normal(&self, p: DVec3) -> Option<DVec3> {
-        if self.conic == 0.0 && self.aspheric.is_empty() && self.cylinder.is_none() {
+        if self.conic == 0.0 && !self.has_polynomial() && self.cylinder.is_none() {
             // Sphere: (−c x, −c y, 1 − c z) is already unit length on the surface, since
             // c(x² + y² + z²) − 2z = 0 there.
             let c = self.curvature_per_mm;
@@ -124,7 +137,7 @@ impl Shape {
         let cc = c * (ox * ox + oy * oy + k1 * o.z * o.z) - 2.0 * o.z;
         let disc = b * b - a * cc;
         let mut t = if disc < 0.0 {
-            if self.aspheric.is_empty() {
+            if !self.has_polynomial() {
                 return None;
             }
             // The base conic is missed but the asphere may not be: start from the vertex plane.
@@ -146,7 +159,7 @@ impl Shape {
                 (true, false) => t1,
                 (false, true) => t2,
                 (false, false) => {
-                    if self.aspheric.is_empty() {
+                    if !self.has_polynomial() {
                         return None;
                     }
                     if d.z.abs() < 1e-300 {
@@ -156,8 +169,8 @@ impl Shape {
                 }
             }
         };
-        // 2. Aspheric terms: Newton on f(t) = z(t) − sag(ρ²(t)).
-        if !self.aspheric.is_empty() {
+        // 2. Polynomial terms: Newton on f(t) = z(t) − sag(ρ²(t)).
+        if self.has_polynomial() {
             let mut converged = false;
             for _ in 0..MAX_NEWTON_ITERATIONS {
                 let p = o + t * d;
@@ -223,7 +236,7 @@ mod tests {
     use super::*;
 
     fn sphere(r: f64) -> Shape {
-        Shape { curvature_per_mm: 1.0 / r, conic: 0.0, aspheric: vec![], cylinder: None }
+        Shape { curvature_per_mm: 1.0 / r, conic: 0.0, a2: 0.0, aspheric: vec![], cylinder: None }
     }
 
     #[test]
@@ -278,7 +291,7 @@ mod tests {
 
     #[test]
     fn asphere_sag_and_intersection_agree() {
-        let s = Shape { curvature_per_mm: 1.0 / 19.865, conic: 0.0, aspheric: vec![-1.5313e-05, 9.4893e-08, -1.8128e-09, 8.7528e-12], cylinder: None };
+        let s = Shape { curvature_per_mm: 1.0 / 19.865, conic: 0.0, a2: 0.0, aspheric: vec![-1.5313e-05, 9.4893e-08, -1.8128e-09, 8.7528e-12], cylinder: None };
         let o = DVec3::new(2.0, -3.0, -5.0);
         let d = DVec3::new(0.05, 0.02, 1.0).normalize();
         let t = s.intersect(o, d).unwrap();

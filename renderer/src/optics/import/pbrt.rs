@@ -343,6 +343,7 @@ pub(super) fn shape_of(s: &SurfaceSpec) -> Shape {
     Shape {
         curvature_per_mm: if s.radius_mm == 0.0 { 0.0 } else { 1.0 / s.radius_mm },
         conic: s.conic,
+        a2: s.aspheric_r2,
         aspheric: s.aspheric.clone(),
         cylinder: s.cylinder,
     }

@@ -26,8 +26,7 @@
 //!
 //! Conversions and choices:
 //! - The last lens surface's `DISZ` is its distance to the image surface.
-//! - `PARM 1` of an EVENASPH surface (the r² term) has no place in our `aspheric` list
-//!   (A4, A6, ...): a nonzero value is an error.
+//! - `PARM 1` of an EVENASPH surface (the r² term) becomes `aspheric_r2`.
 //! - A glass name not in our catalogue falls back to the file's own nd/vd (fields 4 and 5 of
 //!   the `GLAS` line) as a model glass, with a note; without usable nd it is an error.
 //! - A surface with `DIAM 0` (or none) takes the larger semi-diameter of its nearest
@@ -327,16 +326,10 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
             "STANDARD" => {}
             "EVENASPH" => {
                 let mut coeffs: Vec<f64> = Vec::new();
-                for &(pl, pk, v) in &s.parms {
+                for &(_, pk, v) in &s.parms {
                     if pk == 1 {
-                        if v != 0.0 {
-                            return Err(Error::lens_file(
-                                file,
-                                pl,
-                                "PARM 1",
-                                "an r² aspheric term is not supported (our aspheric list starts at A4)",
-                            ));
-                        }
+                        // α r² in file units → mm: α · u^(−1).
+                        spec.aspheric_r2 = v / unit_mm;
                         continue;
                     }
                     if pk > 9 {

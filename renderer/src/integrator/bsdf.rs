@@ -1,0 +1,463 @@
+//! The glTF metallic-roughness BSDF (glTF 2.0 spec appendix B, with `KHR_materials_specular` /
+//! `KHR_materials_ior` dielectric F0), reflection only.
+//!
+//! ```text
+//! f = (1 − m)·[ F_d(v·h)·D·V  +  base/π·(1 − E_d(μo))(1 − E_d(μi))/(1 − Ē_d) ]  +  m·F_m(v·h)·D·V
+//! F_d = Schlick(F0 = specular·((ior−1)/(ior+1))², F90 = specular)    (dielectric)
+//! F_m = Schlick(F0 = base colour, F90 = 1)                              (metal)
+//! D = GGX / Trowbridge–Reitz, V = Smith height-correlated G2 / (4 μo μi), α = roughness² ≥ 1e-3
+//! ```
+//!
+//! One deliberate deviation from appendix B: the spec weights the diffuse base by
+//! `1 − F_d(v·h)` (`mix(diffuse, specular, F)`), which is reciprocal but gains energy at grazing
+//! angles (a white dielectric reflects up to ~1.36 of the incident energy at roughness 0.3,
+//! 89°). Here the base is weighted by the specular layer's directional albedo `E_d(μ)` in the
+//! reciprocal form of Kelemen & Szirmay-Kalos / Kulla & Conty, so the total albedo is
+//! `E_d(μo) + base·(1 − E_d(μo)) ≤ 1` and `f(wo, wi) = f(wi, wo)`. `E_d` is exact for Schlick
+//! (linear in F0 and F90) from two tabulated integrals (64×64 in √μ and roughness, computed once).
+//! Blender's Principled BSDF also scales its base by the specular layer's albedo. No
+//! multiple-scattering compensation: rough metals lose some energy, as single-scatter GGX does.
+//!
+//! Sampling: the specular lobe (visible normals, Heitz 2018) or the cosine-weighted diffuse lobe,
+//! chosen with probability proportional to the Fresnel reflectance at μo versus the diffuse
+//! albedo; `pdf` is the mixture, so sample/pdf/eval agree exactly.
+//!
+//! Everything here is in the local shading frame (normal = +z); [`SurfaceBsdf`] handles the
+//! world frame and the geometric-normal checks.
+
+use std::f32::consts::{FRAC_1_PI, PI};
+use std::sync::OnceLock;
+
+use glam::{Vec2, Vec3};
+
+/// Smallest GGX alpha (roughness² is clamped to this; keeps D finite).
+pub const MIN_ALPHA: f32 = 1e-3;
+
+/// Rec. 709 luminance.
+#[inline]
+pub fn luminance(c: Vec3) -> f32 {
+    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+}
+
+/// An orthonormal basis (t, b) with t × b = n (Duff et al. 2017).
+#[inline]
+pub fn orthonormal_basis(n: Vec3) -> (Vec3, Vec3) {
+    let sign = 1.0f32.copysign(n.z);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    (Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x), Vec3::new(b, sign + n.y * n.y * a, -n.y))
+}
+
+/// A sampled direction.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BsdfSample {
+    /// Incident direction (local frame for [`Bsdf`], world for [`SurfaceBsdf`]).
+    pub wi: Vec3,
+    /// f·cos/pdf.
+    pub weight: Vec3,
+    /// Solid-angle pdf of `wi` (the mixture of both lobes).
+    pub pdf: f32,
+    /// Always false here (α ≥ [`MIN_ALPHA`] keeps every lobe non-delta).
+    pub is_delta: bool,
+}
+
+#[inline]
+fn schlick_weight(cos: f32) -> f32 {
+    let m = (1.0 - cos).clamp(0.0, 1.0);
+    let m2 = m * m;
+    m2 * m2 * m
+}
+
+/// GGX normal distribution D(h) for `cos_h = h.z`.
+#[inline]
+fn ggx_d(cos_h: f32, a2: f32) -> f32 {
+    let c2 = cos_h * cos_h;
+    let d = c2 * (a2 - 1.0) + 1.0;
+    a2 / (PI * d * d)
+}
+
+/// Smith Λ for GGX.
+#[inline]
+fn smith_lambda(cos: f32, a2: f32) -> f32 {
+    let c2 = cos * cos;
+    let t2 = (1.0 - c2).max(0.0) / c2.max(1e-12);
+    0.5 * (-1.0 + (1.0 + a2 * t2).sqrt())
+}
+
+/// Visible-normal sample (Heitz 2018, isotropic), `wo.z > 0`.
+#[inline]
+fn sample_vndf(wo: Vec3, alpha: f32, u: Vec2) -> Vec3 {
+    let vh = Vec3::new(alpha * wo.x, alpha * wo.y, wo.z).normalize();
+    let lensq = vh.x * vh.x + vh.y * vh.y;
+    let t1 = if lensq > 1e-14 { Vec3::new(-vh.y, vh.x, 0.0) / lensq.sqrt() } else { Vec3::X };
+    let t2 = vh.cross(t1);
+    let r = u.x.sqrt();
+    let phi = 2.0 * PI * u.y;
+    let p1 = r * phi.cos();
+    let mut p2 = r * phi.sin();
+    let s = 0.5 * (1.0 + vh.z);
+    p2 = (1.0 - s) * (1.0 - p1 * p1).max(0.0).sqrt() + s * p2;
+    let nh = t1 * p1 + t2 * p2 + vh * (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt();
+    Vec3::new(alpha * nh.x, alpha * nh.y, nh.z.max(0.0)).normalize_or(Vec3::Z)
+}
+
+/// Cosine-weighted hemisphere sample (concentric map).
+#[inline]
+pub fn sample_cosine_hemisphere(u: Vec2) -> Vec3 {
+    let a = 2.0 * u - Vec2::ONE;
+    let (r, phi) = if a.x == 0.0 && a.y == 0.0 {
+        (0.0, 0.0)
+    } else if a.x.abs() > a.y.abs() {
+        (a.x, std::f32::consts::FRAC_PI_4 * (a.y / a.x))
+    } else {
+        (a.y, std::f32::consts::FRAC_PI_2 - std::f32::consts::FRAC_PI_4 * (a.x / a.y))
+    };
+    let (x, y) = (r * phi.cos(), r * phi.sin());
+    Vec3::new(x, y, (1.0 - x * x - y * y).max(0.0).sqrt())
+}
+
+// ---------------------------------------------------------------------------------------------
+// Directional albedo of the Schlick–GGX specular lobe: E(μ) = F0·E1(μ, r) + (F90 − F0)·E2(μ, r).
+
+/// Table size per axis: roughness (linear) × √μ (nodes crowd near grazing, where smooth lobes
+/// change within a width of about α).
+const TABLE_N: usize = 64;
+
+struct EnergyTables {
+    /// ∫ D·V·μi dωi (F = 1), [roughness][μ].
+    e1: [[f32; TABLE_N]; TABLE_N],
+    /// ∫ (1 − v·h)^5·D·V·μi dωi.
+    e2: [[f32; TABLE_N]; TABLE_N],
+    /// 2∫ E1(μ) μ dμ per roughness (of the interpolated table).
+    e1_avg: [f32; TABLE_N],
+    /// 2∫ E2(μ) μ dμ per roughness.
+    e2_avg: [f32; TABLE_N],
+}
+
+fn radical_inverse_vdc(mut bits: u32) -> f32 {
+    bits = bits.reverse_bits();
+    bits as f32 * (1.0 / 4_294_967_296.0)
+}
+
+fn energy_tables() -> &'static EnergyTables {
+    static TABLES: OnceLock<EnergyTables> = OnceLock::new();
+    TABLES.get_or_init(|| {
+        let mut t = EnergyTables {
+            e1: [[0.0; TABLE_N]; TABLE_N],
+            e2: [[0.0; TABLE_N]; TABLE_N],
+            e1_avg: [0.0; TABLE_N],
+            e2_avg: [0.0; TABLE_N],
+        };
+        const N: u32 = 1024;
+        for ri in 0..TABLE_N {
+            let r = ri as f32 / (TABLE_N - 1) as f32;
+            let alpha = (r * r).max(MIN_ALPHA);
+            let a2 = alpha * alpha;
+            for mi in 0..TABLE_N {
+                let x = mi as f32 / (TABLE_N - 1) as f32;
+                let mu = (x * x).max(1e-5);
+                let wo = Vec3::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
+                let lo = smith_lambda(mu, a2);
+                let (mut s1, mut s2) = (0.0f64, 0.0f64);
+                for k in 0..N {
+                    let u = Vec2::new((k as f32 + 0.5) / N as f32, radical_inverse_vdc(k));
+                    let h = sample_vndf(wo, alpha, u);
+                    let voh = wo.dot(h);
+                    let wi = 2.0 * voh * h - wo;
+                    if wi.z <= 0.0 {
+                        continue;
+                    }
+                    // f·μi/pdf = G2/G1(wo)
+                    let w = (1.0 + lo) / (1.0 + lo + smith_lambda(wi.z, a2));
+                    s1 += w as f64;
+                    s2 += (w * schlick_weight(voh)) as f64;
+                }
+                t.e1[ri][mi] = (s1 / N as f64) as f32;
+                t.e2[ri][mi] = (s2 / N as f64) as f32;
+            }
+        }
+        // Averages of the interpolated curves (what eval uses), by midpoint quadrature.
+        const M: usize = 2048;
+        for ri in 0..TABLE_N {
+            let (mut a1, mut a2) = (0.0f64, 0.0f64);
+            for k in 0..M {
+                let mu = (k as f32 + 0.5) / M as f32;
+                let (x1, x2) = interp_mu(&t.e1[ri], &t.e2[ri], mu);
+                a1 += (2.0 * x1 * mu) as f64;
+                a2 += (2.0 * x2 * mu) as f64;
+            }
+            t.e1_avg[ri] = (a1 / M as f64) as f32;
+            t.e2_avg[ri] = (a2 / M as f64) as f32;
+        }
+        t
+    })
+}
+
+#[inline]
+fn interp_mu(row1: &[f32; TABLE_N], row2: &[f32; TABLE_N], mu: f32) -> (f32, f32) {
+    let x = mu.clamp(0.0, 1.0).sqrt() * (TABLE_N - 1) as f32;
+    let i = (x as usize).min(TABLE_N - 2);
+    let f = x - i as f32;
+    (row1[i] + (row1[i + 1] - row1[i]) * f, row2[i] + (row2[i + 1] - row2[i]) * f)
+}
+
+/// Roughness row index and weight for the tables.
+#[derive(Debug, Clone, Copy)]
+struct RoughnessRow {
+    i: usize,
+    f: f32,
+}
+
+impl RoughnessRow {
+    fn new(roughness: f32) -> Self {
+        let x = roughness.clamp(0.0, 1.0) * (TABLE_N - 1) as f32;
+        let i = (x as usize).min(TABLE_N - 2);
+        RoughnessRow { i, f: x - i as f32 }
+    }
+
+    /// (E1(μ), E2(μ)).
+    fn e(&self, t: &EnergyTables, mu: f32) -> (f32, f32) {
+        let (a1, a2) = interp_mu(&t.e1[self.i], &t.e2[self.i], mu);
+        let (b1, b2) = interp_mu(&t.e1[self.i + 1], &t.e2[self.i + 1], mu);
+        (a1 + (b1 - a1) * self.f, a2 + (b2 - a2) * self.f)
+    }
+
+    fn avg(&self, t: &EnergyTables) -> (f32, f32) {
+        let i = self.i;
+        (
+            t.e1_avg[i] + (t.e1_avg[i + 1] - t.e1_avg[i]) * self.f,
+            t.e2_avg[i] + (t.e2_avg[i + 1] - t.e2_avg[i]) * self.f,
+        )
+    }
+}
+
+/// The glTF metallic-roughness BSDF in its local frame (normal = +z).
+#[derive(Debug, Clone, Copy)]
+pub struct Bsdf {
+    base: Vec3,
+    metallic: f32,
+    alpha: f32,
+    a2: f32,
+    f0_d: f32,
+    f90_d: f32,
+    row: RoughnessRow,
+    /// (1 − m)·base / (π·(1 − Ē_d)), or zero.
+    diffuse_scale: Vec3,
+}
+
+impl Bsdf {
+    /// A BSDF from glTF parameters: linear base colour, metallic, perceptual roughness,
+    /// `KHR_materials_specular` specularFactor and `KHR_materials_ior` ior.
+    pub fn new(base_color: Vec3, metallic: f32, roughness: f32, specular: f32, ior: f32) -> Self {
+        let base = base_color.clamp(Vec3::ZERO, Vec3::ONE);
+        let metallic = if metallic.is_finite() { metallic.clamp(0.0, 1.0) } else { 0.0 };
+        let roughness = if roughness.is_finite() { roughness.clamp(0.0, 1.0) } else { 1.0 };
+        let specular = if specular.is_finite() { specular.clamp(0.0, 1.0) } else { 1.0 };
+        let ior = if ior.is_finite() && ior >= 1.0 { ior } else { 1.5 };
+        let r = (ior - 1.0) / (ior + 1.0);
+        let f0_d = (r * r).min(1.0) * specular;
+        let f90_d = specular;
+        let alpha = (roughness * roughness).max(MIN_ALPHA);
+        let row = RoughnessRow::new(roughness);
+        let (a1, a2) = row.avg(energy_tables());
+        let e_avg = (f0_d * a1 + (f90_d - f0_d) * a2).clamp(0.0, 1.0);
+        let diffuse_scale = if 1.0 - e_avg > 1e-4 && metallic < 1.0 {
+            base * ((1.0 - metallic) * FRAC_1_PI / (1.0 - e_avg))
+        } else {
+            Vec3::ZERO
+        };
+        Bsdf { base, metallic, alpha, a2: alpha * alpha, f0_d, f90_d, row, diffuse_scale }
+    }
+
+    /// GGX alpha (roughness², clamped).
+    pub fn alpha(&self) -> f32 {
+        self.alpha
+    }
+
+    /// Directional albedo of the dielectric specular layer at `mu` (what the diffuse base loses).
+    #[inline]
+    fn e_d(&self, mu: f32) -> f32 {
+        if self.f90_d == 0.0 && self.f0_d == 0.0 {
+            return 0.0;
+        }
+        let (e1, e2) = self.row.e(energy_tables(), mu);
+        (self.f0_d * e1 + (self.f90_d - self.f0_d) * e2).clamp(0.0, 1.0)
+    }
+
+    /// Combined Fresnel (dielectric and metal, mixed by metallic) at `cos`.
+    #[inline]
+    fn fresnel(&self, cos: f32) -> Vec3 {
+        let w = schlick_weight(cos);
+        let fd = self.f0_d + (self.f90_d - self.f0_d) * w;
+        let fm = self.base + (Vec3::ONE - self.base) * w;
+        Vec3::splat((1.0 - self.metallic) * fd) + fm * self.metallic
+    }
+
+    /// Probability of choosing the specular lobe for `wo`.
+    #[inline]
+    fn spec_probability(&self, wo: Vec3) -> f32 {
+        let ws = luminance(self.fresnel(wo.z));
+        let wd = if self.diffuse_scale == Vec3::ZERO {
+            0.0
+        } else {
+            (1.0 - self.metallic) * luminance(self.base) * (1.0 - self.e_d(wo.z))
+        };
+        let sum = ws + wd;
+        if sum > 0.0 {
+            ws / sum
+        } else {
+            0.0
+        }
+    }
+
+    /// f(wo, wi)·cos θi; zero unless both directions are above the surface.
+    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return Vec3::ZERO;
+        }
+        let mut f = Vec3::ZERO;
+        if self.diffuse_scale != Vec3::ZERO {
+            f += self.diffuse_scale * ((1.0 - self.e_d(wo.z)) * (1.0 - self.e_d(wi.z)));
+        }
+        let h = (wo + wi).normalize_or_zero();
+        if h.z > 0.0 {
+            let voh = wo.dot(h).max(0.0);
+            let d = ggx_d(h.z, self.a2);
+            let g2 = 1.0 / (1.0 + smith_lambda(wo.z, self.a2) + smith_lambda(wi.z, self.a2));
+            let v = g2 / (4.0 * wo.z * wi.z);
+            f += self.fresnel(voh) * (d * v);
+        }
+        let r = f * wi.z;
+        if r.is_finite() {
+            r
+        } else {
+            Vec3::ZERO
+        }
+    }
+
+    /// Solid-angle pdf of [`Bsdf::sample`] producing `wi`.
+    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return 0.0;
+        }
+        let ps = self.spec_probability(wo);
+        let mut pdf = (1.0 - ps) * wi.z * FRAC_1_PI;
+        if ps > 0.0 {
+            let h = (wo + wi).normalize_or_zero();
+            if h.z > 0.0 && wo.dot(h) > 0.0 {
+                let g1 = 1.0 / (1.0 + smith_lambda(wo.z, self.a2));
+                pdf += ps * g1 * ggx_d(h.z, self.a2) / (4.0 * wo.z);
+            }
+        }
+        if pdf.is_finite() {
+            pdf
+        } else {
+            0.0
+        }
+    }
+
+    /// Samples wi: `u1` picks the lobe, `u2` the direction. None when the BSDF is black, the
+    /// sample falls below the surface, or its pdf is zero.
+    pub fn sample(&self, wo: Vec3, u2: Vec2, u1: f32) -> Option<BsdfSample> {
+        if wo.z <= 0.0 {
+            return None;
+        }
+        let ps = self.spec_probability(wo);
+        let wi = if u1 < ps {
+            let h = sample_vndf(wo, self.alpha, u2);
+            2.0 * wo.dot(h) * h - wo
+        } else {
+            if self.diffuse_scale == Vec3::ZERO {
+                return None;
+            }
+            sample_cosine_hemisphere(u2)
+        };
+        if wi.z <= 0.0 {
+            return None;
+        }
+        let pdf = self.pdf(wo, wi);
+        if !(pdf > 0.0) {
+            return None;
+        }
+        let f = self.eval(wo, wi);
+        let weight = f / pdf;
+        if !weight.is_finite() || weight == Vec3::ZERO {
+            return None;
+        }
+        Some(BsdfSample { wi, weight, pdf, is_delta: false })
+    }
+}
+
+/// A [`Bsdf`] placed at a surface point: the shading frame (flipped to the side of wo — for
+/// double-sided materials and, like Blender, for back faces of single-sided ones too, so back
+/// faces shade as front faces), and the geometric normal that rejects directions through the
+/// surface (no light leaks from shading normals).
+#[derive(Debug, Clone, Copy)]
+pub struct SurfaceBsdf {
+    /// The local BSDF.
+    pub bsdf: Bsdf,
+    /// Shading normal on wo's side (bent so that wo is above it).
+    pub n: Vec3,
+    t: Vec3,
+    b: Vec3,
+    /// Geometric normal on wo's side.
+    pub ng: Vec3,
+}
+
+impl SurfaceBsdf {
+    /// Places `bsdf` with the given normals for outgoing direction `wo` (unit, world, pointing
+    /// away from the surface). Normals may face either way.
+    pub fn new(bsdf: Bsdf, geometric_normal: Vec3, shading_normal: Vec3, wo: Vec3) -> Self {
+        let ng = if geometric_normal.dot(wo) >= 0.0 { geometric_normal } else { -geometric_normal };
+        let mut n = if shading_normal.dot(ng) >= 0.0 { shading_normal } else { -shading_normal };
+        const EPS: f32 = 1e-4;
+        let c = n.dot(wo);
+        if c < EPS {
+            // Shading normal turned away from the viewer: bend it until wo is just above.
+            n = (n - wo * (c - EPS)).normalize_or(ng);
+            if n.dot(wo) <= 0.0 {
+                n = ng;
+            }
+        }
+        let (t, b) = orthonormal_basis(n);
+        SurfaceBsdf { bsdf, n, t, b, ng }
+    }
+
+    /// World → local.
+    #[inline]
+    pub fn to_local(&self, w: Vec3) -> Vec3 {
+        Vec3::new(w.dot(self.t), w.dot(self.b), w.dot(self.n))
+    }
+
+    /// Local → world.
+    #[inline]
+    pub fn to_world(&self, w: Vec3) -> Vec3 {
+        self.t * w.x + self.b * w.y + self.n * w.z
+    }
+
+    /// f·cos for world directions (zero when wi goes through the geometric surface).
+    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        if wi.dot(self.ng) <= 0.0 {
+            return Vec3::ZERO;
+        }
+        self.bsdf.eval(self.to_local(wo), self.to_local(wi))
+    }
+
+    /// Pdf for world directions.
+    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        if wi.dot(self.ng) <= 0.0 {
+            return 0.0;
+        }
+        self.bsdf.pdf(self.to_local(wo), self.to_local(wi))
+    }
+
+    /// Samples a world direction (None when it would go through the geometric surface).
+    pub fn sample(&self, wo: Vec3, u2: Vec2, u1: f32) -> Option<BsdfSample> {
+        let s = self.bsdf.sample(self.to_local(wo), u2, u1)?;
+        let wi = self.to_world(s.wi).normalize_or_zero();
+        if wi.dot(self.ng) <= 0.0 {
+            return None;
+        }
+        Some(BsdfSample { wi, ..s })
+    }
+}

@@ -1,0 +1,245 @@
+//! Unidirectional path tracing with next-event estimation and multiple importance sampling.
+//!
+//! * At each vertex: one light sample (NEE) and one BSDF sample. Emissive triangles and the
+//!   environment are reached by both and weighted with the power heuristic (β = 2); punctual
+//!   lights (delta) only by NEE. Emission seen by the camera ray counts fully.
+//! * `max_depth` counts scattering events (pbrt's convention): 0 = emission only, 1 = direct
+//!   lighting, ... Emitters reached by the last BSDF sample still count.
+//! * Russian roulette from `rr_start_depth` bounces on, survival probability = min(1, max
+//!   component of the throughput).
+//! * Sample dimensions per bounce, always all consumed in this order so streams stay aligned:
+//!   light pick (1), light point (2), BSDF lobe (1), BSDF direction (2), roulette (1).
+//! * Nothing is clamped. A non-finite radiance is dropped (returned as zero) and flagged in
+//!   [`PathSample::dropped`].
+
+use glam::Vec3;
+
+use super::accel::{RenderScene, SurfaceHit};
+use super::bsdf::{Bsdf, SurfaceBsdf};
+use super::lights::env_radiance;
+use crate::sampler::PixelSampler;
+
+/// Which estimators reach emissive triangles and the environment (for tests and comparisons;
+/// punctual lights always use light sampling).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LightStrategy {
+    /// Light and BSDF sampling combined by the power heuristic.
+    #[default]
+    Mis,
+    /// Light sampling only (emitters hit by BSDF samples are ignored after the camera ray).
+    LightOnly,
+    /// BSDF sampling only (no light samples for area lights and the environment).
+    BsdfOnly,
+}
+
+/// The path tracer's settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PathTracer {
+    /// Maximum number of scattering events (bounces).
+    pub max_depth: u32,
+    /// Bounces before Russian roulette starts.
+    pub rr_start_depth: u32,
+    /// Estimators for area lights and the environment.
+    pub strategy: LightStrategy,
+}
+
+impl Default for PathTracer {
+    fn default() -> Self {
+        PathTracer { max_depth: 8, rr_start_depth: 3, strategy: LightStrategy::Mis }
+    }
+}
+
+/// What one camera ray returns.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PathSample {
+    /// Radiance (linear RGB, W·sr⁻¹·m⁻²).
+    pub radiance: Vec3,
+    /// 1 if the camera ray hit geometry, else 0 (the environment still adds radiance).
+    pub alpha: f32,
+    /// Distance to the first hit along the ray (m); infinite on a miss.
+    pub depth_m: f32,
+    /// First-hit shading normal (world, facing the camera); zero on a miss.
+    pub normal: Vec3,
+    /// First-hit base colour (factor × texture); zero on a miss.
+    pub albedo: Vec3,
+    /// The radiance was not finite and was dropped (then `radiance` is zero).
+    pub dropped: bool,
+}
+
+/// Power heuristic (β = 2) weight of strategy `a` against `b`.
+#[inline]
+pub fn power_heuristic(a: f32, b: f32) -> f32 {
+    let (a2, b2) = (a * a, b * b);
+    let s = a2 + b2;
+    if s > 0.0 && s.is_finite() {
+        a2 / s
+    } else if a.is_infinite() && !b.is_infinite() {
+        1.0
+    } else {
+        0.0
+    }
+}
+
+/// Base colour (factor × texture, linear RGB) at a hit.
+pub fn base_color(scene: &RenderScene, hit: &SurfaceHit) -> Vec3 {
+    let mat = &scene.scene().materials[hit.material_id as usize];
+    let base_tex = scene.texture(mat.base_color_texture, hit.uv0, hit.uv1).map_or(Vec3::ONE, |t| t.truncate());
+    mat.base_color.truncate() * base_tex
+}
+
+/// The BSDF of a hit's material (and its base colour).
+pub fn material_bsdf(scene: &RenderScene, hit: &SurfaceHit) -> (Bsdf, Vec3) {
+    let mat = &scene.scene().materials[hit.material_id as usize];
+    let base = base_color(scene, hit);
+    let (mut metallic, mut roughness) = (mat.metallic, mat.roughness);
+    if let Some(mr) = scene.texture(mat.metallic_roughness_texture, hit.uv0, hit.uv1) {
+        metallic *= mr.z;
+        roughness *= mr.y;
+    }
+    (Bsdf::new(base, metallic, roughness, mat.specular, mat.ior), base)
+}
+
+impl PathTracer {
+    /// Traces one camera ray (`dir` need not be unit).
+    pub fn trace(&self, scene: &RenderScene, origin: Vec3, dir: Vec3, sampler: &mut PixelSampler) -> PathSample {
+        let mut out = PathSample {
+            radiance: Vec3::ZERO,
+            alpha: 0.0,
+            depth_m: f32::INFINITY,
+            normal: Vec3::ZERO,
+            albedo: Vec3::ZERO,
+            dropped: false,
+        };
+        let mut d = dir.normalize_or_zero();
+        if d == Vec3::ZERO || !origin.is_finite() || !d.is_finite() {
+            return out;
+        }
+        let mut o = origin;
+        let env = &scene.scene().environment;
+        let mut l = Vec3::ZERO;
+        let mut beta = Vec3::ONE;
+        let mut prev_pdf = 0.0f32; // BSDF pdf of the ray being traced (0 for the camera ray)
+        let mut depth = 0u32;
+        let nee = self.strategy != LightStrategy::BsdfOnly;
+        loop {
+            let Some(hit) = scene.intersect(o, d, f32::INFINITY) else {
+                let le = env_radiance(env, d);
+                if le != Vec3::ZERO {
+                    let w = if depth == 0 {
+                        1.0
+                    } else {
+                        match self.strategy {
+                            LightStrategy::Mis => power_heuristic(prev_pdf, scene.env_light_pdf(d)),
+                            LightStrategy::BsdfOnly => 1.0,
+                            // Not a light at all (black) → nothing else can find it.
+                            LightStrategy::LightOnly => {
+                                if scene.lights.env_pmf() > 0.0 {
+                                    0.0
+                                } else {
+                                    1.0
+                                }
+                            }
+                        }
+                    };
+                    l += beta * le * w;
+                }
+                break;
+            };
+            let wo = -d;
+            if depth == 0 {
+                out.alpha = 1.0;
+                out.depth_m = hit.t;
+                out.albedo = base_color(scene, &hit);
+                let n = hit.shading_normal;
+                out.normal = if n.dot(wo) >= 0.0 { n } else { -n };
+            }
+
+            // Emission.
+            let le = scene.emission(&hit);
+            if le != Vec3::ZERO {
+                let w = if depth == 0 {
+                    1.0
+                } else {
+                    let light_pdf = scene.triangle_light_pdf(hit.triangle, d, hit.t, hit.geometric_normal);
+                    match self.strategy {
+                        LightStrategy::Mis => power_heuristic(prev_pdf, light_pdf),
+                        LightStrategy::BsdfOnly => 1.0,
+                        LightStrategy::LightOnly => {
+                            if light_pdf > 0.0 {
+                                0.0
+                            } else {
+                                1.0
+                            }
+                        }
+                    }
+                };
+                l += beta * le * w;
+            }
+            if depth >= self.max_depth {
+                break;
+            }
+
+            let u_pick = sampler.next_1d();
+            let u_light = sampler.next_2d();
+            let u_lobe = sampler.next_1d();
+            let u_bsdf = sampler.next_2d();
+            let u_rr = sampler.next_1d();
+
+            let (bsdf, _) = material_bsdf(scene, &hit);
+            let sb = SurfaceBsdf::new(bsdf, hit.geometric_normal, hit.shading_normal, wo);
+
+            // Next-event estimation.
+            if let Some(ls) = scene.sample_light(hit.position, u_pick, u_light) {
+                if ls.delta || nee {
+                    let f = sb.eval(wo, ls.wi);
+                    if f != Vec3::ZERO {
+                        let origin = hit.spawn_origin(ls.wi);
+                        let visible = match ls.target {
+                            Some(t) => {
+                                let to = t - origin;
+                                // Stop just short of the (offset) light point.
+                                !scene.occluded(origin, to, 1.0 - 1e-4)
+                            }
+                            None => !scene.occluded(origin, ls.wi, f32::INFINITY),
+                        };
+                        if visible {
+                            let w = if ls.delta || self.strategy != LightStrategy::Mis {
+                                1.0
+                            } else {
+                                power_heuristic(ls.pdf, sb.pdf(wo, ls.wi))
+                            };
+                            if ls.pdf > 0.0 {
+                                l += beta * f * ls.radiance * (w / ls.pdf);
+                            }
+                        }
+                    }
+                }
+            }
+
+            // BSDF sample.
+            let Some(bs) = sb.sample(wo, u_bsdf, u_lobe) else { break };
+            beta *= bs.weight;
+            if !(beta.max_element() > 0.0) || !beta.is_finite() {
+                break;
+            }
+            prev_pdf = bs.pdf;
+            o = hit.spawn_origin(bs.wi);
+            d = bs.wi;
+            depth += 1;
+
+            if depth >= self.rr_start_depth {
+                let p = beta.max_element().min(1.0);
+                if !(u_rr < p) {
+                    break;
+                }
+                beta /= p;
+            }
+        }
+        if l.is_finite() {
+            out.radiance = l;
+        } else {
+            out.dropped = true;
+        }
+        out
+    }
+}

@@ -1,0 +1,879 @@
+//! Integrator: BVH queries (watertightness, self-intersection, alpha cut-outs), the glTF BSDF
+//! (energy, sampling consistency, reciprocity) and the path tracer against analytic scenes.
+
+use std::collections::HashMap;
+use std::f32::consts::PI;
+use std::sync::Arc;
+
+use glam::{Vec2, Vec3, Vec4};
+use petzval_renderer::integrator::bsdf::{luminance, sample_cosine_hemisphere};
+use petzval_renderer::integrator::{
+    primary_ray_throughput, Bsdf, BvhQuality, LightStrategy, PathSample, PathTracer, RenderScene,
+};
+use petzval_renderer::sampler::PixelSampler;
+use petzval_renderer::scene::texture::Wrap;
+use petzval_renderer::scene::{AlphaMode, Environment, Light, Material, Mesh, Scene, Texture, TextureRef};
+
+// ------------------------------------------------------------------------------------------
+// Scene helpers.
+
+fn diffuse(base: Vec3) -> Material {
+    Material {
+        name: "diffuse".into(),
+        base_color: base.extend(1.0),
+        metallic: 0.0,
+        roughness: 1.0,
+        specular: 0.0,
+        ..Material::default()
+    }
+}
+
+fn emitter(le: Vec3, double_sided: bool) -> Material {
+    Material { emissive: le, double_sided, ..diffuse(Vec3::ZERO) }
+}
+
+/// Icosphere (outward counter-clockwise winding, smooth normals).
+fn icosphere(center: Vec3, radius: f32, level: u32, material: u32) -> Mesh {
+    let t = (1.0 + 5f32.sqrt()) / 2.0;
+    let mut v: Vec<Vec3> = [
+        (-1.0, t, 0.0),
+        (1.0, t, 0.0),
+        (-1.0, -t, 0.0),
+        (1.0, -t, 0.0),
+        (0.0, -1.0, t),
+        (0.0, 1.0, t),
+        (0.0, -1.0, -t),
+        (0.0, 1.0, -t),
+        (t, 0.0, -1.0),
+        (t, 0.0, 1.0),
+        (-t, 0.0, -1.0),
+        (-t, 0.0, 1.0),
+    ]
+    .iter()
+    .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
+    .collect();
+    let mut f: Vec<[u32; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..level {
+        let mut mid: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut nf = Vec::with_capacity(f.len() * 4);
+        let mut m = |a: u32, b: u32, v: &mut Vec<Vec3>| -> u32 {
+            let k = (a.min(b), a.max(b));
+            *mid.entry(k).or_insert_with(|| {
+                v.push(((v[a as usize] + v[b as usize]) * 0.5).normalize());
+                (v.len() - 1) as u32
+            })
+        };
+        for &[a, b, c] in &f {
+            let ab = m(a, b, &mut v);
+            let bc = m(b, c, &mut v);
+            let ca = m(c, a, &mut v);
+            nf.extend_from_slice(&[[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
+        }
+        f = nf;
+    }
+    let n = v.len();
+    Mesh {
+        positions: v.iter().map(|&p| center + p * radius).collect(),
+        normals: v.clone(),
+        tangents: vec![Vec4::ZERO; n],
+        uv0: vec![Vec2::ZERO; n],
+        uv1: vec![],
+        material_ids: vec![material; f.len()],
+        indices: f,
+    }
+}
+
+/// A quad with corners `o`, `o + a`, `o + a + b`, `o + b`; front side along a × b; uv (0,0)
+/// at `o`, u along a, v along b.
+fn quad(o: Vec3, a: Vec3, b: Vec3, material: u32) -> Mesh {
+    let n = a.cross(b).normalize();
+    Mesh {
+        positions: vec![o, o + a, o + a + b, o + b],
+        normals: vec![n; 4],
+        tangents: vec![Vec4::ZERO; 4],
+        uv0: vec![Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0), Vec2::new(1.0, 1.0), Vec2::new(0.0, 1.0)],
+        uv1: vec![],
+        indices: vec![[0, 1, 2], [0, 2, 3]],
+        material_ids: vec![material; 2],
+    }
+}
+
+fn scene_of(meshes: &[Mesh], materials: Vec<Material>) -> Scene {
+    let mut mesh = Mesh::default();
+    for m in meshes {
+        mesh.append(m, 0);
+    }
+    Scene { mesh, materials, ..Scene::default() }
+}
+
+/// A sampler positioned as the render loop leaves it (camera dimensions consumed).
+fn sampler(px: u32, s: u32) -> PixelSampler {
+    let mut sp = PixelSampler::new(px, 7, s, 1);
+    sp.next_2d();
+    sp.next_2d();
+    sp.next_1d();
+    sp
+}
+
+fn mean_radiance(tracer: &PathTracer, scene: &RenderScene, o: Vec3, d: Vec3, px: u32, n: u32) -> (Vec3, PathSample) {
+    let mut sum = Vec3::ZERO;
+    let mut first = None;
+    for s in 0..n {
+        let r = tracer.trace(scene, o, d, &mut sampler(px, s));
+        assert!(!r.dropped, "dropped sample");
+        assert!(r.radiance.is_finite());
+        sum += r.radiance;
+        first.get_or_insert(r);
+    }
+    (sum / n as f32, first.unwrap())
+}
+
+fn rel(a: f32, b: f32) -> f32 {
+    (a - b).abs() / b.abs().max(1e-12)
+}
+
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f32 {
+        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((self.0 >> 40) as f32) / (1u64 << 24) as f32
+    }
+    fn v2(&mut self) -> Vec2 {
+        Vec2::new(self.next(), self.next())
+    }
+    fn dir(&mut self) -> Vec3 {
+        let z = 1.0 - 2.0 * self.next();
+        let r = (1.0 - z * z).max(0.0).sqrt();
+        let phi = 2.0 * PI * self.next();
+        Vec3::new(r * phi.cos(), r * phi.sin(), z)
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// Ray casting.
+
+#[test]
+fn closed_sphere_is_watertight() {
+    let c = Vec3::new(0.3, -0.2, 0.1);
+    let rs = RenderScene::new(scene_of(&[icosphere(c, 1.0, 4, 0)], vec![diffuse(Vec3::ONE)])).unwrap();
+    assert_eq!(rs.triangle_count(), 5120);
+    let mut rng = Rng(3);
+    let mut misses = 0;
+    let n = 100_000;
+    for i in 0..n {
+        // Rays from outside aimed at points inside, and rays from inside (two hits / one hit).
+        let (o, target) = if i % 2 == 0 {
+            (c + rng.dir() * 3.0, c + rng.dir() * 0.5 * rng.next())
+        } else {
+            (c + rng.dir() * 0.9 * rng.next(), c + rng.dir() * 5.0)
+        };
+        if rs.intersect(o, target - o, f32::INFINITY).is_none() {
+            misses += 1;
+        }
+        assert!(rs.occluded(o, target - o, f32::INFINITY) || misses > 0);
+    }
+    assert_eq!(misses, 0, "{misses} of {n} rays leaked through the closed mesh");
+}
+
+#[test]
+fn hit_record_attributes() {
+    // Quad in the z = 0 plane facing +z, uv0 along x/y.
+    let q = quad(Vec3::new(-1.0, -1.0, 0.0), Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 2.0, 0.0), 0);
+    let rs = RenderScene::new(scene_of(&[q], vec![diffuse(Vec3::ONE)])).unwrap();
+    let h = rs.intersect(Vec3::new(0.5, 0.25, 2.0), Vec3::new(0.0, 0.0, -1.0), f32::INFINITY).unwrap();
+    assert!((h.t - 2.0).abs() < 1e-6);
+    assert!(h.position.distance(Vec3::new(0.5, 0.25, 0.0)) < 1e-6);
+    assert!(h.geometric_normal.distance(Vec3::Z) < 1e-6);
+    assert!(h.shading_normal.distance(Vec3::Z) < 1e-6);
+    assert!(h.uv0.distance(Vec2::new(0.75, 0.625)) < 1e-6);
+    assert!(h.front_face);
+    let back = rs.intersect(Vec3::new(0.5, 0.25, -2.0), Vec3::Z, f32::INFINITY).unwrap();
+    assert!(!back.front_face, "back faces are hit and reported");
+    assert!(rs.intersect(Vec3::new(0.5, 0.25, 2.0), Vec3::NEG_Z, 1.99).is_none(), "t_max respected");
+    assert!(!rs.occluded(Vec3::new(0.5, 0.25, 2.0), Vec3::NEG_Z, 1.99));
+    assert!(rs.occluded(Vec3::new(0.5, 0.25, 2.0), Vec3::NEG_Z, 2.01));
+    // Non-unit direction for occluded: t in units of its length.
+    assert!(rs.occluded(Vec3::new(0.5, 0.25, 2.0), Vec3::new(0.0, 0.0, -4.0), 0.51));
+    assert!(!rs.occluded(Vec3::new(0.5, 0.25, 2.0), Vec3::new(0.0, 0.0, -4.0), 0.49));
+}
+
+#[test]
+fn normal_map_tilts_shading_normal() {
+    // A normal map texel pointing along +u (tangent-space (1, 0, 1)/√2) on a quad without
+    // vertex tangents: the frame comes from the UV derivatives (u along +x).
+    let q = quad(Vec3::new(-1.0, -1.0, 0.0), Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 2.0, 0.0), 0);
+    let tn = Vec3::new(1.0, 0.0, 1.0).normalize();
+    let tex = Texture::constant("n", (tn * 0.5 + Vec3::splat(0.5)).extend(1.0));
+    let mat = Material { normal_texture: Some(TextureRef { index: 0, uv_set: 0 }), ..diffuse(Vec3::ONE) };
+    let mut scene = scene_of(&[q], vec![mat]);
+    scene.textures.push(Arc::new(tex));
+    let rs = RenderScene::new(scene).unwrap();
+    let h = rs.intersect(Vec3::new(0.1, 0.2, 1.0), Vec3::NEG_Z, f32::INFINITY).unwrap();
+    assert!(h.shading_normal.distance(tn) < 1e-3, "{:?}", h.shading_normal);
+    assert!(h.geometric_normal.distance(Vec3::Z) < 1e-6);
+}
+
+#[test]
+fn spawned_rays_do_not_self_intersect_far_from_origin() {
+    // A sphere 10⁴ m from the origin: positions have ULPs of ~1 mm.
+    let c = Vec3::new(7000.0, -3000.0, 5000.0);
+    let r = 2.0;
+    let rs = RenderScene::new(scene_of(&[icosphere(c, r, 4, 0)], vec![diffuse(Vec3::ONE)])).unwrap();
+    let mut rng = Rng(11);
+    let mut tested = 0;
+    for _ in 0..20_000 {
+        let o = c + rng.dir() * 10.0;
+        let target = c + rng.dir() * (0.5 * r);
+        let Some(h) = rs.intersect(o, target - o, f32::INFINITY) else { continue };
+        tested += 1;
+        let ng = h.geometric_normal_toward(o - h.position);
+        // Outward: a convex object cannot be hit again.
+        let mut out = rng.dir();
+        if out.dot(ng) < 0.0 {
+            out = -out;
+        }
+        let so = h.spawn_origin(out);
+        assert!(rs.intersect(so, out, f32::INFINITY).is_none(), "self-hit leaving the surface at {:?}", h.position);
+        assert!(!rs.occluded(so, out, f32::INFINITY));
+        // Inward: must reach the far side, not the starting triangle.
+        let inw = -ng;
+        let so_in = h.spawn_origin(inw);
+        let h2 = rs.intersect(so_in, inw, f32::INFINITY).unwrap_or_else(|| panic!("inward ray must hit the far side: hit {:?} origin {so_in:?} (dist from centre {}) dir {inw:?}", h, (so_in - c).length()));
+        assert!(h2.t > 0.5 * r, "inward ray hit at t = {}", h2.t);
+    }
+    assert!(tested > 10_000);
+}
+
+fn alpha_quads(mode: AlphaMode, factor: f32, texture: bool) -> RenderScene {
+    // Front quad at z = 0 (x in [-1, 1]) with a 2×1 texture: alpha 0 on the left half, 1 on the
+    // right; an opaque back quad at z = −1.
+    let front = quad(Vec3::new(-1.0, -1.0, 0.0), Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 2.0, 0.0), 0);
+    let back = quad(Vec3::new(-2.0, -2.0, -1.0), Vec3::new(4.0, 0.0, 0.0), Vec3::new(0.0, 4.0, 0.0), 1);
+    let mut m = diffuse(Vec3::ONE);
+    m.base_color.w = factor;
+    m.alpha_mode = mode;
+    if texture {
+        m.base_color_texture = Some(TextureRef { index: 0, uv_set: 0 });
+    }
+    let mut scene = scene_of(&[front, back], vec![m, diffuse(Vec3::splat(0.5))]);
+    scene.textures.push(Arc::new(Texture {
+        name: "alpha".into(),
+        width: 2,
+        height: 1,
+        texels: vec![Vec4::new(1.0, 1.0, 1.0, 0.0), Vec4::ONE],
+        wrap_s: Wrap::ClampToEdge,
+        wrap_t: Wrap::ClampToEdge,
+        bilinear: false,
+    }));
+    RenderScene::new(scene).unwrap()
+}
+
+#[test]
+fn alpha_mask_cuts_out() {
+    let rs = alpha_quads(AlphaMode::Mask(0.5), 1.0, true);
+    let left = rs.intersect(Vec3::new(-0.5, 0.0, 1.0), Vec3::NEG_Z, f32::INFINITY).unwrap();
+    assert_eq!(left.material_id, 1, "cut-out: the ray reaches the back quad");
+    assert!((left.t - 2.0).abs() < 1e-5);
+    let right = rs.intersect(Vec3::new(0.5, 0.0, 1.0), Vec3::NEG_Z, f32::INFINITY).unwrap();
+    assert_eq!(right.material_id, 0);
+    assert!((right.t - 1.0).abs() < 1e-5);
+    assert!(!rs.occluded(Vec3::new(-0.5, 0.0, 1.0), Vec3::NEG_Z, 1.5));
+    assert!(rs.occluded(Vec3::new(0.5, 0.0, 1.0), Vec3::NEG_Z, 1.5));
+    // Factor alone below the cutoff removes the whole quad; Opaque ignores alpha.
+    let cut = alpha_quads(AlphaMode::Mask(0.5), 0.4, false);
+    assert_eq!(cut.intersect(Vec3::new(0.5, 0.0, 1.0), Vec3::NEG_Z, f32::INFINITY).unwrap().material_id, 1);
+    let opaque = alpha_quads(AlphaMode::Opaque, 0.0, true);
+    assert_eq!(opaque.intersect(Vec3::new(-0.5, 0.0, 1.0), Vec3::NEG_Z, f32::INFINITY).unwrap().material_id, 0);
+    // The camera sees through the cut-out to the (lit) back quad.
+    let mut scene = alpha_quads(AlphaMode::Mask(0.5), 1.0, true).into_scene();
+    scene.mesh = {
+        // Only the front quad: the cut-out shows the environment with alpha 0.
+        let mut m = quad(Vec3::new(-1.0, -1.0, 0.0), Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 2.0, 0.0), 0);
+        m.material_ids = vec![0, 0];
+        m
+    };
+    scene.environment = Environment::Constant(Vec3::splat(0.25));
+    let rs = RenderScene::new(scene).unwrap();
+    let s = PathTracer::default().trace(&rs, Vec3::new(-0.5, 0.0, 1.0), Vec3::NEG_Z, &mut sampler(0, 0));
+    assert_eq!(s.alpha, 0.0);
+    assert!(s.depth_m.is_infinite());
+    assert!(s.radiance.distance(Vec3::splat(0.25)) < 1e-6);
+}
+
+#[test]
+fn alpha_blend_is_stochastic_coverage() {
+    let rs = alpha_quads(AlphaMode::Blend, 0.3, false);
+    let mut rng = Rng(5);
+    let (mut front, mut occl) = (0, 0);
+    let n = 40_000;
+    for _ in 0..n {
+        let o = Vec3::new(rng.next() * 1.6 - 0.8, rng.next() * 1.6 - 0.8, 1.0);
+        let d = Vec3::new(rng.next() * 0.1 - 0.05, rng.next() * 0.1 - 0.05, -1.0).normalize();
+        let h = rs.intersect(o, d, f32::INFINITY).unwrap();
+        let hit_front = h.material_id == 0;
+        front += hit_front as u32;
+        // The same ray gets the same decision from the any-hit query.
+        let t_front = 1.0 / d.z.abs();
+        let blocked = rs.occluded(o, d, t_front * 1.01);
+        assert_eq!(blocked, hit_front);
+        occl += blocked as u32;
+    }
+    let frac = front as f32 / n as f32;
+    assert!((frac - 0.3).abs() < 0.01, "blend coverage {frac}, expected 0.3");
+    assert_eq!(front, occl);
+}
+
+// ------------------------------------------------------------------------------------------
+// BSDF.
+
+fn bsdf_cases() -> Vec<(&'static str, Bsdf)> {
+    vec![
+        ("white diffuse", Bsdf::new(Vec3::ONE, 0.0, 1.0, 0.0, 1.5)),
+        ("white dielectric r=0.05", Bsdf::new(Vec3::ONE, 0.0, 0.05, 1.0, 1.5)),
+        ("white dielectric r=0.3", Bsdf::new(Vec3::ONE, 0.0, 0.3, 1.0, 1.5)),
+        ("white dielectric r=0.7", Bsdf::new(Vec3::ONE, 0.0, 0.7, 1.0, 1.5)),
+        ("white dielectric ior 2.5", Bsdf::new(Vec3::ONE, 0.0, 0.4, 1.0, 2.5)),
+        ("white metal r=0.2", Bsdf::new(Vec3::ONE, 1.0, 0.2, 1.0, 1.5)),
+        ("white metal r=0", Bsdf::new(Vec3::ONE, 1.0, 0.0, 1.0, 1.5)),
+        ("gold metal r=0.5", Bsdf::new(Vec3::new(1.0, 0.78, 0.34), 1.0, 0.5, 1.0, 1.5)),
+        ("half metal r=0.4", Bsdf::new(Vec3::new(0.9, 0.5, 0.2), 0.5, 0.4, 1.0, 1.5)),
+        ("rough plastic", Bsdf::new(Vec3::new(0.2, 0.6, 0.9), 0.0, 0.9, 1.0, 1.5)),
+    ]
+}
+
+fn wo_at(theta_deg: f32) -> Vec3 {
+    let t = theta_deg.to_radians();
+    Vec3::new(t.sin(), 0.0, t.cos())
+}
+
+/// White furnace for the BSDF alone: ∫ f cos dωi ≤ 1, estimated by importance sampling.
+#[test]
+fn bsdf_energy_at_most_one() {
+    let mut rng = Rng(17);
+    let mut report = String::new();
+    for (name, b) in bsdf_cases() {
+        for theta in [0.0f32, 30.0, 60.0, 75.0, 85.0, 89.0] {
+            let wo = wo_at(theta);
+            let n = 200_000;
+            let mut sum = Vec3::ZERO;
+            for _ in 0..n {
+                if let Some(s) = b.sample(wo, rng.v2(), rng.next()) {
+                    sum += s.weight;
+                }
+            }
+            let e = sum / n as f32;
+            report += &format!("{name} θ={theta}: {:.4}\n", e.max_element());
+            assert!(e.max_element() <= 1.005, "{name} at θo = {theta}°: albedo {e:?} > 1");
+        }
+    }
+    // The white dielectric conserves energy almost exactly (specular layer + scaled base).
+    let b = Bsdf::new(Vec3::ONE, 0.0, 0.3, 1.0, 1.5);
+    for theta in [0.0f32, 45.0, 80.0] {
+        let wo = wo_at(theta);
+        let mut sum = 0.0;
+        let n = 400_000;
+        for _ in 0..n {
+            if let Some(s) = b.sample(wo, rng.v2(), rng.next()) {
+                sum += s.weight.x;
+            }
+        }
+        let e = sum / n as f32;
+        assert!((e - 1.0).abs() < 0.01, "white dielectric albedo at {theta}° = {e}");
+    }
+    eprintln!("{report}");
+}
+
+/// Each sample's pdf equals pdf(), its weight equals eval/pdf; and the estimate of ∫ f cos by
+/// BSDF sampling agrees with uniform hemisphere sampling of eval.
+#[test]
+fn bsdf_sample_pdf_eval_consistent() {
+    let mut rng = Rng(23);
+    for (name, b) in bsdf_cases() {
+        for theta in [10.0f32, 50.0, 80.0] {
+            let wo = wo_at(theta);
+            for _ in 0..20_000 {
+                if let Some(s) = b.sample(wo, rng.v2(), rng.next()) {
+                    let pdf = b.pdf(wo, s.wi);
+                    assert!(rel(pdf, s.pdf) < 1e-4, "{name}: pdf {} vs {}", s.pdf, pdf);
+                    let w = b.eval(wo, s.wi) / pdf;
+                    assert!((w - s.weight).abs().max_element() <= 1e-4 * w.max_element().max(1.0), "{name}: weight");
+                    assert!(!s.is_delta);
+                }
+            }
+            // Compare ∫ f cos: BSDF sampling vs cosine-hemisphere sampling of eval (rough lobes
+            // only; sharp lobes are not resolved by blind sampling).
+            if b.alpha() >= 0.09 {
+                let n = 400_000;
+                // Luminance estimates with their standard errors.
+                let (mut a, mut a2, mut c, mut c2) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+                for _ in 0..n {
+                    if let Some(s) = b.sample(wo, rng.v2(), rng.next()) {
+                        let x = luminance(s.weight) as f64;
+                        a += x;
+                        a2 += x * x;
+                    }
+                    let wi = sample_cosine_hemisphere(rng.v2());
+                    if wi.z > 0.0 {
+                        let x = luminance(b.eval(wo, wi) * (PI / wi.z)) as f64;
+                        c += x;
+                        c2 += x * x;
+                    }
+                }
+                let nf = n as f64;
+                let (ma, mc) = (a / nf, c / nf);
+                let se = (((a2 / nf - ma * ma) / nf).max(0.0) + ((c2 / nf - mc * mc) / nf).max(0.0)).sqrt();
+                assert!((ma - mc).abs() < 4.0 * se + 2e-3, "{name} θ={theta}: sampled {ma} vs uniform {mc} (σ = {se})");
+            }
+        }
+    }
+}
+
+/// Histogram of sampled directions vs ∫ pdf over each bin (θ: cos² bins, φ: 16 bins).
+#[test]
+fn bsdf_sample_histogram_matches_pdf() {
+    let mut rng = Rng(31);
+    const NT: usize = 16;
+    const NP: usize = 16;
+    for (name, b) in bsdf_cases() {
+        if b.alpha() < 0.05 {
+            continue; // peaked lobes need finer bins than this test uses
+        }
+        for theta in [20.0f32, 70.0] {
+            let wo = wo_at(theta);
+            let n = 400_000usize;
+            let mut hist = vec![0f64; NT * NP];
+            let mut none = 0usize;
+            for _ in 0..n {
+                match b.sample(wo, rng.v2(), rng.next()) {
+                    Some(s) => {
+                        let c2 = (s.wi.z * s.wi.z).clamp(0.0, 0.999_999);
+                        let ti = ((1.0 - c2) * NT as f32) as usize; // bins uniform in sin²θ
+                        let phi = s.wi.y.atan2(s.wi.x).rem_euclid(2.0 * PI);
+                        let pi = ((phi / (2.0 * PI)) * NP as f32) as usize % NP;
+                        hist[ti.min(NT - 1) * NP + pi] += 1.0;
+                    }
+                    None => none += 1,
+                }
+            }
+            // Expected: ∫_bin pdf dω with 8×8 sub-samples per bin. dω = dφ·d(cosθ); with
+            // s = sin²θ, d(cosθ) = ds / (2 cosθ).
+            let mut chi2 = 0.0f64;
+            let mut dof = 0;
+            let mut total_expected = 0.0;
+            for ti in 0..NT {
+                for pi in 0..NP {
+                    let mut p = 0.0f64;
+                    const K: usize = 8;
+                    for a in 0..K {
+                        for c in 0..K {
+                            let s = (ti as f32 + (a as f32 + 0.5) / K as f32) / NT as f32;
+                            let phi = (pi as f32 + (c as f32 + 0.5) / K as f32) / NP as f32 * 2.0 * PI;
+                            let cos = (1.0 - s).sqrt();
+                            let sin = s.sqrt();
+                            let wi = Vec3::new(sin * phi.cos(), sin * phi.sin(), cos);
+                            let jac = 1.0 / (2.0 * cos);
+                            p += (b.pdf(wo, wi) * jac) as f64;
+                        }
+                    }
+                    let area = (1.0 / NT as f64) * (2.0 * std::f64::consts::PI / NP as f64);
+                    let expected = p / (K * K) as f64 * area * n as f64;
+                    total_expected += expected;
+                    let obs = hist[ti * NP + pi];
+                    if expected > 20.0 {
+                        chi2 += (obs - expected).powi(2) / expected;
+                        dof += 1;
+                    }
+                }
+            }
+            // Integral of pdf is 1 (minus samples rejected below the horizon).
+            let accepted = (n - none) as f64;
+            assert!((total_expected - n as f64).abs() / (n as f64) < 0.02 + none as f64 / n as f64, "{name}: ∫pdf = {}", total_expected / n as f64);
+            assert!(accepted > 0.0);
+            // Generous bound (bin integration error dominates for peaked bins): χ²/dof < 3.
+            let ratio = chi2 / dof.max(1) as f64;
+            assert!(ratio < 3.0, "{name} θ={theta}: χ²/dof = {ratio:.2} over {dof} bins");
+        }
+    }
+}
+
+#[test]
+fn bsdf_reciprocity() {
+    let mut rng = Rng(41);
+    for (name, b) in bsdf_cases() {
+        for _ in 0..5_000 {
+            let wo = sample_cosine_hemisphere(rng.v2());
+            let wi = sample_cosine_hemisphere(rng.v2());
+            if wo.z < 1e-3 || wi.z < 1e-3 {
+                continue;
+            }
+            let f1 = b.eval(wo, wi) / wi.z;
+            let f2 = b.eval(wi, wo) / wo.z;
+            let m = f1.max_element().max(f2.max_element());
+            assert!((f1 - f2).abs().max_element() <= 1e-4 * m.max(1e-3), "{name}: f(wo,wi) = {f1:?} ≠ f(wi,wo) = {f2:?}");
+        }
+        assert_eq!(b.eval(Vec3::new(0.0, 0.6, 0.8), Vec3::new(0.0, 0.6, -0.8)), Vec3::ZERO, "no transmission");
+    }
+}
+
+#[test]
+fn bsdf_pure_lambertian_when_specular_zero() {
+    let b = Bsdf::new(Vec3::splat(0.8), 0.0, 1.0, 0.0, 1.5);
+    let wo = wo_at(40.0);
+    for wi in [wo_at(0.0), wo_at(-60.0), Vec3::new(0.3, 0.4, 0.866).normalize()] {
+        let f = b.eval(wo, wi);
+        assert!((f - Vec3::splat(0.8 / PI * wi.z)).abs().max_element() < 1e-6);
+    }
+    assert!(luminance(Vec3::ONE) > 0.999);
+}
+
+// ------------------------------------------------------------------------------------------
+// Path tracer.
+
+/// A diffuse convex object under a uniform environment reflects exactly albedo × L.
+#[test]
+fn furnace_diffuse_sphere() {
+    for albedo in [0.8f32, 1.0] {
+        let c = Vec3::new(0.0, 1.0, 0.0);
+        let mut scene = scene_of(&[icosphere(c, 1.0, 5, 0)], vec![diffuse(Vec3::splat(albedo))]);
+        scene.environment = Environment::Constant(Vec3::ONE);
+        let rs = RenderScene::new(scene).unwrap();
+        let tracer = PathTracer { max_depth: 64, ..PathTracer::default() };
+        let eye = Vec3::new(0.3, 1.4, 4.0);
+        let mut rng = Rng(7);
+        let mut worst = 0.0f32;
+        for px in 0..24 {
+            let target = c + rng.dir() * 0.95;
+            let d = (target - eye).normalize();
+            let (l, first) = mean_radiance(&tracer, &rs, eye, d, px, 2048);
+            assert_eq!(first.alpha, 1.0);
+            assert!(first.depth_m.is_finite() && first.depth_m > 2.0 && first.depth_m < 4.2);
+            assert!((first.albedo - Vec3::splat(albedo)).abs().max_element() < 1e-6);
+            assert!(first.normal.dot(d) < 0.0, "normal faces the camera");
+            for k in 0..3 {
+                worst = worst.max(rel(l[k], albedo));
+                assert!(rel(l[k], albedo) < 0.01, "albedo {albedo}: pixel {px} radiance {l:?}");
+            }
+        }
+        eprintln!("furnace albedo {albedo}: worst relative error {worst:.4}");
+        // Missed rays: environment radiance, alpha 0.
+        let s = tracer.trace(&rs, eye, Vec3::new(0.0, 1.0, 0.0), &mut sampler(0, 0));
+        assert_eq!(s.alpha, 0.0);
+        assert_eq!(s.radiance, Vec3::ONE);
+    }
+}
+
+fn plane_scene(albedo: f32) -> Scene {
+    // Ground plane y = 0 facing +y (quad with a × b along +y), 20 m wide.
+    let q = quad(Vec3::new(-10.0, 0.0, 10.0), Vec3::new(20.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -20.0), 0);
+    scene_of(&[q], vec![diffuse(Vec3::splat(albedo))])
+}
+
+/// Radiance leaving the plane toward a camera ray hitting `p`.
+fn plane_radiance(scene: Scene, p: Vec3, spp: u32) -> Vec3 {
+    let rs = RenderScene::new(scene).unwrap();
+    let eye = Vec3::new(1.0, 1.5, 2.0);
+    mean_radiance(&PathTracer::default(), &rs, eye, p - eye, 3, spp).0
+}
+
+#[test]
+fn point_and_spot_lights_on_diffuse_plane() {
+    let albedo = 0.5;
+    let p = Vec3::new(0.1, 0.0, 0.2);
+    let lp = Vec3::new(0.3, 2.0, -0.2);
+    let intensity = Vec3::new(10.0, 20.0, 30.0);
+    let d = lp - p;
+    let r2 = d.length_squared();
+    let cos = d.normalize().y;
+    let expected = intensity * (albedo / PI * cos / r2);
+
+    let mut s = plane_scene(albedo);
+    s.lights.push(Light::Point { position: lp, intensity, range: None });
+    let l = plane_radiance(s, p, 16);
+    for k in 0..3 {
+        assert!(rel(l[k], expected[k]) < 0.01, "point: {l:?} vs {expected:?}");
+    }
+
+    // glTF range window: clamp(1 − (d/range)⁴, 0, 1)².
+    let range = 3.0;
+    let x = r2.sqrt() / range;
+    let win = (1.0 - x.powi(4)).clamp(0.0, 1.0).powi(2);
+    let mut s = plane_scene(albedo);
+    s.lights.push(Light::Point { position: lp, intensity, range: Some(range) });
+    let l = plane_radiance(s, p, 16);
+    assert!(rel(l.y, expected.y * win) < 0.01, "range: {l:?} vs {:?}", expected * win);
+
+    // Spot pointing at p: inside the inner cone = point light; between the cones: glTF's
+    // squared linear ramp in cos; outside: dark.
+    let axis = -d.normalize();
+    for (inner, outer, tilt_deg) in [(0.3f32, 0.6f32, 0.0f32), (0.2, 0.6, 25.0), (0.1, 0.3, 30.0)] {
+        // Tilt the spot axis about z by `tilt_deg`.
+        let t = tilt_deg.to_radians();
+        let dir = glam::Quat::from_rotation_z(t) * axis;
+        let cd = dir.dot(-d.normalize());
+        let ramp = ((cd - outer.cos()) / (inner.cos() - outer.cos())).clamp(0.0, 1.0).powi(2);
+        let mut s = plane_scene(albedo);
+        s.lights.push(Light::Spot { position: lp, direction: dir, intensity, inner_cone_rad: inner, outer_cone_rad: outer, range: None });
+        let l = plane_radiance(s, p, 16);
+        let e = expected * ramp;
+        assert!((l.y - e.y).abs() <= 0.01 * expected.y * ramp.max(1e-6) + 1e-7, "spot {inner}/{outer} tilt {tilt_deg}: {l:?} vs {e:?}");
+    }
+
+    // Directional: E·cosθ·albedo/π.
+    let mut s = plane_scene(albedo);
+    let dir = Vec3::new(0.3, -1.0, 0.2).normalize();
+    s.lights.push(Light::Directional { direction: dir, irradiance: Vec3::splat(3.0) });
+    let l = plane_radiance(s, p, 16);
+    let e = 3.0 * (-dir.y) * albedo / PI;
+    assert!(rel(l.x, e) < 0.01, "directional: {l:?} vs {e}");
+}
+
+#[test]
+fn shadows_block_lights() {
+    let p = Vec3::new(0.1, 0.0, 0.2);
+    let lp = Vec3::new(0.3, 2.0, -0.2);
+    // A blocker halfway between p and the light (both sides: a single-sided quad still casts).
+    let mid = 0.5 * (p + lp);
+    let blocker = quad(mid + Vec3::new(-0.2, 0.0, 0.2), Vec3::new(0.4, 0.0, 0.0), Vec3::new(0.0, 0.0, -0.4), 0);
+    let ground = quad(Vec3::new(-10.0, 0.0, 10.0), Vec3::new(20.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -20.0), 0);
+    let mut s = scene_of(&[ground, blocker], vec![diffuse(Vec3::splat(0.5))]);
+    s.lights.push(Light::Point { position: lp, intensity: Vec3::splat(10.0), range: None });
+    let rs = RenderScene::new(s).unwrap();
+    let eye = Vec3::new(2.0, 1.0, 2.0);
+    // max_depth 1: direct light only (the blocker's top would otherwise bounce light down).
+    let tracer = PathTracer { max_depth: 1, ..PathTracer::default() };
+    let (l, _) = mean_radiance(&tracer, &rs, eye, p - eye, 0, 16);
+    assert_eq!(l, Vec3::ZERO, "point in the blocker's shadow");
+    let q = Vec3::new(-1.5, 0.0, 1.0);
+    let (l, _) = mean_radiance(&tracer, &rs, eye, q - eye, 0, 16);
+    assert!(l.x > 0.0, "point outside the shadow is lit");
+}
+
+#[test]
+fn shared_types_are_send_and_sync() {
+    fn check<T: Send + Sync>() {}
+    check::<RenderScene>();
+    check::<PathTracer>();
+    check::<PathSample>();
+}
+
+/// Irradiance at a point below the centre of a parallel square emitter (side `s`, height `h`).
+fn square_irradiance(le: f32, s: f32, h: f32) -> f32 {
+    let a = (s / 2.0) / h;
+    let b = a;
+    let fq = 1.0 / (2.0 * PI)
+        * (a / (1.0 + a * a).sqrt() * (b / (1.0 + a * a).sqrt()).atan() + b / (1.0 + b * b).sqrt() * (a / (1.0 + b * b).sqrt()).atan());
+    le * PI * 4.0 * fq
+}
+
+#[test]
+fn area_light_strategies_agree_with_analytic() {
+    let le = 5.0;
+    let (side, h) = (1.0f32, 1.0f32);
+    let albedo = 0.7;
+    // Emitter at y = h facing down (a × b along −y).
+    let light = quad(Vec3::new(-0.5, h, -0.5), Vec3::new(side, 0.0, 0.0), Vec3::new(0.0, 0.0, side), 1);
+    assert!(light.normals[0].y < -0.99);
+    let ground = quad(Vec3::new(-10.0, 0.0, 10.0), Vec3::new(20.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -20.0), 0);
+    let scene = scene_of(&[ground, light], vec![diffuse(Vec3::splat(albedo)), emitter(Vec3::splat(le), false)]);
+    let rs = RenderScene::new(scene).unwrap();
+    assert_eq!(rs.light_count(), 2);
+    let p = Vec3::ZERO;
+    let eye = Vec3::new(1.5, 0.5, 1.5);
+    let expected = albedo / PI * square_irradiance(le, side, h);
+    let mut results = vec![];
+    for (strategy, spp) in [(LightStrategy::Mis, 4096), (LightStrategy::LightOnly, 4096), (LightStrategy::BsdfOnly, 65536)] {
+        let tracer = PathTracer { strategy, ..PathTracer::default() };
+        let (l, _) = mean_radiance(&tracer, &rs, eye, p - eye, 9, spp);
+        results.push((strategy, l.x));
+        assert!(rel(l.x, expected) < 0.02, "{strategy:?}: {} vs analytic {expected}", l.x);
+    }
+    eprintln!("area light: analytic {expected:.5}, {results:?}");
+
+    // Seen directly: Le from the front, nothing from the back (single sided), Le from both
+    // sides when double sided.
+    let tracer = PathTracer::default();
+    let below = tracer.trace(&rs, Vec3::new(0.1, 0.5, 0.1), Vec3::Y, &mut sampler(0, 0));
+    assert!((below.radiance - Vec3::splat(le)).abs().max_element() < 1e-5, "{:?}", below.radiance);
+    let above = tracer.trace(&rs, Vec3::new(0.1, 2.0, 0.1), Vec3::NEG_Y, &mut sampler(0, 0));
+    assert_eq!(above.radiance, Vec3::ZERO);
+    assert_eq!(above.alpha, 1.0);
+    let light = quad(Vec3::new(-0.5, h, -0.5), Vec3::new(side, 0.0, 0.0), Vec3::new(0.0, 0.0, side), 0);
+    let rs2 = RenderScene::new(scene_of(&[light], vec![emitter(Vec3::splat(le), true)])).unwrap();
+    let above = tracer.trace(&rs2, Vec3::new(0.1, 2.0, 0.1), Vec3::NEG_Y, &mut sampler(0, 0));
+    assert!((above.radiance - Vec3::splat(le)).abs().max_element() < 1e-5);
+}
+
+/// Environment lighting a plane: MIS, light-only and BSDF-only agree (E = π·L, L_o = albedo·L).
+#[test]
+fn environment_strategies_agree() {
+    let mut scene = plane_scene(0.6);
+    scene.environment = Environment::Constant(Vec3::new(0.5, 1.0, 2.0));
+    let rs = RenderScene::new(scene).unwrap();
+    let eye = Vec3::new(1.0, 1.5, 2.0);
+    for strategy in [LightStrategy::Mis, LightStrategy::LightOnly, LightStrategy::BsdfOnly] {
+        let tracer = PathTracer { strategy, ..PathTracer::default() };
+        let (l, _) = mean_radiance(&tracer, &rs, eye, -eye, 1, 4096);
+        let e = Vec3::new(0.5, 1.0, 2.0) * 0.6;
+        assert!((l - e).abs().max_element() < 0.01 * e.max_element(), "{strategy:?}: {l:?} vs {e:?}");
+    }
+}
+
+#[test]
+fn deterministic_and_finite() {
+    // Glossy metal + emitter + point light + environment, deep paths.
+    let c = Vec3::new(0.0, 1.0, 0.0);
+    let mut scene = scene_of(
+        &[
+            icosphere(c, 1.0, 3, 1),
+            quad(Vec3::new(-10.0, 0.0, 10.0), Vec3::new(20.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -20.0), 0),
+            quad(Vec3::new(-0.5, 3.0, -0.5), Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 0.0, 1.0), 2),
+        ],
+        vec![
+            diffuse(Vec3::splat(0.5)),
+            Material { base_color: Vec4::new(0.9, 0.6, 0.3, 1.0), metallic: 1.0, roughness: 0.0, ..Material::default() },
+            emitter(Vec3::splat(10.0), false),
+        ],
+    );
+    scene.lights.push(Light::Point { position: Vec3::new(2.0, 3.0, 1.0), intensity: Vec3::splat(5.0), range: None });
+    scene.environment = Environment::Constant(Vec3::splat(0.1));
+    let rs = RenderScene::new(scene).unwrap();
+    let tracer = PathTracer { max_depth: 32, ..PathTracer::default() };
+    let eye = Vec3::new(0.5, 1.2, 4.0);
+    let mut rng = Rng(9);
+    for px in 0..64 {
+        let d = (c + rng.dir() * 1.5 - eye).normalize();
+        for s in 0..64 {
+            let a = tracer.trace(&rs, eye, d, &mut sampler(px, s));
+            let b = tracer.trace(&rs, eye, d, &mut sampler(px, s));
+            assert_eq!(a, b);
+            assert!(!a.dropped && a.radiance.is_finite() && a.radiance.min_element() >= 0.0);
+        }
+    }
+}
+
+#[test]
+fn malformed_meshes_are_repaired() {
+    let mut q = quad(Vec3::ZERO, Vec3::X, Vec3::Y, 5); // material 5 does not exist
+    q.indices.push([0, 1, 99]); // bad index
+    q.material_ids.push(0);
+    q.indices.push([0, 0, 1]); // degenerate
+    q.material_ids.push(0);
+    q.normals = vec![Vec3::NAN; 4];
+    let scene = scene_of(&[q], vec![diffuse(Vec3::ONE)]);
+    let rs = RenderScene::new(scene).unwrap();
+    assert_eq!(rs.triangle_count(), 2);
+    assert!(!rs.scene().warnings.is_empty());
+    let h = rs.intersect(Vec3::new(0.3, 0.3, 1.0), Vec3::NEG_Z, f32::INFINITY).unwrap();
+    assert!(h.shading_normal.is_finite());
+    let s = PathTracer::default().trace(&rs, Vec3::new(0.3, 0.3, 1.0), Vec3::NEG_Z, &mut sampler(0, 0));
+    assert!(s.radiance.is_finite() && !s.dropped);
+    // Empty scene.
+    let rs = RenderScene::new(Scene::default()).unwrap();
+    assert!(rs.intersect(Vec3::ZERO, Vec3::Z, f32::INFINITY).is_none());
+    assert!(!rs.occluded(Vec3::ZERO, Vec3::Z, f32::INFINITY));
+}
+
+// ------------------------------------------------------------------------------------------
+// Throughput.
+
+/// ~1.05 M triangles: a 600×600 height-field grid and a displaced level-7 icosphere.
+fn million_triangle_scene() -> Scene {
+    let n = 600usize;
+    let mut grid = Mesh::default();
+    for j in 0..=n {
+        for i in 0..=n {
+            let (x, z) = (i as f32 / n as f32 * 40.0 - 20.0, j as f32 / n as f32 * 40.0 - 20.0);
+            let y = 0.3 * (x * 0.7).sin() * (z * 0.5).cos() + 0.05 * (x * 5.0).sin();
+            grid.positions.push(Vec3::new(x, y, z));
+            grid.normals.push(Vec3::Y);
+            grid.uv0.push(Vec2::new(i as f32 / n as f32, j as f32 / n as f32));
+        }
+    }
+    for j in 0..n {
+        for i in 0..n {
+            let a = (j * (n + 1) + i) as u32;
+            let b = a + 1;
+            let c = a + (n + 1) as u32;
+            let d = c + 1;
+            grid.indices.push([a, c, b]);
+            grid.indices.push([b, c, d]);
+        }
+    }
+    grid.material_ids = vec![0; grid.indices.len()];
+    grid.tangents = vec![Vec4::ZERO; grid.positions.len()];
+    let mut sphere = icosphere(Vec3::new(0.0, 3.0, 0.0), 3.0, 7, 0);
+    for p in sphere.positions.iter_mut() {
+        let q = *p - Vec3::new(0.0, 3.0, 0.0);
+        *p += q * 0.05 * (q.x * 4.0).sin() * (q.y * 3.0).cos();
+    }
+    scene_of(&[grid, sphere], vec![diffuse(Vec3::splat(0.5))])
+}
+
+#[test]
+fn throughput_smoke() {
+    let rs = RenderScene::new(scene_of(&[icosphere(Vec3::ZERO, 1.0, 3, 0)], vec![diffuse(Vec3::ONE)])).unwrap();
+    assert!(primary_ray_throughput(&rs, 10_000) > 0.0);
+    assert!(rs.bvh_memory_bytes() > 0);
+}
+
+/// `cargo test -p petzval-renderer --release --test renderer integrator::bench -- --ignored --nocapture`
+#[test]
+#[ignore]
+fn bench_million_triangles() {
+    for quality in [BvhQuality::Fast, BvhQuality::Medium, BvhQuality::High] {
+        let scene = million_triangle_scene();
+        let t0 = std::time::Instant::now();
+        let rs = RenderScene::with_quality(scene, quality).unwrap();
+        let total = t0.elapsed();
+        let tris = rs.triangle_count();
+        let rays = 2_000_000;
+        let _ = primary_ray_throughput(&rs, 100_000); // warm-up
+        let rps = primary_ray_throughput(&rs, rays);
+        // Hit fraction of the same camera (see `primary_ray_throughput`).
+        let hit_fraction = {
+            let (bmin, bmax) = rs.bounds();
+            let center = 0.5 * (bmin + bmax);
+            let back = Vec3::new(0.35, 0.8, 0.6).normalize();
+            let eye = center + back * (0.8 * (bmax - bmin).length());
+            let (right, half, side) = (Vec3::Y.cross(back).normalize(), 25f32.to_radians().tan(), 200);
+            let up = back.cross(right);
+            let mut hits = 0;
+            for i in 0..side * side {
+                let (x, y) = ((i % side) as f32 + 0.5, (i / side) as f32 + 0.5);
+                let d = right * ((x / side as f32) * 2.0 - 1.0) * half + up * (1.0 - (y / side as f32) * 2.0) * half - back;
+                hits += rs.intersect(eye, d, f32::INFINITY).is_some() as u32;
+            }
+            hits as f64 / (side * side) as f64
+        };
+        eprintln!(
+            "{quality:?}: {tris} triangles, BVH build {:.3} s (RenderScene::new {:.3} s), {:.1} MB = {:.1} B/triangle, primary rays {:.2} M/s/core ({:.0}% hit)",
+            rs.bvh_build_time().as_secs_f64(),
+            total.as_secs_f64(),
+            rs.bvh_memory_bytes() as f64 / 1e6,
+            rs.bvh_memory_bytes() as f64 / tris as f64,
+            rps / 1e6,
+            hit_fraction * 100.0
+        );
+    }
+}
