@@ -7,6 +7,7 @@ use std::process::ExitCode;
 
 mod bench;
 mod lens_cmd;
+mod render_cmd;
 
 /// Command line.
 #[derive(Parser)]
@@ -23,6 +24,8 @@ enum Command {
         #[command(subcommand)]
         command: lens_cmd::LensCommand,
     },
+    /// Render a glTF scene (or the built-in demo) through a lens to EXR and PNG.
+    Render(Box<render_cmd::RenderArgs>),
     /// Benchmarks (print tables; see docs/performance.md).
     Bench {
         #[command(subcommand)]
@@ -34,6 +37,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Lens { command } => lens_cmd::run(command),
+        Command::Render(args) => render_cmd::run(*args),
         Command::Bench { command } => bench::run(command),
     };
     match result {

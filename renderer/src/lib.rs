@@ -6,7 +6,7 @@ pub mod io;
 pub mod film;
 pub mod integrator;
 pub mod optics;
-// pub mod render; (enabled once the integrator lands)
+pub mod render;
 pub mod sampler;
 pub mod spectral;
 pub mod scene;

@@ -142,7 +142,7 @@ pub fn render(scene: &RenderScene, rig: &CameraRig, settings: &RenderSettings, p
                     let d = rig.to_world.transform_vector3(ray.direction).normalize().as_vec3();
                     let sample = tracer.trace(scene, o, d, &mut sampler);
                     let value = sample.radiance * lambda_weight * ray.weight as f32;
-                    if !value.is_finite() {
+                    if !value.is_finite() || sample.dropped {
                         px.dropped += 1;
                         continue;
                     }

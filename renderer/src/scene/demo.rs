@@ -7,7 +7,7 @@
 //! | name | type | unit | default |
 //! |---|---|---|---|
 //! | lens | library name | — | `double-gauss-50mm` |
-//! | f-number | f64 | — | 2.0 |
+//! | f-number | f64 | — | 2.1 (wide open is f/2.03) |
 //! | focus distance | f64 | m | 0.55 |
 //! | sensor tilt x | f64 | degrees | −6 |
 //! | aperture | blades | — | 7 blades, 10° |
@@ -200,6 +200,6 @@ pub fn demo_scene() -> (Scene, DemoShot) {
     let target = Vec3::new(0.0, 0.02, -0.4);
     let view = Affine3A::look_at_rh(eye, target, Vec3::Y);
     scene.cameras.push(SceneCamera { name: "demo".into(), to_world: view.inverse(), yfov_rad: 0.45, aspect_ratio: Some(1.5), znear: 0.01, zfar: None });
-    let shot = DemoShot { lens: "double-gauss-50mm", f_number: 2.0, focus_distance_m: 0.55, tilt_x_deg: -6.0, blades: 7, blade_rotation_deg: 10.0 };
+    let shot = DemoShot { lens: "double-gauss-50mm", f_number: 2.1, focus_distance_m: 0.55, tilt_x_deg: -6.0, blades: 7, blade_rotation_deg: 10.0 };
     (scene, shot)
 }
