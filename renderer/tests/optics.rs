@@ -270,8 +270,20 @@ proptest! {
 /// Exit-pupil bounds never cut off a ray that passes (brute force over the rear plane).
 #[test]
 fn exit_pupil_bounds_contain_every_passing_ray() {
-    for name in ["double-gauss-50mm", "wide-22mm", "telephoto-250mm", "fisheye-10mm"] {
-        let l = library_lens(name).unwrap();
+    let blades = petzval_renderer::Aperture {
+        shape: petzval_renderer::ApertureShape::Blades { count: 5, curvature: 0.0 },
+        rotation_rad: 0.4,
+        anamorphic_ratio: 1.0,
+    };
+    let lenses = vec![
+        ("double-gauss-50mm", library_lens("double-gauss-50mm").unwrap()),
+        ("wide-22mm", library_lens("wide-22mm").unwrap()),
+        ("telephoto-250mm", library_lens("telephoto-250mm").unwrap()),
+        ("fisheye-10mm", library_lens("fisheye-10mm").unwrap()),
+        ("double-gauss-50mm f/4 5 blades", library_lens("double-gauss-50mm").unwrap().stopped_down(4.0).unwrap().with_aperture(blades)),
+        ("schneider-anamorphic-31mm", library_lens("schneider-anamorphic-31mm").unwrap()),
+    ];
+    for (name, l) in lenses {
         let film_z = l.last_vertex_z_mm() + l.focus_image_distance_mm(None).unwrap();
         let r_max = 21.7;
         let b = ExitPupilBounds::compute(&l, film_z, 0.0, r_max);

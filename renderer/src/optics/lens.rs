@@ -304,6 +304,15 @@ impl Lens {
         Ok(lens)
     }
 
+    /// A copy whose stop is the circle containing the current opening (for conservative
+    /// sampling bounds of bladed, masked or anamorphic openings); the housing still clips.
+    pub fn with_circumscribed_circular_stop(&self) -> Lens {
+        let mut lens = self.clone();
+        lens.stop_semi_diameter_mm = self.stop_semi_diameter_mm * self.aperture.bounding_radius_factor();
+        lens.aperture = Aperture::default();
+        lens
+    }
+
     /// A copy stopped to f-number `f_number` (object at infinity). Errors when the lens cannot
     /// open that wide.
     pub fn stopped_down(&self, f_number: f64) -> Result<Lens> {

@@ -84,7 +84,16 @@ impl ExitPupilBounds {
     /// largest distance any film point has from the axis; the bounds are per radius, and a
     /// tilted film's z varies, so they are computed over the span `film_z_mm ± dz`.
     pub fn compute(lens: &Lens, film_z_mm: f64, film_dz_mm: f64, max_film_radius_mm: f64) -> Self {
-        Self::compute_with(lens, film_z_mm, film_dz_mm, max_film_radius_mm, 64, 16, 48)
+        if lens.is_rotationally_symmetric() {
+            // A bladed, masked or squeezed opening lies inside its circumscribed circle, which
+            // keeps the bounds rotationally symmetric (and conservative).
+            let circular = if lens.aperture().is_circular() { lens.clone() } else { lens.with_circumscribed_circular_stop() };
+            Self::compute_with(&circular, film_z_mm, film_dz_mm, max_film_radius_mm, 64, 16, 48)
+        } else {
+            // One union box serves every film point, so fewer intervals lose nothing; each
+            // traces 8 azimuths.
+            Self::compute_with(lens, film_z_mm, film_dz_mm, max_film_radius_mm, 16, 8, 48)
+        }
     }
 
     /// [`ExitPupilBounds::compute`] with explicit resolution.
