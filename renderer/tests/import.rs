@@ -631,3 +631,42 @@ fn truncated_and_mutated_inputs_never_panic() {
         }
     }
 }
+
+/// Our TOML format: every malformed input names the file, the line and the field.
+#[test]
+fn toml_bad_input_names_file_line_and_field() {
+    let good = "[lens]\nname = \"t\"\nsource = \"test\"\n\n[[surface]]\nthickness_mm = 2.0\nsemi_diameter_mm = 3.0\nstop = true\n\n[[surface]]\nradius_mm = 51.0\nthickness_mm = 4.0\nmaterial = \"N-BK7\"\nsemi_diameter_mm = 8.0\n\n[[surface]]\nradius_mm = -51.0\nthickness_mm = 48.0\nsemi_diameter_mm = 8.0\n";
+    Lens::from_toml(good, "good.toml", None).unwrap();
+    let cases: Vec<(String, usize, &str, &str)> = vec![
+        // missing field: serde names it and the table's line
+        (good.replace("thickness_mm = 4.0\n", ""), 10, "thickness_mm", "missing"),
+        // unknown field
+        (good.replace("radius_mm = 51.0", "radius_mm = 51.0\ncolour = 3"), 12, "colour", "unknown"),
+        // unknown glass, with a suggestion
+        (good.replace("\"N-BK7\"", "\"N-BK8\""), 13, "surface[2].material", "N-BK8"),
+        // NaN
+        (good.replace("radius_mm = -51.0", "radius_mm = nan"), 17, "surface[3].radius_mm", "finite"),
+        // elements that intersect: 0.5 mm centre thickness between R 51 and R −51 at 8 mm
+        (good.replace("thickness_mm = 4.0", "thickness_mm = 0.5"), 12, "surface[2].thickness_mm", "intersect"),
+        // a stop larger than its housing
+        (good.replace("stop = true", "stop = true\nhousing_semi_diameter_mm = 2.0"), 7, "surface[1].semi_diameter_mm", "housing"),
+        // a semi-diameter larger than the radius allows
+        (good.replace("semi_diameter_mm = 8.0\n\n[[surface]]\nradius_mm = -51.0", "semi_diameter_mm = 60.0\n\n[[surface]]\nradius_mm = -51.0"), 14, "surface[2].semi_diameter_mm", "radius"),
+        // no stop
+        (good.replace("stop = true\n", ""), 0, "surface.stop", "no aperture stop"),
+        // wrong type
+        (good.replace("thickness_mm = 48.0", "thickness_mm = \"far\""), 18, "toml", "invalid type"),
+    ];
+    for (text, line, field, needle) in cases {
+        let err = Lens::from_toml(&text, "bad.toml", None).unwrap_err();
+        let msg = err.to_string();
+        match err {
+            Error::LensFile { file, line: l, field: f, message } => {
+                assert_eq!(file, "bad.toml");
+                assert_eq!((l, f.as_str()), (line, field), "{msg}");
+                assert!(message.contains(needle) || msg.contains(needle), "{msg} should mention '{needle}'");
+            }
+            other => panic!("expected a LensFile error, got {other}"),
+        }
+    }
+}
