@@ -273,7 +273,12 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         }
     }
     // 4. Render with a progress bar; Ctrl-C stops and keeps what converged.
-    let spectral = args.spectral;
+    // Model only what the scene needs: one wavelength per ray only where the lens disperses.
+    let dispersive = matches!(&rig.camera, Camera::Realistic(c) if c.lens.has_dispersion());
+    let spectral = args.spectral && dispersive;
+    if args.spectral && !dispersive {
+        eprintln!("note: --spectral ignored: the {} has no dispersion, so RGB transport is exact here", if matches!(&rig.camera, Camera::Realistic(_)) { "lens" } else { "camera model" });
+    }
     let settings = RenderSettings {
         width,
         height,
