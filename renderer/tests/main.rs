@@ -4,5 +4,7 @@ mod aperture;
 mod camera;
 mod gltf;
 mod import;
+mod lrtf;
 mod integrator;
 mod optics;
+mod render;

@@ -11,3 +11,4 @@ pub mod prescription;
 pub mod pupil;
 pub mod surface;
 pub mod draw;
+pub mod lrtf;

@@ -1,0 +1,543 @@
+//! Lens ray transfer function (LRTF): the lens's film → scene ray map sampled into a table and
+//! evaluated in O(1) instead of tracing every surface.
+//!
+//! A ray from the film meets the *input dome*, a hemisphere over the rear element (centre on the
+//! axis at the rear element's film-most point, radius just over its clear semi-diameter). Its
+//! key is (u, σx, σy): u = ρ/R is the radial position of that point, and σ = s/s_max the
+//! stereographic projection s = (dx, dy)/(1 − dz) of its direction, taken in the frame rotated
+//! so that the point lies on +x. Rotational symmetry reduces the 4-D ray space to these three
+//! axes (and the mirror symmetry y → −y halves σy). Each entry stores where the ray leaves the
+//! *output sphere* around the front element (its stereographic coordinates w, seen from the
+//! film-side pole), its outgoing direction (stereographic e, beyond the unit disc for fisheye
+//! rays that leave backwards), where it crossed the stop plane, and a signed margin: the
+//! smallest relative distance to any element rim (negative when a rim clips the ray). Tables
+//! are baked with the stop open, so any stop size and shape applies at lookup from the stored
+//! stop crossing; the margin, interpolated, decides vignetting by the rims.
+//!
+//! | name | type | unit | default |
+//! |---|---|---|---|
+//! | `resolution` | u32: samples along u and σx (σy gets resolution/2 + 1) | — | 96 |
+//! | `max_film_radius_mm` | f64: film points covered | mm | 30 |
+//! | `min_film_distance_mm` | f64: nearest film plane behind the input dome | mm | the lens's back focal length − 5 |
+//! | `wavelengths_nm` | list of f64: one table each (one for lenses without dispersion) | nm | primary |
+
+use super::lens::{Lens, Ray};
+use super::surface::refract;
+use crate::error::{Error, Result};
+use glam::{DVec2, DVec3};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::io::Write;
+use std::path::Path;
+
+/// File magic.
+const MAGIC: &[u8; 8] = b"PZLRTF\0\0";
+/// File format version.
+pub const LRTF_VERSION: u32 = 1;
+/// Channels per entry: w.x, w.y, e.x, e.y, stop.x, stop.y, margin, validity.
+const CHANNELS: usize = 8;
+
+/// Everything about a table except its data.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct LrtfHeader {
+    /// Format version.
+    pub version: u32,
+    /// Name of the lens it was baked for.
+    pub lens_name: String,
+    /// Hash of that lens's prescription (FNV-1a 64 of its TOML).
+    pub lens_hash: u64,
+    /// Samples along u and σx.
+    pub resolution: u32,
+    /// Samples along |σy|.
+    pub resolution_y: u32,
+    /// One table per wavelength.
+    pub wavelengths_nm: Vec<f64>,
+    /// Input dome centre z (lens frame).
+    pub in_centre_z_mm: f64,
+    /// Input dome radius.
+    pub in_radius_mm: f64,
+    /// Half-width of the σ domain in stereographic units.
+    pub s_max: f64,
+    /// Output sphere centre z.
+    pub out_centre_z_mm: f64,
+    /// Output sphere radius.
+    pub out_radius_mm: f64,
+    /// Film radius the table covers.
+    pub max_film_radius_mm: f64,
+    /// Nearest film distance behind the dome centre the table covers.
+    pub min_film_distance_mm: f64,
+}
+
+/// A baked table.
+#[derive(Debug, Clone)]
+pub struct LrtfTable {
+    /// Header.
+    pub header: LrtfHeader,
+    data: Vec<f32>,
+    stride_y: usize,
+    stride_x: usize,
+    stride_u: usize,
+    stride_w: usize,
+}
+
+/// What a lookup returns.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LrtfRay {
+    /// The ray leaving the lens (lens frame; origin on the output sphere).
+    pub ray: Ray,
+    /// Where it crossed the stop plane.
+    pub stop_point: DVec2,
+    /// Interpolated rim margin (> 0: passes every rim).
+    pub margin: f64,
+}
+
+/// The outcome of a lookup.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LrtfLookup {
+    /// Every corner of the cell passes: the interpolated ray.
+    Hit(LrtfRay),
+    /// Every corner is clipped (or the ray misses the input dome).
+    Miss,
+    /// The cell straddles a vignetting boundary or a failed entry: trace exactly.
+    Uncertain,
+}
+
+/// FNV-1a 64-bit hash (stable across builds, unlike `std`'s hasher).
+pub fn fnv1a64(bytes: &[u8]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in bytes {
+        h ^= *b as u64;
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    h
+}
+
+/// The hash identifying a lens's optics (its prescription).
+pub fn lens_hash(lens: &Lens) -> u64 {
+    fnv1a64(super::prescription::to_toml(lens.prescription()).as_bytes())
+}
+
+/// Stereographic projection of a unit vector from the +z pole.
+#[inline]
+fn stereo(v: DVec3) -> DVec2 {
+    let k = 1.0 / (1.0 - v.z).max(1e-12);
+    DVec2::new(v.x * k, v.y * k)
+}
+
+/// Inverse of [`stereo`].
+#[inline]
+fn unstereo(s: DVec2) -> DVec3 {
+    let s2 = s.length_squared();
+    let k = 1.0 / (1.0 + s2);
+    DVec3::new(2.0 * s.x * k, 2.0 * s.y * k, (s2 - 1.0) * k)
+}
+
+/// Result of an unclipped trace.
+struct Unclipped {
+    /// The ray leaving the front, when the trace got through every surface.
+    ray: Option<Ray>,
+    /// Where it crossed the stop.
+    stop: DVec2,
+    /// Smallest relative distance to a rim seen so far (negative: clipped). When the trace
+    /// fails (missed surface, TIR) after a rim already clipped it, this stays a smooth negative
+    /// number, so interpolation across the vignetting boundary remains accurate; a failure with
+    /// every rim passed so far (TIR inside the lens) is −1.
+    margin: f64,
+}
+
+/// Exact film → scene trace that records, instead of clipping, the smallest relative distance
+/// to a rim (clear aperture or stop housing), and where the ray crossed the stop.
+fn trace_unclipped(lens: &Lens, ray: &Ray, wavelength_nm: f64) -> Unclipped {
+    let mut o = ray.origin;
+    let mut d = ray.direction;
+    let mut margin = f64::INFINITY;
+    let mut stop = DVec2::ZERO;
+    let surfaces = lens.surfaces();
+    let fail = |margin: f64, stop: DVec2| Unclipped { ray: None, stop, margin: if margin < 0.0 { margin } else { -1.0 } };
+    for i in (0..surfaces.len()).rev() {
+        let s = &surfaces[i];
+        let local = DVec3::new(o.x, o.y, o.z - s.z_mm);
+        let Some(t) = s.shape.intersect(local, d) else { return fail(margin, stop) };
+        let p = local + t * d;
+        let r = p.x.hypot(p.y);
+        let rim = if s.is_stop { s.housing_semi_diameter_mm } else { s.semi_diameter_mm };
+        margin = margin.min((rim - r) / rim);
+        if s.is_stop {
+            stop = DVec2::new(p.x, p.y);
+        }
+        let (n1, n2) = (lens.index_after(i, wavelength_nm), lens.index_before(i, wavelength_nm));
+        if n1 != n2 {
+            let Some(nrm) = s.shape.normal(p) else { return fail(margin, stop) };
+            let Some(nd) = refract(d, nrm, n1, n2) else { return fail(margin, stop) };
+            d = nd;
+        }
+        o = DVec3::new(p.x, p.y, p.z + s.z_mm);
+    }
+    if !(o.is_finite() && d.is_finite()) {
+        return fail(margin, stop);
+    }
+    Unclipped { ray: Some(Ray { origin: o, direction: d }), stop, margin }
+}
+
+/// Where a ray starting inside a sphere leaves it (or `None`).
+#[inline]
+fn exit_sphere(o: DVec3, d: DVec3, centre: DVec3, radius: f64) -> Option<DVec3> {
+    let oc = o - centre;
+    let b = oc.dot(d);
+    let c = oc.length_squared() - radius * radius;
+    let disc = b * b - c;
+    if disc < 0.0 {
+        return None;
+    }
+    let t = -b + disc.sqrt();
+    (t >= 0.0).then(|| o + d * t)
+}
+
+/// Where a ray from outside first meets a sphere.
+#[inline]
+fn enter_sphere(o: DVec3, d: DVec3, centre: DVec3, radius: f64) -> Option<DVec3> {
+    let oc = o - centre;
+    let b = oc.dot(d);
+    let c = oc.length_squared() - radius * radius;
+    let disc = b * b - c;
+    if disc < 0.0 {
+        return None;
+    }
+    let t = -b - disc.sqrt();
+    (t >= 0.0).then(|| o + d * t)
+}
+
+/// Bake options.
+#[derive(Debug, Clone)]
+pub struct BakeOptions {
+    /// Samples along u and σx.
+    pub resolution: u32,
+    /// Film radius to cover.
+    pub max_film_radius_mm: f64,
+    /// Nearest film distance behind the input dome centre to cover (None: BFL − 5 mm).
+    pub min_film_distance_mm: Option<f64>,
+    /// Wavelengths (None: the primary one, or the design wavelengths for dispersive lenses).
+    pub wavelengths_nm: Option<Vec<f64>>,
+}
+
+impl Default for BakeOptions {
+    fn default() -> Self {
+        BakeOptions { resolution: 96, max_film_radius_mm: 30.0, min_film_distance_mm: None, wavelengths_nm: None }
+    }
+}
+
+impl LrtfTable {
+    fn with_header(header: LrtfHeader, data: Vec<f32>) -> Self {
+        let n = header.resolution as usize;
+        let ny = header.resolution_y as usize;
+        let stride_y = CHANNELS;
+        let stride_x = ny * stride_y;
+        let stride_u = n * stride_x;
+        let stride_w = n * stride_u;
+        LrtfTable { header, data, stride_y, stride_x, stride_u, stride_w }
+    }
+
+    /// Bytes of table data.
+    pub fn data_bytes(&self) -> usize {
+        self.data.len() * 4
+    }
+
+    /// Bakes the table for `lens` (rotationally symmetric lenses only). `progress` gets the
+    /// fraction done.
+    pub fn bake(lens: &Lens, options: &BakeOptions, progress: &(dyn Fn(f64) + Sync)) -> Result<LrtfTable> {
+        if !lens.is_rotationally_symmetric() {
+            return Err(Error::Optics(format!(
+                "lens '{}' has cylindrical surfaces: its ray transfer is not rotationally symmetric, so a 3-D LRTF cannot represent it (use the exact model)",
+                lens.name()
+            )));
+        }
+        let n = options.resolution.clamp(8, 512);
+        let ny = n / 2 + 1;
+        // 1. Domes: the input hemisphere over the rear element, the output sphere around the front.
+        let surfaces = lens.surfaces();
+        let last = surfaces.last().ok_or_else(|| Error::Optics("empty lens".into()))?;
+        let first = &surfaces[0];
+        let samples = 64;
+        let (mut z_rear, mut z_front, mut r_out) = (f64::NEG_INFINITY, f64::INFINITY, 0.0f64);
+        for k in 0..=samples {
+            let r = last.semi_diameter_mm * k as f64 / samples as f64;
+            z_rear = z_rear.max(last.z_mm + last.shape.sag(r, 0.0).unwrap_or(0.0)).max(last.z_mm + last.shape.sag(0.0, r).unwrap_or(0.0));
+            let rf = first.semi_diameter_mm * k as f64 / samples as f64;
+            z_front = z_front.min(first.z_mm + first.shape.sag(rf, 0.0).unwrap_or(0.0));
+        }
+        for k in 0..=samples {
+            let rf = first.semi_diameter_mm * k as f64 / samples as f64;
+            let z = first.z_mm + first.shape.sag(rf, 0.0).unwrap_or(0.0);
+            r_out = r_out.max(rf.hypot(z - z_front));
+        }
+        let in_radius = last.semi_diameter_mm * 1.02;
+        let out_radius = r_out * 1.02 + 1e-6;
+        // 2. Direction domain: every ray from a film point within the covered radius and distance.
+        let min_film = options.min_film_distance_mm.unwrap_or((lens.paraxial().bfl_mm + lens.last_vertex_z_mm() - z_rear) - 5.0);
+        if !(min_film > in_radius * 1.05) {
+            return Err(Error::Optics(format!(
+                "the film ({min_film:.2} mm behind the rear element) is too close to the lens for the table's input dome (radius {in_radius:.2} mm)"
+            )));
+        }
+        let alpha_max = ((options.max_film_radius_mm + in_radius) / (min_film - in_radius)).atan().min(89f64.to_radians());
+        let s_max = (0.5 * alpha_max).tan() * 1.02;
+        let wavelengths = match &options.wavelengths_nm {
+            Some(w) if !w.is_empty() => w.clone(),
+            _ if lens.has_dispersion() => lens.wavelengths_nm().to_vec(),
+            _ => vec![lens.primary_wavelength_nm()],
+        };
+        let header = LrtfHeader {
+            version: LRTF_VERSION,
+            lens_name: lens.name().to_string(),
+            lens_hash: lens_hash(lens),
+            resolution: n,
+            resolution_y: ny,
+            wavelengths_nm: wavelengths.clone(),
+            in_centre_z_mm: z_rear,
+            in_radius_mm: in_radius,
+            s_max,
+            out_centre_z_mm: z_front,
+            out_radius_mm: out_radius,
+            max_film_radius_mm: options.max_film_radius_mm,
+            min_film_distance_mm: min_film,
+        };
+        // 3. Trace every entry (rows of u in parallel).
+        let (n, ny) = (n as usize, ny as usize);
+        let row = n * ny * CHANNELS;
+        let mut data = vec![0f32; wavelengths.len() * n * row];
+        let done = std::sync::atomic::AtomicUsize::new(0);
+        let total = wavelengths.len() * n;
+        for (wi, &wl) in wavelengths.iter().enumerate() {
+            let block = &mut data[wi * n * row..(wi + 1) * n * row];
+            block.par_chunks_mut(row).enumerate().for_each(|(iu, out)| {
+                let u = iu as f64 / (n - 1) as f64;
+                let p = DVec3::new(u * in_radius, 0.0, z_rear + in_radius * (1.0 - u * u).max(0.0).sqrt());
+                for ix in 0..n {
+                    for iy in 0..ny {
+                        let sx = (-1.0 + 2.0 * ix as f64 / (n - 1) as f64) * s_max;
+                        let sy = (iy as f64 / (ny - 1) as f64) * s_max;
+                        // direction towards the lens (z < 0 inside the unit disc)
+                        let d = unstereo(DVec2::new(sx, sy));
+                        let e = &mut out[(ix * ny + iy) * CHANNELS..(ix * ny + iy + 1) * CHANNELS];
+                        let u = trace_unclipped(lens, &Ray { origin: p, direction: d.normalize() }, wl);
+                        let out_ray = u.ray.and_then(|r| Some((exit_sphere(r.origin, r.direction, DVec3::new(0.0, 0.0, z_front), out_radius)?, r.direction)));
+                        let margin = u.margin.max(-1.0) as f32;
+                        match out_ray {
+                            Some((q, dir)) => {
+                                let w = stereo((q - DVec3::new(0.0, 0.0, z_front)) / out_radius);
+                                let es = stereo(dir);
+                                e.copy_from_slice(&[w.x as f32, w.y as f32, es.x as f32, es.y as f32, u.stop.x as f32, u.stop.y as f32, margin, 1.0]);
+                            }
+                            None => e.copy_from_slice(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, margin.min(-1e-6), 0.0]),
+                        }
+                    }
+                }
+                let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                progress(k as f64 / total as f64);
+            });
+        }
+        let mut table = LrtfTable::with_header(header, data);
+        table.fill_invalid();
+        Ok(table)
+    }
+
+    /// Entries whose trace failed (TIR, missed surface) get the outputs of their nearest valid
+    /// neighbours, so interpolation next to them stays smooth; their margin stays negative.
+    fn fill_invalid(&mut self) {
+        let n = self.header.resolution as usize;
+        let ny = self.header.resolution_y as usize;
+        for wi in 0..self.header.wavelengths_nm.len() {
+            for _pass in 0..(2 * n) {
+                let mut changed = false;
+                let mut updates = Vec::new();
+                for iu in 0..n {
+                    for ix in 0..n {
+                        for iy in 0..ny {
+                            let i = self.index(wi, iu, ix, iy);
+                            if self.data[i + 7] != 0.0 {
+                                continue;
+                            }
+                            let mut acc = [0f32; 6];
+                            let mut cnt = 0;
+                            for (du, dx, dy) in [(1i64, 0i64, 0i64), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)] {
+                                let (a, b, c) = (iu as i64 + du, ix as i64 + dx, iy as i64 + dy);
+                                if a < 0 || b < 0 || c < 0 || a >= n as i64 || b >= n as i64 || c >= ny as i64 {
+                                    continue;
+                                }
+                                let j = self.index(wi, a as usize, b as usize, c as usize);
+                                if self.data[j + 7] != 0.0 {
+                                    for k in 0..6 {
+                                        acc[k] += self.data[j + k];
+                                    }
+                                    cnt += 1;
+                                }
+                            }
+                            if cnt > 0 {
+                                updates.push((i, acc.map(|v| v / cnt as f32)));
+                            }
+                        }
+                    }
+                }
+                for (i, v) in updates {
+                    self.data[i..i + 6].copy_from_slice(&v);
+                    self.data[i + 7] = 0.5; // filled: valid for interpolation, margin stays negative
+                    changed = true;
+                }
+                if !changed {
+                    break;
+                }
+            }
+        }
+    }
+
+    #[inline]
+    fn index(&self, wi: usize, iu: usize, ix: usize, iy: usize) -> usize {
+        wi * self.stride_w + iu * self.stride_u + ix * self.stride_x + iy * self.stride_y
+    }
+
+    /// Looks up the ray leaving the lens for a ray from the film (lens frame).
+    ///
+    /// Returns [`LrtfLookup::Uncertain`] when the ray's cell straddles a vignetting boundary
+    /// (its corners disagree on passing) or touches an entry whose trace failed: there the
+    /// caller traces exactly, so interpolation never invents or loses a ray at a rim.
+    #[inline]
+    pub fn lookup(&self, ray: &Ray, wavelength_nm: f64) -> LrtfLookup {
+        let h = &self.header;
+        // 1. Key: the dome point and the direction in the frame where the point lies on +x.
+        let centre = DVec3::new(0.0, 0.0, h.in_centre_z_mm);
+        let Some(p) = enter_sphere(ray.origin, ray.direction, centre, h.in_radius_mm) else { return LrtfLookup::Miss };
+        if p.z < h.in_centre_z_mm {
+            return LrtfLookup::Miss;
+        }
+        let rho = p.x.hypot(p.y);
+        let (c, s) = if rho > 1e-12 { (p.x / rho, p.y / rho) } else { (1.0, 0.0) };
+        let d = ray.direction;
+        let dl = DVec3::new(c * d.x + s * d.y, -s * d.x + c * d.y, d.z);
+        let sd = stereo(dl);
+        let mirror = sd.y < 0.0;
+        let n = h.resolution as usize;
+        let ny = h.resolution_y as usize;
+        let fu = rho / h.in_radius_mm * (n - 1) as f64;
+        let fx = (sd.x / h.s_max + 1.0) * 0.5 * (n - 1) as f64;
+        let fy = sd.y.abs() / h.s_max * (ny - 1) as f64;
+        if !(fu <= (n - 1) as f64 && fx >= 0.0 && fx <= (n - 1) as f64 && fy <= (ny - 1) as f64) {
+            // outside the baked domain: only the exact trace can say
+            return LrtfLookup::Uncertain;
+        }
+        // 2. Wavelength: the nearest baked one.
+        let wi = self.nearest_wavelength(wavelength_nm);
+        // 3. Trilinear interpolation of the 7 channels; corners must agree on passing.
+        let (iu, ix, iy) = ((fu as usize).min(n - 2), (fx as usize).min(n - 2), (fy as usize).min(ny - 2));
+        let (tu, tx, ty) = ((fu - iu as f64) as f32, (fx - ix as f64) as f32, (fy - iy as f64) as f32);
+        let base = self.index(wi, iu, ix, iy);
+        let mut v = [0f32; 7];
+        let (mut pass, mut fail) = (0u32, 0u32);
+        for (corner, wgt) in [
+            (0, (1.0 - tu) * (1.0 - tx) * (1.0 - ty)),
+            (self.stride_y, (1.0 - tu) * (1.0 - tx) * ty),
+            (self.stride_x, (1.0 - tu) * tx * (1.0 - ty)),
+            (self.stride_x + self.stride_y, (1.0 - tu) * tx * ty),
+            (self.stride_u, tu * (1.0 - tx) * (1.0 - ty)),
+            (self.stride_u + self.stride_y, tu * (1.0 - tx) * ty),
+            (self.stride_u + self.stride_x, tu * tx * (1.0 - ty)),
+            (self.stride_u + self.stride_x + self.stride_y, tu * tx * ty),
+        ] {
+            let e = &self.data[base + corner..base + corner + CHANNELS];
+            if e[6] > 0.0 && e[7] == 1.0 {
+                pass += 1;
+            } else {
+                fail += 1;
+            }
+            for k in 0..7 {
+                v[k] += wgt * e[k];
+            }
+        }
+        if pass == 0 {
+            return LrtfLookup::Miss;
+        }
+        if fail > 0 {
+            return LrtfLookup::Uncertain;
+        }
+        let margin = v[6] as f64;
+        // 4. Back to the lens frame: undo the mirror and the rotation.
+        let sign = if mirror { -1.0 } else { 1.0 };
+        let w = DVec2::new(v[0] as f64, sign * v[1] as f64);
+        let e = DVec2::new(v[2] as f64, sign * v[3] as f64);
+        let st = DVec2::new(v[4] as f64, sign * v[5] as f64);
+        let q = unstereo(w) * h.out_radius_mm;
+        let dir = unstereo(e);
+        let rot = |a: DVec3| DVec3::new(c * a.x - s * a.y, s * a.x + c * a.y, a.z);
+        let origin = rot(q) + DVec3::new(0.0, 0.0, h.out_centre_z_mm);
+        LrtfLookup::Hit(LrtfRay {
+            ray: Ray { origin, direction: rot(dir) },
+            stop_point: DVec2::new(c * st.x - s * st.y, s * st.x + c * st.y),
+            margin,
+        })
+    }
+
+    fn nearest_wavelength(&self, wavelength_nm: f64) -> usize {
+        let ws = &self.header.wavelengths_nm;
+        let mut best = 0;
+        for (i, w) in ws.iter().enumerate() {
+            if (w - wavelength_nm).abs() < (ws[best] - wavelength_nm).abs() {
+                best = i;
+            }
+        }
+        best
+    }
+
+    /// Writes the table (temporary file, then rename).
+    pub fn save(&self, path: &Path) -> Result<()> {
+        let header = serde_json::to_vec(&self.header).map_err(|e| Error::io(path, std::io::Error::other(e)))?;
+        let mut buf = Vec::with_capacity(16 + header.len() + self.data.len() * 4);
+        buf.extend_from_slice(MAGIC);
+        buf.extend_from_slice(&LRTF_VERSION.to_le_bytes());
+        buf.extend_from_slice(&(header.len() as u32).to_le_bytes());
+        buf.write_all(&header).map_err(|e| Error::io(path, e))?;
+        for v in &self.data {
+            buf.extend_from_slice(&v.to_le_bytes());
+        }
+        crate::io::write_atomic(path, &buf)
+    }
+
+    /// Reads a table and checks that it belongs to `lens` (same prescription hash).
+    pub fn load(path: &Path, lens: &Lens) -> Result<LrtfTable> {
+        let bad = |m: String| Error::Optics(format!("{}: {m}", path.display()));
+        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        if bytes.len() < 16 || &bytes[..8] != MAGIC {
+            return Err(bad("not a Petzval LRTF file (bad magic)".into()));
+        }
+        let version = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]);
+        if version != LRTF_VERSION {
+            return Err(bad(format!("LRTF format version {version}, this build reads version {LRTF_VERSION}: re-bake it with `petzval lrtf bake`")));
+        }
+        let hlen = u32::from_le_bytes([bytes[12], bytes[13], bytes[14], bytes[15]]) as usize;
+        let hend = 16usize.checked_add(hlen).filter(|e| *e <= bytes.len()).ok_or_else(|| bad("truncated header".into()))?;
+        let header: LrtfHeader = serde_json::from_slice(&bytes[16..hend]).map_err(|e| bad(format!("header: {e}")))?;
+        let expect_hash = lens_hash(lens);
+        if header.lens_hash != expect_hash || header.lens_name != lens.name() {
+            return Err(bad(format!(
+                "baked for lens '{}' (hash {:016x}), not for '{}' (hash {:016x}): the lens differs or changed; re-bake with `petzval lrtf bake {}`",
+                header.lens_name,
+                header.lens_hash,
+                lens.name(),
+                expect_hash,
+                lens.name()
+            )));
+        }
+        let (n, ny, nw) = (header.resolution as usize, header.resolution_y as usize, header.wavelengths_nm.len());
+        if n < 2 || ny < 2 || nw == 0 || n > 4096 || ny > 4096 {
+            return Err(bad("implausible table size in the header".into()));
+        }
+        let count = nw * n * n * ny * CHANNELS;
+        if bytes.len() != hend + count * 4 {
+            return Err(bad(format!("expected {} bytes of table data, found {}", count * 4, bytes.len() - hend)));
+        }
+        let data: Vec<f32> = bytes[hend..].chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+        if data.iter().any(|v| !v.is_finite()) {
+            return Err(bad("non-finite values in the table".into()));
+        }
+        Ok(LrtfTable::with_header(header, data))
+    }
+}
