@@ -7,6 +7,7 @@ use std::process::ExitCode;
 
 mod bench;
 mod lens_cmd;
+mod lrtf_cmd;
 mod render_cmd;
 
 /// Command line.
@@ -24,6 +25,11 @@ enum Command {
         #[command(subcommand)]
         command: lens_cmd::LensCommand,
     },
+    /// Lens ray transfer tables: bake and inspect.
+    Lrtf {
+        #[command(subcommand)]
+        command: lrtf_cmd::LrtfCommand,
+    },
     /// Render a glTF scene (or the built-in demo) through a lens to EXR and PNG.
     Render(Box<render_cmd::RenderArgs>),
     /// Benchmarks (print tables; see docs/performance.md).
@@ -38,6 +44,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Lens { command } => lens_cmd::run(command),
         Command::Render(args) => render_cmd::run(*args),
+        Command::Lrtf { command } => lrtf_cmd::run(command),
         Command::Bench { command } => bench::run(command),
     };
     match result {

@@ -7,7 +7,8 @@ use petzval_renderer::film::{write_exr, write_png, ExrLayers, Metadata, PixelFil
 use petzval_renderer::integrator::RenderScene;
 use petzval_renderer::render::{render, CameraRig, RenderSettings};
 use petzval_renderer::scene::{demo, gltf_load, Environment, Scene, SceneCamera};
-use petzval_renderer::{load_lens, Aperture, ApertureMask, ApertureShape, Camera, Error, PinholeCamera, RealisticCamera, Sensor, ThickLensCamera, ThinLensCamera};
+use petzval_renderer::optics::lrtf::{BakeOptions, LrtfTable};
+use petzval_renderer::{load_lens, Aperture, ApertureMask, ApertureShape, Camera, Error, LrtfCamera, PinholeCamera, RealisticCamera, Sensor, ThickLensCamera, ThinLensCamera};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -30,9 +31,13 @@ pub struct RenderArgs {
     /// Lens: a library name, a lens file, `thin` or `pinhole` (default: thin for scene files, the demo's lens for the demo).
     #[arg(long)]
     pub lens: Option<String>,
-    /// Lens model for library lenses: exact (trace every surface) or thick (thick-lens approximation).
+    /// Lens model for real lenses: exact (trace every surface), lrtf[:RESOLUTION] (a ray
+    /// transfer table baked now, default resolution 96), or thick (thick-lens approximation).
     #[arg(long, default_value = "exact")]
     pub lens_model: String,
+    /// Use this baked LRTF table (`petzval lrtf bake`) with --lens-model lrtf.
+    #[arg(long)]
+    pub lrtf_file: Option<PathBuf>,
     /// f-number (default: 2.8 for thin, the lens's own for real lenses).
     #[arg(long)]
     pub fstop: Option<f64>,
@@ -260,8 +265,24 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
             let label = lens.name().to_string();
             let cam = match args.lens_model.as_str() {
                 "exact" => Camera::Realistic(RealisticCamera::new(sensor, lens, focus_m)?),
+                m if m == "lrtf" || m.starts_with("lrtf:") => {
+                    let table = match &args.lrtf_file {
+                        Some(path) => LrtfTable::load(path, &lens)?,
+                        None => {
+                            let res: u32 = match m.strip_prefix("lrtf:") {
+                                Some(r) => r.parse().map_err(|_| camera_err("lens_model", format!("expected lrtf:RESOLUTION, got '{m}'")))?,
+                                None => 96,
+                            };
+                            let t0 = std::time::Instant::now();
+                            let t = LrtfTable::bake(&lens, &BakeOptions { resolution: res, ..BakeOptions::default() }, &|_| {})?;
+                            eprintln!("lrtf: baked {res}³ table for {} in {:.2} s ({:.1} MiB)", lens.name(), t0.elapsed().as_secs_f64(), t.data_bytes() as f64 / (1 << 20) as f64);
+                            t
+                        }
+                    };
+                    Camera::Lrtf(LrtfCamera::new(sensor, lens, focus_m, Arc::new(table))?)
+                }
                 "thick" => Camera::ThickLens(ThickLensCamera::new(sensor, &lens, None, focus_m, aperture.clone().unwrap_or_else(|| lens.aperture().clone()))?),
-                m => return Err(camera_err("lens_model", format!("expected exact or thick, got '{m}'"))),
+                m => return Err(camera_err("lens_model", format!("expected exact, lrtf[:RESOLUTION] or thick, got '{m}'"))),
             };
             (cam, label, f, n)
         }
@@ -274,7 +295,11 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     }
     // 4. Render with a progress bar; Ctrl-C stops and keeps what converged.
     // Model only what the scene needs: one wavelength per ray only where the lens disperses.
-    let dispersive = matches!(&rig.camera, Camera::Realistic(c) if c.lens.has_dispersion());
+    let dispersive = match &rig.camera {
+        Camera::Realistic(c) => c.lens.has_dispersion(),
+        Camera::Lrtf(c) => c.exact.lens.has_dispersion() && c.table.header.wavelengths_nm.len() > 1,
+        _ => false,
+    };
     let spectral = args.spectral && dispersive;
     if args.spectral && !dispersive {
         eprintln!("note: --spectral ignored: the {} has no dispersion, so RGB transport is exact here", if matches!(&rig.camera, Camera::Realistic(_)) { "lens" } else { "camera model" });

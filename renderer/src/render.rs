@@ -112,6 +112,7 @@ pub fn render(scene: &RenderScene, rig: &CameraRig, settings: &RenderSettings, p
     let dropped = AtomicU64::new(0);
     let wavelength_primary = match &rig.camera {
         Camera::Realistic(c) => c.lens.primary_wavelength_nm(),
+        Camera::Lrtf(c) => c.exact.lens.primary_wavelength_nm(),
         _ => crate::optics::glass::WAVELENGTH_D_NM,
     };
     // 1. Progressive passes: 1, 1, 2, 4, ... samples, at most 16 spp per pass.

@@ -28,7 +28,9 @@ pub use focus_plane::FocusPlane;
 use crate::error::{Error, Result};
 use crate::optics::aperture::Aperture;
 use crate::optics::lens::{Lens, Ray, TraceDirection};
+use crate::optics::lrtf::{LrtfLookup, LrtfTable};
 use crate::optics::pupil::ExitPupilBounds;
+use std::sync::Arc;
 use glam::{DMat3, DVec2, DVec3};
 
 /// A ray leaving the camera, in camera space (metres).
@@ -202,6 +204,8 @@ pub enum Camera {
     ThickLens(ThickLensCamera),
     /// Exact trace through a real lens.
     Realistic(RealisticCamera),
+    /// A real lens through its ray transfer table.
+    Lrtf(LrtfCamera),
 }
 
 /// Thin-lens refraction: direction of the ray that left film point `p` (relative to the lens,
@@ -408,21 +412,78 @@ impl RealisticCamera {
     }
 
     fn raw_ray(&self, film: DVec2, lens_u: DVec2, wavelength_nm: f64) -> Option<CameraRay> {
+        self.raw_ray_with(film, lens_u, |ray| {
+            self.lens.trace(ray, wavelength_nm, TraceDirection::FilmToScene).map(|t| (t.ray, t.transmission))
+        })
+    }
+
+    /// The camera ray for a film and lens sample, with `through_lens` mapping the ray from the
+    /// film to the ray leaving the front and its stop transmission (exact trace or a table).
+    #[inline]
+    fn raw_ray_with(&self, film: DVec2, lens_u: DVec2, through_lens: impl Fn(&Ray) -> Option<(Ray, f64)>) -> Option<CameraRay> {
         // 1. Film point and a rear-plane point inside the exit-pupil bounds.
         let p = self.sensor.film_point(film, self.film_z_mm);
         let s = self.pupil.sample(DVec2::new(p.x, p.y), lens_u)?;
-        // 2. Trace through the lens towards the scene.
+        // 2. Through the lens towards the scene.
         let ray = Ray::new(p, s.point - p);
-        let out = self.lens.trace(&ray, wavelength_nm, TraceDirection::FilmToScene)?;
+        let (out, transmission) = through_lens(&ray)?;
         // 3. Irradiance weight cosθ_film cosθ_rear / d² / pdf and stop transmission.
-        let weight = geometric_factor(p, s.point, self.sensor.normal()) / s.pdf_area * out.transmission;
+        let weight = geometric_factor(p, s.point, self.sensor.normal()) / s.pdf_area * transmission;
         let z_ep = self.lens.paraxial().entrance_pupil_z_mm;
-        let o = out.ray.origin;
-        Some(CameraRay { origin: DVec3::new(o.x, o.y, o.z - z_ep) * 1e-3, direction: out.ray.direction, weight })
+        let o = out.origin;
+        Some(CameraRay { origin: DVec3::new(o.x, o.y, o.z - z_ep) * 1e-3, direction: out.direction, weight })
     }
 
     fn generate_ray(&self, film: DVec2, lens_u: DVec2, wavelength_nm: f64) -> Option<CameraRay> {
         self.raw_ray(film, lens_u, wavelength_nm).map(|r| CameraRay { weight: r.weight * self.exposure, ..r })
+    }
+}
+
+/// A real lens evaluated through its baked ray transfer table ([`LrtfTable`]); rays in cells
+/// that straddle a vignetting boundary are traced exactly.
+#[derive(Debug, Clone)]
+pub struct LrtfCamera {
+    /// The same camera traced exactly (sensor, lens, focus, pupil bounds, exposure).
+    pub exact: RealisticCamera,
+    /// The table.
+    pub table: Arc<LrtfTable>,
+}
+
+impl LrtfCamera {
+    /// A camera through `table`, which must have been baked for `lens` and cover the sensor.
+    pub fn new(sensor: Sensor, lens: Lens, focus_distance_m: Option<f64>, table: Arc<LrtfTable>) -> Result<Self> {
+        let exact = RealisticCamera::new(sensor, lens, focus_distance_m)?;
+        let h = &table.header;
+        let (r, dz) = exact.sensor.extent();
+        if r > h.max_film_radius_mm {
+            return Err(Error::Camera {
+                field: "lens_model".into(),
+                message: format!("the LRTF table covers film points up to {:.1} mm from the axis; this sensor reaches {r:.1} mm: re-bake with a larger --max-film-radius", h.max_film_radius_mm),
+            });
+        }
+        if exact.film_z_mm - dz - h.in_centre_z_mm < h.min_film_distance_mm {
+            return Err(Error::Camera {
+                field: "lens_model".into(),
+                message: "the sensor comes closer to the lens than the LRTF table covers: re-bake it".into(),
+            });
+        }
+        Ok(LrtfCamera { exact, table })
+    }
+
+    fn raw_ray(&self, film: DVec2, lens_u: DVec2, wavelength_nm: f64) -> Option<CameraRay> {
+        let lens = &self.exact.lens;
+        self.exact.raw_ray_with(film, lens_u, |ray| match self.table.lookup(ray, wavelength_nm) {
+            LrtfLookup::Hit(hit) => {
+                let tr = lens.aperture().transmission(hit.stop_point.x, hit.stop_point.y, lens.stop_semi_diameter_mm());
+                (tr > 0.0).then_some((hit.ray, tr))
+            }
+            LrtfLookup::Miss => None,
+            LrtfLookup::Uncertain => lens.trace(ray, wavelength_nm, TraceDirection::FilmToScene).map(|t| (t.ray, t.transmission)),
+        })
+    }
+
+    fn generate_ray(&self, film: DVec2, lens_u: DVec2, wavelength_nm: f64) -> Option<CameraRay> {
+        self.raw_ray(film, lens_u, wavelength_nm).map(|r| CameraRay { weight: r.weight * self.exact.exposure, ..r })
     }
 }
 
@@ -444,6 +505,7 @@ impl Camera {
             Camera::ThinLens(c) => c.generate_ray(film, lens_u),
             Camera::ThickLens(c) => c.generate_ray(film, lens_u),
             Camera::Realistic(c) => c.generate_ray(film, lens_u, wavelength_nm),
+            Camera::Lrtf(c) => c.generate_ray(film, lens_u, wavelength_nm),
         }
     }
 
@@ -454,6 +516,7 @@ impl Camera {
             Camera::ThinLens(c) => &c.sensor,
             Camera::ThickLens(c) => &c.sensor,
             Camera::Realistic(c) => &c.sensor,
+            Camera::Lrtf(c) => &c.exact.sensor,
         }
     }
 
@@ -464,6 +527,7 @@ impl Camera {
             Camera::ThinLens(_) => "thin",
             Camera::ThickLens(_) => "thick",
             Camera::Realistic(_) => "exact",
+            Camera::Lrtf(_) => "lrtf",
         }
     }
 

@@ -1,17 +1,39 @@
-//! Light sampling: one discrete distribution over every light, proportional to emitted power.
+//! Light sampling: which light a shading point samples, and the point on it.
+//!
+//! Lights are punctual lights, emissive triangles and the environment. Next-event estimation
+//! picks one light per shading point (position `p`, normal `n`):
+//!
+//! * [`LightSelection::Tree`] (default): a light BVH ("light tree", Conty Estevez & Kulla 2018,
+//!   as pbrt-v4's `BVHLightSampler`) over the bounded lights (point, spot, emissive triangles).
+//!   Each node stores [`LightBounds`]-style data: bounding box, power `phi`, a cone of emission
+//!   normals (axis `w`, spread `θo`), the emission falloff `θe` and a two-sided flag. The tree is
+//!   built top-down with pbrt-v4's SAH-like cost (power × orientation measure × surface area ×
+//!   aspect-ratio term, 12 buckets per axis). Traversal picks a child with probability
+//!   proportional to its importance at (p, n) (pbrt-v4's `LightBounds::Importance`, with two
+//!   changes: the distance clamp is the squared bounding-sphere radius, and the cosine at the
+//!   receiver is one-sided, taken with the geometric normal on the side the path arrived from,
+//!   so lights wholly behind the surface get importance 0 — the BSDFs here never transmit).
+//!   Lights at infinity (environment, directional) are chosen with the fixed probability
+//!   `pInfinite = nInfinite / (nInfinite + 1)` (uniformly among them), the tree otherwise.
+//!   The selection pmf of a given light, needed by MIS when a BSDF-sampled ray hits an emitter,
+//!   is recomputed by retracing the light's path from the root with a per-light bit trail;
+//!   it uses the very same float operations as sampling, so the two agree exactly.
+//! * [`LightSelection::Power`]: one global distribution proportional to emitted power
+//!   (independent of the shading point).
 //!
 //! | light | power used for selection |
 //! |---|---|
 //! | point | 4π·lum(I) |
-//! | spot | 2π·(1 − (cos inner + cos outer)/2)·lum(I) (pbrt's spot power) |
+//! | spot | Power: 2π·(1 − (cos inner + cos outer)/2)·lum(I) (pbrt's spot power); Tree: 4π·lum(I) (the cone is in the bounds, as pbrt-v4) |
 //! | directional | π·r²·lum(E), r = scene bounding-sphere radius |
 //! | emissive triangle | π·area·lum(emissive factor) (×2 double sided); the emissive texture is ignored for selection but used for radiance |
 //! | environment | 4π²·r²·lum(mean radiance) (mean estimated with the environment's own importance sampling) |
 //!
-//! The selection pmf is the difference of consecutive entries of the f32 CDF that is actually
+//! The Power pmf is the difference of consecutive entries of the f32 CDF that is actually
 //! searched, so selection probabilities and the pmf used in estimators and MIS weights agree
 //! exactly (a light whose CDF interval rounds to zero is never picked and has pmf 0, which MIS
-//! then treats as BSDF-only).
+//! then treats as BSDF-only). In the tree, a light whose importance is 0 at a shading point (it
+//! provably cannot light it) has pmf 0 there; a light is never picked with pmf 0.
 //!
 //! Punctual lights follow KHR_lights_punctual: range window `clamp(1 − (d/range)⁴, 0, 1)²`, spot
 //! attenuation `clamp((cd − cos outer)/(cos inner − cos outer), 0, 1)²` with cd the cosine to the
@@ -19,9 +41,9 @@
 //! Emissive triangles emit from their front side (counter-clockwise winding) only, unless the
 //! material is double sided.
 
-use std::f32::consts::PI;
+use std::f32::consts::{FRAC_PI_2, PI};
 
-use glam::{Vec2, Vec3};
+use glam::{Quat, Vec2, Vec3};
 
 use super::accel::{offset_ray_origin, AlphaTest, RenderScene};
 use super::bsdf::luminance;
@@ -54,6 +76,17 @@ pub fn sample_uniform_sphere(u: Vec2) -> Vec3 {
     Vec3::new(r * phi.cos(), r * phi.sin(), z)
 }
 
+/// How next-event estimation chooses a light.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LightSelection {
+    /// Light BVH over the bounded lights, traversed by importance at the shading point; lights
+    /// at infinity with a fixed probability.
+    #[default]
+    Tree,
+    /// One global distribution proportional to emitted power.
+    Power,
+}
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) enum LightKind {
     /// Index into `Scene::lights`.
@@ -81,16 +114,448 @@ pub struct LightSample {
     pub target: Option<Vec3>,
 }
 
-/// Light list and selection distribution.
+// ------------------------------------------------------------------------------------------
+// Light bounds and the light tree.
+
+/// Largest f32 below 1.
+const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
+
+#[inline]
+fn safe_acos(x: f32) -> f32 {
+    x.clamp(-1.0, 1.0).acos()
+}
+
+#[inline]
+fn safe_sqrt(x: f32) -> f32 {
+    x.max(0.0).sqrt()
+}
+
+/// Angle between unit vectors (numerically robust, as pbrt).
+#[inline]
+fn angle_between(a: Vec3, b: Vec3) -> f32 {
+    if a.dot(b) < 0.0 {
+        PI - 2.0 * ((a + b).length() * 0.5).clamp(-1.0, 1.0).asin()
+    } else {
+        2.0 * ((b - a).length() * 0.5).clamp(-1.0, 1.0).asin()
+    }
+}
+
+/// Smallest cone (axis, cos half-angle) holding cones a and b (pbrt-v4's `Union`), slightly
+/// widened so that rounding never makes it too narrow.
+fn cone_union(wa: Vec3, cos_a: f32, wb: Vec3, cos_b: f32) -> (Vec3, f32) {
+    if cos_a <= -1.0 || cos_b <= -1.0 {
+        return (wa, -1.0);
+    }
+    let (ta, tb) = (safe_acos(cos_a), safe_acos(cos_b));
+    let td = angle_between(wa, wb);
+    if (td + tb).min(PI) <= ta {
+        return (wa, cos_a);
+    }
+    if (td + ta).min(PI) <= tb {
+        return (wb, cos_b);
+    }
+    let to = 0.5 * (ta + td + tb) + 1e-5;
+    if to >= PI {
+        return (wa, -1.0);
+    }
+    let wr = wa.cross(wb);
+    if wr.length_squared() < 1e-20 {
+        return (wa, -1.0);
+    }
+    let w = (Quat::from_axis_angle(wr.normalize(), to - ta) * wa).normalize();
+    if !w.is_finite() {
+        return (wa, -1.0);
+    }
+    (w, to.cos())
+}
+
+/// Spatial and directional bounds of one light or a group of lights (pbrt-v4's `LightBounds`).
+#[derive(Debug, Clone, Copy)]
+struct LightBounds {
+    bmin: Vec3,
+    bmax: Vec3,
+    /// Emission power (luminance).
+    phi: f32,
+    /// Axis of the cone of emission normals.
+    w: Vec3,
+    /// cos θo: spread of the emission normals about `w`.
+    cos_o: f32,
+    /// cos θe: how far beyond the normals light is emitted (π/2 for area lights).
+    cos_e: f32,
+    two_sided: bool,
+}
+
+impl LightBounds {
+    #[inline]
+    fn centroid(&self) -> Vec3 {
+        0.5 * (self.bmin + self.bmax)
+    }
+
+    fn union(&self, o: &LightBounds) -> LightBounds {
+        let (w, cos_o) = cone_union(self.w, self.cos_o, o.w, o.cos_o);
+        LightBounds {
+            bmin: self.bmin.min(o.bmin),
+            bmax: self.bmax.max(o.bmax),
+            phi: self.phi + o.phi,
+            w,
+            cos_o,
+            cos_e: self.cos_e.min(o.cos_e),
+            two_sided: self.two_sided || o.two_sided,
+        }
+    }
+
+    /// pbrt-v4's SAH-like cost of a cluster: power × orientation measure M_Ω × surface area ×
+    /// `kr` (aspect-ratio term of the parent along the split axis).
+    fn cost(&self, kr: f32) -> f32 {
+        let theta_o = safe_acos(self.cos_o);
+        let theta_e = safe_acos(self.cos_e);
+        let theta_w = (theta_o + theta_e).min(PI);
+        let sin_o = safe_sqrt(1.0 - self.cos_o * self.cos_o);
+        let m_omega = 2.0 * PI * (1.0 - self.cos_o)
+            + FRAC_PI_2 * (2.0 * theta_w * sin_o - (theta_o - 2.0 * theta_w).cos() - 2.0 * theta_o * sin_o + self.cos_o);
+        let d = self.bmax - self.bmin;
+        let area = 2.0 * (d.x * d.y + d.y * d.z + d.z * d.x);
+        self.phi * m_omega * area * kr
+    }
+}
+
+/// A light-tree node, stored in the form the importance needs.
+#[derive(Debug, Clone, Copy)]
+struct TreeNode {
+    /// Centre of the bounding box (= of its bounding sphere).
+    center: Vec3,
+    /// Squared radius of the bounding sphere (slightly padded).
+    radius2: f32,
+    w: Vec3,
+    phi: f32,
+    cos_o: f32,
+    sin_o: f32,
+    cos_e: f32,
+    two_sided: bool,
+    leaf: bool,
+    /// Leaf: the light's index; interior: the second child's node index (the first child is
+    /// the next node).
+    index: u32,
+}
+
+impl TreeNode {
+    fn new(b: &LightBounds, leaf: bool, index: u32) -> TreeNode {
+        let center = b.centroid();
+        let r = (b.bmax - center).length().max((center - b.bmin).length());
+        // Pad against rounding in `center` (absolute) and in the radius (relative).
+        let r = if r > 0.0 { r * (1.0 + 1e-5) + center.abs().max_element() * 4.0 * f32::EPSILON } else { 0.0 };
+        let w = b.w.normalize_or(Vec3::Z);
+        TreeNode {
+            center,
+            radius2: r * r,
+            w,
+            phi: b.phi,
+            cos_o: b.cos_o,
+            sin_o: safe_sqrt(1.0 - b.cos_o * b.cos_o),
+            cos_e: b.cos_e,
+            two_sided: b.two_sided,
+            leaf,
+            index,
+        }
+    }
+
+    /// Importance of the node's lights for a receiver at `p` with normal `n` (zero: no normal,
+    /// no receiver-cosine term), after pbrt-v4's `LightBounds::Importance`. Zero only when no
+    /// light in the node can reach `p` (the cone bounds are conservative), or, with a normal,
+    /// when all of it is below the surface (`n·wi ≤ 0` for every direction wi to the node).
+    #[inline]
+    fn importance(&self, p: Vec3, n: Vec3) -> f32 {
+        let d = p - self.center;
+        let dist2 = d.length_squared();
+        let d2 = dist2.max(self.radius2);
+        if !(d2 > 0.0) {
+            // p on a point light.
+            return if self.phi > 0.0 { 1e30 } else { 0.0 };
+        }
+        // Cone of directions from p to the node's bounding sphere.
+        let (cos_b, sin_b) = if dist2 <= self.radius2 {
+            (-1.0, 0.0)
+        } else {
+            let s2 = self.radius2 / dist2;
+            (safe_sqrt(1.0 - s2), s2.sqrt())
+        };
+        // Unit direction from the node to p.
+        let wi = d * (1.0 / dist2.sqrt());
+        let mut cos_w = self.w.dot(wi);
+        if self.two_sided {
+            cos_w = cos_w.abs();
+        }
+        let sin_w = safe_sqrt(1.0 - cos_w * cos_w);
+        // θx = max(0, θw − θo).
+        let (cos_x, sin_x) =
+            if cos_w > self.cos_o { (1.0, 0.0) } else { (cos_w * self.cos_o + sin_w * self.sin_o, sin_w * self.cos_o - cos_w * self.sin_o) };
+        // θ' = max(0, θx − θb).
+        let cos_p = if cos_x > cos_b { 1.0 } else { cos_x * cos_b + sin_x * sin_b };
+        if cos_p <= self.cos_e {
+            return 0.0;
+        }
+        let mut imp = self.phi * cos_p / d2;
+        if n != Vec3::ZERO {
+            // One-sided receiver cosine bound: θi' = max(0, θi − θb), θi the angle between n
+            // and the direction toward the node centre.
+            let cos_i = -n.dot(wi);
+            let sin_i = safe_sqrt(1.0 - cos_i * cos_i);
+            let cos_pi = if cos_i > cos_b { 1.0 } else { cos_i * cos_b + sin_i * sin_b };
+            if cos_pi <= 0.0 {
+                return 0.0;
+            }
+            imp *= cos_pi;
+        }
+        if imp > 0.0 {
+            imp.min(1e30)
+        } else {
+            0.0
+        }
+    }
+}
+
+/// Where a light sits in the tree sampler.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Slot {
+    /// In the tree; bit k = child taken at depth k (0: first, 1: second).
+    Tree(u64),
+    /// At infinity.
+    Infinite,
+    /// Never sampled by the tree (unbounded position).
+    None,
+}
+
+/// The light BVH and the lights at infinity.
+#[derive(Debug, Clone, Default)]
+struct LightTree {
+    nodes: Vec<TreeNode>,
+    infinite: Vec<u32>,
+    slots: Vec<Slot>,
+    /// Probability of sampling a light at infinity.
+    p_infinite: f32,
+    depth: u32,
+}
+
+/// Tree depth from which splits are median splits, so that the depth stays below 64 (bit trail).
+const SAH_MAX_DEPTH: u32 = 32;
+const BUCKETS: usize = 12;
+
+impl LightTree {
+    fn build(bounded: Vec<(u32, LightBounds)>, infinite: Vec<u32>, n_lights: usize) -> LightTree {
+        let mut slots = vec![Slot::None; n_lights];
+        for &i in &infinite {
+            slots[i as usize] = Slot::Infinite;
+        }
+        let mut tree = LightTree { nodes: Vec::new(), infinite, slots, p_infinite: 0.0, depth: 0 };
+        let mut items = bounded;
+        if !items.is_empty() {
+            tree.nodes.reserve(2 * items.len() - 1);
+            tree.build_rec(&mut items, 0, 0);
+        }
+        let n_inf = tree.infinite.len() as f32;
+        let n_tree = if tree.nodes.is_empty() { 0.0 } else { 1.0 };
+        tree.p_infinite = if n_inf > 0.0 { n_inf / (n_inf + n_tree) } else { 0.0 };
+        tree
+    }
+
+    fn build_rec(&mut self, items: &mut [(u32, LightBounds)], trail: u64, depth: u32) -> LightBounds {
+        self.depth = self.depth.max(depth);
+        if items.len() == 1 {
+            let (li, b) = items[0];
+            self.nodes.push(TreeNode::new(&b, true, li));
+            self.slots[li as usize] = Slot::Tree(trail);
+            return b;
+        }
+        let (mut bmin, mut bmax) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        let (mut cmin, mut cmax) = (bmin, bmax);
+        for (_, b) in items.iter() {
+            bmin = bmin.min(b.bmin);
+            bmax = bmax.max(b.bmax);
+            let c = b.centroid();
+            cmin = cmin.min(c);
+            cmax = cmax.max(c);
+        }
+        let diag = bmax - bmin;
+        // Best split: (cost, axis, last bucket of the first child).
+        let mut best: Option<(f32, usize, usize)> = None;
+        if depth < SAH_MAX_DEPTH {
+            for dim in 0..3 {
+                if !(cmax[dim] > cmin[dim]) {
+                    continue;
+                }
+                let mut buckets: [Option<LightBounds>; BUCKETS] = [None; BUCKETS];
+                for (_, b) in items.iter() {
+                    let k = bucket_of(b.centroid()[dim], cmin[dim], cmax[dim]);
+                    buckets[k] = Some(match buckets[k] {
+                        Some(a) => a.union(b),
+                        None => *b,
+                    });
+                }
+                let kr = diag.max_element() / diag[dim];
+                // Suffix unions.
+                let mut suffix: [Option<LightBounds>; BUCKETS] = [None; BUCKETS];
+                let mut acc: Option<LightBounds> = None;
+                for k in (0..BUCKETS).rev() {
+                    acc = join(acc, buckets[k]);
+                    suffix[k] = acc;
+                }
+                let mut prefix: Option<LightBounds> = None;
+                for k in 0..BUCKETS - 1 {
+                    prefix = join(prefix, buckets[k]);
+                    let (Some(l), Some(r)) = (prefix, suffix[k + 1]) else { continue };
+                    let cost = l.cost(kr) + r.cost(kr);
+                    if cost.is_finite() && best.is_none_or(|(c, _, _)| cost < c) {
+                        best = Some((cost, dim, k));
+                    }
+                }
+            }
+        }
+        let mut mid = match best {
+            Some((_, dim, split)) => {
+                let mut i = 0;
+                for j in 0..items.len() {
+                    if bucket_of(items[j].1.centroid()[dim], cmin[dim], cmax[dim]) <= split {
+                        items.swap(i, j);
+                        i += 1;
+                    }
+                }
+                i
+            }
+            None => 0,
+        };
+        if mid == 0 || mid == items.len() {
+            // Median along the widest centroid axis.
+            mid = items.len() / 2;
+            let ext = cmax - cmin;
+            let dim = if ext.x >= ext.y && ext.x >= ext.z {
+                0
+            } else if ext.y >= ext.z {
+                1
+            } else {
+                2
+            };
+            items.select_nth_unstable_by(mid, |a, b| a.1.centroid()[dim].total_cmp(&b.1.centroid()[dim]));
+        }
+        let node = self.nodes.len();
+        // Placeholder, filled in once the children are built.
+        self.nodes.push(TreeNode::new(&items[0].1, false, 0));
+        let (left, right) = items.split_at_mut(mid);
+        let b0 = self.build_rec(left, trail, depth + 1);
+        let second = self.nodes.len() as u32;
+        let b1 = self.build_rec(right, trail | (1u64 << depth), depth + 1);
+        let b = b0.union(&b1);
+        self.nodes[node] = TreeNode::new(&b, false, second);
+        b
+    }
+
+    /// Picks a light for (p, n): (light index, pmf).
+    fn pick(&self, p: Vec3, n: Vec3, u: f32) -> Option<(usize, f32)> {
+        let u = u.clamp(0.0, ONE_MINUS_EPSILON);
+        let p_inf = self.p_infinite;
+        if u < p_inf {
+            let n_inf = self.infinite.len();
+            let k = ((u / p_inf * n_inf as f32) as usize).min(n_inf - 1);
+            return Some((self.infinite[k] as usize, p_inf / n_inf as f32));
+        }
+        if self.nodes.is_empty() {
+            return None;
+        }
+        let mut u = ((u - p_inf) / (1.0 - p_inf)).min(ONE_MINUS_EPSILON);
+        let mut pmf = 1.0 - p_inf;
+        let mut i = 0usize;
+        loop {
+            let node = &self.nodes[i];
+            if node.leaf {
+                if i > 0 || node.importance(p, n) > 0.0 {
+                    return Some((node.index as usize, pmf));
+                }
+                return None;
+            }
+            let second = node.index as usize;
+            let c0 = self.nodes[i + 1].importance(p, n);
+            let c1 = self.nodes[second].importance(p, n);
+            let sum = c0 + c1;
+            if !(sum > 0.0) {
+                return None;
+            }
+            let p0 = c0 / sum;
+            if u < p0 {
+                u = (u / p0).min(ONE_MINUS_EPSILON);
+                pmf *= p0;
+                i += 1;
+            } else {
+                u = ((u - p0) / (1.0 - p0)).min(ONE_MINUS_EPSILON);
+                pmf *= c1 / sum;
+                i = second;
+            }
+        }
+    }
+
+    /// Probability that [`LightTree::pick`] returns `light` at (p, n): the same float
+    /// operations along the light's bit trail.
+    fn pmf(&self, p: Vec3, n: Vec3, light: usize) -> f32 {
+        match self.slots.get(light) {
+            Some(Slot::Infinite) => self.p_infinite / self.infinite.len() as f32,
+            Some(&Slot::Tree(mut trail)) => {
+                let mut pmf = 1.0 - self.p_infinite;
+                let mut i = 0usize;
+                loop {
+                    let node = &self.nodes[i];
+                    if node.leaf {
+                        return if i > 0 || node.importance(p, n) > 0.0 { pmf } else { 0.0 };
+                    }
+                    let second = node.index as usize;
+                    let c0 = self.nodes[i + 1].importance(p, n);
+                    let c1 = self.nodes[second].importance(p, n);
+                    let sum = c0 + c1;
+                    if !(sum > 0.0) {
+                        return 0.0;
+                    }
+                    if trail & 1 == 0 {
+                        pmf *= c0 / sum;
+                        i += 1;
+                    } else {
+                        pmf *= c1 / sum;
+                        i = second;
+                    }
+                    trail >>= 1;
+                }
+            }
+            _ => 0.0,
+        }
+    }
+}
+
+#[inline]
+fn bucket_of(c: f32, lo: f32, hi: f32) -> usize {
+    let t = (c - lo) / (hi - lo);
+    ((t * BUCKETS as f32) as usize).min(BUCKETS - 1)
+}
+
+#[inline]
+fn join(a: Option<LightBounds>, b: Option<LightBounds>) -> Option<LightBounds> {
+    match (a, b) {
+        (Some(a), Some(b)) => Some(a.union(&b)),
+        (a, None) => a,
+        (None, b) => b,
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// The light set.
+
+/// Light list and selection distributions.
 #[derive(Debug, Clone, Default)]
 pub struct LightSet {
     kinds: Vec<LightKind>,
-    /// n + 1 entries, cdf[0] = 0, cdf[n] = 1.
+    /// Power distribution: n + 1 entries, cdf[0] = 0, cdf[n] = 1.
     cdf: Vec<f32>,
     /// Mesh triangle → light index (u32::MAX: not a light); empty when no triangle emits.
     tri_light: Vec<u32>,
     env_light: Option<u32>,
     scene_radius: f32,
+    tree: LightTree,
+    selection: LightSelection,
 }
 
 impl LightSet {
@@ -99,6 +564,10 @@ impl LightSet {
         let radius = radius.max(1e-3);
         let mut kinds = Vec::new();
         let mut power: Vec<f64> = Vec::new();
+        // Tree: bounded lights with their bounds, lights at infinity.
+        let mut bounded: Vec<(u32, LightBounds)> = Vec::new();
+        let mut infinite: Vec<u32> = Vec::new();
+        let cos_half_pi = FRAC_PI_2.cos();
         for (i, l) in scene.lights.iter().enumerate() {
             let p = match *l {
                 Light::Point { intensity, .. } => 4.0 * PI * luminance(intensity),
@@ -107,9 +576,42 @@ impl LightSet {
                 }
                 Light::Directional { irradiance, .. } => PI * radius * radius * luminance(irradiance),
             };
-            if p.is_finite() && p > 0.0 {
-                kinds.push(LightKind::Punctual(i as u32));
-                power.push(p as f64);
+            if !(p.is_finite() && p > 0.0) {
+                continue;
+            }
+            let li = kinds.len() as u32;
+            kinds.push(LightKind::Punctual(i as u32));
+            power.push(p as f64);
+            let point = |position: Vec3, intensity: Vec3, w: Vec3, cos_o: f32, cos_e: f32| LightBounds {
+                bmin: position,
+                bmax: position,
+                phi: 4.0 * PI * luminance(intensity),
+                w,
+                cos_o,
+                cos_e,
+                two_sided: false,
+            };
+            let b = match *l {
+                Light::Point { position, intensity, .. } => Some(point(position, intensity, Vec3::Z, -1.0, cos_half_pi)),
+                Light::Spot { position, direction, intensity, inner_cone_rad, outer_cone_rad, .. } => {
+                    let w = direction.normalize_or_zero();
+                    if w == Vec3::ZERO {
+                        Some(point(position, intensity, Vec3::Z, -1.0, cos_half_pi))
+                    } else {
+                        // Zero beyond the outer cone whatever the inner one (see
+                        // spot_attenuation); θe > 0 so that the cone's inside counts.
+                        let outer = outer_cone_rad.clamp(0.0, PI);
+                        let theta_o = inner_cone_rad.clamp(0.0, outer);
+                        let theta_e = (outer - theta_o).max(1e-3);
+                        Some(point(position, intensity, w, theta_o.cos(), theta_e.cos()))
+                    }
+                }
+                Light::Directional { .. } => None,
+            };
+            match b {
+                Some(b) if b.bmin.is_finite() && b.phi > 0.0 && b.phi.is_finite() => bounded.push((li, b)),
+                Some(_) => {}
+                None => infinite.push(li),
             }
         }
         let mesh = &scene.mesh;
@@ -122,16 +624,33 @@ impl LightSet {
                     continue;
                 }
                 let [a, b, c] = mesh.indices[t as usize].map(|i| mesh.positions[i as usize]);
-                let area = 0.5 * (b - a).cross(c - a).length();
+                let cross = (b - a).cross(c - a);
+                let area = 0.5 * cross.length();
                 let sides = if m.double_sided { 2.0 } else { 1.0 };
                 let p = PI * area * luminance(m.emissive) * sides;
                 if p.is_finite() && p > 0.0 {
                     if tri_light.is_empty() {
                         tri_light = vec![u32::MAX; mesh.indices.len()];
                     }
-                    tri_light[t as usize] = kinds.len() as u32;
+                    let li = kinds.len() as u32;
+                    tri_light[t as usize] = li;
                     kinds.push(LightKind::Triangle(t));
                     power.push(p as f64);
+                    let w = cross.normalize_or_zero();
+                    if w != Vec3::ZERO {
+                        bounded.push((
+                            li,
+                            LightBounds {
+                                bmin: a.min(b).min(c),
+                                bmax: a.max(b).max(c),
+                                phi: p,
+                                w,
+                                cos_o: 1.0,
+                                cos_e: cos_half_pi,
+                                two_sided: m.double_sided,
+                            },
+                        ));
+                    }
                 }
             }
         }
@@ -153,9 +672,11 @@ impl LightSet {
             }
             let mean = sum / (N * N) as f64 / (4.0 * std::f64::consts::PI);
             if mean > 0.0 && mean.is_finite() {
-                env_light = Some(kinds.len() as u32);
+                let li = kinds.len() as u32;
+                env_light = Some(li);
                 kinds.push(LightKind::Environment);
                 power.push(4.0 * (PI as f64).powi(2) * (radius as f64).powi(2) * mean);
+                infinite.push(li);
             }
         }
         let total: f64 = power.iter().sum();
@@ -172,7 +693,8 @@ impl LightSet {
         if kinds.is_empty() {
             cdf.clear();
         }
-        LightSet { kinds, cdf, tri_light, env_light, scene_radius: radius }
+        let tree = LightTree::build(bounded, infinite, kinds.len());
+        LightSet { kinds, cdf, tri_light, env_light, scene_radius: radius, tree, selection: LightSelection::default() }
     }
 
     /// Number of lights.
@@ -185,21 +707,22 @@ impl LightSet {
         self.kinds.is_empty()
     }
 
+    /// Power-distribution pmf of light `i`.
     #[inline]
-    fn pmf(&self, i: usize) -> f32 {
+    fn power_pmf(&self, i: usize) -> f32 {
         self.cdf[i + 1] - self.cdf[i]
     }
 
-    /// Picks a light: (index, pmf).
+    /// Picks a light by power: (index, pmf).
     #[inline]
-    fn pick(&self, u: f32) -> Option<(usize, f32)> {
+    fn power_pick(&self, u: f32) -> Option<(usize, f32)> {
         if self.kinds.is_empty() {
             return None;
         }
         let u = u.clamp(0.0, 1.0 - f32::EPSILON);
         // First index with cdf[i + 1] > u.
         let i = self.cdf[1..].partition_point(|&c| c <= u).min(self.kinds.len() - 1);
-        let p = self.pmf(i);
+        let p = self.power_pmf(i);
         if p > 0.0 {
             Some((i, p))
         } else {
@@ -207,24 +730,58 @@ impl LightSet {
         }
     }
 
-    /// Selection pmf of the environment (0 when it is not a light).
+    /// Picks a light for shading point `p` with normal `n` (zero: unknown): (index, pmf).
     #[inline]
-    pub fn env_pmf(&self) -> f32 {
-        self.env_light.map_or(0.0, |i| self.pmf(i as usize))
+    pub(crate) fn pick(&self, p: Vec3, n: Vec3, u: f32) -> Option<(usize, f32)> {
+        match self.selection {
+            LightSelection::Tree => self.tree.pick(p, n, u),
+            LightSelection::Power => self.power_pick(u),
+        }
     }
 
-    /// Selection pmf of mesh triangle `tri` as a light (0 when it does not emit).
+    /// Probability that [`LightSet::pick`] at (p, n) returns light `i`.
     #[inline]
-    pub fn triangle_pmf(&self, tri: u32) -> f32 {
-        match self.tri_light.get(tri as usize) {
-            Some(&i) if i != u32::MAX => self.pmf(i as usize),
-            _ => 0.0,
+    pub(crate) fn pmf(&self, p: Vec3, n: Vec3, i: usize) -> f32 {
+        if i >= self.kinds.len() {
+            return 0.0;
         }
+        match self.selection {
+            LightSelection::Tree => self.tree.pmf(p, n, i),
+            LightSelection::Power => self.power_pmf(i),
+        }
+    }
+
+    /// Selection pmf of the environment (0 when it is not a light); the same at every shading
+    /// point.
+    #[inline]
+    pub fn env_pmf(&self) -> f32 {
+        self.env_light.map_or(0.0, |i| self.pmf(Vec3::ZERO, Vec3::ZERO, i as usize))
+    }
+
+    /// Light index of mesh triangle `tri` (None when it does not emit).
+    #[inline]
+    pub fn triangle_light(&self, tri: u32) -> Option<usize> {
+        match self.tri_light.get(tri as usize) {
+            Some(&i) if i != u32::MAX => Some(i as usize),
+            _ => None,
+        }
+    }
+
+    /// Selection pmf of mesh triangle `tri` as a light for shading point (p, n) (0 when it does
+    /// not emit).
+    #[inline]
+    pub fn triangle_pmf(&self, p: Vec3, n: Vec3, tri: u32) -> f32 {
+        self.triangle_light(tri).map_or(0.0, |i| self.pmf(p, n, i))
     }
 
     /// Radius of the scene's bounding sphere.
     pub fn scene_radius(&self) -> f32 {
         self.scene_radius
+    }
+
+    /// Depth of the light tree (0: at most one bounded light).
+    pub fn tree_depth(&self) -> u32 {
+        self.tree.depth
     }
 }
 
@@ -252,9 +809,45 @@ pub fn spot_attenuation(cd: f32, inner: f32, outer: f32) -> f32 {
 }
 
 impl RenderScene {
-    /// Samples a light for shading point `p`: `u_pick` selects the light, `u` the point on it. None when nothing can be sampled.
+    /// How next-event estimation chooses lights ([`LightSelection::Tree`] unless changed).
+    pub fn light_selection(&self) -> LightSelection {
+        self.lights.selection
+    }
+
+    /// Switches the light selection strategy (for comparisons; the tree is the default).
+    pub fn set_light_selection(&mut self, selection: LightSelection) {
+        self.lights.selection = selection;
+    }
+
+    /// Picks a light for shading point `p` with normal `n` (the geometric normal on the side
+    /// the light must be on, or zero when there is none): (light index, selection pmf). This is
+    /// the choice [`RenderScene::sample_light_at`] makes with the same `u_pick`.
+    pub fn pick_light(&self, p: Vec3, n: Vec3, u_pick: f32) -> Option<(usize, f32)> {
+        self.lights.pick(p, n, u_pick)
+    }
+
+    /// Probability that [`RenderScene::pick_light`] at (p, n) picks light `light` (an index
+    /// below [`RenderScene::light_count`]). Equal to the pmf the pick returns.
+    pub fn light_pmf(&self, p: Vec3, n: Vec3, light: usize) -> f32 {
+        self.lights.pmf(p, n, light)
+    }
+
+    /// Light index of emissive mesh triangle `tri` (None when it is not a light).
+    pub fn triangle_light(&self, tri: u32) -> Option<usize> {
+        self.lights.triangle_light(tri)
+    }
+
+    /// Samples a light for shading point `p` without a surface normal (as
+    /// [`RenderScene::sample_light_at`] with `n = 0`).
     pub fn sample_light(&self, p: Vec3, u_pick: f32, u: Vec2) -> Option<LightSample> {
-        let (i, pmf) = self.lights.pick(u_pick)?;
+        self.sample_light_at(p, Vec3::ZERO, u_pick, u)
+    }
+
+    /// Samples a light for shading point `p` with normal `n` (the geometric normal on the side
+    /// where light is wanted, or zero): `u_pick` selects the light, `u` the point on it. None
+    /// when nothing can be sampled. Lights wholly below `n` are never chosen.
+    pub fn sample_light_at(&self, p: Vec3, n: Vec3, u_pick: f32, u: Vec2) -> Option<LightSample> {
+        let (i, pmf) = self.lights.pick(p, n, u_pick)?;
         match self.lights.kinds[i] {
             LightKind::Punctual(li) => {
                 let light = self.scene().lights[li as usize];
@@ -365,10 +958,11 @@ impl RenderScene {
         }
     }
 
-    /// Pdf (selection × solid angle) with which [`RenderScene::sample_light`] would have produced
-    /// a point on emissive triangle `tri` seen at distance `dist` along unit `dir`.
-    pub fn triangle_light_pdf(&self, tri: u32, dir: Vec3, dist: f32, geometric_normal: Vec3) -> f32 {
-        let pmf = self.lights.triangle_pmf(tri);
+    /// Pdf (selection × solid angle) with which [`RenderScene::sample_light_at`] at shading
+    /// point (`p`, `n`) would have produced a point on emissive triangle `tri` seen at distance
+    /// `dist` along unit `dir`.
+    pub fn triangle_light_pdf(&self, p: Vec3, n: Vec3, tri: u32, dir: Vec3, dist: f32, geometric_normal: Vec3) -> f32 {
+        let pmf = self.lights.triangle_pmf(p, n, tri);
         if pmf == 0.0 {
             return 0.0;
         }
@@ -384,7 +978,8 @@ impl RenderScene {
         }
     }
 
-    /// Pdf (selection × solid angle) of sampling the environment toward `dir`.
+    /// Pdf (selection × solid angle) of sampling the environment toward `dir` (the environment's
+    /// selection pmf is the same at every shading point).
     pub fn env_light_pdf(&self, dir: Vec3) -> f32 {
         let pmf = self.lights.env_pmf();
         if pmf == 0.0 {

@@ -1,7 +1,7 @@
 //! The integrator: ray casting against the scene ([`RenderScene`]: obvhs CWBVH, watertight
 //! triangles, alpha cut-outs, robust ray offsets), the glTF metallic-roughness BSDF
 //! ([`bsdf`]), light sampling ([`lights`]: punctual lights, emissive triangles, environment,
-//! power-proportional selection) and a unidirectional path tracer with next-event estimation
+//! light-tree selection) and a unidirectional path tracer with next-event estimation
 //! and MIS ([`PathTracer`]).
 
 pub mod accel;
@@ -11,7 +11,7 @@ pub mod path;
 
 pub use accel::{offset_ray_origin, BvhQuality, RenderScene, SurfaceHit};
 pub use bsdf::{Bsdf, BsdfSample, SurfaceBsdf};
-pub use lights::LightSample;
+pub use lights::{LightSample, LightSelection};
 pub use path::{LightStrategy, PathSample, PathTracer};
 
 use glam::Vec3;

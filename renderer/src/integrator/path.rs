@@ -2,7 +2,9 @@
 //!
 //! * At each vertex: one light sample (NEE) and one BSDF sample. Emissive triangles and the
 //!   environment are reached by both and weighted with the power heuristic (β = 2); punctual
-//!   lights (delta) only by NEE. Emission seen by the camera ray counts fully.
+//!   lights (delta) only by NEE. Emission seen by the camera ray counts fully. Light selection
+//!   depends on the shading point (position and geometric normal, see [`super::lights`]), so the
+//!   light pdf in the weight of an emitter hit is evaluated for the vertex the ray left from.
 //! * `max_depth` counts scattering events (pbrt's convention): 0 = emission only, 1 = direct
 //!   lighting, ... Emitters reached by the last BSDF sample still count.
 //! * Russian roulette from `rr_start_depth` bounces on, survival probability = min(1, max
@@ -119,6 +121,9 @@ impl PathTracer {
         let mut l = Vec3::ZERO;
         let mut beta = Vec3::ONE;
         let mut prev_pdf = 0.0f32; // BSDF pdf of the ray being traced (0 for the camera ray)
+        // Shading point (position, geometric normal on the side of the path) the ray being
+        // traced left from: light selection there depends on it, so MIS needs it.
+        let (mut prev_p, mut prev_n) = (Vec3::ZERO, Vec3::ZERO);
         let mut depth = 0u32;
         let nee = self.strategy != LightStrategy::BsdfOnly;
         loop {
@@ -160,7 +165,7 @@ impl PathTracer {
                 let w = if depth == 0 {
                     1.0
                 } else {
-                    let light_pdf = scene.triangle_light_pdf(hit.triangle, d, hit.t, hit.geometric_normal);
+                    let light_pdf = scene.triangle_light_pdf(prev_p, prev_n, hit.triangle, d, hit.t, hit.geometric_normal);
                     match self.strategy {
                         LightStrategy::Mis => power_heuristic(prev_pdf, light_pdf),
                         LightStrategy::BsdfOnly => 1.0,
@@ -189,7 +194,7 @@ impl PathTracer {
             let sb = SurfaceBsdf::new(bsdf, hit.geometric_normal, hit.shading_normal, wo);
 
             // Next-event estimation.
-            if let Some(ls) = scene.sample_light(hit.position, u_pick, u_light) {
+            if let Some(ls) = scene.sample_light_at(hit.position, sb.ng, u_pick, u_light) {
                 if ls.delta || nee {
                     let f = sb.eval(wo, ls.wi);
                     if f != Vec3::ZERO {
@@ -223,6 +228,8 @@ impl PathTracer {
                 break;
             }
             prev_pdf = bs.pdf;
+            prev_p = hit.position;
+            prev_n = sb.ng;
             o = hit.spawn_origin(bs.wi);
             d = bs.wi;
             depth += 1;

@@ -1,0 +1,83 @@
+//! `petzval lrtf ...`: bake and inspect lens ray transfer tables.
+
+use clap::Subcommand;
+use indicatif::{ProgressBar, ProgressStyle};
+use petzval_renderer::optics::lrtf::{BakeOptions, LrtfTable};
+use petzval_renderer::Error;
+use std::path::PathBuf;
+
+/// LRTF subcommands.
+#[derive(Subcommand)]
+pub enum LrtfCommand {
+    /// Bake a table for a lens (stop open; any f-number and stop shape apply at render time).
+    Bake {
+        /// Library name or lens file.
+        lens: String,
+        /// Output file.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Samples along the radial and σx axes (σy gets half).
+        #[arg(long, default_value_t = 96)]
+        resolution: u32,
+        /// Film radius the table must cover (mm).
+        #[arg(long, default_value_t = 30.0)]
+        max_film_radius: f64,
+        /// Wavelengths in nm, comma separated (default: primary, or the design wavelengths for
+        /// dispersive lenses).
+        #[arg(long)]
+        wavelengths: Option<String>,
+    },
+    /// Print a table's header after checking it belongs to LENS.
+    Info {
+        /// Library name or lens file the table was baked for.
+        lens: String,
+        /// Table file.
+        file: PathBuf,
+    },
+}
+
+/// Runs an LRTF subcommand.
+pub fn run(cmd: LrtfCommand) -> Result<(), Error> {
+    match cmd {
+        LrtfCommand::Bake { lens, output, resolution, max_film_radius, wavelengths } => {
+            let lens = petzval_renderer::load_lens(&lens)?;
+            let wavelengths_nm = match wavelengths {
+                None => None,
+                Some(w) => Some(
+                    w.split(',')
+                        .map(|v| v.trim().parse::<f64>().ok().filter(|x| (380.0..=780.0).contains(x)))
+                        .collect::<Option<Vec<f64>>>()
+                        .ok_or_else(|| Error::Optics(format!("--wavelengths: expected numbers in 380..780 nm, got '{w}'")))?,
+                ),
+            };
+            if !(8..=512).contains(&resolution) {
+                return Err(Error::Optics(format!("--resolution {resolution} must be in 8..=512")));
+            }
+            let bar = ProgressBar::new(1000);
+            bar.set_style(ProgressStyle::with_template("baking {spinner} [{elapsed_precise}] {wide_bar} {percent}% ETA {eta}").unwrap_or_else(|_| ProgressStyle::default_bar()));
+            let t0 = std::time::Instant::now();
+            let opts = BakeOptions { resolution, max_film_radius_mm: max_film_radius, min_film_distance_mm: None, wavelengths_nm };
+            let table = LrtfTable::bake(&lens, &opts, &|f| bar.set_position((f * 1000.0) as u64))?;
+            bar.finish_and_clear();
+            table.save(&output)?;
+            eprintln!(
+                "baked {} at {}×{}×{} × {} wavelength(s) in {:.2} s: {:.1} MiB → {}",
+                lens.name(),
+                table.header.resolution,
+                table.header.resolution,
+                table.header.resolution_y,
+                table.header.wavelengths_nm.len(),
+                t0.elapsed().as_secs_f64(),
+                table.data_bytes() as f64 / (1 << 20) as f64,
+                output.display()
+            );
+            Ok(())
+        }
+        LrtfCommand::Info { lens, file } => {
+            let lens = petzval_renderer::load_lens(&lens)?;
+            let table = LrtfTable::load(&file, &lens)?;
+            println!("{}", serde_json::to_string_pretty(&table.header).unwrap_or_default());
+            Ok(())
+        }
+    }
+}
