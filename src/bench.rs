@@ -22,6 +22,22 @@ pub enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Speed against error of every lens model (pinhole, thin, thick, LRTF at several
+    /// resolutions, exact) for each library lens.
+    LensModels {
+        /// Only this lens.
+        #[arg(long)]
+        lens: Option<String>,
+        /// Rays per lens and model.
+        #[arg(long, default_value_t = 200_000)]
+        rays: usize,
+        /// LRTF resolutions.
+        #[arg(long, default_value = "32,64,96,128")]
+        resolutions: String,
+        /// Print a JSON array instead of a table.
+        #[arg(long)]
+        json: bool,
+    },
     /// Render cost by camera model on the built-in demo (ratio to pinhole), and primary-ray
     /// throughput, BVH build time and memory on a ~1M-triangle scene.
     Render {
@@ -42,6 +58,7 @@ pub fn run(cmd: BenchCommand) -> Result<(), Error> {
     match cmd {
         BenchCommand::Lens { lens, rays, json } => bench_lens(lens, rays, json),
         BenchCommand::Render { resolution, spp, triangles } => bench_render(&resolution, spp, triangles),
+        BenchCommand::LensModels { lens, rays, resolutions, json } => bench_lens_models(lens, rays, &resolutions, json),
     }
 }
 
@@ -248,6 +265,176 @@ fn bench_render(resolution: &str, spp: u32, triangles: usize) -> Result<(), Erro
             pinhole_s = r.seconds;
         }
         println!("| {name} | {:.2} | {:.2}× | {:.2} M |", r.seconds, r.seconds / pinhole_s, r.camera_rays as f64 / r.seconds / 1e6);
+    }
+    Ok(())
+}
+
+/// Sensor used to express errors in pixels: 36 mm across 1920 pixels.
+const PIXEL_PITCH_MM: f64 = 36.0 / 1920.0;
+
+fn bench_lens_models(only: Option<String>, rays: usize, resolutions: &str, json: bool) -> Result<(), Error> {
+    use petzval_renderer::optics::lrtf::{exit_sphere, BakeOptions, LrtfLookup, LrtfTable};
+    use petzval_renderer::optics::pupil::{self, ExitPupilBounds};
+    use petzval_renderer::{Aperture, Camera, PinholeCamera, ThickLensCamera, ThinLensCamera};
+    let res_list: Vec<u32> = resolutions.split(',').filter_map(|r| r.trim().parse().ok()).collect();
+    let names: Vec<String> = match only {
+        Some(n) => vec![n],
+        None => LIBRARY.iter().map(|e| e.name.to_string()).collect(),
+    };
+    let mut rows: Vec<serde_json::Value> = Vec::new();
+    for name in names {
+        let lens = load_lens(&name)?;
+        let wl = lens.primary_wavelength_nm();
+        let efl = lens.paraxial().efl_mm;
+        let film_z = lens.last_vertex_z_mm() + lens.focus_image_distance_mm(None)?;
+        let sensor = Sensor::default();
+        let bounds = ExitPupilBounds::compute(&lens, film_z, 0.0, sensor.extent().0 * 1.001);
+        // 1. The camera's ray distribution: film points over the sensor, rear points in bounds.
+        let mut rng = SplitMix(0xbe9c);
+        let mut samples: Vec<Ray> = Vec::with_capacity(rays);
+        let mut film_uv: Vec<DVec2> = Vec::with_capacity(rays);
+        let mut guard = 0;
+        while samples.len() < rays && guard < rays * 50 {
+            guard += 1;
+            let u = rng.next2();
+            let p = sensor.film_point(u, film_z);
+            if let Some(s) = bounds.sample(DVec2::new(p.x, p.y), rng.next2()) {
+                samples.push(Ray::new(p, s.point - p));
+                film_uv.push(u);
+            }
+        }
+        // 2. Exact reference (timed).
+        let t0 = Instant::now();
+        let exact: Vec<Option<Ray>> = samples.iter().map(|r| lens.trace(r, wl, TraceDirection::FilmToScene).map(|t| t.ray)).collect();
+        let exact_ns = t0.elapsed().as_secs_f64() * 1e9 / samples.len().max(1) as f64;
+        let mut push = |model: &str, res: Option<u32>, ns: f64, pos_um: Option<f64>, dir_mrad: f64, mean_px: f64, max_px: f64, mis: Option<f64>, extra: serde_json::Value| {
+            let mut v = serde_json::json!({
+                "lens": name, "model": model, "resolution": res, "ns_per_ray": ns,
+                "mean_position_error_um": pos_um, "mean_direction_error_mrad": dir_mrad,
+                "mean_image_error_px": mean_px, "max_image_error_px": max_px, "misclassified_fraction": mis,
+            });
+            if let (Some(o), Some(e)) = (v.as_object_mut(), extra.as_object()) {
+                for (k, x) in e {
+                    o.insert(k.clone(), x.clone());
+                }
+            }
+            rows.push(v);
+        };
+        push("exact", None, exact_ns, Some(0.0), 0.0, 0.0, 0.0, Some(0.0), serde_json::json!({}));
+        // 3. Pinhole, thin and thick: distortion of the chief ray against the exact lens, on a
+        //    grid of film points; time per generated camera ray.
+        let grid: Vec<DVec2> = (0..15).flat_map(|i| (0..10).map(move |j| DVec2::new((i as f64 + 0.5) / 15.0, (j as f64 + 0.5) / 10.0))).collect();
+        let mut chief: Vec<(DVec3, DVec3)> = Vec::new(); // (film point, exact chief direction)
+        for u in &grid {
+            let p = sensor.film_point(*u, film_z);
+            if let Some(r) = pupil::chief_ray_from_film(&lens, p, wl) {
+                chief.push((p, r.direction));
+            }
+        }
+        let analytic: Vec<(&str, Camera)> = vec![
+            ("pinhole", Camera::Pinhole(PinholeCamera::new(sensor, efl.abs())?)),
+            ("thin", Camera::ThinLens(ThinLensCamera::new(sensor, efl.abs(), lens.paraxial().f_number, None, Aperture::default())?)),
+            ("thick", Camera::ThickLens(ThickLensCamera::new(sensor, &lens, None, None, Aperture::default())?)),
+        ];
+        for (model, cam) in analytic {
+            let t0 = Instant::now();
+            let mut n_ok = 0usize;
+            for (i, u) in film_uv.iter().enumerate() {
+                let lu = DVec2::new((i as f64 * 0.618_034) % 1.0, (i as f64 * 0.414_214) % 1.0);
+                n_ok += cam.generate_ray(*u, lu, wl).is_some() as usize;
+            }
+            let ns = t0.elapsed().as_secs_f64() * 1e9 / film_uv.len().max(1) as f64;
+            let _ = n_ok;
+            // these models image a direction θ at h = f·tanθ (rectilinear): compare with the
+            // exact chief ray of each film point
+            let (mut sum_mrad, mut sum_px, mut max_px) = (0.0, 0.0, 0.0f64);
+            for (p, d) in &chief {
+                let model_dir = DVec3::new(-p.x, -p.y, -efl.abs()).normalize();
+                let ang = d.dot(model_dir).clamp(-1.0, 1.0).acos();
+                let h_exact = efl.abs() * (d.x.hypot(d.y) / (-d.z).max(1e-9));
+                let px = ((h_exact - p.x.hypot(p.y)).abs() / PIXEL_PITCH_MM).min(1e6);
+                sum_mrad += ang * 1e3;
+                sum_px += px;
+                max_px = max_px.max(px);
+            }
+            let n = chief.len().max(1) as f64;
+            push(model, None, ns, None, sum_mrad / n, sum_px / n, max_px, None, serde_json::json!({"note": "chief-ray distortion against the exact lens; no vignetting"}));
+        }
+        // 4. LRTF tables at each resolution.
+        if lens.is_rotationally_symmetric() {
+            for &res in &res_list {
+                let t0 = Instant::now();
+                let table = LrtfTable::bake(&lens, &BakeOptions { resolution: res, ..BakeOptions::default() }, &|_| {})?;
+                let bake_s = t0.elapsed().as_secs_f64();
+                let t0 = Instant::now();
+                let out: Vec<Option<Ray>> = samples
+                    .iter()
+                    .map(|r| match table.lookup(r, wl) {
+                        LrtfLookup::Hit(h) => (lens.aperture().transmission(h.stop_point.x, h.stop_point.y, lens.stop_semi_diameter_mm()) > 0.0).then_some(h.ray),
+                        LrtfLookup::Miss => None,
+                        LrtfLookup::Uncertain => lens.trace(r, wl, TraceDirection::FilmToScene).map(|t| t.ray),
+                    })
+                    .collect();
+                let ns = t0.elapsed().as_secs_f64() * 1e9 / samples.len().max(1) as f64;
+                let uncertain = samples.iter().filter(|r| matches!(table.lookup(r, wl), LrtfLookup::Uncertain)).count();
+                let (mut mis, mut both, mut sum_um, mut sum_mrad, mut sum_px, mut max_px) = (0usize, 0usize, 0.0, 0.0, 0.0, 0.0f64);
+                let centre = DVec3::new(0.0, 0.0, table.header.out_centre_z_mm);
+                for (e, a) in exact.iter().zip(&out) {
+                    match (e, a) {
+                        (Some(e), Some(a)) => {
+                            both += 1;
+                            let q = exit_sphere(e.origin, e.direction, centre, table.header.out_radius_mm).unwrap_or(e.origin);
+                            sum_um += (q - a.origin).length() * 1e3;
+                            let ang = e.direction.dot(a.direction).clamp(-1.0, 1.0).acos();
+                            sum_mrad += ang * 1e3;
+                            let px = efl.abs() * ang / PIXEL_PITCH_MM;
+                            sum_px += px;
+                            max_px = max_px.max(px);
+                        }
+                        (None, None) => {}
+                        _ => mis += 1,
+                    }
+                }
+                let nb = both.max(1) as f64;
+                push(
+                    "lrtf",
+                    Some(res),
+                    ns,
+                    Some(sum_um / nb),
+                    sum_mrad / nb,
+                    sum_px / nb,
+                    max_px,
+                    Some(mis as f64 / samples.len().max(1) as f64),
+                    serde_json::json!({"uncertain_fraction": uncertain as f64 / samples.len().max(1) as f64, "table_mib": table.data_bytes() as f64 / (1 << 20) as f64, "bake_seconds": bake_s, "speedup_vs_exact": exact_ns / ns}),
+                );
+            }
+        }
+    }
+    if json {
+        println!("{}", serde_json::to_string_pretty(&rows).unwrap_or_default());
+    } else {
+        println!("Errors against the exact trace for the camera's own rays (film points over a 36×24 mm sensor, rear points in the exit-pupil bounds, focus at infinity); image error = EFL × angle, in pixels of 36 mm / 1920 px. Pinhole/thin/thick: chief-ray distortion on a 15×10 film grid.");
+        println!();
+        println!("| lens | model | res | ns/ray | speed-up | pos µm | dir mrad | mean px | max px | misclassified | uncertain (exact fallback) | MiB |");
+        println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+        for r in &rows {
+            let f = |k: &str| r[k].as_f64();
+            println!(
+                "| {} | {} | {} | {:.0} | {} | {} | {:.4} | {:.3} | {:.3} | {} | {} | {} |",
+                r["lens"].as_str().unwrap_or(""),
+                r["model"].as_str().unwrap_or(""),
+                r["resolution"].as_u64().map(|v| v.to_string()).unwrap_or_default(),
+                f("ns_per_ray").unwrap_or(0.0),
+                f("speedup_vs_exact").map(|v| format!("{v:.1}×")).unwrap_or_default(),
+                f("mean_position_error_um").map(|v| format!("{v:.2}")).unwrap_or_else(|| "–".into()),
+                f("mean_direction_error_mrad").unwrap_or(0.0),
+                f("mean_image_error_px").unwrap_or(0.0),
+                f("max_image_error_px").unwrap_or(0.0),
+                f("misclassified_fraction").map(|v| format!("{:.3}%", v * 100.0)).unwrap_or_else(|| "–".into()),
+                f("uncertain_fraction").map(|v| format!("{:.1}%", v * 100.0)).unwrap_or_default(),
+                f("table_mib").map(|v| format!("{v:.1}")).unwrap_or_default(),
+            );
+        }
     }
     Ok(())
 }

@@ -181,8 +181,8 @@ fn trace_unclipped(lens: &Lens, ray: &Ray, wavelength_nm: f64) -> Unclipped {
 }
 
 /// Where a ray starting inside a sphere leaves it (or `None`).
-#[inline]
-fn exit_sphere(o: DVec3, d: DVec3, centre: DVec3, radius: f64) -> Option<DVec3> {
+/// Where a ray starting inside a sphere leaves it (or `None`).
+pub fn exit_sphere(o: DVec3, d: DVec3, centre: DVec3, radius: f64) -> Option<DVec3> {
     let oc = o - centre;
     let b = oc.dot(d);
     let c = oc.length_squared() - radius * radius;
