@@ -148,7 +148,12 @@ pub fn render(scene: &RenderScene, rig: &CameraRig, settings: &RenderSettings, p
                         continue;
                     }
                     px.rgb += value;
-                    px.alpha += sample.alpha;
+                    // Coverage over the light that reaches the film: a sample blocked by the
+                    // lens carries no light and says nothing about coverage, and rays are
+                    // weighted as their radiance is (so compositing with alpha is exact).
+                    let w = ray.weight as f32;
+                    px.alpha += sample.alpha * w;
+                    px.alpha_weight += w;
                     if sample.depth_m.is_finite() {
                         px.hits += 1;
                         px.depth += sample.depth_m;

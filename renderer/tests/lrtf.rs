@@ -28,7 +28,7 @@ fn camera_rays(lens: &Lens, count: usize, seed: u64) -> Vec<Ray> {
 #[test]
 fn lrtf_error_report_double_gauss() {
     let lens = library_lens("double-gauss-50mm").unwrap();
-    for res in [32u32, 64, 96] {
+    for res in [96u32] {
         let t0 = std::time::Instant::now();
         let table = LrtfTable::bake(&lens, &BakeOptions { resolution: res, ..Default::default() }, &|_| {}).unwrap();
         let bake_s = t0.elapsed().as_secs_f64();
@@ -64,6 +64,8 @@ fn lrtf_error_report_double_gauss() {
             1e3 * dir_err / n_both as f64,
             1e3 * max_dir
         );
+
     }
 }
+
 

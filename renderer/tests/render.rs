@@ -663,29 +663,33 @@ fn render_bokeh_cats_eye_double_gauss() {
 
 /// Ground scene: an emissive plane y = −h (world) carrying vertical stripes of a fixed image
 /// period: u = K·x_c/(−z_c) in the camera frame, so lines of constant u are planes through the
-/// camera's vertical axis; the ground is cut into thin strips in depth so the per-vertex u is
-/// exact along every strip edge and off by < 1e-3 periods inside.
+/// camera's vertical axis. The ground is a grid of thin cells (2% in depth, 0.025 in x/|z|
+/// across), with u set per vertex: u is exact along the cell edges of constant depth and its
+/// bilinear error inside a cell is below 0.01 stripe periods.
 fn striped_ground(h: f64, cam_to_world: &DAffine3, stripes_per_radian: f64) -> RenderScene {
     let texture = Texture { name: "stripes".into(), width: 2, height: 1, texels: vec![Vec4::new(0.2, 0.2, 0.2, 1.0), Vec4::ONE], wrap_s: Wrap::Repeat, wrap_t: Wrap::Repeat, bilinear: false };
     let to_cam = cam_to_world.inverse();
     let mut mesh = Mesh::default();
+    let columns = 48;
+    let q = |k: i32| -> f64 { 0.6 * (2.0 * k as f64 / columns as f64 - 1.0) };
     let mut z0 = -0.02f64;
     while z0 > -400.0 {
         let z1 = z0 * 1.02;
-        let half = 0.6 * z1.abs() + 1.0;
-        let corners = [DVec3::new(-half, -h, z0), DVec3::new(half, -h, z0), DVec3::new(half, -h, z1), DVec3::new(-half, -h, z1)];
-        let base = mesh.positions.len() as u32;
-        for c in corners {
-            let pc = to_cam.transform_point3(c);
-            let u = stripes_per_radian * pc.x / -pc.z;
-            mesh.positions.push(c.as_vec3());
-            mesh.normals.push(Vec3::Y);
-            mesh.tangents.push(Vec4::ZERO);
-            mesh.uv0.push(Vec2::new(u as f32, 0.5));
+        for k in 0..columns {
+            let corners = [DVec3::new(q(k) * -z0, -h, z0), DVec3::new(q(k + 1) * -z0, -h, z0), DVec3::new(q(k + 1) * -z1, -h, z1), DVec3::new(q(k) * -z1, -h, z1)];
+            let base = mesh.positions.len() as u32;
+            for c in corners {
+                let pc = to_cam.transform_point3(c);
+                let u = stripes_per_radian * pc.x / -pc.z;
+                mesh.positions.push(c.as_vec3());
+                mesh.normals.push(Vec3::Y);
+                mesh.tangents.push(Vec4::ZERO);
+                mesh.uv0.push(Vec2::new(u as f32, 0.5));
+            }
+            mesh.indices.push([base, base + 1, base + 2]);
+            mesh.indices.push([base, base + 2, base + 3]);
+            mesh.material_ids.extend([0, 0]);
         }
-        mesh.indices.push([base, base + 1, base + 2]);
-        mesh.indices.push([base, base + 2, base + 3]);
-        mesh.material_ids.extend([0, 0]);
         z0 = z1;
     }
     let mat = Material { emissive: Vec3::ONE, emissive_texture: Some(TextureRef { index: 0, uv_set: 0 }), ..emitter(1.0) };
@@ -895,6 +899,47 @@ fn render_tilted_sensor_focus_on_the_ground() {
 }
 
 // ------------------------------------------------------------------------------------------
+// Alpha.
+
+/// Alpha is coverage: a wall filling the left half of the view through a real lens wide open
+/// (about half the film samples are blocked inside the lens, more towards the corners) reads
+/// alpha 1 on the wall and 0 on the sky, not the fraction of samples the lens let through.
+#[test]
+fn render_alpha_is_coverage_through_a_real_lens() {
+    // wall x < 0 at 3 m, facing the camera; grey sky
+    let wall = Mesh {
+        positions: vec![Vec3::new(-50.0, -50.0, -3.0), Vec3::new(0.0, -50.0, -3.0), Vec3::new(0.0, 50.0, -3.0), Vec3::new(-50.0, 50.0, -3.0)],
+        normals: vec![Vec3::Z; 4],
+        tangents: vec![Vec4::ZERO; 4],
+        uv0: vec![Vec2::ZERO; 4],
+        uv1: vec![],
+        indices: vec![[0, 1, 2], [0, 2, 3]],
+        material_ids: vec![0, 0],
+    };
+    let rs = scene_of(&[wall], vec![diffuse(Vec3::splat(0.5))], Environment::Constant(Vec3::splat(0.3)));
+    let lens = library_lens("double-gauss-50mm").unwrap();
+    let cam = Camera::Realistic(RealisticCamera::new(Sensor::default(), lens, Some(3.0)).unwrap());
+    let (w, h) = (48u32, 32u32);
+    let img = shoot_img(&rs, cam, &settings(w, h, 8, 1, BOX1));
+    // columns well clear of the edge (the defocus there is < 1 px: the wall is in focus)
+    let (mut lo_wall, mut hi_sky) = (1.0f32, 0.0f32);
+    for y in 0..h as usize {
+        for x in 0..w as usize {
+            let a = img.rgba[y * w as usize + x][3];
+            if x < 22 {
+                lo_wall = lo_wall.min(a);
+            } else if x > 25 {
+                hi_sky = hi_sky.max(a);
+            }
+        }
+    }
+    eprintln!("alpha through double-gauss-50mm: wall min {lo_wall}, sky max {hi_sky}");
+    // exact: every sample that passes the lens hits the wall (or misses it)
+    assert!(lo_wall > 1.0 - 1e-5, "alpha on the wall {lo_wall}");
+    assert!(hi_sky < 1e-6, "alpha on the sky {hi_sky}");
+}
+
+// ------------------------------------------------------------------------------------------
 // 6. Determinism.
 
 fn demo_rig() -> (RenderScene, CameraRig) {
@@ -959,9 +1004,12 @@ fn assert_finite(img: &Image) {
 }
 
 fn check_furnace_image(img: &Image) {
-    let min = img.rgba.iter().map(|p| p[1]).fold(f32::MAX, f32::min);
+    // An unsampled pixel has no radiance and no coverage; a sampled one reads ≈ 1 (sky) or is
+    // covered by the sphere (alpha 1). A single sample of the sphere may legitimately be 0.
+    let unsampled = img.rgba.iter().filter(|p| p[1] == 0.0 && p[3] == 0.0).count();
+    assert_eq!(unsampled, 0, "unsampled pixels");
+    // the furnace's mean is 1: 1% ≫ the noise of the mean over 16k pixels even at 1 spp
     let mean = img.rgba.iter().map(|p| p[1] as f64).sum::<f64>() / img.rgba.len() as f64;
-    assert!(min > 0.0, "an unsampled (black) pixel");
     assert!((mean - 1.0).abs() < 0.01, "furnace mean {mean}");
 }
 
@@ -970,30 +1018,37 @@ fn check_furnace_image(img: &Image) {
 #[test]
 fn render_cancel_via_progress_returns_promptly() {
     let (rs, rig) = furnace_for_interrupts();
-    let st = settings(320, 200, 1 << 20, 0, PixelFilter::default());
+    let st = settings(160, 100, 1 << 20, 0, PixelFilter::default());
     let start = Instant::now();
     let calls = AtomicU32::new(0);
-    // cancel after 0.3 s of rendering (well into the progressive passes)
-    let progress = |_f: f32| {
+    let cancelled_at = std::sync::Mutex::new(None::<Instant>);
+    // cancel once 0.3 s have passed and the first pass is complete (progress = rows done /
+    // (spp · height), so past 1/spp every pixel has a sample)
+    let progress = |f: f32| {
         calls.fetch_add(1, Ordering::Relaxed);
-        start.elapsed() < Duration::from_millis(300)
+        let go_on = start.elapsed() < Duration::from_millis(300) || (f as f64) * (st.spp as f64) < 1.5;
+        if !go_on {
+            cancelled_at.lock().unwrap().get_or_insert_with(Instant::now);
+        }
+        go_on
     };
     let r = render(&rs, &rig, &st, &progress).unwrap();
     let t = start.elapsed().as_secs_f64();
-    eprintln!("cancel: returned after {t:.3} s, spp_done {}, {} progress calls", r.spp_done, calls.load(Ordering::Relaxed));
+    let after = cancelled_at.lock().unwrap().expect("cancelled").elapsed().as_secs_f64();
+    eprintln!("cancel: returned {after:.4} s after the cancel ({t:.3} s in all), spp_done {}, {} progress calls", r.spp_done, calls.load(Ordering::Relaxed));
     assert!(!r.complete);
-    assert!(r.spp_done < st.spp);
-    // "promptly": the cancel flag is checked per row (a row of ≤ 16 spp here takes < 10 ms)
-    assert!(t < 1.5, "cancel took {t} s");
+    assert!(r.spp_done >= 1 && r.spp_done < st.spp, "spp_done {}", r.spp_done);
+    // "promptly": the cancel flag is checked per row; rows in flight (one per thread, ≤ 16 spp
+    // of 160 px, ≈ 2 ms each) finish. 0.5 s leaves room for a loaded machine.
+    assert!(after < 0.5, "cancel took {after} s");
     assert_finite(&r.image);
-    // every pixel got at least one sample before 0.3 s: no black pixel, and the furnace's
-    // mean is 1 (1%: ≫ the noise of 64k pixels)
-    assert!(r.spp_done >= 1, "spp_done {}", r.spp_done);
     check_furnace_image(&r.image);
 
     // cancelled at the very first progress call (inside the first pass): still finite, incomplete
+    let start = Instant::now();
     let r = render(&rs, &rig, &st, &|_| false).unwrap();
     assert!(!r.complete && r.spp_done == 0);
+    assert!(start.elapsed() < Duration::from_millis(500));
     assert_finite(&r.image);
 }
 
@@ -1001,28 +1056,16 @@ fn render_cancel_via_progress_returns_promptly() {
 #[test]
 fn render_time_limit_stops_early() {
     let (rs, rig) = furnace_for_interrupts();
-    let st = RenderSettings { time_limit: Some(Duration::from_millis(250)), ..settings(320, 200, 1 << 20, 0, PixelFilter::default()) };
+    let st = RenderSettings { time_limit: Some(Duration::from_millis(250)), ..settings(160, 100, 1 << 20, 0, PixelFilter::default()) };
     let start = Instant::now();
     let r = render(&rs, &rig, &st, &|_| true).unwrap();
     let t = start.elapsed().as_secs_f64();
     eprintln!("time limit 0.25 s: returned after {t:.3} s, spp_done {}", r.spp_done);
     assert!(!r.complete && r.spp_done >= 1 && r.spp_done < st.spp);
-    // one pass is at most 16 spp of 64k pixels (≈ 0.2 s on one core here)
-    assert!(t < 2.0, "time limit overrun: {t} s");
+    // It stops after the pass that crosses the limit: a pass is at most 16 spp of 16k pixels
+    // (≈ 0.05 s on one idle core); 3 s allows for a loaded machine. The full 2²⁰ spp would
+    // take hours.
+    assert!(t < 3.0, "time limit overrun: {t} s");
     assert_finite(&r.image);
     check_furnace_image(&r.image);
-}
-
-#[test]
-fn zz_dg_noise_probe() {
-    let lens = library_lens("double-gauss-50mm").unwrap();
-    let pitch = 0.03125;
-    let w = 128u32;
-    let cam = Camera::Realistic(RealisticCamera::new(square_sensor(w as f64 * pitch), lens, Some(2.0)).unwrap());
-    let alpha = 8.0 * pitch / 50.0;
-    for seed in [1, 2, 3, 4, 5, 6, 7, 8, 9] {
-        let focused = emitter_moments(&cam, 2.0, alpha, w, 256, seed);
-        let blurred = emitter_moments(&cam, 0.6, alpha, w, 256, seed);
-        eprintln!("DG seed {seed}: focused {:.4} blurred {:.4} ratio {:.5}", focused.flux, blurred.flux, blurred.flux / focused.flux);
-    }
 }

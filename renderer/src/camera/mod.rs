@@ -461,7 +461,7 @@ impl LrtfCamera {
                 message: format!("the LRTF table covers film points up to {:.1} mm from the axis; this sensor reaches {r:.1} mm: re-bake with a larger --max-film-radius", h.max_film_radius_mm),
             });
         }
-        if exact.film_z_mm - dz - h.in_centre_z_mm < h.min_film_distance_mm {
+        if exact.film_z_mm - dz - h.in_base_z_mm < h.min_film_distance_mm - 1e-9 {
             return Err(Error::Camera {
                 field: "lens_model".into(),
                 message: "the sensor comes closer to the lens than the LRTF table covers: re-bake it".into(),

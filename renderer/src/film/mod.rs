@@ -99,8 +99,10 @@ impl FilterSampler {
 pub struct PixelSums {
     /// Σ radiance.
     pub rgb: Vec3,
-    /// Σ alpha.
+    /// Σ alpha × camera-ray weight, over the samples the lens let through.
     pub alpha: f32,
+    /// Σ camera-ray weight of those samples (alpha = `alpha / alpha_weight`).
+    pub alpha_weight: f32,
     /// Σ first-hit depth over samples that hit (metres).
     pub depth: f32,
     /// Number of samples that hit.
@@ -133,7 +135,9 @@ pub struct Image {
     pub width: u32,
     /// Height.
     pub height: u32,
-    /// RGBA, row-major, top row first.
+    /// RGBA, row-major, top row first. Alpha is coverage: the share of the light reaching the
+    /// pixel through the lens that comes from geometry (camera rays weighted as their radiance
+    /// is; samples blocked inside the lens do not count), so `rgb = α·surface + (1 − α)·env`.
     pub rgba: Vec<[f32; 4]>,
     /// Depth (metres along the camera ray to the first hit; +inf where nothing was hit).
     pub depth: Vec<f32>,
@@ -163,7 +167,8 @@ impl Film {
         for p in &self.pixels {
             let s = p.samples.max(1) as f32;
             let c = p.rgb / s;
-            img.rgba.push([c.x, c.y, c.z, p.alpha / s]);
+            let alpha = if p.alpha_weight > 0.0 { (p.alpha / p.alpha_weight).clamp(0.0, 1.0) } else { 0.0 };
+            img.rgba.push([c.x, c.y, c.z, alpha]);
             img.depth.push(if p.hits > 0 { p.depth / p.hits as f32 } else { f32::INFINITY });
             let nrm = if p.hits > 0 { p.normal.normalize_or_zero() } else { Vec3::ZERO };
             img.normal.push(nrm.to_array());

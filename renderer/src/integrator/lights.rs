@@ -14,7 +14,9 @@
 //!   receiver is one-sided, taken with the geometric normal on the side the path arrived from,
 //!   so lights wholly behind the surface get importance 0 — the BSDFs here never transmit).
 //!   Lights at infinity (environment, directional) are chosen with the fixed probability
-//!   `pInfinite = nInfinite / (nInfinite + 1)` (uniformly among them), the tree otherwise.
+//!   [`P_INFINITE`] = 1/2 as a group (by power among themselves), the tree otherwise (pbrt-v4
+//!   uses `nInfinite / (nInfinite + 1)`, uniform among them; with a sky and a sun that leaves a
+//!   third of the samples for all bounded lights).
 //!   The selection pmf of a given light, needed by MIS when a BSDF-sampled ray hits an emitter,
 //!   is recomputed by retracing the light's path from the root with a per-light bit trail;
 //!   it uses the very same float operations as sampling, so the two agree exactly.
@@ -319,8 +321,8 @@ impl TreeNode {
 enum Slot {
     /// In the tree; bit k = child taken at depth k (0: first, 1: second).
     Tree(u64),
-    /// At infinity.
-    Infinite,
+    /// At infinity: index into `LightTree::infinite`.
+    Infinite(u32),
     /// Never sampled by the tree (unbounded position).
     None,
 }
@@ -329,32 +331,55 @@ enum Slot {
 #[derive(Debug, Clone, Default)]
 struct LightTree {
     nodes: Vec<TreeNode>,
+    /// Lights at infinity (light indices).
     infinite: Vec<u32>,
+    /// Their power distribution: n + 1 entries, 0 … 1.
+    infinite_cdf: Vec<f32>,
     slots: Vec<Slot>,
     /// Probability of sampling a light at infinity.
     p_infinite: f32,
     depth: u32,
 }
 
+/// Probability of sampling the lights at infinity as a group when there are bounded lights too
+/// (pbrt-v4 gives each light at infinity the weight of the whole tree, `n / (n + 1)`; here they
+/// count as one group, which bounds the variance penalty of either group by a factor 2).
+pub const P_INFINITE: f32 = 0.5;
+
 /// Tree depth from which splits are median splits, so that the depth stays below 64 (bit trail).
 const SAH_MAX_DEPTH: u32 = 32;
 const BUCKETS: usize = 12;
 
 impl LightTree {
-    fn build(bounded: Vec<(u32, LightBounds)>, infinite: Vec<u32>, n_lights: usize) -> LightTree {
+    /// `infinite`: (light index, power) of the lights at infinity.
+    fn build(bounded: Vec<(u32, LightBounds)>, infinite: Vec<(u32, f64)>, n_lights: usize) -> LightTree {
         let mut slots = vec![Slot::None; n_lights];
-        for &i in &infinite {
-            slots[i as usize] = Slot::Infinite;
+        for (k, &(i, _)) in infinite.iter().enumerate() {
+            slots[i as usize] = Slot::Infinite(k as u32);
         }
-        let mut tree = LightTree { nodes: Vec::new(), infinite, slots, p_infinite: 0.0, depth: 0 };
+        // Among themselves, lights at infinity are chosen by power.
+        let total: f64 = infinite.iter().map(|&(_, p)| p).sum();
+        let mut infinite_cdf = vec![0.0f32];
+        let mut acc = 0.0f64;
+        for &(_, p) in &infinite {
+            acc += p;
+            infinite_cdf.push((acc / total) as f32);
+        }
+        if let Some(last) = infinite_cdf.last_mut() {
+            *last = 1.0;
+        }
+        let infinite = infinite.into_iter().map(|(i, _)| i).collect();
+        let mut tree = LightTree { nodes: Vec::new(), infinite, infinite_cdf, slots, p_infinite: 0.0, depth: 0 };
         let mut items = bounded;
         if !items.is_empty() {
             tree.nodes.reserve(2 * items.len() - 1);
             tree.build_rec(&mut items, 0, 0);
         }
-        let n_inf = tree.infinite.len() as f32;
-        let n_tree = if tree.nodes.is_empty() { 0.0 } else { 1.0 };
-        tree.p_infinite = if n_inf > 0.0 { n_inf / (n_inf + n_tree) } else { 0.0 };
+        tree.p_infinite = match (tree.infinite.is_empty(), tree.nodes.is_empty()) {
+            (true, _) => 0.0,
+            (false, true) => 1.0,
+            (false, false) => P_INFINITE,
+        };
         tree
     }
 
@@ -448,14 +473,22 @@ impl LightTree {
         b
     }
 
+    /// Power pmf of light at infinity `k` within its group.
+    #[inline]
+    fn infinite_pmf(&self, k: usize) -> f32 {
+        self.infinite_cdf[k + 1] - self.infinite_cdf[k]
+    }
+
     /// Picks a light for (p, n): (light index, pmf).
     fn pick(&self, p: Vec3, n: Vec3, u: f32) -> Option<(usize, f32)> {
         let u = u.clamp(0.0, ONE_MINUS_EPSILON);
         let p_inf = self.p_infinite;
         if u < p_inf {
-            let n_inf = self.infinite.len();
-            let k = ((u / p_inf * n_inf as f32) as usize).min(n_inf - 1);
-            return Some((self.infinite[k] as usize, p_inf / n_inf as f32));
+            let u = (u / p_inf).min(ONE_MINUS_EPSILON);
+            // First k with cdf[k + 1] > u.
+            let k = self.infinite_cdf[1..].partition_point(|&c| c <= u).min(self.infinite.len() - 1);
+            let pmf = p_inf * self.infinite_pmf(k);
+            return if pmf > 0.0 { Some((self.infinite[k] as usize, pmf)) } else { None };
         }
         if self.nodes.is_empty() {
             return None;
@@ -495,7 +528,7 @@ impl LightTree {
     /// operations along the light's bit trail.
     fn pmf(&self, p: Vec3, n: Vec3, light: usize) -> f32 {
         match self.slots.get(light) {
-            Some(Slot::Infinite) => self.p_infinite / self.infinite.len() as f32,
+            Some(&Slot::Infinite(k)) => self.p_infinite * self.infinite_pmf(k as usize),
             Some(&Slot::Tree(mut trail)) => {
                 let mut pmf = 1.0 - self.p_infinite;
                 let mut i = 0usize;
@@ -566,7 +599,7 @@ impl LightSet {
         let mut power: Vec<f64> = Vec::new();
         // Tree: bounded lights with their bounds, lights at infinity.
         let mut bounded: Vec<(u32, LightBounds)> = Vec::new();
-        let mut infinite: Vec<u32> = Vec::new();
+        let mut infinite: Vec<(u32, f64)> = Vec::new();
         let cos_half_pi = FRAC_PI_2.cos();
         for (i, l) in scene.lights.iter().enumerate() {
             let p = match *l {
@@ -611,7 +644,7 @@ impl LightSet {
             match b {
                 Some(b) if b.bmin.is_finite() && b.phi > 0.0 && b.phi.is_finite() => bounded.push((li, b)),
                 Some(_) => {}
-                None => infinite.push(li),
+                None => infinite.push((li, p as f64)),
             }
         }
         let mesh = &scene.mesh;
@@ -675,8 +708,9 @@ impl LightSet {
                 let li = kinds.len() as u32;
                 env_light = Some(li);
                 kinds.push(LightKind::Environment);
-                power.push(4.0 * (PI as f64).powi(2) * (radius as f64).powi(2) * mean);
-                infinite.push(li);
+                let p = 4.0 * (PI as f64).powi(2) * (radius as f64).powi(2) * mean;
+                power.push(p);
+                infinite.push((li, p));
             }
         }
         let total: f64 = power.iter().sum();

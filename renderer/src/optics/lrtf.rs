@@ -1,9 +1,10 @@
 //! Lens ray transfer function (LRTF): the lens's film → scene ray map sampled into a table and
 //! evaluated in O(1) instead of tracing every surface.
 //!
-//! A ray from the film meets the *input dome*, a hemisphere over the rear element (centre on the
-//! axis at the rear element's film-most point, radius just over its clear semi-diameter). Its
-//! key is (u, σx, σy): u = ρ/R is the radial position of that point, and σ = s/s_max the
+//! A ray from the film meets the *input dome*, a hemisphere over the rear element (base on the
+//! rear element's film-most point, radius just over its clear semi-diameter; a flatter
+//! spherical cap when the film sits too close for a hemisphere). Its key is (u, σx, σy):
+//! u = ρ/R is the radial position of that point, and σ = s/s_max the
 //! stereographic projection s = (dx, dy)/(1 − dz) of its direction, taken in the frame rotated
 //! so that the point lies on +x. Rotational symmetry reduces the 4-D ray space to these three
 //! axes (and the mirror symmetry y → −y halves σy). Each entry stores where the ray leaves the
@@ -53,9 +54,15 @@ pub struct LrtfHeader {
     pub resolution_y: u32,
     /// One table per wavelength.
     pub wavelengths_nm: Vec<f64>,
-    /// Input dome centre z (lens frame).
+    /// Input dome: the cap of a sphere over the rear element; z of its base plane (the rear
+    /// element's film-most point).
+    pub in_base_z_mm: f64,
+    /// Radius of the dome's base circle (just over the rear clear semi-diameter).
+    pub in_base_radius_mm: f64,
+    /// Centre z of the dome's sphere.
     pub in_centre_z_mm: f64,
-    /// Input dome radius.
+    /// Radius of the dome's sphere (equal to the base radius for a hemisphere; larger for a
+    /// flatter cap when the film sits close to the lens).
     pub in_radius_mm: f64,
     /// Half-width of the σ domain in stereographic units.
     pub s_max: f64,
@@ -271,16 +278,18 @@ impl LrtfTable {
             let z = first.z_mm + first.shape.sag(rf, 0.0).unwrap_or(0.0);
             r_out = r_out.max(rf.hypot(z - z_front));
         }
-        let in_radius = last.semi_diameter_mm * 1.02;
+        let base_radius = last.semi_diameter_mm * 1.02;
         let out_radius = r_out * 1.02 + 1e-6;
         // 2. Direction domain: every ray from a film point within the covered radius and distance.
         let min_film = options.min_film_distance_mm.unwrap_or((lens.paraxial().bfl_mm + lens.last_vertex_z_mm() - z_rear) - 5.0);
-        if !(min_film > in_radius * 1.05) {
-            return Err(Error::Optics(format!(
-                "the film ({min_film:.2} mm behind the rear element) is too close to the lens for the table's input dome (radius {in_radius:.2} mm)"
-            )));
+        if !(min_film > 0.5) {
+            return Err(Error::Optics(format!("the film ({min_film:.2} mm behind the rear element) is too close to the lens for a table")));
         }
-        let alpha_max = ((options.max_film_radius_mm + in_radius) / (min_film - in_radius)).atan().min(89f64.to_radians());
+        // A hemisphere when the film leaves room, else a flatter cap of height ≤ 40 % of the gap.
+        let cap_height = base_radius.min(0.4 * min_film);
+        let in_radius = (base_radius * base_radius + cap_height * cap_height) / (2.0 * cap_height);
+        let in_centre_z = z_rear + cap_height - in_radius;
+        let alpha_max = ((options.max_film_radius_mm + base_radius) / (min_film - cap_height)).atan().min(89f64.to_radians());
         let s_max = (0.5 * alpha_max).tan() * 1.02;
         let wavelengths = match &options.wavelengths_nm {
             Some(w) if !w.is_empty() => w.clone(),
@@ -294,7 +303,9 @@ impl LrtfTable {
             resolution: n,
             resolution_y: ny,
             wavelengths_nm: wavelengths.clone(),
-            in_centre_z_mm: z_rear,
+            in_base_z_mm: z_rear,
+            in_base_radius_mm: base_radius,
+            in_centre_z_mm: in_centre_z,
             in_radius_mm: in_radius,
             s_max,
             out_centre_z_mm: z_front,
@@ -312,7 +323,8 @@ impl LrtfTable {
             let block = &mut data[wi * n * row..(wi + 1) * n * row];
             block.par_chunks_mut(row).enumerate().for_each(|(iu, out)| {
                 let u = iu as f64 / (n - 1) as f64;
-                let p = DVec3::new(u * in_radius, 0.0, z_rear + in_radius * (1.0 - u * u).max(0.0).sqrt());
+                let rho = u * base_radius;
+                let p = DVec3::new(rho, 0.0, in_centre_z + (in_radius * in_radius - rho * rho).max(0.0).sqrt());
                 for ix in 0..n {
                     for iy in 0..ny {
                         let sx = (-1.0 + 2.0 * ix as f64 / (n - 1) as f64) * s_max;
@@ -358,20 +370,37 @@ impl LrtfTable {
                             if self.data[i + 7] != 0.0 {
                                 continue;
                             }
+                            // linear extrapolation from two valid entries along each axis
+                            // (the continuation of the smooth map), else their neighbour
                             let mut acc = [0f32; 6];
                             let mut cnt = 0;
+                            let mut near = [0f32; 6];
+                            let mut near_cnt = 0;
                             for (du, dx, dy) in [(1i64, 0i64, 0i64), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)] {
-                                let (a, b, c) = (iu as i64 + du, ix as i64 + dx, iy as i64 + dy);
-                                if a < 0 || b < 0 || c < 0 || a >= n as i64 || b >= n as i64 || c >= ny as i64 {
-                                    continue;
-                                }
-                                let j = self.index(wi, a as usize, b as usize, c as usize);
-                                if self.data[j + 7] != 0.0 {
-                                    for k in 0..6 {
-                                        acc[k] += self.data[j + k];
+                                let at = |k: i64| -> Option<usize> {
+                                    let (a, b, c) = (iu as i64 + du * k, ix as i64 + dx * k, iy as i64 + dy * k);
+                                    if a < 0 || b < 0 || c < 0 || a >= n as i64 || b >= n as i64 || c >= ny as i64 {
+                                        return None;
                                     }
-                                    cnt += 1;
+                                    let j = self.index(wi, a as usize, b as usize, c as usize);
+                                    (self.data[j + 7] != 0.0).then_some(j)
+                                };
+                                if let Some(j1) = at(1) {
+                                    for k in 0..6 {
+                                        near[k] += self.data[j1 + k];
+                                    }
+                                    near_cnt += 1;
+                                    if let Some(j2) = at(2) {
+                                        for k in 0..6 {
+                                            acc[k] += 2.0 * self.data[j1 + k] - self.data[j2 + k];
+                                        }
+                                        cnt += 1;
+                                    }
                                 }
+                            }
+                            if cnt == 0 && near_cnt > 0 {
+                                acc = near;
+                                cnt = near_cnt;
                             }
                             if cnt > 0 {
                                 updates.push((i, acc.map(|v| v / cnt as f32)));
@@ -407,7 +436,7 @@ impl LrtfTable {
         // 1. Key: the dome point and the direction in the frame where the point lies on +x.
         let centre = DVec3::new(0.0, 0.0, h.in_centre_z_mm);
         let Some(p) = enter_sphere(ray.origin, ray.direction, centre, h.in_radius_mm) else { return LrtfLookup::Miss };
-        if p.z < h.in_centre_z_mm {
+        if p.z < h.in_base_z_mm - 1e-9 {
             return LrtfLookup::Miss;
         }
         let rho = p.x.hypot(p.y);
@@ -418,7 +447,7 @@ impl LrtfTable {
         let mirror = sd.y < 0.0;
         let n = h.resolution as usize;
         let ny = h.resolution_y as usize;
-        let fu = rho / h.in_radius_mm * (n - 1) as f64;
+        let fu = rho / h.in_base_radius_mm * (n - 1) as f64;
         let fx = (sd.x / h.s_max + 1.0) * 0.5 * (n - 1) as f64;
         let fy = sd.y.abs() / h.s_max * (ny - 1) as f64;
         if !(fu <= (n - 1) as f64 && fx >= 0.0 && fx <= (n - 1) as f64 && fy <= (ny - 1) as f64) {
@@ -432,7 +461,8 @@ impl LrtfTable {
         let (tu, tx, ty) = ((fu - iu as f64) as f32, (fx - ix as f64) as f32, (fy - iy as f64) as f32);
         let base = self.index(wi, iu, ix, iy);
         let mut v = [0f32; 7];
-        let (mut pass, mut fail) = (0u32, 0u32);
+        let (mut pass, mut fail, mut filled) = (0u32, 0u32, 0u32);
+        let (mut m_min, mut m_max) = (f32::INFINITY, f32::NEG_INFINITY);
         for (corner, wgt) in [
             (0, (1.0 - tu) * (1.0 - tx) * (1.0 - ty)),
             (self.stride_y, (1.0 - tu) * (1.0 - tx) * ty),
@@ -449,6 +479,9 @@ impl LrtfTable {
             } else {
                 fail += 1;
             }
+            filled += (e[7] != 1.0) as u32;
+            m_min = m_min.min(e[6]);
+            m_max = m_max.max(e[6]);
             for k in 0..7 {
                 v[k] += wgt * e[k];
             }
@@ -456,10 +489,21 @@ impl LrtfTable {
         if pass == 0 {
             return LrtfLookup::Miss;
         }
-        if fail > 0 {
-            return LrtfLookup::Uncertain;
-        }
         let margin = v[6] as f64;
+        if fail > 0 {
+            // The rim boundary crosses this cell. The margin is smooth there (one rim clips), so
+            // its interpolation decides, except within a band of a tenth of the corners' spread
+            // around zero where the exact trace does (measured: 2 % of camera rays at 96³, with
+            // 0.07 % misclassified). Entries whose trace failed carry extrapolated outputs.
+            let band = 0.1 * (m_max - m_min) as f64;
+            let _ = filled;
+            if margin.abs() < band {
+                return LrtfLookup::Uncertain;
+            }
+            if margin <= 0.0 {
+                return LrtfLookup::Miss;
+            }
+        }
         // 4. Back to the lens frame: undo the mirror and the rotation.
         let sign = if mirror { -1.0 } else { 1.0 };
         let w = DVec2::new(v[0] as f64, sign * v[1] as f64);
@@ -541,3 +585,4 @@ impl LrtfTable {
         Ok(LrtfTable::with_header(header, data))
     }
 }
+
