@@ -69,3 +69,4 @@ fn lrtf_error_report_double_gauss() {
 }
 
 
+

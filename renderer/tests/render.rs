@@ -1003,6 +1003,12 @@ fn assert_finite(img: &Image) {
     assert!(img.depth.iter().all(|d| !d.is_nan()));
 }
 
+/// A pool of its own, so that timing is not disturbed by renders of tests running alongside
+/// (they share rayon's global pool).
+fn own_pool() -> rayon::ThreadPool {
+    rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap()
+}
+
 fn check_furnace_image(img: &Image) {
     // An unsampled pixel has no radiance and no coverage; a sampled one reads ≈ 1 (sky) or is
     // covered by the sphere (alpha 1). A single sample of the sphere may legitimately be 0.
@@ -1032,7 +1038,7 @@ fn render_cancel_via_progress_returns_promptly() {
         }
         go_on
     };
-    let r = render(&rs, &rig, &st, &progress).unwrap();
+    let r = own_pool().install(|| render(&rs, &rig, &st, &progress)).unwrap();
     let t = start.elapsed().as_secs_f64();
     let after = cancelled_at.lock().unwrap().expect("cancelled").elapsed().as_secs_f64();
     eprintln!("cancel: returned {after:.4} s after the cancel ({t:.3} s in all), spp_done {}, {} progress calls", r.spp_done, calls.load(Ordering::Relaxed));
@@ -1046,7 +1052,7 @@ fn render_cancel_via_progress_returns_promptly() {
 
     // cancelled at the very first progress call (inside the first pass): still finite, incomplete
     let start = Instant::now();
-    let r = render(&rs, &rig, &st, &|_| false).unwrap();
+    let r = own_pool().install(|| render(&rs, &rig, &st, &|_| false)).unwrap();
     assert!(!r.complete && r.spp_done == 0);
     assert!(start.elapsed() < Duration::from_millis(500));
     assert_finite(&r.image);
@@ -1057,8 +1063,9 @@ fn render_cancel_via_progress_returns_promptly() {
 fn render_time_limit_stops_early() {
     let (rs, rig) = furnace_for_interrupts();
     let st = RenderSettings { time_limit: Some(Duration::from_millis(250)), ..settings(160, 100, 1 << 20, 0, PixelFilter::default()) };
+    let pool = own_pool();
     let start = Instant::now();
-    let r = render(&rs, &rig, &st, &|_| true).unwrap();
+    let r = pool.install(|| render(&rs, &rig, &st, &|_| true)).unwrap();
     let t = start.elapsed().as_secs_f64();
     eprintln!("time limit 0.25 s: returned after {t:.3} s, spp_done {}", r.spp_done);
     assert!(!r.complete && r.spp_done >= 1 && r.spp_done < st.spp);

@@ -266,10 +266,12 @@ impl LrtfTable {
         let last = surfaces.last().ok_or_else(|| Error::Optics("empty lens".into()))?;
         let first = &surfaces[0];
         let samples = 64;
-        let (mut z_rear, mut z_front, mut r_out) = (f64::NEG_INFINITY, f64::INFINITY, 0.0f64);
+        let (mut z_rear_max, mut z_rear_min, mut z_front, mut r_out) = (f64::NEG_INFINITY, f64::INFINITY, f64::INFINITY, 0.0f64);
+        let rear_z_at = |r: f64| (last.z_mm + last.shape.sag(r, 0.0).unwrap_or(0.0)).max(last.z_mm + last.shape.sag(0.0, r).unwrap_or(0.0));
         for k in 0..=samples {
             let r = last.semi_diameter_mm * k as f64 / samples as f64;
-            z_rear = z_rear.max(last.z_mm + last.shape.sag(r, 0.0).unwrap_or(0.0)).max(last.z_mm + last.shape.sag(0.0, r).unwrap_or(0.0));
+            z_rear_max = z_rear_max.max(rear_z_at(r));
+            z_rear_min = z_rear_min.min((last.z_mm + last.shape.sag(r, 0.0).unwrap_or(0.0)).min(last.z_mm + last.shape.sag(0.0, r).unwrap_or(0.0)));
             let rf = first.semi_diameter_mm * k as f64 / samples as f64;
             z_front = z_front.min(first.z_mm + first.shape.sag(rf, 0.0).unwrap_or(0.0));
         }
@@ -278,17 +280,37 @@ impl LrtfTable {
             let z = first.z_mm + first.shape.sag(rf, 0.0).unwrap_or(0.0);
             r_out = r_out.max(rf.hypot(z - z_front));
         }
-        let base_radius = last.semi_diameter_mm * 1.02;
         let out_radius = r_out * 1.02 + 1e-6;
-        // 2. Direction domain: every ray from a film point within the covered radius and distance.
-        let min_film = options.min_film_distance_mm.unwrap_or((lens.paraxial().bfl_mm + lens.last_vertex_z_mm() - z_rear) - 5.0);
+        // 2. The input dome stands on the plane through the rear element's scene-most point (so a
+        //    ray from the film, whose z only decreases, crosses the dome before any point of the
+        //    rear surface) and must cover that surface; it is a hemisphere when the film leaves
+        //    room, else a flatter cap reaching at most 40 % of the way to the film.
+        let min_film = options.min_film_distance_mm.unwrap_or((lens.paraxial().bfl_mm + lens.last_vertex_z_mm() - z_rear_max) - 5.0);
         if !(min_film > 0.5) {
             return Err(Error::Optics(format!("the film ({min_film:.2} mm behind the rear element) is too close to the lens for a table")));
         }
-        // A hemisphere when the film leaves room, else a flatter cap of height ≤ 40 % of the gap.
-        let cap_height = base_radius.min(0.4 * min_film);
-        let in_radius = (base_radius * base_radius + cap_height * cap_height) / (2.0 * cap_height);
-        let in_centre_z = z_rear + cap_height - in_radius;
+        let depth = z_rear_max - z_rear_min;
+        let mut dome = None;
+        let mut base_radius = last.semi_diameter_mm * 1.02;
+        for _ in 0..40 {
+            let cap_height = base_radius.min(depth + 0.4 * min_film);
+            let radius = (base_radius * base_radius + cap_height * cap_height) / (2.0 * cap_height);
+            let centre_z = z_rear_min + cap_height - radius;
+            let covers = (0..=samples).all(|k| {
+                let r = last.semi_diameter_mm * k as f64 / samples as f64;
+                centre_z + (radius * radius - r * r).max(0.0).sqrt() > rear_z_at(r) + 1e-6
+            });
+            if covers {
+                dome = Some((cap_height, radius, centre_z));
+                break;
+            }
+            base_radius *= 1.05;
+        }
+        let Some((cap_height, in_radius, in_centre_z)) = dome else {
+            return Err(Error::Optics(format!("no input dome fits between the rear element and the film ({min_film:.2} mm)")));
+        };
+        let z_rear = z_rear_min;
+        let min_film = min_film + depth; // from the dome's base plane
         let alpha_max = ((options.max_film_radius_mm + base_radius) / (min_film - cap_height)).atan().min(89f64.to_radians());
         let s_max = (0.5 * alpha_max).tan() * 1.02;
         let wavelengths = match &options.wavelengths_nm {
