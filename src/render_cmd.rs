@@ -172,6 +172,8 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         let _ = rayon::ThreadPoolBuilder::new().num_threads(t).build_global();
     }
     let (width, height) = parse_resolution(&args.resolution)?;
+    // Check the settings before loading anything.
+    RenderSettings { width, height, spp: args.spp, max_depth: args.max_depth, ..RenderSettings::default() }.validate()?;
     // 1. Scene (file or demo) and the shot's defaults.
     let (mut scene, demo_shot): (Scene, Option<demo::DemoShot>) = match &args.scene {
         Some(path) => (gltf_load::load_gltf(path)?, None),

@@ -293,13 +293,18 @@ fn render_furnace_white_sphere_pinhole() {
 fn render_furnace_thin_lens_without_natural_vignetting() {
     let rs = scene_of(&[icosphere(Vec3::new(0.0, 0.0, -4.0), 1.0, 4, 0)], vec![diffuse(Vec3::ONE)], Environment::Constant(Vec3::ONE));
     let cam = thin(Sensor::default(), 50.0, 2.0, 4.0, Aperture::default(), false);
-    let img = shoot_img(&rs, cam, &settings(48, 32, 16, 1, PixelFilter::default()));
+    let img = shoot_img(&rs, cam, &settings(48, 32, 64, 1, PixelFilter::default()));
     let n = img.rgba.len();
     let mean = img.rgba.iter().map(|p| p[1] as f64).sum::<f64>() / n as f64;
-    let (lo, hi) = img.rgba.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| (lo.min(p[1] as f64), hi.max(p[1] as f64)));
-    eprintln!("furnace (thin f/2, vignetting off): mean {mean:.4}, range {lo:.4}..{hi:.4}");
-    assert!((mean - 1.0).abs() < 0.01, "mean {mean}: thin lens with natural_vignetting = false is not exposure-normalised");
-    assert!(lo > 0.9 && hi < 1.1, "range {lo}..{hi}");
+    // Pixels that see only the environment: every camera ray carries the same weight and
+    // radiance 1, so they are exactly 1 (up to f32 sums).
+    let sky: Vec<f64> = img.rgba.iter().filter(|p| p[3] == 0.0).map(|p| p[1] as f64).collect();
+    let (lo, hi) = sky.iter().fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(*v), hi.max(*v)));
+    eprintln!("furnace (thin f/2, vignetting off): image mean {mean:.4}, {} sky pixels in {lo:.6}..{hi:.6}", sky.len());
+    assert!(sky.len() > n / 4);
+    assert!(lo > 1.0 - 1e-4 && hi < 1.0 + 1e-4, "sky pixels {lo}..{hi}: thin lens with natural_vignetting = false is not exposure-normalised");
+    // the whole image (sphere noise at 64 spp ≈ 1.2% per pixel): mean within 1%
+    assert!((mean - 1.0).abs() < 0.01, "mean {mean}");
 }
 
 // ------------------------------------------------------------------------------------------
@@ -440,8 +445,8 @@ fn render_defocus_conserves_flux() {
         blurred.flux,
         blurred.mean_r2().sqrt()
     );
-    // 1% (the brief) both against 1 and against the traced power ratio (measured σ over
-    // seeds ≈ 0.03%).
+    // 1% (the brief) both against 1 and against the traced power ratio. Measured over seeds
+    // 1–9: ratio 1.0043 ± 0.0025 (σ), so 1% is 4σ from the traced value 1.0047.
     assert!((ratio - 1.0).abs() < 0.01, "realistic lens: defocused/focused flux {ratio}");
     assert!((ratio / expected - 1.0).abs() < 0.01, "realistic lens: flux ratio {ratio} vs traced power ratio {expected}");
 }

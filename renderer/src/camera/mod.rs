@@ -148,10 +148,12 @@ pub struct ThinLensCamera {
     pub focus_distance_m: Option<f64>,
     /// Aperture shape.
     pub aperture: Aperture,
-    /// Apply cos⁴ falloff.
+    /// Apply cos⁴ falloff (the exposure normalisation for either setting is precomputed, so
+    /// this may be changed after construction).
     pub natural_vignetting: bool,
     film_z_mm: f64,
-    exposure: f64,
+    /// Exposure normalisation with and without natural vignetting.
+    exposure: [f64; 2],
 }
 
 /// The thick-lens approximation of a real lens (its focal length and principal planes).
@@ -281,9 +283,13 @@ impl ThinLensCamera {
             check_positive("focus_distance_m", d)?;
         }
         let film_z_mm = thin_lens_image_distance(focal_length_mm, focus_distance_m.map(|m| m * 1e3))?;
-        let mut cam = ThinLensCamera { sensor, focal_length_mm, f_number, focus_distance_m, aperture, natural_vignetting: true, film_z_mm, exposure: 1.0 };
+        let mut cam = ThinLensCamera { sensor, focal_length_mm, f_number, focus_distance_m, aperture, natural_vignetting: true, film_z_mm, exposure: [1.0; 2] };
         let centre = cam.sensor.axis_film_coord();
-        cam.exposure = 1.0 / centre_mean(|u| cam.raw_ray(centre, u).map(|r| r.weight));
+        let natural = 1.0 / centre_mean(|u| cam.raw_ray(centre, u).map(|r| r.weight));
+        cam.natural_vignetting = false;
+        let flat = 1.0 / centre_mean(|u| cam.raw_ray(centre, u).map(|r| r.weight));
+        cam.natural_vignetting = true;
+        cam.exposure = [natural, flat];
         Ok(cam)
     }
 
@@ -317,7 +323,8 @@ impl ThinLensCamera {
     }
 
     fn generate_ray(&self, film: DVec2, lens_u: DVec2) -> Option<CameraRay> {
-        self.raw_ray(film, lens_u).map(|r| CameraRay { weight: r.weight * self.exposure, ..r })
+        let exposure = self.exposure[if self.natural_vignetting { 0 } else { 1 }];
+        self.raw_ray(film, lens_u).map(|r| CameraRay { weight: r.weight * exposure, ..r })
     }
 }
 

@@ -226,7 +226,8 @@ impl LightBounds {
 struct TreeNode {
     /// Centre of the bounding box (= of its bounding sphere).
     center: Vec3,
-    /// Squared radius of the bounding sphere (slightly padded).
+    /// Radius of the bounding sphere (slightly padded), and its square.
+    radius: f32,
     radius2: f32,
     w: Vec3,
     phi: f32,
@@ -249,6 +250,7 @@ impl TreeNode {
         let w = b.w.normalize_or(Vec3::Z);
         TreeNode {
             center,
+            radius: r,
             radius2: r * r,
             w,
             phi: b.phi,
@@ -262,51 +264,65 @@ impl TreeNode {
     }
 
     /// Importance of the node's lights for a receiver at `p` with normal `n` (zero: no normal,
-    /// no receiver-cosine term), after pbrt-v4's `LightBounds::Importance`. Zero only when no
-    /// light in the node can reach `p` (the cone bounds are conservative), or, with a normal,
-    /// when all of it is below the surface (`n·wi ≤ 0` for every direction wi to the node).
+    /// no receiver-cosine term), after pbrt-v4's `LightBounds::Importance`:
+    /// `phi · cos θ' / d²` (× `cos θi'` with a normal), θ' the smallest angle between an
+    /// emission normal of the cone and a direction from the node to `p`, θi' the smallest
+    /// angle between `n` and a direction from `p` to the node. Zero only when no light in the
+    /// node can reach `p` (θ' ≥ θe; the bounds are conservative) or, with a normal, when all of
+    /// the node is below the surface (θi' ≥ π/2). Inside the bounding sphere: `phi / r²`.
     #[inline]
     fn importance(&self, p: Vec3, n: Vec3) -> f32 {
         let d = p - self.center;
         let dist2 = d.length_squared();
-        let d2 = dist2.max(self.radius2);
-        if !(d2 > 0.0) {
-            // p on a point light.
-            return if self.phi > 0.0 { 1e30 } else { 0.0 };
+        if dist2 <= self.radius2 {
+            // Every direction and orientation is possible; d² clamped to r².
+            return if self.radius2 > 0.0 {
+                (self.phi / self.radius2).min(1e30)
+            } else if self.phi > 0.0 {
+                1e30 // p on a point light
+            } else {
+                0.0
+            };
         }
-        // Cone of directions from p to the node's bounding sphere.
-        let (cos_b, sin_b) = if dist2 <= self.radius2 {
-            (-1.0, 0.0)
-        } else {
-            let s2 = self.radius2 / dist2;
-            (safe_sqrt(1.0 - s2), s2.sqrt())
-        };
-        // Unit direction from the node to p.
-        let wi = d * (1.0 / dist2.sqrt());
+        let inv_dist = dist2.sqrt().recip();
+        // Unit direction from the node to p, and the cone of directions from p to the
+        // bounding sphere (half-angle θb).
+        let wi = d * inv_dist;
+        let sin_b = self.radius * inv_dist;
+        let cos_b = safe_sqrt(1.0 - sin_b * sin_b);
         let mut cos_w = self.w.dot(wi);
         if self.two_sided {
             cos_w = cos_w.abs();
         }
-        let sin_w = safe_sqrt(1.0 - cos_w * cos_w);
-        // θx = max(0, θw − θo).
-        let (cos_x, sin_x) =
-            if cos_w > self.cos_o { (1.0, 0.0) } else { (cos_w * self.cos_o + sin_w * self.sin_o, sin_w * self.cos_o - cos_w * self.sin_o) };
-        // θ' = max(0, θx − θb).
-        let cos_p = if cos_x > cos_b { 1.0 } else { cos_x * cos_b + sin_x * sin_b };
+        // θ' = max(0, θw − θo − θb).
+        let cos_p = if cos_w > self.cos_o {
+            1.0
+        } else {
+            let sin_w = safe_sqrt(1.0 - cos_w * cos_w);
+            // θx = θw − θo.
+            let cos_x = cos_w * self.cos_o + sin_w * self.sin_o;
+            let sin_x = sin_w * self.cos_o - cos_w * self.sin_o;
+            if cos_x > cos_b {
+                1.0
+            } else {
+                cos_x * cos_b + sin_x * sin_b
+            }
+        };
         if cos_p <= self.cos_e {
             return 0.0;
         }
-        let mut imp = self.phi * cos_p / d2;
+        let mut imp = self.phi * cos_p / dist2;
         if n != Vec3::ZERO {
-            // One-sided receiver cosine bound: θi' = max(0, θi − θb), θi the angle between n
-            // and the direction toward the node centre.
+            // θi' = max(0, θi − θb), θi between n and the direction toward the node centre.
             let cos_i = -n.dot(wi);
-            let sin_i = safe_sqrt(1.0 - cos_i * cos_i);
-            let cos_pi = if cos_i > cos_b { 1.0 } else { cos_i * cos_b + sin_i * sin_b };
-            if cos_pi <= 0.0 {
-                return 0.0;
+            if cos_i <= cos_b {
+                let sin_i = safe_sqrt(1.0 - cos_i * cos_i);
+                let cos_pi = cos_i * cos_b + sin_i * sin_b;
+                if cos_pi <= 0.0 {
+                    return 0.0;
+                }
+                imp *= cos_pi;
             }
-            imp *= cos_pi;
         }
         if imp > 0.0 {
             imp.min(1e30)

@@ -1,0 +1,419 @@
+"""End-to-end tests of the `petzval` command line.
+
+* Bad input: a clear error on stderr, a non-zero exit, never a panic, never an output file
+  (not even a partial or temporary one).
+* `petzval render` without arguments renders the built-in demo to render.exr + render.png; the
+  EXR header carries the shot's metadata (parsed here from the OpenEXR header itself, no
+  OpenEXR library needed) and its pixels decode completely.
+* `lens list`, `lens info`, `lens draw` work.
+* SIGINT during a render: a complete EXR marked `complete=false...`, no temporary files.
+
+The binary is $PETZVAL_BIN, else target/release/petzval (built with `cargo build --release`
+when missing).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import struct
+import subprocess
+import sys
+import threading
+import time
+import xml.etree.ElementTree as ET
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+
+# small and fast demo renders (the demo is ~13k triangles through a traced double Gauss)
+FAST = ["--resolution", "96x64", "--spp", "2"]
+
+
+@pytest.fixture(scope="session")
+def petzval() -> Path:
+    env = os.environ.get("PETZVAL_BIN")
+    if env:
+        p = Path(env)
+        if not p.is_file():
+            pytest.fail(f"PETZVAL_BIN={env} does not exist", pytrace=False)
+        return p
+    p = REPO / "target" / "release" / "petzval"
+    if not p.is_file():
+        r = subprocess.run(["cargo", "build", "--release", "-p", "petzval"], cwd=REPO, capture_output=True, text=True)
+        if r.returncode != 0:
+            pytest.fail(f"cargo build failed:\n{r.stderr[-4000:]}", pytrace=False)
+    return p
+
+
+def run(petzval: Path, args: list[str], cwd: Path, timeout: float = 120) -> subprocess.CompletedProcess:
+    env = dict(os.environ, RUST_BACKTRACE="0")
+    return subprocess.run([str(petzval), *args], cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env)
+
+
+def assert_clean_failure(r: subprocess.CompletedProcess, cwd: Path, *words: str) -> None:
+    """Non-zero exit, an error message naming the problem, no panic, no files written."""
+    msg = f"exit {r.returncode}\nstdout:\n{r.stdout}\nstderr:\n{r.stderr}"
+    assert r.returncode != 0, msg
+    assert "panicked" not in r.stderr and "RUST_BACKTRACE" not in r.stderr, msg
+    assert "error" in r.stderr.lower(), msg
+    low = r.stderr.lower()
+    for w in words:
+        assert w.lower() in low, f"the error should mention '{w}'\n{msg}"
+    left = sorted(p.name for p in cwd.iterdir() if p.name not in INPUTS)
+    assert not left, f"files written by a failed run: {left}\n{msg}"
+
+
+# files the tests themselves put into the working directory
+INPUTS = {"corrupt.glb", "empty.glb"}
+
+
+# ------------------------------------------------------------------------------------------
+# Bad input.
+
+BAD_RENDER_ARGS = [
+    # (id, arguments, words the error must contain)
+    ("missing-scene", ["no-such-scene.glb"], ["no-such-scene.glb"]),
+    ("corrupt-glb", ["corrupt.glb"], ["corrupt.glb"]),
+    ("empty-glb", ["empty.glb"], ["empty.glb"]),
+    ("huge-resolution", ["--resolution", "100000x100000"], ["resolution"]),
+    ("zero-resolution", ["--resolution", "0x10"], ["resolution"]),
+    ("garbage-resolution", ["--resolution", "wide"], ["resolution"]),
+    ("unknown-lens", ["--lens", "no-such-lens"], ["no-such-lens"]),
+    ("impossible-focus", ["--lens", "double-gauss-50mm", "--focus", "0.01"], ["focus"]),
+    ("negative-focus", ["--focus=-1"], ["focus"]),
+    ("negative-spp", ["--spp=-3"], ["spp"]),
+    ("zero-spp", ["--spp", "0"], ["spp"]),
+    ("unknown-aperture", ["--aperture", "hexagon"], ["aperture"]),
+    ("bad-blades", ["--aperture", "blades:two"], ["aperture"]),
+    ("two-blades", ["--aperture", "blades:2"], ["aperture"]),
+    ("missing-aperture-image", ["--aperture", "image:no-such-mask.png"], ["no-such-mask.png"]),
+    ("unknown-camera", ["--camera", "no-such-camera"], ["no-such-camera"]),
+    ("nan-environment", ["--environment", "nan,1,1"], ["environment"]),
+    ("inf-environment", ["--environment", "inf"], ["environment"]),
+    ("negative-environment", ["--environment=-1,0,0"], ["environment"]),
+    ("missing-environment-map", ["--environment", "no-such-sky.exr"], ["no-such-sky.exr"]),
+    ("excessive-tilt", ["--tilt-x", "75"], ["tilt"]),
+    ("zero-fstop", ["--lens", "thin", "--fstop", "0"], ["f_number"]),
+    ("unknown-lens-model", ["--lens", "double-gauss-50mm", "--lens-model", "wobbly"], ["lens_model"]),
+    ("zero-threads", ["--threads", "0"], ["threads"]),
+]
+
+
+@pytest.mark.parametrize("args,words", [pytest.param(a, w, id=i) for i, a, w in BAD_RENDER_ARGS])
+def test_render_bad_input_fails_cleanly(petzval, tmp_path, args, words):
+    rng = np.random.default_rng(1234)
+    (tmp_path / "corrupt.glb").write_bytes(rng.integers(0, 256, 4096, dtype=np.uint8).tobytes())
+    (tmp_path / "empty.glb").write_bytes(b"")
+    # small settings so that an input that is wrongly accepted does not take long
+    extra = [] if any(a.startswith("--resolution") for a in args) else ["--resolution", "24x16"]
+    extra += [] if any(a.startswith("--spp") for a in args) else ["--spp", "1"]
+    r = run(petzval, ["render", *args, *extra], tmp_path)
+    assert_clean_failure(r, tmp_path, *words)
+
+
+def test_corrupt_glb_with_valid_magic_fails_cleanly(petzval, tmp_path):
+    """A glb header followed by nonsense: the loader must not trust the chunk lengths."""
+    rng = np.random.default_rng(99)
+    body = rng.integers(0, 256, 2048, dtype=np.uint8).tobytes()
+    # magic, version 2, total length, then a JSON chunk header claiming 1 GB
+    data = b"glTF" + struct.pack("<II", 2, 12 + 8 + len(body)) + struct.pack("<I", 1 << 30) + b"JSON" + body
+    (tmp_path / "corrupt.glb").write_bytes(data)
+    r = run(petzval, ["render", "corrupt.glb", "--resolution", "24x16", "--spp", "1"], tmp_path)
+    assert_clean_failure(r, tmp_path, "corrupt.glb")
+
+
+@pytest.mark.parametrize(
+    "args,words",
+    [
+        pytest.param(["lens", "info", "no-such-lens"], ["no-such-lens"], id="info-unknown"),
+        pytest.param(["lens", "info", "double-gauss-50mm", "--fstop", "0.5"], ["f/"], id="info-too-fast"),
+        pytest.param(["lens", "draw", "no-such-lens", "-o", "x.svg"], ["no-such-lens"], id="draw-unknown"),
+        pytest.param(["lens", "draw", "double-gauss-50mm", "--focus", "0.01", "-o", "x.svg"], ["focus"], id="draw-impossible-focus"),
+    ],
+)
+def test_lens_bad_input_fails_cleanly(petzval, tmp_path, args, words):
+    r = run(petzval, args, tmp_path)
+    assert_clean_failure(r, tmp_path, *words)
+
+
+# ------------------------------------------------------------------------------------------
+# OpenEXR reading (single-part scan-line files, as the `exr` crate writes them).
+
+COMPRESSION = {0: ("none", 1), 1: ("rle", 1), 2: ("zips", 1), 3: ("zip", 16), 4: ("piz", 32)}
+
+
+def read_exr_header(data: bytes) -> tuple[dict[str, tuple[str, bytes]], int]:
+    """Attributes {name: (type, raw value)} and the offset just past the header."""
+    assert data[:4] == b"\x76\x2f\x31\x01", "not an OpenEXR file"
+    (version,) = struct.unpack_from("<I", data, 4)
+    assert version & 0xFF == 2, f"EXR version {version & 0xFF}"
+    assert not version & 0x200, "tiled files are not expected"
+    assert not version & 0x1000, "multi-part files are not expected"
+    pos = 8
+    attrs: dict[str, tuple[str, bytes]] = {}
+    while data[pos] != 0:
+        end = data.index(b"\0", pos)
+        name = data[pos:end].decode("latin-1")
+        pos = end + 1
+        end = data.index(b"\0", pos)
+        typ = data[pos:end].decode("latin-1")
+        pos = end + 1
+        (size,) = struct.unpack_from("<i", data, pos)
+        pos += 4
+        assert 0 <= size <= len(data) - pos, f"attribute {name} size {size}"
+        attrs[name] = (typ, data[pos : pos + size])
+        pos += size
+    return attrs, pos + 1
+
+
+def exr_text_attributes(attrs) -> dict[str, str]:
+    return {k: v.decode("latin-1") for k, (t, v) in attrs.items() if t == "string"}
+
+
+def parse_channels(raw: bytes) -> list[tuple[str, int]]:
+    out, pos = [], 0
+    while raw[pos] != 0:
+        end = raw.index(b"\0", pos)
+        name = raw[pos:end].decode("latin-1")
+        pixel_type, _linear, xs, ys = struct.unpack_from("<iB3xii", raw, end + 1)
+        assert (xs, ys) == (1, 1), "subsampled channels are not expected"
+        out.append((name, pixel_type))
+        pos = end + 1 + 16
+    return out
+
+
+def read_exr(path: Path) -> tuple[dict[str, str], dict[str, np.ndarray]]:
+    """Text metadata and every channel as a (height, width) float32 array. Checks that the
+    offset table and every chunk are present and consistent (a truncated file fails)."""
+    data = path.read_bytes()
+    attrs, pos = read_exr_header(data)
+    xmin, ymin, xmax, ymax = struct.unpack("<iiii", attrs["dataWindow"][1])
+    w, h = xmax - xmin + 1, ymax - ymin + 1
+    comp = attrs["compression"][1][0]
+    assert comp in COMPRESSION and COMPRESSION[comp][0] in ("none", "zip", "zips", "rle"), f"compression {comp}"
+    lines = COMPRESSION[comp][1]
+    channels = parse_channels(attrs["channels"][1])
+    sizes = {0: 4, 1: 2, 2: 4}  # uint, half, float
+    chunks = (h + lines - 1) // lines
+    offsets = struct.unpack_from(f"<{chunks}Q", data, pos)
+    out = {name: np.zeros((h, w), np.float32) for name, _ in channels}
+    end_of_data = pos + 8 * chunks
+    for off in offsets:
+        assert end_of_data <= off < len(data), f"chunk offset {off} outside the file ({len(data)} bytes)"
+        y, size = struct.unpack_from("<ii", data, off)
+        assert 0 <= size and off + 8 + size <= len(data), "truncated chunk"
+        raw = data[off + 8 : off + 8 + size]
+        y0 = y - ymin
+        n_lines = min(lines, h - y0)
+        expected = n_lines * w * sum(sizes[t] for _, t in channels)
+        if size < expected:
+            assert COMPRESSION[comp][0] in ("zip", "zips"), "only ZIP decoding is implemented"
+            raw = undo_zip_predictor(zlib.decompress(raw))
+        assert len(raw) == expected, f"chunk at line {y}: {len(raw)} bytes, expected {expected}"
+        p = 0
+        for line in range(n_lines):
+            for name, t in channels:
+                n = w * sizes[t]
+                dtype = {0: "<u4", 1: "<f2", 2: "<f4"}[t]
+                out[name][y0 + line] = np.frombuffer(raw[p : p + n], dtype=dtype).astype(np.float32)
+                p += n
+    return exr_text_attributes(attrs), out
+
+
+def undo_zip_predictor(t: bytes) -> bytes:
+    """OpenEXR ZIP: a byte-wise delta predictor over two interleaved halves."""
+    a = np.frombuffer(t, np.uint8).astype(np.int64)
+    d = np.empty_like(a)
+    d[0] = a[0]
+    d[1:] = a[1:] - 128
+    r = (np.cumsum(d) & 0xFF).astype(np.uint8)
+    half = (len(r) + 1) // 2
+    out = np.empty_like(r)
+    out[0::2] = r[:half]
+    out[1::2] = r[half:]
+    return out.tobytes()
+
+
+# ------------------------------------------------------------------------------------------
+# The demo render.
+
+METADATA_KEYS = {
+    "lens": "petzval/lens",
+    "focal length": "petzval/focalLengthMM",
+    "f-number": "petzval/fNumber",
+    "focus distance": "petzval/focusDistanceM",
+    "tilt x": "petzval/tiltXDeg",
+    "tilt y": "petzval/tiltYDeg",
+    "shift x": "petzval/shiftXMM",
+    "shift y": "petzval/shiftYMM",
+    "spp": "petzval/spp",
+    "seed": "petzval/seed",
+    "complete": "petzval/complete",
+}
+
+
+def test_render_demo_without_arguments(petzval, tmp_path):
+    r = run(petzval, ["render", *FAST, "--seed", "7"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "panicked" not in r.stderr
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == ["render.exr", "render.png"], names
+    # PNG: signature and the IHDR size
+    png = (tmp_path / "render.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    assert struct.unpack(">II", png[16:24]) == (96, 64)
+    meta, ch = read_exr(tmp_path / "render.exr")
+    missing = [k for k, v in METADATA_KEYS.items() if v not in meta]
+    assert not missing, f"missing metadata {missing}; have {sorted(meta)}"
+    assert meta["petzval/lens"] == "double-gauss-50mm" or "double" in meta["petzval/lens"].lower(), meta["petzval/lens"]
+    assert abs(float(meta["petzval/focalLengthMM"]) - 50) < 2.5
+    assert abs(float(meta["petzval/fNumber"]) - 2.1) < 0.05
+    assert abs(float(meta["petzval/focusDistanceM"]) - 0.55) < 1e-3
+    assert float(meta["petzval/tiltXDeg"]) == -6.0
+    assert float(meta["petzval/tiltYDeg"]) == 0.0
+    assert float(meta["petzval/shiftXMM"]) == 0.0 and float(meta["petzval/shiftYMM"]) == 0.0
+    assert meta["petzval/spp"] == "2" and meta["petzval/seed"] == "7"
+    assert meta["petzval/complete"] == "true"
+    # pixels: RGBA + depth, finite, the demo is neither black nor blown out
+    assert {"R", "G", "B", "A", "Z"} <= set(ch), sorted(ch)
+    rgb = np.stack([ch["R"], ch["G"], ch["B"]])
+    assert rgb.shape == (3, 64, 96)
+    assert np.isfinite(rgb).all() and (rgb >= 0).all()
+    assert 0.001 < rgb.mean() < 10, rgb.mean()
+    # alpha is coverage: the table and street fill the lower part of the frame (sky above)
+    assert (ch["A"] > 0.99).mean() > 0.5, f"alpha: {(ch['A'] > 0.99).mean():.2f} of the pixels fully covered"
+
+
+def test_render_output_options(petzval, tmp_path):
+    """-o, --png, --no-png and AOV channels."""
+    r = run(petzval, ["render", *FAST, "-o", "a.exr", "--no-png", "--aovs", "depth,normal,albedo"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.exr"]
+    _, ch = read_exr(tmp_path / "a.exr")
+    assert {"normal.X", "normal.Y", "normal.Z", "albedo.R", "albedo.G", "albedo.B", "Z"} <= set(ch), sorted(ch)
+    r = run(petzval, ["render", *FAST, "-o", "b.exr", "--png", "preview.png"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.exr", "b.exr", "preview.png"]
+
+
+def test_thin_lens_natural_vignetting_off_keeps_exposure(petzval, tmp_path):
+    """`--natural-vignetting off` removes the cos⁴ falloff; at the image centre (cos⁴ ≈ 1)
+    the exposure must not change."""
+    means = {}
+    for v in ("on", "off"):
+        r = run(petzval, ["render", "--lens", "thin", "--fstop", "2", "--natural-vignetting", v, "--resolution", "48x32", "--spp", "16", "-o", f"{v}.exr", "--no-png"], tmp_path)
+        assert r.returncode == 0, r.stderr
+        _, ch = read_exr(tmp_path / f"{v}.exr")
+        # central 8×8 block: cos⁴ > 0.99 there for the demo's field of view
+        means[v] = float(np.mean(ch["G"][12:20, 20:28]))
+    # 5%: the two renders differ in their weights only by cos⁴ (< 1% here) and share seeds,
+    # so their noise is strongly correlated
+    assert abs(means["off"] / means["on"] - 1) < 0.05, means
+
+
+# ------------------------------------------------------------------------------------------
+# Lens subcommands.
+
+
+def test_lens_list(petzval, tmp_path):
+    r = run(petzval, ["lens", "list"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    lines = [l for l in r.stdout.splitlines() if l.strip()]
+    assert len(lines) >= 5
+    assert any(l.startswith("double-gauss-50mm") for l in lines), r.stdout
+
+
+def test_lens_info(petzval, tmp_path):
+    r = run(petzval, ["lens", "info", "double-gauss-50mm"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "double-gauss-50mm" in r.stdout or "Double" in r.stdout
+    r = run(petzval, ["lens", "info", "double-gauss-50mm", "--json"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    import json
+
+    info = json.loads(r.stdout)
+    text = json.dumps(info)
+    assert "50" in text
+
+
+def test_lens_draw_writes_valid_svg(petzval, tmp_path):
+    r = run(petzval, ["lens", "draw", "double-gauss-50mm", "-o", "x.svg"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.svg"]
+    root = ET.parse(tmp_path / "x.svg").getroot()
+    assert root.tag in ("svg", "{http://www.w3.org/2000/svg}svg"), root.tag
+    drawn = [e for e in root.iter() if e.tag.split("}")[-1] in ("path", "line", "polyline", "polygon", "circle")]
+    assert len(drawn) > 10, "expected the elements and a ray fan"
+
+
+# ------------------------------------------------------------------------------------------
+# Interrupting a render.
+
+
+def test_sigint_writes_complete_exr_marked_incomplete(petzval, tmp_path):
+    env = dict(os.environ, RUST_BACKTRACE="0")
+    proc = subprocess.Popen(
+        [str(petzval), "render", "--resolution", "96x64", "--spp", "100000", "--threads", "2"],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=env,
+    )
+    # Wait until rendering has started (the focus-plane line comes just before the render; the
+    # Ctrl-C handler is installed right after it), then give it about a second.
+    err_lines: list[str] = []
+    started = threading.Event()
+
+    def reader():
+        assert proc.stderr is not None
+        buf = b""
+        while True:
+            b = proc.stderr.read(1)
+            if not b:
+                break
+            buf += b
+            if b in (b"\n", b"\r"):
+                line = buf.decode("utf-8", "replace")
+                err_lines.append(line)
+                if "focus plane" in line or "autofocus" in line:
+                    started.set()
+                buf = b""
+        if buf:
+            err_lines.append(buf.decode("utf-8", "replace"))
+
+    t = threading.Thread(target=reader, daemon=True)
+    t.start()
+    try:
+        assert started.wait(60), "the render did not start:\n" + "".join(err_lines)
+        time.sleep(1.0)
+        assert proc.poll() is None, "the render finished before it could be interrupted"
+        proc.send_signal(signal.SIGINT)
+        rc = proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    t.join(5)
+    stderr = "".join(err_lines)
+    assert "panicked" not in stderr, stderr
+    assert rc == 0, f"exit {rc}\n{stderr}"
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == ["render.exr", "render.png"], f"{names} (temporary files left?)\n{stderr}"
+    meta, ch = read_exr(tmp_path / "render.exr")
+    assert meta["petzval/complete"].startswith("false"), meta["petzval/complete"]
+    spp = int(meta["petzval/spp"])
+    assert 0 <= spp < 100000
+    assert meta.get("petzval/sppRequested") == "100000"
+    rgb = np.stack([ch["R"], ch["G"], ch["B"]])
+    assert np.isfinite(rgb).all(), "the interrupted image has non-finite pixels"
+    # about a second of rendering reaches every pixel: nothing left black
+    assert (rgb.max(axis=0) > 0).mean() > 0.99, "unrendered (black) pixels in the interrupted image"
+
+
+if __name__ == "__main__":
+    sys.exit(pytest.main([__file__, "-v"]))
