@@ -107,7 +107,8 @@ pub struct RenderArgs {
     /// Natural vignetting (cos⁴) for thin and pinhole cameras: on (physical) or off (as Cycles).
     #[arg(long, default_value = "on")]
     pub natural_vignetting: String,
-    /// Pixel filter width in pixels (Blackman–Harris; 0 = box 1 px).
+    /// Pixel filter width as Blender's filter_width: a Blackman–Harris filter spanning twice
+    /// this many pixels, as Cycles does (0 = a 1-pixel box).
     #[arg(long, default_value_t = 1.5)]
     pub filter_width: f32,
 }
@@ -314,7 +315,7 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         max_depth: args.max_depth,
         spectral,
         time_limit: args.time_limit.map(Duration::from_secs_f64),
-        filter: if args.filter_width > 0.0 { PixelFilter::BlackmanHarris { width_px: args.filter_width } } else { PixelFilter::Box { width_px: 1.0 } },
+        filter: if args.filter_width > 0.0 { PixelFilter::BlackmanHarris { width_px: 2.0 * args.filter_width } } else { PixelFilter::Box { width_px: 1.0 } },
     };
     settings.validate()?;
     let interrupted = Arc::new(AtomicBool::new(false));

@@ -10,7 +10,7 @@
 //! | `max_depth` | u32, path vertices | — | 8 |
 //! | `spectral` | bool: one wavelength per camera ray (lens dispersion) | — | false |
 //! | `time_limit` | optional duration; stops after the pass that crosses it | s | none |
-//! | `filter` | [`PixelFilter`] | px | Blackman–Harris 1.5 |
+//! | `filter` | [`PixelFilter`] | px | Blackman–Harris spanning 3 px (Cycles' default) |
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};

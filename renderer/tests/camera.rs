@@ -61,8 +61,10 @@ fn tilted_sensor_focus_plane_thin_lens_is_exact() {
     let sensor = Sensor { tilt_x_deg: 10.0, ..Sensor::default() };
     let cam = Camera::ThinLens(ThinLensCamera::new(sensor, 50.0, 2.0, Some(3.0), Aperture::default()).unwrap());
     let plane = cam.focus_plane().unwrap();
-    // hinge rule: J = f / sin(tilt)
-    let j = 0.05 / 10f64.to_radians().sin();
+    // hinge rule: J = f / sin(tilt), with f the lens's focal length as focused (Blender's thin
+    // lens keeps the film at F = 50 mm and focuses by its power: f = F·s/(F + s))
+    let f = 0.05 * 3.0 / (0.05 + 3.0);
+    let j = f / 10f64.to_radians().sin();
     assert!((plane.hinge_distance_m.unwrap() - j).abs() < 1e-9, "{:?} vs {j}", plane.hinge_distance_m);
     // With the bottom of the sensor tilted away, the plane of focus swings down towards the
     // ground: pixels below the centre see it in front of the camera.

@@ -228,13 +228,17 @@ impl Moments {
     }
 }
 
-fn thin_image_distance_mm(f: f64, s_mm: f64) -> f64 {
-    1.0 / (1.0 / f - 1.0 / s_mm)
+/// Image distance of a point at `s_mm` through Blender's thin lens of focal length `f` (the film
+/// distance) focused at `d_mm`: the lens's power is 1/F + 1/d.
+fn thin_image_distance_mm(f: f64, d_mm: f64, s_mm: f64) -> f64 {
+    1.0 / (1.0 / f + 1.0 / d_mm - 1.0 / s_mm)
 }
 
-/// Thin-lens circle of confusion (diameter on the sensor, mm): c = A·|s−d|/s · f/(d−f).
+/// Circle of confusion (diameter on the sensor, mm) of Blender's thin lens: film at F, aperture
+/// diameter A = F/N, lens focal length F·d/(F + d) (focused at d), so a point at s images at
+/// 1/v = 1/F + 1/d − 1/s and c = A·|F − v|/v = A·F·|1/d − 1/s|.
 fn thin_lens_coc_mm(f: f64, n: f64, s_mm: f64, d_mm: f64) -> f64 {
-    (f / n) * (s_mm - d_mm).abs() / s_mm * f / (d_mm - f)
+    (f / n) * f * (1.0 / d_mm - 1.0 / s_mm).abs()
 }
 
 // ------------------------------------------------------------------------------------------
@@ -312,11 +316,11 @@ fn render_furnace_thin_lens_without_natural_vignetting() {
 
 /// A small flat emitter on the axis, defocused: the blur is the aperture disc scaled by the
 /// circle of confusion. Its diameter from the image's second moment must match
-/// c = A·|s−d|/s · f/(d−f) within 2%.
+/// c = A·F·|1/d − 1/s| (Blender's thin lens) within 2%.
 #[test]
 fn render_thin_lens_circle_of_confusion() {
     let (f, n_stop, d_mm) = (50.0, 2.0, 2000.0);
-    let v_d = thin_image_distance_mm(f, d_mm);
+    let v_d = thin_image_distance_mm(f, d_mm, d_mm); // = F: the film stays at the focal length
     let (w, h) = (96u32, 96u32);
     // s before and behind the focus distance, and at f/4
     for &(s_mm, n) in &[(1000.0, n_stop), (5000.0, n_stop), (700.0, 4.0)] {
@@ -389,7 +393,7 @@ fn render_defocus_conserves_flux() {
     // so Σ pixels = ∫ image. The source's image is 8 px in radius: its flux is then estimated
     // from ≈ 50k source hits (measured σ over seeds: 0.03% in focus, 0.12% defocused).
     let (f, n, d) = (50.0, 2.0, 2.0);
-    let v_d = thin_image_distance_mm(f, d * 1e3);
+    let v_d = thin_image_distance_mm(f, d * 1e3, d * 1e3);
     let pitch = 0.025;
     let w = 96u32;
     let r_src_px = 8.0;
@@ -404,7 +408,7 @@ fn render_defocus_conserves_flux() {
         // source's image distance, so the total ∝ ∫_disc (1 + l²/v_s²)⁻² dA = πr²/(1 + r²/v_s²)
         // (+0.66% here). Without vignetting the weight is constant: ratio 1.
         let r = 0.5 * f / n;
-        let v_s = thin_image_distance_mm(f, 600.0);
+        let v_s = thin_image_distance_mm(f, d * 1e3, 600.0);
         let expected = if vignetting { (1.0 + r * r / (v_d * v_d)) / (1.0 + r * r / (v_s * v_s)) } else { 1.0 };
         let ratio = blurred.flux / focused.flux;
         let area = polygon_area(r_src_px, DISC_SIDES);
@@ -537,7 +541,7 @@ fn boundary_radius(img: &Image, cx: f64, cy: f64, phi_deg: f64, level: f64) -> f
 #[test]
 fn render_bokeh_hexagon_area_and_orientation() {
     let (f, n, d_mm, s_mm) = (50.0, 2.0, 2000.0, 1000.0);
-    let v_d = thin_image_distance_mm(f, d_mm);
+    let v_d = thin_image_distance_mm(f, d_mm, d_mm);
     let c_mm = thin_lens_coc_mm(f, n, s_mm, d_mm);
     let w = 96u32;
     let pitch = c_mm / 60.0; // circumradius 30 px
@@ -567,14 +571,15 @@ fn render_bokeh_hexagon_area_and_orientation() {
         // aperture shape upright on the film and rotated by 180° in the (inverted) image: for a
         // hexagon the same set of vertex directions, rot + k·60°.
         let (phase, strength) = hexagonal_phase_deg(&hex, &mh);
-        let want = (rot_deg + 30.0).rem_euclid(60.0) - 30.0;
+        // edge middles at the rotation (Blender's convention), vertices 30° further
+        let want = (rot_deg + 30.0 + 30.0).rem_euclid(60.0) - 30.0;
         let dphase = ((phase - want + 30.0).rem_euclid(60.0) - 30.0).abs();
         // Boundary at 12 angles: vertices (rot + k·60°) lie at the circumradius, edge midpoints
         // (rot + 30° + k·60°) at the apothem R·cos 30°. Half-plateau crossings; the source
         // disc (6 px) rounds the vertices, so their radius is compared loosely.
         let (mut rv, mut re) = (Vec::new(), Vec::new());
         for k in 0..6 {
-            let a = rot_deg + 60.0 * k as f64;
+            let a = rot_deg + 30.0 + 60.0 * k as f64;
             rv.push(boundary_radius(&hex, mh.cx, mh.cy, a, 0.5 * p_hex));
             re.push(boundary_radius(&hex, mh.cx, mh.cy, a + 30.0, 0.5 * p_hex));
         }
@@ -864,18 +869,29 @@ fn render_tilted_sensor_focus_on_the_ground() {
     // conjugates fix the sensor plane (a thin lens maps planes to planes).
     let h = 0.3;
     let rs = striped_ground(h, &to_world, stripes_per_radian);
-    let conj = |p: DVec3| -> DVec3 { -p * (f / (-p.z - f)) }; // object (z < 0, mm) → image (z > 0)
     let ground_point = |dist_m: f64| -> DVec3 {
         // the ground point straight ahead at horizontal distance dist_m, in camera space (mm)
         to_world.inverse().transform_point3(DVec3::new(0.0, -h, -dist_m)) * 1e3
     };
-    let (i1, i2) = (conj(ground_point(1.0)), conj(ground_point(20.0)));
-    // sensor line through i1, i2 in the (y, z) plane: local +y maps to (cos t, sin t)
-    let dir = (i2 - i1).normalize();
-    let dir = if dir.y < 0.0 { -dir } else { dir };
-    let tilt = dir.z.atan2(dir.y).to_degrees();
-    let v = i1.z - i1.y * dir.z / dir.y; // where the sensor line crosses the axis
-    let focus_m = 1.0 / (1.0 / f - 1.0 / v) * 1e-3;
+    // Blender's thin lens keeps its film pivot at F = f and focuses by the lens's power
+    // f' = F·s/(F + s): find f' whose sensor line through the two conjugates crosses the axis
+    // at F (bisection), then s = F·f'/(F − f').
+    let sensor_line = |fl: f64| -> (f64, f64) {
+        let conj = |p: DVec3| -> DVec3 { -p * (fl / (-p.z - fl)) }; // object (z < 0, mm) → image (z > 0)
+        let (i1, i2) = (conj(ground_point(1.0)), conj(ground_point(20.0)));
+        // sensor line through i1, i2 in the (y, z) plane: local +y maps to (cos t, sin t)
+        let dir = (i2 - i1).normalize();
+        let dir = if dir.y < 0.0 { -dir } else { dir };
+        (dir.z.atan2(dir.y).to_degrees(), i1.z - i1.y * dir.z / dir.y)
+    };
+    let (mut lo, mut hi) = (0.5 * f, f);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if sensor_line(mid).1 < f { lo = mid } else { hi = mid }
+    }
+    let f_lens = 0.5 * (lo + hi);
+    let (tilt, _) = sensor_line(f_lens);
+    let focus_m = f * f_lens / (f - f_lens) * 1e-3;
     let (ratio, cam) = ratio_for(&rs, tilt, focus_m);
     let plane = cam.focus_plane().unwrap();
     let misalign = plane.normal.dot(ground_n).abs().min(1.0).acos().to_degrees();

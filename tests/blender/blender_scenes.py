@@ -483,45 +483,32 @@ class CyclesEquivalentLens:
 
 
 def cycles_equivalent(spec: CameraSpec, *, fstop_scale: float = 1.0, focus_m: float | None = None) -> CyclesEquivalentLens:
-    """Cycles' camera model, written as a physical thin lens petzval can render.
-
-    Cycles (intern/cycles/kernel/camera/camera.h, blender/camera.cpp) keeps the field of view of
-    the pinhole camera with the "focal length" F (Blender's lens value) whatever the focus, and
-    samples the lens on a disc of radius F/(2N) (in scene units), aiming every ray at the point
-    of the plane of focus (distance s) the pinhole ray through the pixel reaches. That is a thin
-    lens whose film sits at F behind it, i.e. whose real focal length is f = F·s/(F + s), with
-    the aperture diameter F/N, i.e. the f-number N·f/F. Also:
-
-    * blades: Cycles' polygon (kernel regular_polygon_sample) puts the middle of an *edge* at
-      the rotation angle, its vertices at rotation ± 180°/N; petzval's `blades:N:ROT` puts a
-      vertex at ROT. Equivalent: ROT = Blender rotation + 180°/N.
-    * pixel filter: Cycles' Blackman-Harris of filter_width w spans 2w pixels (scene/film.cpp,
-      filter_table: `width *= 2.0f` for FILTER_BLACKMAN_HARRIS); petzval's --filter-width is the
-      whole support. Equivalent: --filter-width 2w.
+    """Cycles' camera model as petzval's thin lens: since petzval follows Blender's conventions
+    (the film stays at the focal length F and the lens focuses by its power, f = F·s/(F + s), with
+    aperture diameter F/N; blade rotation puts an edge middle at the angle; --filter-width is
+    Cycles' filter_width, the Blackman-Harris support being twice it), this is Blender's camera
+    as it is. Cycles references: intern/cycles/kernel/camera/camera.h (thin lens),
+    kernel regular_polygon_sample (blades), scene/film.cpp filter_table (width *= 2).
 
     `fstop_scale` and `focus_m` make deliberately wrong cameras for the negative controls (the
     Cycles camera with another f-stop or focus distance)."""
     bpy = _import_bpy()
     cam = bpy.data.objects[spec.name].data
-    F = float(cam.lens)
     s_m = float(cam.dof.focus_distance) if focus_m is None else focus_m
-    s = s_m * 1e3
-    f = F * s / (F + s)
-    n = float(cam.dof.aperture_fstop) * fstop_scale * f / F
-    blades = int(cam.dof.aperture_blades)
-    rot = math.degrees(cam.dof.aperture_rotation) + 180.0 / blades
-    return CyclesEquivalentLens(f, n, s_m, rot, 2.0 * float(bpy.context.scene.cycles.filter_width))
+    n = float(cam.dof.aperture_fstop) * fstop_scale
+    rot = math.degrees(cam.dof.aperture_rotation)
+    return CyclesEquivalentLens(float(cam.lens), n, s_m, rot, float(bpy.context.scene.cycles.filter_width))
 
 
 def petzval_cycles_args(spec: CameraSpec, **kw) -> list[str]:
-    """`petzval render` options for the Cycles-equivalent thin lens (see `cycles_equivalent`)."""
+    """`petzval render` options for Blender's camera (see `cycles_equivalent`), with the
+    negative controls' overrides."""
     bpy = _import_bpy()
     cam = bpy.data.objects[spec.name].data
     eq = cycles_equivalent(spec, **kw)
     return [
         "--camera", spec.name,
         "--lens", "thin",
-        "--focal-length", _num(eq.focal_length_mm),
         "--fstop", _num(eq.fstop),
         "--focus", _num(eq.focus_m),
         "--aperture", f"blades:{cam.dof.aperture_blades}:{_num(eq.rotation_deg)}",

@@ -14,9 +14,10 @@ has a median relative noise of ~0.4 % per side, so biases above ~2 % of a block 
 
 What glTF cannot carry and petzval takes as options: f-stop, focus distance, blades, blade
 rotation, sensor width (yfov only), the world colour, the pixel filter. The whole-image and bokeh
-comparisons use the *Cycles-equivalent* thin lens (blender_scenes.cycles_equivalent): the
-physical thin lens that forms exactly Cycles' image. The direct mapping by petzval's documented
-conventions differs from Cycles in three ways, each isolated in an xfail(strict) test below.
+comparisons pass Blender's camera as it is (blender_scenes.cycles_equivalent): petzval's thin
+lens follows Blender's conventions (no focus breathing, aperture F/N, an edge middle at the blade
+rotation, Cycles' filter_width). The three `test_direct_mapping_*` tests check each convention on
+its own (they were strict xfails before petzval adopted them).
 
 Run: .venv/bin/python -m pytest tests/blender -q -s
 """
@@ -332,12 +333,6 @@ def test_negative_controls_fail_the_metric(blender_run, main_cycles, main_petzva
         assert abs(r - 1) > BOKEH_RG_TOL
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="petzval's thin lens puts the film at the image distance v = 1/(1/f − 1/s), so it magnifies by "
-    "v/f = 1/(1 − f/s) relative to Cycles, whose field of view does not change with focus (4.3 % at f = 50 mm, "
-    "s = 1.2 m); docs/cycles-comparison.md",
-)
 def test_direct_mapping_field_of_view(bokeh_cycles, bokeh_direct, report):
     """Focal length from the exported yfov, Blender's f-stop and focus as they are: the image
     scale must be Cycles' (measured from the separation of the two emitters' centroids)."""
@@ -356,11 +351,6 @@ def test_direct_mapping_field_of_view(bokeh_cycles, bokeh_direct, report):
     assert abs(mag - 1) <= MAGNIFICATION_TOL
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="blade rotation conventions differ by 180°/N: Cycles puts the middle of a polygon edge at "
-    "aperture_rotation, petzval's blades:N:ROT a vertex; docs/cycles-comparison.md",
-)
 def test_direct_mapping_blade_rotation(bokeh_cycles, bokeh_direct, report):
     """Blender's aperture_rotation passed as --aperture blades:N:ROT: the bokeh polygon must have
     Cycles' orientation."""
@@ -375,12 +365,6 @@ def test_direct_mapping_blade_rotation(bokeh_cycles, bokeh_direct, report):
     assert all(abs(d) <= BOKEH_ANGLE_TOL_DEG for d in diffs)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="Cycles' Blackman-Harris filter of filter_width w spans 2w pixels (scene/film.cpp: width *= 2 for "
-    "FILTER_BLACKMAN_HARRIS); petzval's --filter-width is the whole support, so --filter-width 1.5 is half "
-    "as wide as Cycles' default; docs/cycles-comparison.md",
-)
 def test_direct_mapping_pixel_filter(blender_run, main_cycles, main_petzval, report):
     """Cycles' filter_width passed as --filter-width as it is (everything else Cycles-equivalent):
     the image must still match."""

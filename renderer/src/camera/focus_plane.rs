@@ -45,7 +45,7 @@ pub(super) fn focus_plane(cam: &Camera) -> Option<FocusPlane> {
     //    front principal point in camera space.
     let (f, film_z, front_cam_z_mm) = match cam {
         Camera::Pinhole(_) => return None,
-        Camera::ThinLens(c) => (c.focal_length_mm, c.film_distance_mm(), 0.0),
+        Camera::ThinLens(c) => (c.lens_focal_length_mm(), c.film_distance_mm(), 0.0),
         Camera::ThickLens(c) => (c.focal_length_mm, c.film_z_mm() - c.rear_principal_z_mm, c.front_principal_z_mm - c.entrance_pupil_z_mm),
         Camera::Realistic(c) | Camera::Lrtf(crate::camera::LrtfCamera { exact: c, .. }) => {
             let p = c.lens.paraxial();

@@ -135,14 +135,17 @@ pub struct PinholeCamera {
     pub natural_vignetting: bool,
 }
 
-/// An ideal thin lens.
+/// An ideal thin lens with Blender's (Cycles') conventions: the field of view is that of the
+/// focal length F at any focus distance s (the film stays at F behind the lens and the lens's
+/// power changes to focus: its focal length is F·s/(F + s)), and the aperture's circumradius is
+/// F/(2N). Real lenses, traced or as thick lenses, breathe physically instead.
 #[derive(Debug, Clone)]
 pub struct ThinLensCamera {
     /// Sensor.
     pub sensor: Sensor,
-    /// Focal length.
+    /// Focal length F: sets the field of view.
     pub focal_length_mm: f64,
-    /// f-number (aperture circumradius = f / 2N).
+    /// f-number (aperture circumradius = F / 2N).
     pub f_number: f64,
     /// Focus distance (None = infinity).
     pub focus_distance_m: Option<f64>,
@@ -152,6 +155,8 @@ pub struct ThinLensCamera {
     /// this may be changed after construction).
     pub natural_vignetting: bool,
     film_z_mm: f64,
+    /// Focal length of the lens focused at the focus distance: F·s/(F + s).
+    lens_focal_mm: f64,
     /// Exposure normalisation with and without natural vignetting.
     exposure: [f64; 2],
 }
@@ -282,8 +287,12 @@ impl ThinLensCamera {
         if let Some(d) = focus_distance_m {
             check_positive("focus_distance_m", d)?;
         }
-        let film_z_mm = thin_lens_image_distance(focal_length_mm, focus_distance_m.map(|m| m * 1e3))?;
-        let mut cam = ThinLensCamera { sensor, focal_length_mm, f_number, focus_distance_m, aperture, natural_vignetting: true, film_z_mm, exposure: [1.0; 2] };
+        // Film at F; the lens focuses at s by its power: 1/f = 1/F + 1/s.
+        let lens_focal_mm = match focus_distance_m {
+            Some(s) => focal_length_mm * s * 1e3 / (focal_length_mm + s * 1e3),
+            None => focal_length_mm,
+        };
+        let mut cam = ThinLensCamera { sensor, focal_length_mm, f_number, focus_distance_m, aperture, natural_vignetting: true, film_z_mm: focal_length_mm, lens_focal_mm, exposure: [1.0; 2] };
         let centre = cam.sensor.axis_film_coord();
         let natural = 1.0 / centre_mean(|u| cam.raw_ray(centre, u).map(|r| r.weight));
         cam.natural_vignetting = false;
@@ -298,9 +307,14 @@ impl ThinLensCamera {
         0.5 * self.focal_length_mm / self.f_number
     }
 
-    /// Lens-to-film distance.
+    /// Lens-to-film distance (= F).
     pub fn film_distance_mm(&self) -> f64 {
         self.film_z_mm
+    }
+
+    /// Focal length of the lens as focused: F·s/(F + s).
+    pub fn lens_focal_length_mm(&self) -> f64 {
+        self.lens_focal_mm
     }
 
     fn raw_ray(&self, film: DVec2, lens_u: DVec2) -> Option<CameraRay> {
@@ -313,7 +327,7 @@ impl ThinLensCamera {
             return None;
         }
         let pdf = pdf_unit / (r * r);
-        let dir = thin_lens_direction(p, l, self.focal_length_mm);
+        let dir = thin_lens_direction(p, l, self.lens_focal_mm);
         let weight = if self.natural_vignetting {
             geometric_factor(p, l, self.sensor.normal()) / pdf * transmission
         } else {

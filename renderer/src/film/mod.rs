@@ -5,7 +5,7 @@
 //!
 //! | name | type | unit | default |
 //! |---|---|---|---|
-//! | `filter` | [`PixelFilter`] | — | Blackman–Harris, 1.5 px wide (Cycles' default) |
+//! | `filter` | [`PixelFilter`] | — | Blackman–Harris spanning 3 px (Cycles' default `filter_width` 1.5, which Cycles doubles for this filter) |
 
 mod output;
 
@@ -21,16 +21,17 @@ pub enum PixelFilter {
         /// Width in pixels.
         width_px: f32,
     },
-    /// Blackman–Harris of the given width in pixels.
+    /// Blackman–Harris of the given total width (support) in pixels. Cycles' `filter_width`
+    /// w corresponds to a support of 2w.
     BlackmanHarris {
-        /// Width in pixels.
+        /// Total width (support) in pixels.
         width_px: f32,
     },
 }
 
 impl Default for PixelFilter {
     fn default() -> Self {
-        PixelFilter::BlackmanHarris { width_px: 1.5 }
+        PixelFilter::BlackmanHarris { width_px: 3.0 }
     }
 }
 
@@ -184,7 +185,7 @@ mod tests {
 
     #[test]
     fn blackman_harris_samples_follow_the_filter() {
-        let fs = FilterSampler::new(PixelFilter::default());
+        let fs = FilterSampler::new(PixelFilter::BlackmanHarris { width_px: 1.5 });
         let n = 100_000;
         let mut inside_half = 0;
         for i in 0..n {

@@ -3,7 +3,7 @@
 //! | name | type | unit | default |
 //! |---|---|---|---|
 //! | `shape` | [`ApertureShape`] | — | circle |
-//! | `rotation_rad` | f64, rotation of blades or mask | radians | 0 |
+//! | `rotation_rad` | f64: blades put the middle of an edge at this angle (Blender's `aperture_rotation`); rotates a mask | radians | 0 |
 //! | `anamorphic_ratio` | f64: height / width of the opening; x is divided by it (Blender's `aperture_ratio`) | — | 1 |
 //!
 //! The opening is given by its circumradius `R` (the stop semi-diameter at the current
@@ -157,7 +157,7 @@ impl Aperture {
     }
 }
 
-/// Point-in-polygon for a regular N-gon of circumradius 1 whose first vertex is at `rotation`,
+/// Point-in-polygon for a regular N-gon of circumradius 1 with an edge middle at `rotation`,
 /// with blade edges bowed outwards into circular arcs by `curvature`.
 fn inside_blades(u: f64, v: f64, count: u32, curvature: f64, rotation: f64) -> bool {
     let r2 = u * u + v * v;
@@ -166,8 +166,9 @@ fn inside_blades(u: f64, v: f64, count: u32, curvature: f64, rotation: f64) -> b
     }
     let n = count as f64;
     let half = std::f64::consts::PI / n;
-    // 1. Angle to the nearest edge normal (normals lie halfway between vertices).
-    let phi = v.atan2(u) - rotation - half;
+    // 1. Angle to the nearest edge normal: edge middles lie at rotation + k·2π/N (Blender's
+    //    aperture_rotation), vertices halfway between.
+    let phi = v.atan2(u) - rotation;
     let sector = (phi / (2.0 * half)).round();
     let alpha = phi - sector * 2.0 * half;
     let r = r2.sqrt();
@@ -237,7 +238,8 @@ impl Aperture {
                 let n = *count as f64;
                 let k = (u.x * n).floor().min(n - 1.0);
                 let ux = u.x * n - k;
-                let a0 = self.rotation_rad + 2.0 * std::f64::consts::PI * k / n;
+                // vertices halfway between edge middles (which sit at the rotation)
+                let a0 = self.rotation_rad + std::f64::consts::PI / n + 2.0 * std::f64::consts::PI * k / n;
                 let a1 = a0 + 2.0 * std::f64::consts::PI / n;
                 let (v0, v1) = (DVec2::new(a0.cos(), a0.sin()), DVec2::new(a1.cos(), a1.sin()));
                 let su = ux.sqrt();
