@@ -1,7 +1,7 @@
 //! Optics: hard numerical cases, property tests and exit-pupil bounds against brute force.
 
 use glam::{DVec2, DVec3};
-use petzval_renderer::optics::pupil::{self, ExitPupilBounds};
+use petzval_renderer::optics::pupil::ExitPupilBounds;
 use petzval_renderer::{library_lens, Absorbed, Lens, Ray, StopMode, TraceDirection};
 use proptest::prelude::*;
 
