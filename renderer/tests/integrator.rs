@@ -1,7 +1,7 @@
 //! Integrator: BVH queries (watertightness, self-intersection, alpha cut-outs), the glTF BSDF
 //! (energy, sampling consistency, reciprocity) and the path tracer against analytic scenes.
 
-use std::collections::HashMap;
+use crate::common::icosphere;
 use std::f32::consts::PI;
 use std::sync::Arc;
 
@@ -32,77 +32,6 @@ fn emitter(le: Vec3, double_sided: bool) -> Material {
     Material { emissive: le, double_sided, ..diffuse(Vec3::ZERO) }
 }
 
-/// Icosphere (outward counter-clockwise winding, smooth normals).
-fn icosphere(center: Vec3, radius: f32, level: u32, material: u32) -> Mesh {
-    let t = (1.0 + 5f32.sqrt()) / 2.0;
-    let mut v: Vec<Vec3> = [
-        (-1.0, t, 0.0),
-        (1.0, t, 0.0),
-        (-1.0, -t, 0.0),
-        (1.0, -t, 0.0),
-        (0.0, -1.0, t),
-        (0.0, 1.0, t),
-        (0.0, -1.0, -t),
-        (0.0, 1.0, -t),
-        (t, 0.0, -1.0),
-        (t, 0.0, 1.0),
-        (-t, 0.0, -1.0),
-        (-t, 0.0, 1.0),
-    ]
-    .iter()
-    .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
-    .collect();
-    let mut f: Vec<[u32; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..level {
-        let mut mid: HashMap<(u32, u32), u32> = HashMap::new();
-        let mut nf = Vec::with_capacity(f.len() * 4);
-        let mut m = |a: u32, b: u32, v: &mut Vec<Vec3>| -> u32 {
-            let k = (a.min(b), a.max(b));
-            *mid.entry(k).or_insert_with(|| {
-                v.push(((v[a as usize] + v[b as usize]) * 0.5).normalize());
-                (v.len() - 1) as u32
-            })
-        };
-        for &[a, b, c] in &f {
-            let ab = m(a, b, &mut v);
-            let bc = m(b, c, &mut v);
-            let ca = m(c, a, &mut v);
-            nf.extend_from_slice(&[[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
-        }
-        f = nf;
-    }
-    let n = v.len();
-    Mesh {
-        positions: v.iter().map(|&p| center + p * radius).collect(),
-        normals: v.clone(),
-        tangents: vec![Vec4::ZERO; n],
-        uv0: vec![Vec2::ZERO; n],
-        uv1: vec![],
-        material_ids: vec![material; f.len()],
-        indices: f,
-    }
-}
 
 /// A quad with corners `o`, `o + a`, `o + a + b`, `o + b`; front side along a × b; uv (0,0)
 /// at `o`, u along a, v along b.
