@@ -121,3 +121,28 @@ fn sensor_tilted_30_degrees_realistic_focus_plane_verified_by_tracing() {
     assert!(checked >= 2);
 }
 
+
+/// Spectral rays: through a lens with dispersive glass the same film and lens sample leave in
+/// different directions for blue and red (lateral colour grows off axis); a lens without
+/// dispersion gives the same ray for every wavelength.
+#[test]
+fn dispersive_lens_separates_wavelengths() {
+    let lens = library_lens("zeiss-biotar-100mm").unwrap();
+    assert!(lens.has_dispersion());
+    let cam = Camera::Realistic(RealisticCamera::new(Sensor::default(), lens, None).unwrap());
+    let u = DVec2::new(0.5, 0.5);
+    let (mut centre, mut corner) = (0.0f64, 0.0f64);
+    for (film, out) in [(DVec2::new(0.5, 0.5), &mut centre), (DVec2::new(0.95, 0.9), &mut corner)] {
+        let b = cam.generate_ray(film, u, 486.1327).unwrap();
+        let r = cam.generate_ray(film, u, 656.2725).unwrap();
+        *out = b.direction.angle_between(r.direction);
+    }
+    assert!(corner > 1e-4, "lateral colour at the corner: {corner} rad");
+    assert!(corner > 5.0 * centre, "it grows off axis: centre {centre}, corner {corner}");
+    let plain = library_lens("double-gauss-50mm").unwrap();
+    assert!(!plain.has_dispersion());
+    let cam = Camera::Realistic(RealisticCamera::new(Sensor::default(), plain, None).unwrap());
+    let b = cam.generate_ray(DVec2::new(0.9, 0.9), u, 450.0).unwrap();
+    let r = cam.generate_ray(DVec2::new(0.9, 0.9), u, 650.0).unwrap();
+    assert_eq!(b.direction, r.direction);
+}
