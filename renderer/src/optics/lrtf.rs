@@ -461,8 +461,13 @@ impl LrtfTable {
         if p.z < h.in_base_z_mm - 1e-9 {
             return LrtfLookup::Miss;
         }
-        let rho = p.x.hypot(p.y);
-        let (c, s) = if rho > 1e-12 { (p.x / rho, p.y / rho) } else { (1.0, 0.0) };
+        let rho = (p.x * p.x + p.y * p.y).sqrt();
+        let (c, s) = if rho > 1e-12 {
+            let inv = 1.0 / rho;
+            (p.x * inv, p.y * inv)
+        } else {
+            (1.0, 0.0)
+        };
         let d = ray.direction;
         let dl = DVec3::new(c * d.x + s * d.y, -s * d.x + c * d.y, d.z);
         let sd = stereo(dl);
@@ -485,17 +490,25 @@ impl LrtfTable {
         let mut v = [0f32; 7];
         let (mut pass, mut fail, mut filled) = (0u32, 0u32, 0u32);
         let (mut m_min, mut m_max) = (f32::INFINITY, f32::NEG_INFINITY);
-        for (corner, wgt) in [
-            (0, (1.0 - tu) * (1.0 - tx) * (1.0 - ty)),
-            (self.stride_y, (1.0 - tu) * (1.0 - tx) * ty),
-            (self.stride_x, (1.0 - tu) * tx * (1.0 - ty)),
-            (self.stride_x + self.stride_y, (1.0 - tu) * tx * ty),
-            (self.stride_u, tu * (1.0 - tx) * (1.0 - ty)),
-            (self.stride_u + self.stride_y, tu * (1.0 - tx) * ty),
-            (self.stride_u + self.stride_x, tu * tx * (1.0 - ty)),
-            (self.stride_u + self.stride_x + self.stride_y, tu * tx * ty),
-        ] {
-            let e = &self.data[base + corner..base + corner + CHANNELS];
+        let offsets = [0, self.stride_y, self.stride_x, self.stride_x + self.stride_y, self.stride_u, self.stride_u + self.stride_y, self.stride_u + self.stride_x, self.stride_u + self.stride_x + self.stride_y];
+        let weights = [
+            (1.0 - tu) * (1.0 - tx) * (1.0 - ty),
+            (1.0 - tu) * (1.0 - tx) * ty,
+            (1.0 - tu) * tx * (1.0 - ty),
+            (1.0 - tu) * tx * ty,
+            tu * (1.0 - tx) * (1.0 - ty),
+            tu * (1.0 - tx) * ty,
+            tu * tx * (1.0 - ty),
+            tu * tx * ty,
+        ];
+        // one bounds check for the whole cell, then fixed-size entries
+        let last = base + offsets[7] + CHANNELS;
+        if last > self.data.len() {
+            return LrtfLookup::Miss;
+        }
+        let cell = &self.data[base..last];
+        for (off, wgt) in offsets.iter().zip(weights) {
+            let e: &[f32; CHANNELS] = cell[*off..*off + CHANNELS].try_into().unwrap_or(&[0.0; CHANNELS]);
             if e[6] > 0.0 && e[7] == 1.0 {
                 pass += 1;
             } else {
@@ -542,8 +555,12 @@ impl LrtfTable {
         })
     }
 
+    #[inline]
     fn nearest_wavelength(&self, wavelength_nm: f64) -> usize {
         let ws = &self.header.wavelengths_nm;
+        if ws.len() == 1 {
+            return 0;
+        }
         let mut best = 0;
         for (i, w) in ws.iter().enumerate() {
             if (w - wavelength_nm).abs() < (ws[best] - wavelength_nm).abs() {
