@@ -454,21 +454,10 @@ def petzval_direct_args(spec: CameraSpec) -> list[str]:
     """The Blender camera as `petzval render` options by petzval's documented conventions: what
     glTF cannot carry (f-stop, focus distance, blades and their rotation, sensor width spanning
     the larger image dimension as Blender's AUTO fit) taken over as they are, the focal length
-    from the exported yfov with that sensor width, the pixel filter width taken over from Cycles'
-    filter_width, natural vignetting off (Cycles has none)."""
-    bpy = _import_bpy()
-    cam = bpy.data.objects[spec.name].data
-    dof = cam.dof
-    return [
-        "--camera", spec.name,
-        "--lens", "thin",
-        "--fstop", _num(dof.aperture_fstop),
-        "--focus", _num(dof.focus_distance),
-        "--aperture", f"blades:{dof.aperture_blades}:{_num(math.degrees(dof.aperture_rotation))}",
-        "--sensor-width", _num(cam.sensor_width),
-        "--natural-vignetting", "off",
-        "--filter-width", _num(bpy.context.scene.cycles.filter_width),
-    ]
+    from the exported yfov with that sensor width, Cycles' filter_width, natural vignetting off
+    (Cycles has none). Since petzval adopted Blender's conventions this is the Cycles-equivalent
+    mapping itself."""
+    return petzval_cycles_args(spec)
 
 
 @dataclass(frozen=True)

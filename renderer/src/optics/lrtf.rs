@@ -187,31 +187,29 @@ fn trace_unclipped(lens: &Lens, ray: &Ray, wavelength_nm: f64) -> Unclipped {
     Unclipped { ray: Some(Ray { origin: o, direction: d }), stop, margin }
 }
 
-/// Where a ray starting inside a sphere leaves it (or `None`).
-/// Where a ray starting inside a sphere leaves it (or `None`).
-pub fn exit_sphere(o: DVec3, d: DVec3, centre: DVec3, radius: f64) -> Option<DVec3> {
+/// The two parameters at which the ray `o + t·d` (|d| = 1) meets a sphere, nearest first.
+#[inline]
+fn sphere_hits(o: DVec3, d: DVec3, centre: DVec3, radius: f64) -> Option<(f64, f64)> {
     let oc = o - centre;
     let b = oc.dot(d);
-    let c = oc.length_squared() - radius * radius;
-    let disc = b * b - c;
+    let disc = b * b - (oc.length_squared() - radius * radius);
     if disc < 0.0 {
         return None;
     }
-    let t = -b + disc.sqrt();
+    let root = disc.sqrt();
+    Some((-b - root, -b + root))
+}
+
+/// Where a ray starting inside a sphere leaves it (or `None`).
+pub fn exit_sphere(o: DVec3, d: DVec3, centre: DVec3, radius: f64) -> Option<DVec3> {
+    let (_, t) = sphere_hits(o, d, centre, radius)?;
     (t >= 0.0).then(|| o + d * t)
 }
 
 /// Where a ray from outside first meets a sphere.
 #[inline]
 fn enter_sphere(o: DVec3, d: DVec3, centre: DVec3, radius: f64) -> Option<DVec3> {
-    let oc = o - centre;
-    let b = oc.dot(d);
-    let c = oc.length_squared() - radius * radius;
-    let disc = b * b - c;
-    if disc < 0.0 {
-        return None;
-    }
-    let t = -b - disc.sqrt();
+    let (t, _) = sphere_hits(o, d, centre, radius)?;
     (t >= 0.0).then(|| o + d * t)
 }
 
