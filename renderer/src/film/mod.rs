@@ -7,6 +7,7 @@
 //! |---|---|---|---|
 //! | `filter` | [`PixelFilter`] | — | Blackman–Harris spanning 3 px (Cycles' default `filter_width` 1.5, which Cycles doubles for this filter) |
 
+pub mod metrics;
 mod output;
 
 pub use output::{write_exr, write_png, ExrLayers, Metadata, ToneMap};
