@@ -44,6 +44,16 @@ def srgb_to_linear(c: np.ndarray) -> np.ndarray:
 # node helpers
 
 
+def node_tree_of(idblock):
+    """The node tree Blender renders with: always the tree from Blender 5 on (``use_nodes`` is
+    deprecated there), else only with ``use_nodes``."""
+    import bpy
+
+    if bpy.app.version >= (5, 0, 0):
+        return idblock.node_tree
+    return idblock.node_tree if idblock.use_nodes else None
+
+
 def source(socket):
     """(node, output socket) linked into `socket`, through reroutes; None if unlinked."""
     if socket is None or not socket.is_linked:
@@ -196,7 +206,7 @@ class Materials:
                                        alpha_mode="blend" if c[3] < 1.0 else "opaque")
 
     def _convert(self, mat) -> int:
-        nt = mat.node_tree if getattr(mat, "use_nodes", True) else None
+        nt = node_tree_of(mat)
         if nt is None:
             c = tuple(mat.diffuse_color)
             return self.scene.add_material(mat.name, base_color=c, metallic=float(mat.metallic), roughness=float(mat.roughness),
@@ -430,6 +440,22 @@ def light_colour(light) -> np.ndarray:
     return c * (2.0 ** float(getattr(light, "exposure", 0.0)))
 
 
+def _light_nodes_do_something(nt) -> bool:
+    """True unless the light's node tree is Blender's default (a white Emission of strength 1
+    into the Light Output)."""
+    for node in nt.nodes:
+        if node.type == "OUTPUT_LIGHT":
+            continue
+        if node.type != "EMISSION":
+            return True
+        col = value(node, "Color", (1.0, 1.0, 1.0, 1.0))
+        if abs(value(node, "Strength", 1.0) - 1.0) > 1e-6 or any(abs(c - 1.0) > 1e-6 for c in col[:3]):
+            return True
+        if any(s.is_linked for s in node.inputs):
+            return True
+    return False
+
+
 def add_light(pz, obj, matrix_world, notes, materials) -> None:
     light = obj.data
     m = to_gltf(matrix_world)
@@ -439,7 +465,8 @@ def add_light(pz, obj, matrix_world, notes, materials) -> None:
     direction = axis / n if n > 0 else np.array([0.0, -1.0, 0.0])
     colour = light_colour(light)
     name = obj.name
-    if light.use_nodes if hasattr(light, "use_nodes") else False:
+    lnt = node_tree_of(light) if hasattr(light, "node_tree") else None
+    if lnt is not None and _light_nodes_do_something(lnt):
         notes.warn(f"light '{name}': light nodes")
     if light.type in ("POINT", "SPOT"):
         intensity = colour * float(light.energy) / (4.0 * math.pi)
@@ -513,7 +540,7 @@ def add_world(pz, world, notes, materials) -> None:
     if world is None:
         pz.set_environment_color((0.0, 0.0, 0.0))
         return
-    nt = world.node_tree if getattr(world, "use_nodes", True) else None
+    nt = node_tree_of(world)
     node = surface_shader(nt) if nt is not None else None
     if node is None:
         pz.set_environment_color(tuple(float(c) for c in world.color))

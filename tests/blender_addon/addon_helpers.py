@@ -1,0 +1,245 @@
+"""Helpers of the add-on suite: resetting Blender with the add-on enabled, rendering through the
+PETZVAL engine, the scenes specific to this suite (tilt-shift ground, depth target), and the
+Cycles references shared with tests/blender (same scene module, same cache directory)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import subprocess
+import time
+from pathlib import Path
+
+import blender_compare as B  # noqa: F401  (re-exported for the tests)
+import blender_scenes as S
+from blender_scenes import _quiet as quiet  # noqa: F401
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parents[1]
+OUT = REPO / "tests" / "out" / "blender_addon"
+CYCLES_CACHE_ROOT = REPO / "tests" / "out" / "blender"
+ADDON_MODULE = "bl_ext.user_default.petzval"
+
+
+def bpy():
+    import bpy as _bpy
+
+    return _bpy
+
+
+def ensure_enabled():
+    """Enables the installed add-on if a factory reset disabled it; returns its module."""
+    import addon_utils
+
+    b = bpy()
+    if ADDON_MODULE not in {a.module for a in b.context.preferences.addons}:
+        mod = addon_utils.enable(ADDON_MODULE, default_set=True, handle_error=None)
+        if mod is None:
+            raise RuntimeError(f"could not enable {ADDON_MODULE}")
+    import importlib
+
+    return importlib.import_module(ADDON_MODULE)
+
+
+def reset_blender():
+    """An empty factory scene with the add-on enabled."""
+    bpy().ops.wm.read_factory_settings(use_empty=True)
+    return ensure_enabled()
+
+
+def build_main_scene(workdir: Path):
+    """tests/blender's comparison scene (MainCam, BokehCam, lights, checker ground)."""
+    built = S.build_scene(workdir)
+    ensure_enabled()
+    return built
+
+
+def configure_petzval(spp: int, seed: int = 0, max_bounces: int = S.CYCLES_MAX_BOUNCES, camera: str | None = None,
+                      threads: int = 2) -> None:
+    """PETZVAL engine with Cycles-comparable settings and EXR (RGBA float32) output."""
+    b = bpy()
+    scene = b.context.scene
+    if camera is not None:
+        scene.camera = b.data.objects[camera]
+    r = scene.render
+    r.engine = "PETZVAL"
+    r.threads_mode = "FIXED"
+    r.threads = threads
+    r.film_transparent = False
+    p = scene.petzval
+    p.samples = spp
+    p.seed = seed
+    p.use_animated_seed = False
+    p.max_bounces = max_bounces
+    p.filter_width = 1.5
+    p.natural_vignetting = False
+    p.spectral = False
+    vs = scene.view_settings
+    vs.view_transform = "Standard"
+    vs.look = "None"
+    vs.exposure = 0.0
+    vs.gamma = 1.0
+    im = r.image_settings
+    im.media_type = "IMAGE"
+    im.file_format = "OPEN_EXR"
+    im.color_depth = "32"
+    im.color_mode = "RGBA"
+    im.exr_codec = "ZIP"
+
+
+def render_still(out_exr: Path) -> tuple[float, dict]:
+    """F12 + save (``bpy.ops.render.render(write_still=True)``); returns (wall seconds, the
+    engine's log entry for the render)."""
+    b = bpy()
+    mod = ensure_enabled()
+    out_exr.parent.mkdir(parents=True, exist_ok=True)
+    if out_exr.exists():
+        out_exr.unlink()
+    b.context.scene.render.filepath = str(out_exr)
+    before = mod.engine.RENDER_LOG[-1] if mod.engine.RENDER_LOG else None
+    with quiet(OUT / "blender.log"):
+        t0 = time.perf_counter()
+        b.ops.render.render(write_still=True)
+        dt = time.perf_counter() - t0
+    entry = mod.engine.RENDER_LOG[-1] if mod.engine.RENDER_LOG and mod.engine.RENDER_LOG[-1] is not before else {}
+    if entry.get("error"):
+        raise AssertionError(f"the Petzval render failed: {entry['error']}")
+    if not out_exr.is_file():
+        raise AssertionError(f"Blender did not write {out_exr}")
+    return dt, entry
+
+
+# ------------------------------------------------------------------------------------------
+# Cycles references, shared with tests/blender (same key, same directory, same files)
+
+
+def cycles_cache_dir() -> Path:
+    """tests/blender's cache: keyed by blender_scenes.py and the Blender build (the same key as
+    tests/blender/conftest.py, so either suite reuses the other's Cycles renders)."""
+    b = bpy()
+    h = hashlib.sha256()
+    h.update((REPO / "tests" / "blender" / "blender_scenes.py").read_bytes())
+    h.update(b.app.version_string.encode())
+    h.update(b.app.build_hash if isinstance(b.app.build_hash, bytes) else str(b.app.build_hash).encode())
+    return CYCLES_CACHE_ROOT / f"cycles-{h.hexdigest()[:16]}"
+
+
+def cycles_reference(camera: str, seed: int, spp: int) -> Path:
+    """A cached Cycles render of the comparison scene (rendered now when missing; the scene
+    must be built). Leaves the scene's engine at Cycles: configure_petzval() switches back."""
+    import os
+
+    cache = cycles_cache_dir()
+    cache.mkdir(parents=True, exist_ok=True)
+    name = f"cycles_{camera}_spp{spp}_seed{seed}"
+    exr, meta = cache / f"{name}.exr", cache / f"{name}.json"
+    if exr.is_file() and meta.is_file() and not os.environ.get("PETZVAL_BLENDER_NO_CACHE"):
+        return exr
+    secs = S.render_cycles(S.CyclesSettings(samples=spp, seed=seed), camera, exr)
+    meta.write_text(json.dumps({"seconds": secs, "blender": bpy().app.version_string}))
+    return exr
+
+
+# ------------------------------------------------------------------------------------------
+# the glTF path: Blender's exporter + the petzval command line
+
+
+def petzval_cli_render(glb: Path, args: list[str], out: Path, spp: int, seed: int, resolution, environment: str,
+                       max_depth: int) -> Path:
+    import petzval_cli
+
+    w, h = resolution
+    cmd = [str(petzval_cli.ensure_binary()), "render", str(glb), "-o", str(out), "--no-png", *args,
+           "--environment", environment, "--max-depth", str(max_depth), "--resolution", f"{w}x{h}",
+           "--spp", str(spp), "--seed", str(seed), "--threads", "2"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+    if proc.returncode != 0 or not out.is_file():
+        raise AssertionError(f"`{' '.join(cmd)}` exited {proc.returncode}:\n{proc.stderr[-3000:]}")
+    return out
+
+
+# ------------------------------------------------------------------------------------------
+# scenes of this suite
+
+
+def _emissive_checker_material(name: str, tiles: int, px_per_tile: int = 8, bright: float = 1.0):
+    """An emission-only material whose emission is a sRGB 8-bit checkerboard image (Closest)."""
+    import numpy as np
+
+    b = bpy()
+    size = tiles * px_per_tile
+    ij = np.indices((size, size)) // px_per_tile
+    val = np.where((ij[0] + ij[1]) % 2 == 0, 1.0, 0.08).astype(np.float32)
+    img = b.data.images.new(f"{name}Checker", size, size, alpha=False)
+    rgba = np.stack([val, val, val, np.ones_like(val)], axis=-1)
+    img.pixels.foreach_set(rgba.ravel())
+    img.colorspace_settings.name = "sRGB"
+    img.pack()
+    mat = b.data.materials.new(name)
+    if mat.node_tree is None:
+        mat.use_nodes = True
+    nt = mat.node_tree
+    bsdf = nt.nodes.get("Principled BSDF")
+    bsdf.inputs["Base Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    bsdf.inputs["Specular IOR Level"].default_value = 0.0
+    bsdf.inputs["Emission Strength"].default_value = bright
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    tex.interpolation = "Closest"
+    nt.links.new(tex.outputs["Color"], bsdf.inputs["Emission Color"])
+    return mat
+
+
+def add_camera(name: str, location, rotation_euler, lens_mm=50.0, sensor_mm=36.0):
+    b = bpy()
+    data = b.data.cameras.new(name)
+    data.lens = lens_mm
+    data.sensor_width = sensor_mm
+    data.sensor_fit = "AUTO"
+    data.clip_start = 0.01
+    data.clip_end = 1000.0
+    obj = b.data.objects.new(name, data)
+    b.context.scene.collection.objects.link(obj)
+    obj.location = location
+    obj.rotation_euler = rotation_euler
+    b.context.scene.camera = obj
+    return obj
+
+
+def set_world_colour(rgb) -> None:
+    b = bpy()
+    world = b.data.worlds.new("World")
+    if world.node_tree is None:
+        world.use_nodes = True
+    bg = world.node_tree.nodes.get("Background")
+    bg.inputs["Color"].default_value = (*rgb, 1.0)
+    bg.inputs["Strength"].default_value = 1.0
+    b.context.scene.world = world
+
+
+# Tilt-shift scene: a camera `TILT_HEIGHT_M` above an emissive checkerboard ground, pitched down
+# by `TILT_PITCH_DEG`; its axis meets the ground `TILT_HEIGHT_M / sin(pitch)` away.
+TILT_HEIGHT_M = 0.6
+TILT_PITCH_DEG = 30.0
+TILT_TILE_M = 0.05
+
+
+def build_tilt_scene(resolution=(360, 240)):
+    """Emissive checkerboard ground (no lights, black world: the only noise is the lens's), the
+    camera looking down at it. Returns the camera object."""
+    b = bpy()
+    reset_blender()
+    scene = b.context.scene
+    set_world_colour((0.0, 0.0, 0.0))
+    extent = 8.0
+    tiles = int(round(extent / TILT_TILE_M))
+    mat = _emissive_checker_material("Ground", tiles=tiles, px_per_tile=4)
+    b.ops.mesh.primitive_plane_add(size=extent, location=(0.0, extent / 2 - 0.5, 0.0))
+    ground = b.context.active_object
+    ground.name = "Ground"
+    ground.data.materials.append(mat)
+    cam = add_camera("TiltCam", (0.0, 0.0, TILT_HEIGHT_M), (math.radians(90.0 - TILT_PITCH_DEG), 0.0, 0.0))
+    scene.render.resolution_x, scene.render.resolution_y = resolution
+    scene.render.resolution_percentage = 100
+    return cam

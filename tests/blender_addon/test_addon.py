@@ -1,0 +1,534 @@
+"""The Petzval Blender add-on in real Blender (bpy 5.0.1): installed from its zip as a user
+would, rendering through the PETZVAL engine with ``bpy.ops.render.render``.
+
+- registration: the engine, ``Camera.petzval`` / ``Scene.petzval``, our panels, Blender's camera
+  panels opened to PETZVAL; disabling the add-on removes all of it;
+- the thin lens (Blender camera) render of tests/blender's comparison scene matches Cycles
+  (8x8 block z-test, as tests/blender);
+- the same scene through a library lens (double-gauss-50mm, exact trace) matches the glTF path
+  (Blender's glTF exporter + ``petzval render``): what the add-on sends is what the file gives;
+- tilt-shift: a sensor tilt chosen by the hinge rule puts the plane of focus on a ground plane
+  (sharp from near to far), the untilted lens is sharp only in a band around the focus distance;
+- an animation with a keyframed focus distance renders each frame with that frame's value;
+- cancelling stops the render within 0.5 s;
+- a broken lens file is an error report and the next render works;
+- borders (cropped and not), the Depth pass, unsupported material features listed once.
+
+Run: .venv/bin/python -m pytest tests/blender_addon -q -s
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+try:
+    import bpy  # noqa: F401
+except Exception as e:
+    pytest.skip(f"Blender's Python module cannot be imported ({type(e).__name__}: {e}); the add-on suite needs bpy==5.0.1 "
+                "on Python 3.11 (tests/run installs it)", allow_module_level=True)
+
+import addon_helpers as H  # noqa: E402
+import blender_compare as B  # noqa: E402
+import blender_scenes as S  # noqa: E402
+
+OUT = H.OUT
+SEEDS = (0, 1)
+SPP_CYCLES_REF = 256  # tests/blender's cached Cycles renders of MainCam
+SPP_THIN = 128  # add-on renders compared against them
+SPP_ROUND_TRIP = 48
+MAX_MEAN_Z2 = 1.5
+MAX_ABS_Z = 5.0
+MEAN_TOL = 0.01
+CANCEL_LATENCY_S = 0.5
+
+
+def _verdict(cmp: B.BlockComparison) -> dict:
+    z = cmp.z
+    return {"mean_z2": float(np.mean(z**2)), "max_abs_z": float(np.max(np.abs(z))), "n_over_4": int(np.sum(np.abs(z) > 4)),
+            "n_blocks": int(z.size), "rel_noise_a": cmp.rel_noise_c, "rel_noise_b": cmp.rel_noise_p}
+
+
+def _fmt(v: dict) -> str:
+    return (f"mean z² {v['mean_z2']:.3f} (≤ {MAX_MEAN_Z2}), max |z| {v['max_abs_z']:.2f} (≤ {MAX_ABS_Z}), "
+            f"|z|>4: {v['n_over_4']}/{v['n_blocks']} blocks; block noise {v['rel_noise_a']*100:.2f} % / {v['rel_noise_b']*100:.2f} %")
+
+
+def _passes(v: dict) -> bool:
+    return v["mean_z2"] <= MAX_MEAN_Z2 and v["max_abs_z"] <= MAX_ABS_Z
+
+
+# ------------------------------------------------------------------------------------------
+# scenes (module scoped: built once; tests that change them rebuild)
+
+
+@pytest.fixture(scope="module")
+def main_scene(addon):
+    workdir = OUT / "main"
+    H.build_main_scene(workdir)
+    return workdir
+
+
+def _use_main_scene(workdir):
+    """Makes sure the comparison scene is the current one (another test may have replaced it)."""
+    if "MainCam" not in bpy.data.objects:
+        H.build_main_scene(workdir)
+
+
+@pytest.fixture(scope="module")
+def thin_renders(main_scene):
+    """MainCam through the add-on, thin lens (Blender's camera), seeds 0 and 1."""
+    _use_main_scene(main_scene)
+    cam = bpy.data.objects["MainCam"].data
+    cam.petzval.lens = "THIN"
+    imgs, entries = [], []
+    for seed in SEEDS:
+        H.configure_petzval(SPP_THIN, seed=seed, camera="MainCam")
+        secs, entry = H.render_still(main_scene / f"addon_thin_seed{seed}.exr")
+        entry["wall"] = secs
+        imgs.append(B.read_rgb(main_scene / f"addon_thin_seed{seed}.exr"))
+        entries.append(entry)
+    return imgs, entries
+
+
+# ------------------------------------------------------------------------------------------
+# registration
+
+
+def test_registration(addon, report):
+    import petzval
+
+    engines = {getattr(c, "bl_idname", None): c for c in bpy.types.RenderEngine.__subclasses__()}
+    assert "PETZVAL" in engines and engines["PETZVAL"].bl_label == "Petzval"
+    H.reset_blender()
+    bpy.context.scene.render.engine = "PETZVAL"
+    assert bpy.context.scene.render.engine == "PETZVAL"
+
+    cam = bpy.data.cameras.new("RegCam")
+    props = {p.identifier for p in cam.petzval.bl_rna.properties}
+    assert {"lens", "lens_file", "lens_model", "tolerance_px", "tilt_x", "tilt_y", "aperture_image"} <= props, props
+    lens_items = {e.identifier for e in cam.petzval.bl_rna.properties["lens"].enum_items}
+    library = {e["name"] for e in petzval.library_lenses()}
+    assert library and library <= lens_items, library - lens_items
+    assert {"THIN", "PINHOLE", "FILE"} <= lens_items
+    assert cam.petzval.lens == "THIN" and cam.petzval.tolerance_px == pytest.approx(0.25)
+    cam.petzval.lens = "double-gauss-50mm"
+    scene_props = {p.identifier for p in bpy.context.scene.petzval.bl_rna.properties}
+    assert {"samples", "seed", "max_bounces", "filter_width", "natural_vignetting", "spectral"} <= scene_props
+
+    for panel in ("PETZVAL_PT_camera_lens", "PETZVAL_PT_camera_tilt", "PETZVAL_PT_sampling", "PETZVAL_PT_passes"):
+        assert hasattr(bpy.types, panel), panel
+    builtin = ("DATA_PT_lens", "DATA_PT_camera", "DATA_PT_camera_dof", "DATA_PT_camera_dof_aperture", "DATA_PT_EEVEE_light",
+               "DATA_PT_spot", "RENDER_PT_format", "RENDER_PT_output", "RENDER_PT_frame_range", "RENDER_PT_color_management",
+               "EEVEE_MATERIAL_PT_surface", "EEVEE_WORLD_PT_surface")
+    missing = [p for p in builtin if "PETZVAL" not in getattr(bpy.types, p).COMPAT_ENGINES]
+    assert not missing, f"built-in panels not shown for PETZVAL: {missing}"
+
+    # disabling the add-on takes all of it away; enabling brings it back
+    import addon_utils
+
+    addon_utils.disable(H.ADDON_MODULE, default_set=True)
+    try:
+        with pytest.raises(TypeError):
+            bpy.context.scene.render.engine = "PETZVAL"
+        assert not hasattr(bpy.types, "PETZVAL_PT_camera_lens")
+        leftover = [p for p in builtin if "PETZVAL" in getattr(bpy.types, p).COMPAT_ENGINES]
+        assert not leftover, f"PETZVAL left in COMPAT_ENGINES after unregister: {leftover}"
+        assert not hasattr(bpy.types.Camera, "petzval")
+    finally:
+        H.ensure_enabled()
+    assert hasattr(bpy.types, "PETZVAL_PT_camera_lens") and "PETZVAL" in bpy.types.DATA_PT_lens.COMPAT_ENGINES
+    report.line(f"registration: engine PETZVAL, {len(library)} library lenses in the lens menu, "
+                f"{sum('PETZVAL' in getattr(getattr(bpy.types, n), 'COMPAT_ENGINES', ()) for n in dir(bpy.types))} panels list PETZVAL")
+
+
+# ------------------------------------------------------------------------------------------
+# images
+
+
+def test_thin_lens_matches_cycles(main_scene, thin_renders, report):
+    """Blender's camera through the add-on (thin lens) against Cycles on tests/blender's scene:
+    same camera (50 mm, f/2.8, focus 1.5 m, 6 blades at 10°), lights, materials and world."""
+    cyc = [B.read_rgb(H.cycles_reference(S.MAIN_CAM.name, s, SPP_CYCLES_REF)) for s in SEEDS]
+    pz, entries = thin_renders
+    kw = entries[0]["kwargs"]
+    assert kw["lens"] == "thin" and kw["fstop"] == pytest.approx(2.8) and kw["focus_distance_m"] == pytest.approx(1.5)
+    assert kw["aperture_blades"] == 6 and kw["aperture_rotation_rad"] == pytest.approx(math.radians(10), abs=1e-6)
+    assert kw["max_depth"] == S.PETZVAL_MAX_DEPTH
+    notes = entries[0]["notes"]
+    assert not notes["unsupported"], f"the comparison scene should translate fully: {notes['unsupported']}"
+    cmp = B.compare_blocks(cyc[0], cyc[1], pz[0], pz[1])
+    v = _verdict(cmp)
+    ratio = B.mean_ratio((pz[0] + pz[1]) / 2, (cyc[0] + cyc[1]) / 2)
+    w, h = S.RESOLUTION
+    report.line(f"thin lens vs Cycles, MainCam {w}x{h}: add-on {SPP_THIN} spp x seeds {SEEDS} "
+                f"({entries[0]['wall']:.1f} s per F12, render {entries[0]['seconds_render']:.1f} s, scene {entries[0]['seconds_scene']*1e3:.0f} ms, "
+                f"{entries[0]['triangles']} triangles), Cycles {SPP_CYCLES_REF} spp (cached)")
+    report.line(f"  blocks: {_fmt(v)}")
+    report.line(f"  image mean add-on/Cycles R,G,B: {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f} (±{MEAN_TOL*100:.0f} %)")
+    assert np.all(np.abs(ratio - 1) <= MEAN_TOL), f"image mean ratio {ratio}"
+    assert _passes(v), f"blocks differ beyond noise: {_fmt(v)}"
+
+
+def test_real_lens_round_trip_matches_gltf_path(main_scene, report):
+    """MainCam through double-gauss-50mm (exact trace, f/2.8, focus 1.5 m, 6 blades): the add-on's
+    in-memory scene against Blender's glTF export rendered by `petzval render` with the same
+    camera options: the same image within noise."""
+    _use_main_scene(main_scene)
+    cam = bpy.data.objects["MainCam"].data
+    cam.petzval.lens = "double-gauss-50mm"
+    cam.petzval.lens_model = "EXACT"
+    try:
+        addon_imgs = []
+        for seed in SEEDS:
+            H.configure_petzval(SPP_ROUND_TRIP, seed=seed, camera="MainCam")
+            secs, entry = H.render_still(main_scene / f"addon_dg_seed{seed}.exr")
+            addon_imgs.append(B.read_rgb(main_scene / f"addon_dg_seed{seed}.exr"))
+        assert entry["kwargs"]["lens"] == "double-gauss-50mm" and entry["lens_model"] == "exact"
+        glb = S.export_glb(main_scene / "scene.glb")
+        args = ["--camera", "MainCam", "--lens", "double-gauss-50mm", "--lens-model", "exact",
+                "--fstop", S._num(cam.dof.aperture_fstop), "--focus", S._num(cam.dof.focus_distance),
+                "--aperture", f"blades:{cam.dof.aperture_blades}:{S._num(math.degrees(cam.dof.aperture_rotation))}",
+                "--sensor-width", S._num(cam.sensor_width), "--natural-vignetting", "off", "--filter-width", "1.5"]
+        t0 = time.perf_counter()
+        cli_imgs = [B.read_rgb(H.petzval_cli_render(glb, args, main_scene / f"cli_dg_seed{s}.exr", SPP_ROUND_TRIP, s,
+                                                    S.RESOLUTION, S.world_rgb_arg(), S.PETZVAL_MAX_DEPTH)) for s in SEEDS]
+        t_cli = (time.perf_counter() - t0) / len(SEEDS)
+    finally:
+        cam.petzval.lens = "THIN"
+        cam.petzval.lens_model = "AUTO"
+    cmp = B.compare_blocks(cli_imgs[0], cli_imgs[1], addon_imgs[0], addon_imgs[1])
+    v = _verdict(cmp)
+    ratio = B.mean_ratio((addon_imgs[0] + addon_imgs[1]) / 2, (cli_imgs[0] + cli_imgs[1]) / 2)
+    report.line(f"round trip, double-gauss-50mm exact, MainCam {SPP_ROUND_TRIP} spp x seeds {SEEDS}: add-on {secs:.1f} s per F12, "
+                f"CLI on the exported GLB {t_cli:.1f} s per render")
+    report.line(f"  blocks add-on vs glTF path: {_fmt(v)}; image mean ratio R,G,B {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f}")
+    assert np.all(np.abs(ratio - 1) <= MEAN_TOL), f"image mean ratio {ratio}"
+    assert _passes(v), f"the add-on and the glTF path differ beyond noise: {_fmt(v)}"
+
+
+# ------------------------------------------------------------------------------------------
+# tilt-shift
+
+
+def _row_sharpness(img: np.ndarray, smooth: int = 5) -> np.ndarray:
+    """Per image row: mean |horizontal luminance gradient| over the central 80 % of the columns,
+    averaged over `smooth` neighbouring rows."""
+    lum = B.luminance(img)
+    w = lum.shape[1]
+    g = np.abs(np.diff(lum[:, w // 10: w - w // 10], axis=1)).mean(axis=1)
+    k = np.ones(smooth) / smooth
+    return np.convolve(g, k, mode="same")
+
+
+def _ground_coc_px(rows: int, pitch_mm: float, efl_mm: float, fstop: float, focus_m: float) -> np.ndarray:
+    """Thin-lens circle of confusion (pixels) of the ground seen through the centre column of
+    each row, for the untilted camera of H.build_tilt_scene focused at `focus_m`."""
+    f = efl_mm
+    s = focus_m * 1e3
+    v = f * s / (s - f)
+    y = ((np.arange(rows) + 0.5) - rows / 2) * pitch_mm  # + downwards
+    phi = np.arctan(y / v)  # angle below the axis
+    below = math.radians(H.TILT_PITCH_DEG) + phi
+    d = H.TILT_HEIGHT_M * 1e3 / np.sin(below) * np.cos(phi)  # depth along the axis
+    vd = f * d / (d - f)
+    return (f / fstop) * np.abs(vd - v) / vd / pitch_mm
+
+
+def test_tilt_shift_hinge_rule(addon, report):
+    """Ground plane, camera 0.6 m up pitched 30° down through double-gauss-50mm at f/2.1, focused
+    where the axis meets the ground (1.2 m). The hinge rule: the plane of focus passes through the
+    hinge line f / sin(tilt) from the lens, in the lens plane; the ground meets the lens plane
+    h / cos(pitch) below the lens, so tilt = asin(f cos(pitch) / h) lays the plane of focus on
+    the ground. Sharpness per image row (horizontal gradient energy relative to an f/22 render
+    of the same tilt) must then be high from the nearest to the farthest row, while the untilted
+    lens is sharp only in a band around the predicted in-focus row, and the opposite tilt
+    narrows that band."""
+    import petzval
+
+    W, Hh = 300, 200
+    spp = 48
+    cam_obj = H.build_tilt_scene((W, Hh))
+    cam = cam_obj.data
+    info = petzval.Lens("double-gauss-50mm").info()
+    efl = float(info["efl_mm"])
+    focus = H.TILT_HEIGHT_M / math.sin(math.radians(H.TILT_PITCH_DEG))
+    tilt = math.asin(efl * 1e-3 * math.cos(math.radians(H.TILT_PITCH_DEG)) / H.TILT_HEIGHT_M)
+    cam.petzval.lens = "double-gauss-50mm"
+    cam.dof.use_dof = True
+    cam.dof.focus_distance = focus
+    cam.dof.aperture_blades = 0
+    H.configure_petzval(spp, seed=0, max_bounces=0, camera="TiltCam")
+
+    def shot(tag, tilt_rad, fstop):
+        cam.petzval.tilt_x = tilt_rad
+        cam.dof.aperture_fstop = fstop
+        path = OUT / "tilt" / f"{tag}.exr"
+        secs, entry = H.render_still(path)
+        return B.read_rgb(path), secs, entry
+
+    imgs, times, models = {}, {}, {}
+    for tag, t, n in (("untilted", 0.0, 2.1), ("untilted_f22", 0.0, 22.0), ("tilted", tilt, 2.1), ("tilted_f22", tilt, 22.0),
+                      ("reverse", -tilt, 2.1), ("reverse_f22", -tilt, 22.0)):
+        imgs[tag], times[tag], entry = shot(tag, t, n)
+        models[tag] = entry.get("lens_model")
+        assert entry["kwargs"]["tilt_x_deg"] == pytest.approx(math.degrees(t))
+    ratio = {k: _row_sharpness(imgs[k]) / np.maximum(_row_sharpness(imgs[k + "_f22"]), 1e-9) for k in ("untilted", "tilted", "reverse")}
+    pitch = cam.sensor_width / W
+    coc = _ground_coc_px(Hh, pitch, efl, 2.1, focus)
+    rows = slice(4, Hh - 4)  # the smoothing window's edges left out
+    r_idx = np.arange(Hh)[rows]
+    sharp = {k: float(np.mean(v[rows] > 0.75)) for k, v in ratio.items()}
+    peak_row = int(r_idx[np.argmax(ratio["untilted"][rows])])
+    pred_row = int(r_idx[np.argmin(coc[rows])])
+    band_pred = float(np.mean(coc[rows] < 1.0))
+    blurred = coc[rows] > 3.0
+    report.line(f"tilt-shift, double-gauss-50mm (EFL {efl:.2f} mm) f/2.1 at {focus:.2f} m, camera {H.TILT_HEIGHT_M} m up pitched "
+                f"{H.TILT_PITCH_DEG:.0f}° down, {W}x{Hh} {spp} spp: hinge-rule tilt {math.degrees(tilt):.3f}° "
+                f"(lens models {sorted(set(models.values()))}, {np.mean(list(times.values())):.1f} s per F12)")
+    report.line(f"  rows sharp (gradient ≥ 0.75 of f/22): untilted {sharp['untilted']*100:.0f} % (thin-lens CoC < 1 px on "
+                f"{band_pred*100:.0f} % of rows; peak at row {peak_row}, predicted {pred_row}), tilted {sharp['tilted']*100:.0f} %, "
+                f"reverse tilt {sharp['reverse']*100:.0f} %; min ratio tilted {ratio['tilted'][rows].min():.2f}, "
+                f"untilted on rows with CoC > 3 px: median {np.median(ratio['untilted'][rows][blurred]):.2f}")
+    assert abs(peak_row - pred_row) <= 0.05 * Hh, f"untilted sharpest row {peak_row}, predicted {pred_row}"
+    assert sharp["untilted"] < 0.5, f"untilted lens sharp on {sharp['untilted']*100:.0f} % of rows"
+    assert np.median(ratio["untilted"][rows][blurred]) < 0.6
+    assert sharp["tilted"] > 0.9, f"hinge-rule tilt sharp on only {sharp['tilted']*100:.0f} % of rows"
+    assert ratio["tilted"][rows].min() > 0.6
+    assert sharp["reverse"] < sharp["untilted"]
+
+
+# ------------------------------------------------------------------------------------------
+# animation, cancel, errors
+
+
+def test_focus_animation_renders_each_frame(main_scene, report):
+    """dof.focus_distance keyframed over frames 1–3; `render(animation=True)` writes three files,
+    each rendered with its frame's focus distance, and they differ."""
+    _use_main_scene(main_scene)
+    scene = bpy.context.scene
+    H.configure_petzval(16, seed=0, camera="MainCam")
+    cam = bpy.data.objects["MainCam"].data
+    cam.petzval.lens = "THIN"
+    dof = cam.dof
+    focus = {1: 0.6, 2: 1.5, 3: 6.0}
+    for frame, dist in focus.items():
+        dof.focus_distance = dist
+        dof.keyframe_insert("focus_distance", frame=frame)
+    scene.frame_start, scene.frame_end = 1, 3
+    pct = scene.render.resolution_percentage
+    scene.render.resolution_percentage = 40
+    outdir = OUT / "animation"
+    for old in outdir.glob("*.exr"):
+        old.unlink()
+    scene.render.filepath = str(outdir / "frame_")
+    mod = H.ensure_enabled()
+    try:
+        with H.quiet(OUT / "blender.log"):
+            t0 = time.perf_counter()
+            bpy.ops.render.render(animation=True)
+            secs = time.perf_counter() - t0
+        entries = mod.engine.RENDER_LOG[-3:]
+    finally:
+        cam.animation_data_clear()
+        dof.focus_distance = S.MAIN_CAM.focus_m
+        scene.render.resolution_percentage = pct
+        scene.frame_set(1)
+    files = sorted(outdir.glob("frame_*.exr"))
+    assert [f.name for f in files] == ["frame_0001.exr", "frame_0002.exr", "frame_0003.exr"], files
+    assert [e["frame"] for e in entries] == [1, 2, 3]
+    for e in entries:
+        assert e["error"] is None
+        assert e["kwargs"]["focus_distance_m"] == pytest.approx(focus[e["frame"]], rel=1e-6)
+        assert (e["kwargs"]["width"], e["kwargs"]["height"]) == (96, 64)
+    imgs = [B.read_rgb(f) for f in files]
+    assert imgs[0].shape == (64, 96, 3)
+    diffs = [float(np.mean(np.abs(imgs[i] - imgs[j]))) / float(np.mean(imgs[0])) for i, j in ((0, 1), (1, 2), (0, 2))]
+    report.line(f"animation: 3 frames (focus 0.6, 1.5, 6 m) at 96x64 in {secs:.1f} s; mean |Δ| between frames "
+                + ", ".join(f"{d*100:.1f} %" for d in diffs) + " of the mean")
+    assert min(diffs) > 0.02, f"frames barely differ: {diffs}"
+
+
+def test_cancel_is_prompt(main_scene, report):
+    """A render that would take minutes, cancelled (test_break True) 1.5 s in: render() must
+    return within 0.5 s with what converged."""
+    _use_main_scene(main_scene)
+    H.configure_petzval(50000, seed=0, camera="MainCam")
+    bpy.data.objects["MainCam"].data.petzval.lens = "THIN"
+    mod = H.ensure_enabled()
+    cls = mod.engine.PetzvalRenderEngine
+    state = {"t0": None, "t_true": None, "calls": 0}
+
+    def fake_stop(self):
+        now = time.perf_counter()
+        state["calls"] += 1
+        if state["t0"] is None:
+            state["t0"] = now
+        if now - state["t0"] >= 1.5:
+            if state["t_true"] is None:
+                state["t_true"] = now
+            return True
+        return False
+
+    original = cls.__dict__["_should_stop"]
+    cls._should_stop = fake_stop
+    try:
+        t_start = time.perf_counter()
+        with H.quiet(OUT / "blender.log"):
+            bpy.ops.render.render()
+        t_op = time.perf_counter()
+    finally:
+        cls._should_stop = original
+    entry = mod.engine.RENDER_LOG[-1]
+    assert entry["error"] is None, entry["error"]
+    assert state["t_true"] is not None, "the engine never polled for cancel after 1.5 s"
+    latency = entry["returned"] - state["t_true"]
+    latency_op = t_op - state["t_true"]
+    report.line(f"cancel: stop requested {state['t_true'] - t_start:.2f} s into F12; engine.render returned {latency*1e3:.0f} ms later, "
+                f"bpy.ops.render.render {latency_op*1e3:.0f} ms later; {entry.get('spp')} spp kept (complete={entry.get('complete')}), "
+                f"{state['calls']} polls")
+    assert latency < CANCEL_LATENCY_S, f"render() returned {latency:.3f} s after the cancel"
+    assert entry.get("complete") is False or entry.get("cancelled")
+
+
+def test_broken_lens_file_is_reported_and_blender_goes_on(main_scene, report, tmp_path):
+    _use_main_scene(main_scene)
+    H.configure_petzval(4, seed=0, camera="MainCam")
+    scene = bpy.context.scene
+    pct = scene.render.resolution_percentage
+    scene.render.resolution_percentage = 25
+    cam = bpy.data.objects["MainCam"].data
+    bad = tmp_path / "broken-lens.toml"
+    bad.write_text('[lens]\nname = "broken"\n\n[[surface]]\nradius_mm = "not a number"\nthickness_mm = 2.0\n')
+    cam.petzval.lens = "FILE"
+    cam.petzval.lens_file = str(bad)
+    mod = H.ensure_enabled()
+    messages = []
+    try:
+        for path in (bad, tmp_path / "missing-lens.toml"):
+            cam.petzval.lens_file = str(path)
+            raised = None
+            try:
+                with H.quiet(OUT / "blender.log"):
+                    bpy.ops.render.render()
+            except RuntimeError as e:  # the ERROR report, raised by the operator call
+                raised = str(e)
+            entry = mod.engine.RENDER_LOG[-1]
+            assert entry["error"], "a broken lens file rendered without an error"
+            assert path.name in entry["error"], f"the error does not name the file: {entry['error']}"
+            messages.append(entry["error"])
+            report.line(f"broken lens ({path.name}): error '{entry['error']}'; operator raised: {bool(raised)}")
+        cam.petzval.lens = "THIN"
+        with H.quiet(OUT / "blender.log"):
+            bpy.ops.render.render()
+        entry = mod.engine.RENDER_LOG[-1]
+        assert entry["error"] is None and entry.get("complete") is True, entry
+    finally:
+        cam.petzval.lens = "THIN"
+        cam.petzval.lens_file = ""
+        scene.render.resolution_percentage = pct
+
+
+# ------------------------------------------------------------------------------------------
+# borders, depth, unsupported features
+
+
+def _depth_scene():
+    """A 4 m wide emissive wall 3 m in front of the camera (and nothing else)."""
+    H.reset_blender()
+    H.set_world_colour((0.0, 0.0, 0.0))
+    mat = bpy.data.materials.new("Wall")
+    bsdf = mat.node_tree.nodes.get("Principled BSDF")
+    bsdf.inputs["Base Color"].default_value = (0, 0, 0, 1)
+    bsdf.inputs["Emission Color"].default_value = (1, 1, 1, 1)
+    bsdf.inputs["Emission Strength"].default_value = 1.0
+    bpy.ops.mesh.primitive_plane_add(size=4.0, location=(0.0, 3.0, 0.0), rotation=(math.radians(90), 0, 0))
+    bpy.context.active_object.data.materials.append(mat)
+    cam = H.add_camera("DepthCam", (0.0, 0.0, 0.0), (math.radians(90), 0.0, 0.0), lens_mm=20.0)
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y = 80, 60
+    return cam
+
+
+def test_border_crop_and_depth_pass(addon, report):
+    """Render border cropped and not cropped; the Depth pass reaches Blender's compositor."""
+    _depth_scene()
+    scene = bpy.context.scene
+    H.configure_petzval(4, seed=0, camera="DepthCam")
+    full, _ = H.render_still(OUT / "border" / "full.exr")
+    img_full = B.read_exr(OUT / "border" / "full.exr")
+    r = scene.render
+    r.use_border = True
+    r.border_min_x, r.border_max_x, r.border_min_y, r.border_max_y = 0.25, 0.75, 0.5, 1.0
+    try:
+        r.use_crop_to_border = True
+        _, e_crop = H.render_still(OUT / "border" / "crop.exr")
+        crop = B.read_exr(OUT / "border" / "crop.exr")
+        r.use_crop_to_border = False
+        _, e_win = H.render_still(OUT / "border" / "window.exr")
+        win = B.read_exr(OUT / "border" / "window.exr")
+    finally:
+        r.use_border = False
+    assert tuple(e_crop["kwargs"]["crop"]) == (20, 0, 60, 30)
+    assert crop["R"].shape == (30, 40), crop["R"].shape
+    assert win["R"].shape == (60, 80), win["R"].shape
+    # the window is the top half, middle columns (border y from 0.5 to 1 is the top: Blender's y is up)
+    np.testing.assert_allclose(win["R"][0:30, 20:60], crop["R"], rtol=1e-6, atol=1e-7)
+    assert np.all(win["A"][30:, :] == 0) and np.all(win["A"][:, :20] == 0), "outside the border should stay empty"
+    np.testing.assert_allclose(crop["R"], img_full["R"][0:30, 20:60], rtol=0.3, atol=0.05)
+
+    # Depth through the compositor's File Output node (Blender 5 writes passes that way)
+    bpy.context.view_layer.use_pass_z = True
+    tree = bpy.data.node_groups.new("Comp", "CompositorNodeTree")
+    scene.compositing_node_group = tree
+    rl = tree.nodes.new("CompositorNodeRLayers")
+    fo = tree.nodes.new("CompositorNodeOutputFile")
+    fo.file_output_items.new("FLOAT", "Depth")
+    outdir = OUT / "depth"
+    for old in outdir.glob("*.exr"):
+        old.unlink()
+    fo.directory = str(outdir)
+    fo.file_name = "depth_"
+    fo.format.media_type = "IMAGE"
+    fo.format.file_format = "OPEN_EXR"
+    fo.format.color_depth = "32"
+    tree.links.new(rl.outputs["Depth"], fo.inputs["Depth"])
+    scene.render.use_compositing = True
+    with H.quiet(OUT / "blender.log"):
+        bpy.ops.render.render()
+    files = list(outdir.glob("*.exr"))
+    assert files, "the compositor wrote no depth file"
+    z = B.read_exr(files[0])["R"]
+    centre = float(z[30, 40])
+    corner = float(z[0, 0])
+    report.line(f"border: cropped 40x30 window = the same window of the uncropped border render; Depth pass: centre {centre:.4f} m "
+                f"(wall at 3 m), corner {corner:.4g} (background)")
+    assert centre == pytest.approx(3.0, abs=2e-3)
+    assert corner >= 1e9
+
+
+def test_unsupported_features_listed_once(addon, report):
+    """A Glass BSDF and a Principled BSDF with coat on two objects each: one WARNING listing each
+    unsupported thing once, and the render still completes."""
+    _depth_scene()
+    H.configure_petzval(2, seed=0, camera="DepthCam")
+    glass = bpy.data.materials.new("GlassMat")
+    nt = glass.node_tree
+    nt.nodes.remove(nt.nodes.get("Principled BSDF"))
+    g = nt.nodes.new("ShaderNodeBsdfGlass")
+    nt.links.new(g.outputs[0], nt.nodes.get("Material Output").inputs["Surface"])
+    coat = bpy.data.materials.new("CoatMat")
+    coat.node_tree.nodes.get("Principled BSDF").inputs["Coat Weight"].default_value = 0.5
+    for i, m in enumerate((glass, glass, coat, coat)):
+        bpy.ops.mesh.primitive_cube_add(size=0.3, location=(-0.9 + 0.6 * i, 2.5, 0.0))
+        bpy.context.active_object.data.materials.append(m)
+    _, entry = H.render_still(OUT / "unsupported.exr")
+    unsupported = entry["notes"]["unsupported"]
+    report.line(f"unsupported features reported once: {unsupported}")
+    assert len(unsupported) == len(set(unsupported)) == 2, unsupported
+    assert any("GlassMat" in u and "Glass" in u for u in unsupported)
+    assert any("CoatMat" in u and "Coat" in u for u in unsupported)
+    assert entry.get("complete") is True
