@@ -5,10 +5,9 @@ use glam::{DAffine3, DVec2, DVec3};
 use indicatif::{ProgressBar, ProgressStyle};
 use petzval_renderer::film::{write_exr, write_png, ExrLayers, Metadata, PixelFilter, ToneMap};
 use petzval_renderer::integrator::RenderScene;
-use petzval_renderer::render::{render, CameraRig, RenderSettings};
+use petzval_renderer::render::{render, scene_depth_range_m, CameraRig, RenderSettings};
 use petzval_renderer::scene::{demo, gltf_load, Environment, Scene, SceneCamera};
-use petzval_renderer::optics::lrtf::{BakeOptions, LrtfTable};
-use petzval_renderer::{load_lens, Aperture, ApertureMask, ApertureShape, Camera, Error, LrtfCamera, PinholeCamera, RealisticCamera, Sensor, ThickLensCamera, ThinLensCamera};
+use petzval_renderer::{load_lens, Aperture, ApertureMask, ApertureShape, Camera, CameraSpec, Error, LensModel, Sensor, ShotContext};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -31,10 +30,14 @@ pub struct RenderArgs {
     /// Lens: a library name, a lens file, `thin` or `pinhole` (default: thin for scene files, the demo's lens for the demo).
     #[arg(long)]
     pub lens: Option<String>,
-    /// Lens model for real lenses: exact (trace every surface), lrtf[:RESOLUTION] (a ray
-    /// transfer table baked now, default resolution 96), or thick (thick-lens approximation).
-    #[arg(long, default_value = "exact")]
+    /// Lens model: auto (the cheapest model within --tolerance of the exact trace at this
+    /// resolution), exact (trace every surface), lrtf[:RESOLUTION] (a ray transfer table,
+    /// default resolution 96), thick, thin or pinhole.
+    #[arg(long, default_value = "auto")]
     pub lens_model: String,
+    /// Error budget of --lens-model auto, in pixels at the render's resolution.
+    #[arg(long, default_value_t = 0.25)]
+    pub tolerance: f64,
     /// Use this baked LRTF table (`petzval lrtf bake`) with --lens-model lrtf.
     #[arg(long)]
     pub lrtf_file: Option<PathBuf>,
@@ -238,58 +241,56 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         let tan_half_y = (scene_cam.yfov_rad as f64 * 0.5).tan();
         if width >= height { 0.5 * sw / (tan_half_y * aspect) } else { 0.5 * sh / tan_half_y }
     };
-    let (camera, lens_label, focal_mm, f_number) = match lens_name.as_str() {
-        "pinhole" => {
-            let f = args.focal_length.unwrap_or_else(fov_focal);
-            let mut c = PinholeCamera::new(sensor, f)?;
-            c.natural_vignetting = vignetting;
-            (Camera::Pinhole(c), "pinhole".to_string(), f, f64::INFINITY)
-        }
-        "thin" => {
-            let f = args.focal_length.unwrap_or_else(fov_focal);
-            let n = fstop.unwrap_or(2.8);
-            let mut c = ThinLensCamera::new(sensor, f, n, focus_m, aperture.clone().unwrap_or_default())?;
-            c.natural_vignetting = vignetting;
-            (Camera::ThinLens(c), "thin".to_string(), f, n)
-        }
-        name => {
-            if args.focal_length.is_some() {
-                eprintln!("note: --focal-length is ignored for a real lens; '{name}' brings its own focal length");
-            }
-            let mut lens = load_lens(name)?;
-            if let Some(n) = fstop {
-                lens = lens.stopped_down(n)?;
-            }
-            if let Some(a) = &aperture {
-                lens = lens.with_aperture(a.clone());
-            }
-            let f = lens.paraxial().efl_mm;
-            let n = lens.paraxial().f_number;
-            let label = lens.name().to_string();
-            let cam = match args.lens_model.as_str() {
-                "exact" => Camera::Realistic(RealisticCamera::new(sensor, lens, focus_m)?),
-                m if m == "lrtf" || m.starts_with("lrtf:") => {
-                    let table = match &args.lrtf_file {
-                        Some(path) => LrtfTable::load(path, &lens)?,
-                        None => {
-                            let res: u32 = match m.strip_prefix("lrtf:") {
-                                Some(r) => r.parse().map_err(|_| camera_err("lens_model", format!("expected lrtf:RESOLUTION, got '{m}'")))?,
-                                None => 96,
-                            };
-                            let t0 = std::time::Instant::now();
-                            let t = LrtfTable::bake(&lens, &BakeOptions { resolution: res, ..BakeOptions::default() }, &|_| {})?;
-                            eprintln!("lrtf: baked {res}³ table for {} in {:.2} s ({:.1} MiB)", lens.name(), t0.elapsed().as_secs_f64(), t.data_bytes() as f64 / (1 << 20) as f64);
-                            t
-                        }
-                    };
-                    Camera::Lrtf(LrtfCamera::new(sensor, lens, focus_m, Arc::new(table))?)
-                }
-                "thick" => Camera::ThickLens(ThickLensCamera::new(sensor, &lens, None, focus_m, aperture.clone().unwrap_or_else(|| lens.aperture().clone()))?),
-                m => return Err(camera_err("lens_model", format!("expected exact, lrtf[:RESOLUTION] or thick, got '{m}'"))),
-            };
-            (cam, label, f, n)
-        }
+    let ideal = lens_name == "thin" || lens_name == "pinhole";
+    if !ideal && args.focal_length.is_some() {
+        eprintln!("note: --focal-length is ignored for a real lens; '{lens_name}' brings its own focal length");
+    }
+    let mut model: LensModel = args.lens_model.parse()?;
+    if args.lrtf_file.is_some() && model == LensModel::Auto {
+        model = LensModel::Lrtf { resolution: petzval_renderer::camera::DEFAULT_LRTF_RESOLUTION };
+    }
+    let spec = CameraSpec {
+        lens: lens_name.clone(),
+        model,
+        tolerance_px: args.tolerance,
+        focal_length_mm: args.focal_length.unwrap_or_else(fov_focal),
+        f_number: if lens_name == "thin" { Some(fstop.unwrap_or(2.8)) } else { fstop },
+        focus_distance_m: focus_m,
+        aperture: aperture.clone(),
+        sensor,
+        natural_vignetting: vignetting,
+        lrtf_file: args.lrtf_file.clone(),
     };
+    spec.validate()?;
+    // 4. The camera: auto picks the cheapest model within the error budget for this shot.
+    let probe_focal = if ideal { spec.focal_length_mm } else { load_lens(&lens_name)?.paraxial().efl_mm };
+    let shot = ShotContext {
+        width,
+        height,
+        spp: args.spp,
+        depth_range_m: scene_depth_range_m(&render_scene, &to_world, &sensor, probe_focal),
+        spectral: args.spectral,
+    };
+    let t0 = std::time::Instant::now();
+    let built = spec.build(&shot)?;
+    if model == LensModel::Auto {
+        eprintln!("lens model: {} (auto, {:.2} s to decide) — {}", built.choice.model, t0.elapsed().as_secs_f64(), built.choice.reason);
+        for c in &built.choice.candidates {
+            eprintln!(
+                "  {:<9} max {:>9.3} px  mean {:>9.3} px  vignetting {:>6.2} %  {:>7.1} ns/ray  est. {:>8.2} s  {}",
+                c.model.to_string(),
+                c.max_error_px,
+                c.mean_error_px,
+                c.irradiance_error * 100.0,
+                c.ns_per_ray,
+                c.estimated_seconds,
+                if c.meets { "meets".to_string() } else { c.note.clone() }
+            );
+        }
+    } else if matches!(model, LensModel::Lrtf { .. }) && args.lrtf_file.is_none() {
+        eprintln!("lrtf: table baked in {:.2} s", t0.elapsed().as_secs_f64());
+    }
+    let (camera, lens_label, focal_mm, f_number) = (built.camera, built.lens_label, built.focal_length_mm, built.f_number);
     let rig = CameraRig { camera, to_world };
     if let Some(p) = rig.camera.focus_plane() {
         if let Some(j) = p.hinge_distance_m {
@@ -316,6 +317,7 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         spectral,
         time_limit: args.time_limit.map(Duration::from_secs_f64),
         filter: if args.filter_width > 0.0 { PixelFilter::BlackmanHarris { width_px: 2.0 * args.filter_width } } else { PixelFilter::Box { width_px: 1.0 } },
+        ..RenderSettings::default()
     };
     settings.validate()?;
     let interrupted = Arc::new(AtomicBool::new(false));
@@ -353,7 +355,9 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     let s = rig.camera.sensor();
     let metadata: Metadata = vec![
         ("lens".into(), lens_label.clone()),
-        ("lensModel".into(), rig.camera.model_name().into()),
+        ("lensModel".into(), built.choice.model.to_string()),
+        ("lensModelReason".into(), built.choice.reason.clone()),
+        ("lensModelTolerancePx".into(), format!("{}", args.tolerance)),
         ("focalLengthMM".into(), format!("{focal_mm:.4}")),
         ("fNumber".into(), format!("{f_number:.4}")),
         ("focusDistanceM".into(), focus_m.map(|f| format!("{f:.4}")).unwrap_or_else(|| "inf".into())),

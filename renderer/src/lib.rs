@@ -21,5 +21,5 @@ pub use optics::library::{library_lens, load_lens, LIBRARY};
 pub use optics::paraxial::ParaxialData;
 pub use optics::prescription::Prescription;
 pub mod camera;
-pub use camera::{Camera, CameraRay, FocusPlane, LrtfCamera, PinholeCamera, RealisticCamera, Sensor, ThickLensCamera, ThinLensCamera};
+pub use camera::{BuiltCamera, Camera, CameraRay, CameraSpec, FocusPlane, LensModel, ModelChoice, ShotContext, LrtfCamera, PinholeCamera, RealisticCamera, Sensor, ThickLensCamera, ThinLensCamera};
 pub use integrator::{PathSample, PathTracer, RenderScene, SurfaceHit};

@@ -11,6 +11,8 @@
 //! | `spectral` | bool: one wavelength per camera ray (lens dispersion) | — | false |
 //! | `time_limit` | optional duration; stops after the pass that crosses it | s | none |
 //! | `filter` | [`PixelFilter`] | px | Blackman–Harris spanning 3 px (Cycles' default) |
+//! | `clip_start_m`, `clip_end_m` | f64: clipping planes perpendicular to the view axis (Cycles) | m | 0, ∞ |
+//! | `crop` | optional `[x0, y0, x1, y1)` window of the frame to render (row 0 = top) | px | whole frame |
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -51,11 +53,29 @@ pub struct RenderSettings {
     pub time_limit: Option<Duration>,
     /// Pixel filter.
     pub filter: PixelFilter,
+    /// Near clipping plane distance along the view axis.
+    pub clip_start_m: f64,
+    /// Far clipping plane distance along the view axis.
+    pub clip_end_m: f64,
+    /// Render only this window `[x0, y0, x1, y1)` of the frame; the image is the window's size.
+    pub crop: Option<[u32; 4]>,
 }
 
 impl Default for RenderSettings {
     fn default() -> Self {
-        RenderSettings { width: 960, height: 640, spp: 64, seed: 0, max_depth: 8, spectral: false, time_limit: None, filter: PixelFilter::default() }
+        RenderSettings {
+            width: 960,
+            height: 640,
+            spp: 64,
+            seed: 0,
+            max_depth: 8,
+            spectral: false,
+            time_limit: None,
+            filter: PixelFilter::default(),
+            clip_start_m: 0.0,
+            clip_end_m: f64::INFINITY,
+            crop: None,
+        }
     }
 }
 
@@ -74,6 +94,14 @@ impl RenderSettings {
         }
         if self.max_depth == 0 || self.max_depth > 1024 {
             return bad("max_depth", format!("{} must be in 1..=1024", self.max_depth));
+        }
+        if !(self.clip_start_m >= 0.0 && self.clip_start_m.is_finite()) || self.clip_end_m.is_nan() || self.clip_end_m <= self.clip_start_m {
+            return bad("clip", format!("clip start {} and end {} must satisfy 0 ≤ start < end", self.clip_start_m, self.clip_end_m));
+        }
+        if let Some([x0, y0, x1, y1]) = self.crop {
+            if !(x0 < x1 && y0 < y1 && x1 <= self.width && y1 <= self.height) {
+                return bad("crop", format!("window [{x0}, {y0}, {x1}, {y1}) is empty or outside the {}x{} frame", self.width, self.height));
+            }
         }
         Ok(())
     }
@@ -99,12 +127,23 @@ pub struct RenderResult {
 /// Progress: fraction done in [0, 1]; return false to cancel.
 pub type Progress<'a> = &'a (dyn Fn(f32) -> bool + Sync);
 
+/// Called after every finished pass with the image so far and the samples per pixel done.
+pub type PassObserver<'a> = &'a (dyn Fn(&Image, u32) + Sync);
+
 /// Renders `scene` through `rig`.
 pub fn render(scene: &RenderScene, rig: &CameraRig, settings: &RenderSettings, progress: Progress) -> Result<RenderResult> {
+    render_observed(scene, rig, settings, progress, &|_, _| {})
+}
+
+/// Renders `scene` through `rig`, showing every finished pass to `on_pass` (progressive display).
+pub fn render_observed(scene: &RenderScene, rig: &CameraRig, settings: &RenderSettings, progress: Progress, on_pass: PassObserver) -> Result<RenderResult> {
     settings.validate()?;
     let start = Instant::now();
     let (w, h) = (settings.width, settings.height);
-    let mut film = Film::new(w, h);
+    let [x0, y0, x1, y1] = settings.crop.unwrap_or([0, 0, w, h]);
+    let (cw, ch) = (x1 - x0, y1 - y0);
+    let mut film = Film::new(cw, ch);
+    let (clip_near, clip_far) = (settings.clip_start_m, settings.clip_end_m);
     let filter = FilterSampler::new(settings.filter);
     let tracer = PathTracer { max_depth: settings.max_depth, ..PathTracer::default() };
     let cancelled = AtomicBool::new(false);
@@ -118,16 +157,18 @@ pub fn render(scene: &RenderScene, rig: &CameraRig, settings: &RenderSettings, p
     // 1. Progressive passes: 1, 1, 2, 4, ... samples, at most 16 spp per pass.
     let mut done = 0u32;
     let mut pass_spp = 1u32;
-    let total_work = settings.spp as f64 * h as f64;
+    let total_work = settings.spp as f64 * ch as f64;
     let rows_done = AtomicU64::new(0);
     while done < settings.spp && !cancelled.load(Ordering::Relaxed) {
         let n = pass_spp.min(settings.spp - done);
         let range = done..done + n;
-        film.pixels.par_chunks_mut(w as usize).enumerate().for_each(|(y, row)| {
+        film.pixels.par_chunks_mut(cw as usize).enumerate().for_each(|(row_index, row)| {
             if cancelled.load(Ordering::Relaxed) {
                 return;
             }
-            for (x, px) in row.iter_mut().enumerate() {
+            let y = row_index + y0 as usize;
+            for (col, px) in row.iter_mut().enumerate() {
+                let x = col + x0 as usize;
                 for s in range.clone() {
                     // 2. Camera sample: filter offset, lens point, wavelength.
                     let mut sampler = PixelSampler::new(x as u32, y as u32, s, settings.seed);
@@ -138,10 +179,12 @@ pub fn render(scene: &RenderScene, rig: &CameraRig, settings: &RenderSettings, p
                     let (lambda, lambda_weight) = if settings.spectral { spectral::sample_wavelength(u_lambda) } else { (wavelength_primary as f32, Vec3::ONE) };
                     px.samples += 1;
                     let Some(ray) = rig.camera.generate_ray(film_uv, lens_u.as_dvec2(), lambda as f64) else { continue };
-                    // 3. World ray and the path.
+                    // 3. World ray, clipping planes (along the view axis) and the path.
                     let o = rig.to_world.transform_point3(ray.origin).as_vec3();
                     let d = rig.to_world.transform_vector3(ray.direction).normalize().as_vec3();
-                    let sample = tracer.trace(scene, o, d, &mut sampler);
+                    let axial = (-ray.direction.z / ray.direction.length()).max(1e-6);
+                    let clip = ((clip_near / axial) as f32, (clip_far / axial) as f32);
+                    let sample = tracer.trace_clipped(scene, o, d, clip, &mut sampler);
                     let value = sample.radiance * lambda_weight * ray.weight as f32;
                     if !value.is_finite() || sample.dropped {
                         px.dropped += 1;
@@ -170,6 +213,7 @@ pub fn render(scene: &RenderScene, rig: &CameraRig, settings: &RenderSettings, p
         });
         if !cancelled.load(Ordering::Relaxed) {
             done += n;
+            on_pass(&film.image(), done);
         }
         pass_spp = (pass_spp * 2).min(16);
         if let Some(limit) = settings.time_limit {
@@ -189,4 +233,34 @@ pub fn render(scene: &RenderScene, rig: &CameraRig, settings: &RenderSettings, p
         camera_rays: camera_rays.load(Ordering::Relaxed),
         dropped_samples: dropped.load(Ordering::Relaxed),
     })
+}
+
+/// Nearest and farthest distance (m) at which the scene is seen through a pinhole of focal
+/// length `focal_length_mm` on `sensor` (a 32 × 24 grid of rays from the camera origin); the far
+/// end is infinite when some ray escapes. `None` when no ray hits anything. Used to size the
+/// depth of field that `--lens-model auto` must honour.
+pub fn scene_depth_range_m(scene: &RenderScene, to_world: &DAffine3, sensor: &crate::camera::Sensor, focal_length_mm: f64) -> Option<(f64, f64)> {
+    let pinhole = crate::camera::PinholeCamera::new(*sensor, focal_length_mm).ok()?;
+    let camera = Camera::Pinhole(pinhole);
+    let (mut near, mut far, mut any) = (f64::INFINITY, 0.0f64, false);
+    let (nx, ny) = (32, 24);
+    for j in 0..ny {
+        for i in 0..nx {
+            let film = DVec2::new((i as f64 + 0.5) / nx as f64, (j as f64 + 0.5) / ny as f64);
+            let Some(ray) = camera.generate_ray(film, DVec2::splat(0.5), crate::optics::glass::WAVELENGTH_D_NM) else { continue };
+            let o = to_world.transform_point3(ray.origin).as_vec3();
+            let d = to_world.transform_vector3(ray.direction).normalize().as_vec3();
+            match scene.intersect(o, d, f32::INFINITY) {
+                Some(hit) => {
+                    // distance along the view axis (the depth a lens focuses by)
+                    let z = hit.t as f64 * (-ray.direction.z);
+                    near = near.min(z);
+                    far = far.max(z);
+                    any = true;
+                }
+                None => far = f64::INFINITY,
+            }
+        }
+    }
+    any.then_some((near, far))
 }

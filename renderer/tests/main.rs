@@ -1,6 +1,7 @@
 //! Integration tests of the renderer crate (one binary; modules per area).
 
 mod aperture;
+mod auto_model;
 mod common;
 mod camera;
 mod gltf;

@@ -75,7 +75,7 @@ fn scene_of(meshes: &[Mesh], materials: Vec<Material>, env: Environment) -> Rend
 }
 
 fn settings(w: u32, h: u32, spp: u32, seed: u32, filter: PixelFilter) -> RenderSettings {
-    RenderSettings { width: w, height: h, spp, seed, max_depth: 8, spectral: false, time_limit: None, filter }
+    RenderSettings { width: w, height: h, spp, seed, max_depth: 8, spectral: false, time_limit: None, filter, ..RenderSettings::default() }
 }
 
 const BOX1: PixelFilter = PixelFilter::Box { width_px: 1.0 };

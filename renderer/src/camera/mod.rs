@@ -22,8 +22,12 @@
 //! vignetting show as falloff towards the corners.
 
 mod focus_plane;
+mod model_choice;
+mod spec;
 
 pub use focus_plane::FocusPlane;
+pub use model_choice::{CandidateReport, ModelChoice, ShotContext};
+pub use spec::{cached_lrtf, BuiltCamera, CameraSpec, LensModel, DEFAULT_LRTF_RESOLUTION};
 
 use crate::error::{Error, Result};
 use crate::optics::aperture::Aperture;
@@ -473,7 +477,12 @@ pub struct LrtfCamera {
 impl LrtfCamera {
     /// A camera through `table`, which must have been baked for `lens` and cover the sensor.
     pub fn new(sensor: Sensor, lens: Lens, focus_distance_m: Option<f64>, table: Arc<LrtfTable>) -> Result<Self> {
-        let exact = RealisticCamera::new(sensor, lens, focus_distance_m)?;
+        Self::with_exact(RealisticCamera::new(sensor, lens, focus_distance_m)?, table)
+    }
+
+    /// A camera through `table` for an exact camera already built (its pupil bounds and
+    /// exposure are reused).
+    pub fn with_exact(exact: RealisticCamera, table: Arc<LrtfTable>) -> Result<Self> {
         let h = &table.header;
         let (r, dz) = exact.sensor.extent();
         if r > h.max_film_radius_mm {

@@ -104,6 +104,13 @@ pub fn material_bsdf(scene: &RenderScene, hit: &SurfaceHit) -> (Bsdf, Vec3) {
 impl PathTracer {
     /// Traces one camera ray (`dir` need not be unit).
     pub fn trace(&self, scene: &RenderScene, origin: Vec3, dir: Vec3, sampler: &mut PixelSampler) -> PathSample {
+        self.trace_clipped(scene, origin, dir, (0.0, f32::INFINITY), sampler)
+    }
+
+    /// Traces one camera ray that sees only what lies between `clip.0` and `clip.1` along it
+    /// (clipping planes; beyond them the environment shows, as in Blender). Depth is still
+    /// measured from `origin`.
+    pub fn trace_clipped(&self, scene: &RenderScene, origin: Vec3, dir: Vec3, clip: (f32, f32), sampler: &mut PixelSampler) -> PathSample {
         let mut out = PathSample {
             radiance: Vec3::ZERO,
             alpha: 0.0,
@@ -116,7 +123,9 @@ impl PathTracer {
         if d == Vec3::ZERO || !origin.is_finite() || !d.is_finite() {
             return out;
         }
-        let mut o = origin;
+        let (t_near, t_far) = (clip.0.max(0.0), clip.1);
+        let mut o = origin + d * t_near;
+        let mut t_max = if t_far > t_near { t_far - t_near } else { 0.0 };
         let env = &scene.scene().environment;
         let mut l = Vec3::ZERO;
         let mut beta = Vec3::ONE;
@@ -127,7 +136,8 @@ impl PathTracer {
         let mut depth = 0u32;
         let nee = self.strategy != LightStrategy::BsdfOnly;
         loop {
-            let Some(hit) = scene.intersect(o, d, f32::INFINITY) else {
+            let found = if t_max > 0.0 { scene.intersect(o, d, t_max) } else { None };
+            let Some(hit) = found else {
                 let le = env_radiance(env, d);
                 if le != Vec3::ZERO {
                     let w = if depth == 0 {
@@ -153,7 +163,7 @@ impl PathTracer {
             let wo = -d;
             if depth == 0 {
                 out.alpha = 1.0;
-                out.depth_m = hit.t;
+                out.depth_m = hit.t + t_near;
                 out.albedo = base_color(scene, &hit);
                 let n = hit.shading_normal;
                 out.normal = if n.dot(wo) >= 0.0 { n } else { -n };
@@ -232,6 +242,7 @@ impl PathTracer {
             prev_n = sb.ng;
             o = hit.spawn_origin(bs.wi);
             d = bs.wi;
+            t_max = f32::INFINITY;
             depth += 1;
 
             if depth >= self.rr_start_depth {
