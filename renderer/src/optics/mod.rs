@@ -4,6 +4,7 @@
 pub mod aperture;
 pub mod glass;
 pub mod import;
+pub mod info;
 pub mod lens;
 pub mod library;
 pub mod paraxial;

@@ -1,0 +1,212 @@
+"""Petzval's native module (Rust, pyo3). Import it through the ``petzval`` package.
+
+Conventions
+-----------
+* World space is glTF's: metres, +y up, right-handed. Blender's world (+z up) maps to it by
+  ``(x, y, z) -> (x, z, -y)``; the caller converts (the add-on does).
+* Cameras look down their local -z with +y up (Blender's and glTF's camera convention).
+* Colours are linear Rec.709. Light units are Blender's: watts for point/spot power is turned
+  into radiant intensity by the caller (``intensity_w_sr = power_w / (4 pi)``), W/m^2 for sun.
+* Textures and images: row 0 is the TOP row; UVs use glTF's convention (v = 0 at the top), so
+  Blender UVs are passed as ``(u, 1 - v)`` and Blender image pixels (bottom row first) are
+  flipped vertically.
+* Every array argument may be any numeric dtype and is copied; C-contiguous float32/float64
+  arrays avoid a conversion.
+* Errors: a missing file raises ``FileNotFoundError``; everything else raises a subclass of
+  :class:`PetzvalError`. No Rust panic crosses into Python (an internal error raises
+  ``PetzvalError`` with the message).
+"""
+
+from typing import Callable, Optional, Sequence, Tuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+__version__: str
+
+class PetzvalError(Exception):
+    """Base class of every Petzval error."""
+
+class InvalidLensError(PetzvalError):
+    """A lens file or lens name is invalid (message names the file, line and field)."""
+
+class InvalidSceneError(PetzvalError):
+    """Scene data is invalid (message names the object/field)."""
+
+class InvalidSettingsError(PetzvalError):
+    """Camera or render settings are invalid (message names the field)."""
+
+class CancelledError(PetzvalError):
+    """The progress callback asked to stop (raised only when no pass completed)."""
+
+def library_lenses() -> list[dict]:
+    """The built-in lens library: ``[{"name", "description", "focal_length_mm", "f_number",
+    "source"}]`` sorted by name."""
+
+class Lens:
+    """A lens: a library name (``"double-gauss-50mm"``) or a path to a lens file
+    (``.toml``, pbrt ``.dat``, Zemax ``.zmx``, lentil ``.json``)."""
+
+    def __init__(self, name_or_path: str) -> None: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def focal_length_mm(self) -> float: ...
+    @property
+    def f_number(self) -> float: ...
+    def info(self) -> dict:
+        """Paraxial and physical data, the same keys as ``petzval lens info --json``."""
+    def trace(
+        self,
+        origins: NDArray[np.float64],
+        directions: NDArray[np.float64],
+        wavelength_nm: float = 587.5618,
+        direction: str = "film_to_scene",
+    ) -> Tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+        """Traces N rays (``(N, 3)`` arrays, lens coordinates in mm as ``petzval lens trace``)
+        through every surface. ``direction`` is ``"film_to_scene"`` or ``"scene_to_film"``.
+        Returns (origins, unit directions, passed); rows that did not pass are NaN."""
+
+class Scene:
+    """A scene assembled from buffers. Build it, then pass it to :func:`render`."""
+
+    def __init__(self) -> None: ...
+    def add_texture(self, pixels: NDArray[np.float32], name: str = "", interpolation: str = "linear", extension: str = "repeat") -> int:
+        """Adds a texture from ``(H, W, 4)`` (or ``(H, W, 3)``) LINEAR values, row 0 at the
+        top. ``interpolation``: ``"linear"`` or ``"closest"``; ``extension``: ``"repeat"``,
+        ``"clip"`` (clamp to edge) or ``"mirror"``. Returns its index."""
+    def add_material(
+        self,
+        name: str,
+        base_color: Sequence[float] = (0.8, 0.8, 0.8, 1.0),
+        metallic: float = 0.0,
+        roughness: float = 0.5,
+        ior: float = 1.5,
+        specular: float = 1.0,
+        emission: Sequence[float] = (0.0, 0.0, 0.0),
+        alpha_mode: str = "opaque",
+        alpha_cutoff: float = 0.5,
+        base_color_texture: Optional[int] = None,
+        metallic_roughness_texture: Optional[int] = None,
+        normal_texture: Optional[int] = None,
+        normal_scale: float = 1.0,
+        emission_texture: Optional[int] = None,
+        double_sided: bool = True,
+    ) -> int:
+        """Adds a glTF metallic-roughness material and returns its index.
+
+        ``specular`` is glTF's specularFactor (1 = F0 0.04 at ior 1.5; Blender's Specular IOR
+        Level 0.5 is 1, level 0 is 0). ``emission`` is emitted radiance (Blender: emission
+        colour x strength). ``alpha_mode``: ``"opaque"``, ``"blend"`` (stochastic) or
+        ``"mask"`` (cut at ``alpha_cutoff``); alpha is ``base_color[3]`` x texture alpha.
+        ``metallic_roughness_texture`` reads roughness from G and metallic from B (glTF).
+        Texture indices come from :meth:`add_texture`."""
+    def add_mesh(
+        self,
+        positions: NDArray[np.float32],
+        triangles: NDArray[np.uint32],
+        material_ids: Optional[NDArray[np.uint32]] = None,
+        normals: Optional[NDArray[np.float32]] = None,
+        uvs: Optional[NDArray[np.float32]] = None,
+        tangents: Optional[NDArray[np.float32]] = None,
+        transform: Optional[NDArray[np.float64]] = None,
+        name: str = "",
+    ) -> None:
+        """Adds a triangle mesh: ``positions (N, 3)``, ``triangles (M, 3)`` vertex indices,
+        ``material_ids (M,)`` indices into the scene's materials (default: all 0; a scene
+        without materials gets a grey default), optional per-vertex ``normals (N, 3)``
+        (computed from faces when absent), ``uvs (N, 2)`` (glTF convention), ``tangents
+        (N, 4)`` (xyz + handedness w), and ``transform`` a ``(4, 4)`` object-to-world matrix
+        (column vectors, i.e. Blender's ``matrix_world`` layout, already in glTF axes).
+        Indices out of range, non-finite values or a singular transform raise
+        InvalidSceneError naming ``name``."""
+    def add_point_light(self, position: Sequence[float], intensity_w_sr: Sequence[float], name: str = "") -> None:
+        """A point light: radiant intensity per RGB channel in W/sr."""
+    def add_spot_light(
+        self,
+        position: Sequence[float],
+        direction: Sequence[float],
+        intensity_w_sr: Sequence[float],
+        inner_cone_rad: float,
+        outer_cone_rad: float,
+        name: str = "",
+    ) -> None:
+        """A spot light pointing along ``direction``; full intensity inside the inner cone
+        half-angle, zero outside the outer (smooth in between, as glTF)."""
+    def add_sun_light(self, direction: Sequence[float], irradiance_w_m2: Sequence[float], name: str = "") -> None:
+        """A directional light travelling along ``direction``."""
+    def set_environment_color(self, rgb: Sequence[float]) -> None:
+        """A uniform environment radiance."""
+    def set_environment_map(self, pixels: NDArray[np.float32], strength: float = 1.0, rotation_rad: float = 0.0, name: str = "") -> None:
+        """An equirectangular environment ``(H, W, 3|4)``, row 0 at the top, mapped as
+        Blender's Environment Texture node maps it (see the renderer's environment docs)."""
+    @property
+    def triangle_count(self) -> int: ...
+    @property
+    def warnings(self) -> list[str]: ...
+
+ProgressCallback = Callable[[float, int, Optional[NDArray[np.float32]]], bool]
+
+def render(
+    scene: Scene,
+    camera_to_world: NDArray[np.float64],
+    width: int,
+    height: int,
+    *,
+    lens: str = "thin",
+    lens_model: str = "auto",
+    tolerance_px: float = 0.25,
+    focal_length_mm: float = 50.0,
+    sensor_width_mm: float = 36.0,
+    sensor_height_mm: float = 24.0,
+    sensor_fit: str = "auto",
+    shift_x: float = 0.0,
+    shift_y: float = 0.0,
+    tilt_x_deg: float = 0.0,
+    tilt_y_deg: float = 0.0,
+    fstop: Optional[float] = None,
+    focus_distance_m: Optional[float] = None,
+    aperture_blades: int = 0,
+    aperture_rotation_rad: float = 0.0,
+    aperture_ratio: float = 1.0,
+    aperture_image: Optional[str] = None,
+    clip_start_m: float = 0.0,
+    clip_end_m: float = float("inf"),
+    crop: Optional[Tuple[int, int, int, int]] = None,
+    spp: int = 64,
+    seed: int = 0,
+    max_depth: int = 8,
+    filter_width_px: float = 1.5,
+    natural_vignetting: bool = False,
+    spectral: bool = False,
+    threads: int = 0,
+    progress: Optional[ProgressCallback] = None,
+    progress_interval_s: float = 0.1,
+) -> dict:
+    """Renders ``scene`` and returns ``{"rgba": (H, W, 4) float32, "depth": (H, W) float32,
+    "spp": int, "complete": bool, "seconds": float, "lens_model": str, "lens_model_reason":
+    str, "warnings": list[str]}``. Row 0 of the images is the TOP row (flip for Blender's
+    render result, whose row 0 is the bottom). Depth is the distance along the camera's -z
+    axis to the first hit (Blender's Z pass), ``inf`` where nothing was hit.
+
+    The camera follows Blender's camera data: ``lens`` ``"thin"`` or ``"pinhole"`` use
+    ``focal_length_mm``; a library name or lens file brings its own focal length and f-number
+    (``fstop`` stops it down). ``sensor_fit`` is Blender's ``"auto"`` (``sensor_width_mm``
+    spans the larger image side), ``"horizontal"`` or ``"vertical"`` (``sensor_height_mm``
+    spans the height). ``shift_x``/``shift_y`` are Blender's shifts, in units of the larger
+    sensor side. ``fstop None`` means no depth of field for thin (pinhole) and the lens's own
+    f-number for real lenses. ``focus_distance_m None`` is infinity. ``aperture_blades`` 0
+    is a circle; ``aperture_rotation_rad`` and ``aperture_ratio`` are Blender's. ``lens_model``
+    ``"auto"`` picks the cheapest model within ``tolerance_px`` (pinhole, thin, thick, LRTF,
+    exact) and says why in ``lens_model_reason``; or ``"exact"``, ``"lrtf"``, ``"thick"``,
+    ``"thin"``, ``"pinhole"``. Clipping is along the view ray, as Blender does.
+
+    ``crop = (x0, y0, x1, y1)`` in pixels of the full ``width x height`` frame, row 0 at the
+    top, renders only that window (Blender's border with "crop to border"); the returned
+    arrays are the window's size.
+
+    ``progress(fraction, spp_done, rgba_or_None)`` is called from the calling thread about
+    every ``progress_interval_s`` seconds and once per finished pass with the image so far
+    (``rgba`` as above, else None); return False to cancel. A cancelled render returns what
+    converged with ``complete False`` (raises CancelledError if not even one pass finished).
+    ``threads`` 0 uses all cores. The GIL is released while rendering."""
