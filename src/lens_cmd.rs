@@ -2,7 +2,7 @@
 
 use clap::{Subcommand, ValueEnum};
 use glam::DVec3;
-use petzval_renderer::optics::{draw, paraxial, pupil};
+use petzval_renderer::optics::draw;
 use petzval_renderer::{load_lens, Error, Lens, Ray, StopMode, TraceDirection, LIBRARY};
 use serde_json::{json, Value};
 use std::io::{BufRead, Write};
