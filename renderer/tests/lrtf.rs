@@ -96,6 +96,10 @@ fn lrtf_file_round_trip_and_refusals() {
     for r in &rays {
         assert_eq!(format!("{:?}", back.lookup(r, wl)), format!("{:?}", table.lookup(r, wl)));
     }
+    // the in-memory layout (entries replicated with their σy neighbour) gives back the file's
+    // entries exactly
+    back.save(&dir.join("again.lrtf")).unwrap();
+    assert!(std::fs::read(&path).unwrap() == std::fs::read(dir.join("again.lrtf")).unwrap(), "save → load → save changed the file");
     // stale: another lens
     let other = library_lens("wide-22mm").unwrap();
     let err = LrtfTable::load(&path, &other).unwrap_err().to_string();
