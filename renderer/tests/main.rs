@@ -7,6 +7,7 @@ mod camera;
 mod gltf;
 mod import;
 mod lrtf;
+mod lrtf_cases;
 mod integrator;
 mod optics;
 mod render;

@@ -185,9 +185,11 @@ def render(
 ) -> dict:
     """Renders ``scene`` and returns ``{"rgba": (H, W, 4) float32, "depth": (H, W) float32,
     "spp": int, "complete": bool, "seconds": float, "lens_model": str, "lens_model_reason":
-    str, "warnings": list[str]}``. Row 0 of the images is the TOP row (flip for Blender's
-    render result, whose row 0 is the bottom). Depth is the distance along the camera's -z
-    axis to the first hit (Blender's Z pass), ``inf`` where nothing was hit.
+    str, "warnings": list[str], "camera_rays": int, "dropped_samples": int}``. Row 0 of the
+    images is the TOP row (flip for Blender's render result, whose row 0 is the bottom). Depth
+    is the distance from the lens along the camera ray to the first hit, averaged over the
+    pixel's samples that hit (Cycles' Z pass of a perspective camera), ``inf`` where nothing
+    was hit.
 
     The camera follows Blender's camera data: ``lens`` ``"thin"`` or ``"pinhole"`` use
     ``focal_length_mm``; a library name or lens file brings its own focal length and f-number
@@ -199,7 +201,8 @@ def render(
     is a circle; ``aperture_rotation_rad`` and ``aperture_ratio`` are Blender's. ``lens_model``
     ``"auto"`` picks the cheapest model within ``tolerance_px`` (pinhole, thin, thick, LRTF,
     exact) and says why in ``lens_model_reason``; or ``"exact"``, ``"lrtf"``, ``"thick"``,
-    ``"thin"``, ``"pinhole"``. Clipping is along the view ray, as Blender does.
+    ``"thin"``, ``"pinhole"``. ``clip_start_m``/``clip_end_m`` are planes perpendicular to
+    the view axis, as in Cycles; beyond them the world shows.
 
     ``crop = (x0, y0, x1, y1)`` in pixels of the full ``width x height`` frame, row 0 at the
     top, renders only that window (Blender's border with "crop to border"); the returned
@@ -207,6 +210,8 @@ def render(
 
     ``progress(fraction, spp_done, rgba_or_None)`` is called from the calling thread about
     every ``progress_interval_s`` seconds and once per finished pass with the image so far
-    (``rgba`` as above, else None); return False to cancel. A cancelled render returns what
+    (``rgba`` as above, else None); return ``False`` to cancel (``None`` or ``True``
+    continue). An exception raised by the callback cancels and is re-raised. A cancelled
+    render returns what
     converged with ``complete False`` (raises CancelledError if not even one pass finished).
     ``threads`` 0 uses all cores. The GIL is released while rendering."""
