@@ -316,6 +316,30 @@ def test_thin_lens_natural_vignetting_off_keeps_exposure(petzval, tmp_path):
     assert abs(means["off"] / means["on"] - 1) < 0.05, means
 
 
+def test_auto_lens_model_is_reported_in_stderr_and_metadata(petzval, tmp_path):
+    """--lens-model auto (the default) prints its choice and why, and writes both into the EXR."""
+    # A pinhole-sized thin-lens aperture: nothing to model but a pinhole.
+    r = run(petzval, ["render", "--lens", "thin", "--fstop", "5000", "--resolution", "48x32", "--spp", "2", "-o", "p.exr", "--no-png"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "lens model: pinhole (auto" in r.stderr, r.stderr
+    meta, _ = read_exr(tmp_path / "p.exr")
+    assert meta["petzval/lensModel"] == "pinhole", meta
+    assert "circle of confusion" in meta["petzval/lensModelReason"], meta["petzval/lensModelReason"]
+    assert float(meta["petzval/lensModelTolerancePx"]) == 0.25
+    # The demo's wide-open double Gauss is not reduced to a thin lens, and every cheaper
+    # candidate that failed is named with its measured error.
+    r = run(petzval, ["render", *FAST, "-o", "d.exr", "--no-png", "--tolerance", "0.1"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    meta, _ = read_exr(tmp_path / "d.exr")
+    assert meta["petzval/lensModel"] not in ("thin", "pinhole"), meta["petzval/lensModel"]
+    assert "thin (mean error" in meta["petzval/lensModelReason"], meta["petzval/lensModelReason"]
+    # An explicit model is used as given.
+    r = run(petzval, ["render", *FAST, "-o", "t.exr", "--no-png", "--lens-model", "thick"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    meta, _ = read_exr(tmp_path / "t.exr")
+    assert meta["petzval/lensModel"] == "thick" and meta["petzval/lensModelReason"] == "requested"
+
+
 # ------------------------------------------------------------------------------------------
 # Lens subcommands.
 
