@@ -349,3 +349,50 @@ fn focusing_moves_the_sensor_and_refuses_the_impossible() {
     assert!(err.contains("cannot focus"), "{err}");
 }
 
+
+/// Tracing scene → film through a lens is tracing film → scene through its reversal (mirrored
+/// in z): a film → scene ray, sent back, arrives at its film point in the reversed lens.
+#[test]
+fn reversed_lens_traces_rays_backwards() {
+    use petzval_renderer::{library_lens, Ray, TraceDirection};
+    for name in ["double-gauss-50mm", "cooke-speed-panchro-25mm", "fisheye-10mm", "aspheric-fisheye-10mm", "petzval-portrait-100mm"] {
+        let lens = library_lens(name).unwrap();
+        let rev = lens.reversed().unwrap();
+        assert_eq!(rev.surfaces().len(), lens.surfaces().len());
+        assert!((rev.paraxial().efl_mm - lens.paraxial().efl_mm).abs() < 1e-9 * lens.paraxial().efl_mm.abs(), "{name}: EFL");
+        // twice reversed: the same optics
+        let back = rev.reversed().unwrap();
+        assert!((back.paraxial().bfl_mm - lens.paraxial().bfl_mm).abs() < 1e-9, "{name}: BFL after two reversals");
+        let l = lens.last_vertex_z_mm();
+        let mirror = |v: glam::DVec3| glam::DVec3::new(v.x, v.y, l - v.z);
+        let mirror_dir = |v: glam::DVec3| glam::DVec3::new(v.x, v.y, -v.z);
+        let film_z = l + lens.focus_image_distance_mm(None).unwrap();
+        let wl = lens.primary_wavelength_nm();
+        let mut passed = 0;
+        let mut state = 99u64;
+        let mut rnd = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..4000 {
+            let p = glam::DVec3::new(12.0 * (rnd() - 0.5), 12.0 * (rnd() - 0.5), film_z);
+            let r = lens.rear_semi_diameter_mm() * rnd().sqrt();
+            let phi = std::f64::consts::TAU * rnd();
+            let target = glam::DVec3::new(r * phi.cos(), r * phi.sin(), l);
+            let din = (target - p).normalize();
+            let Some(out) = lens.trace(&Ray::new(p, din), wl, TraceDirection::FilmToScene) else { continue };
+            passed += 1;
+            // back from the scene side, mirrored into the reversed lens
+            let start = out.ray.origin + out.ray.direction * 5.0;
+            let back_ray = Ray::new(mirror(start), mirror_dir(-out.ray.direction));
+            let arrived = rev.trace(&back_ray, wl, TraceDirection::FilmToScene).unwrap_or_else(|| panic!("{name}: the reversed ray was absorbed"));
+            let o = mirror(arrived.ray.origin);
+            let d = mirror_dir(arrived.ray.direction);
+            assert!((d + din).length() < 1e-9, "{name}: direction {d} vs {}", -din);
+            // the line through o along d passes through the film point p
+            let miss = (p - o).cross(d).length();
+            assert!(miss < 1e-8, "{name}: misses the film point by {miss} mm");
+        }
+        assert!(passed > 200, "{name}: only {passed} rays to compare");
+    }
+}

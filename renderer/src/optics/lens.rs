@@ -184,6 +184,49 @@ impl Lens {
         Ok(lens)
     }
 
+    /// The same lens seen from the other side: surfaces in reverse order, mirrored in z
+    /// (radii and aspheric terms change sign), each medium moved to the other side of its
+    /// surface, the stop kept at its surface and opening. A point (x, y, z) of this lens is the
+    /// point (x, y, L − z) of the reversed one, L = [`Lens::last_vertex_z_mm`]; so tracing
+    /// scene → film here is tracing film → scene there (used for the scene → film LRTF). The
+    /// reversed lens's last thickness is its paraxial back focal length. Its name gains
+    /// " (reversed)", so tables baked for it are never mistaken for the lens's own.
+    pub fn reversed(&self) -> Result<Lens> {
+        let p = &self.prescription;
+        let n = p.surfaces.len();
+        let air = prescription::MaterialSpec::Name("air".into());
+        let mut q = p.clone();
+        q.lens.name = format!("{} (reversed)", p.lens.name);
+        q.lens.focal_length_mm = None;
+        // The stop shape is applied below (an image stop's file was resolved at load).
+        q.aperture.shape = ApertureShapeSpec::Circle;
+        q.aperture.image = None;
+        q.surfaces = (0..n)
+            .map(|i| {
+                let old = &p.surfaces[n - 1 - i];
+                let mut s = old.clone();
+                s.radius_mm = -old.radius_mm;
+                s.aspheric_r2 = -old.aspheric_r2;
+                s.aspheric = old.aspheric.iter().map(|a| -a).collect();
+                s.material = if i + 1 < n { p.surfaces[n - 2 - i].material.clone() } else { air.clone() };
+                s.thickness_mm = if i + 1 < n { p.surfaces[n - 2 - i].thickness_mm } else { 0.0 };
+                s
+            })
+            .collect();
+        let map = SourceMap::new(format!("{} (reversed)", self.source_label), vec![]);
+        let mut lens = Lens::new(q.clone(), &map, None)?;
+        // The image side: at the paraxial back focus of the reversed lens.
+        let bfl = lens.paraxial().bfl_mm;
+        if bfl.is_finite() && bfl > 0.0 {
+            if let Some(last) = q.surfaces.last_mut() {
+                last.thickness_mm = bfl;
+            }
+            lens = Lens::new(q, &map, None)?;
+        }
+        lens = lens.with_aperture(self.aperture.clone());
+        lens.with_stop_semi_diameter(self.stop_semi_diameter_mm.min(lens.max_stop_semi_diameter_mm()))
+    }
+
     /// Parses and builds a lens from our TOML text.
     pub fn from_toml(text: &str, file: &str, base_dir: Option<&Path>) -> Result<Lens> {
         let (p, map) = prescription::parse_toml(text, file)?;
