@@ -521,7 +521,8 @@ def add_area_light(pz, obj, m, colour, notes, materials) -> None:
         return
     if light.spread < math.pi - 1e-4:
         notes.warn(f"light '{obj.name}': area light spread below 180°")
-    # Cycles: radiance = power / (area * pi) for a normalized light (Lambertian, one-sided)
+    # Cycles: radiance = power / (area * pi) for a normalized light (one-sided, Lambertian); measured
+    # in Cycles 5.0: a 1 m^2 light of 100 W seen head-on reads 31.83 = 100 / pi)
     power = float(light.energy)
     radiance = colour * power / ((area if light.normalize else 1.0) * math.pi)
     mat = pz.add_material(f"{obj.name} (area light)", base_color=(0.0, 0.0, 0.0, 1.0), specular=0.0, roughness=1.0,
@@ -529,7 +530,10 @@ def add_area_light(pz, obj, m, colour, notes, materials) -> None:
     normals = np.tile(np.array([[0.0, 0.0, -1.0]], dtype=np.float32), (len(v), 1))
     pz.add_mesh(v.astype(np.float32), t, material_ids=np.full(len(t), mat, dtype=np.uint32), normals=normals,
                 transform=m, name=obj.name)
-    notes.note("area lights are rendered as emissive surfaces (visible to the camera)")
+    if not getattr(obj, "visible_camera", True):
+        notes.note("area lights are emissive surfaces here, seen by the camera (Cycles hides lights from camera rays by default)")
+    else:
+        notes.note("area lights are rendered as emissive surfaces")
 
 
 # ------------------------------------------------------------------------------------------

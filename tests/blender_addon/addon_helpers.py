@@ -172,9 +172,13 @@ def _emissive_checker_material(name: str, tiles: int, px_per_tile: int = 8, brig
     ij = np.indices((size, size)) // px_per_tile
     val = np.where((ij[0] + ij[1]) % 2 == 0, 1.0, 0.08).astype(np.float32)
     img = b.data.images.new(f"{name}Checker", size, size, alpha=False)
+    img.colorspace_settings.name = "sRGB"  # before the pixels: changing it regenerates a generated image
     rgba = np.stack([val, val, val, np.ones_like(val)], axis=-1)
     img.pixels.foreach_set(rgba.ravel())
-    img.colorspace_settings.name = "sRGB"
+    OUT.mkdir(parents=True, exist_ok=True)
+    img.filepath_raw = str(OUT / f"{name}_checker.png")
+    img.file_format = "PNG"
+    img.save()
     img.pack()
     mat = b.data.materials.new(name)
     if mat.node_tree is None:

@@ -74,6 +74,37 @@ def addon_zip() -> Path:
     return path
 
 
+def _use_the_extensions_wheel(user: Path):
+    """Makes the add-on use the ``petzval`` module of the wheel it installed, and returns the
+    add-on's package.
+
+    Blender appends the extensions' wheel directory to the END of sys.path; in real Blender
+    nothing else provides ``petzval``, but bpy-as-a-module shares this venv, where a ``petzval``
+    (pip/maturin-installed for the Python-side tests) would shadow the wheel under test. So the
+    wheel directory is moved to the front and the add-on is re-enabled with a fresh import."""
+    import addon_utils
+
+    site = user / "extensions" / ".local" / "lib" / f"python{sys.version_info[0]}.{sys.version_info[1]}" / "site-packages"
+    assert (site / "petzval").is_dir(), f"the extension's wheel was not installed into {site}"
+    import petzval
+
+    if Path(petzval.__file__).resolve().is_relative_to(site.resolve()):
+        return importlib.import_module(ADDON_MODULE)
+    addon_utils.disable(ADDON_MODULE, default_set=True)
+    while str(site) in sys.path:
+        sys.path.remove(str(site))
+    sys.path.insert(0, str(site))
+    for name in list(sys.modules):
+        if name == "petzval" or name.startswith("petzval.") or name == ADDON_MODULE or name.startswith(ADDON_MODULE + "."):
+            del sys.modules[name]
+    if addon_utils.enable(ADDON_MODULE, default_set=True) is None:
+        pytest.fail(f"re-enabling {ADDON_MODULE} with the extension's own wheel failed", pytrace=False)
+    import petzval as pz
+
+    assert Path(pz.__file__).resolve().is_relative_to(site.resolve()), pz.__file__
+    return importlib.import_module(ADDON_MODULE)
+
+
 @pytest.fixture(scope="session")
 def addon(addon_zip, report):
     import bpy  # test modules skip before this when bpy cannot be imported
@@ -93,7 +124,7 @@ def addon(addon_zip, report):
         assert result == {"FINISHED"}, result
         enabled = [a.module for a in bpy.context.preferences.addons]
         assert ADDON_MODULE in enabled, f"{ADDON_MODULE} not enabled after installing {addon_zip.name}: {enabled}"
-        module = importlib.import_module(ADDON_MODULE)
+        module = _use_the_extensions_wheel(user)
         import petzval
 
         try:
