@@ -3,6 +3,7 @@
 use clap::Subcommand;
 use indicatif::{ProgressBar, ProgressStyle};
 use petzval_renderer::optics::lrtf::{BakeOptions, LrtfTable};
+use petzval_renderer::optics::lrtf_scene::SceneToFilmTable;
 use petzval_renderer::Error;
 use std::path::PathBuf;
 
@@ -26,6 +27,10 @@ pub enum LrtfCommand {
         /// dispersive lenses).
         #[arg(long)]
         wavelengths: Option<String>,
+        /// film-to-scene (rendering) or scene-to-film (where light from the scene lands on the
+        /// film, for lens-fit; covers the lens's field plus 5°).
+        #[arg(long, default_value = "film-to-scene")]
+        direction: String,
     },
     /// Print a table's header after checking it belongs to LENS.
     Info {
@@ -39,7 +44,7 @@ pub enum LrtfCommand {
 /// Runs an LRTF subcommand.
 pub fn run(cmd: LrtfCommand) -> Result<(), Error> {
     match cmd {
-        LrtfCommand::Bake { lens, output, resolution, max_film_radius, wavelengths } => {
+        LrtfCommand::Bake { lens, output, resolution, max_film_radius, wavelengths, direction } => {
             let lens = petzval_renderer::load_lens(&lens)?;
             let wavelengths_nm = match wavelengths {
                 None => None,
@@ -56,12 +61,23 @@ pub fn run(cmd: LrtfCommand) -> Result<(), Error> {
             let bar = ProgressBar::new(1000);
             bar.set_style(ProgressStyle::with_template("baking {spinner} [{elapsed_precise}] {wide_bar} {percent}% ETA {eta}").unwrap_or_else(|_| ProgressStyle::default_bar()));
             let t0 = std::time::Instant::now();
-            let opts = BakeOptions { resolution, max_film_radius_mm: max_film_radius, min_film_distance_mm: None, wavelengths_nm };
-            let table = LrtfTable::bake(&lens, &opts, &|f| bar.set_position((f * 1000.0) as u64))?;
+            let table = match direction.as_str() {
+                "film-to-scene" => {
+                    let opts = BakeOptions { resolution, max_film_radius_mm: max_film_radius, min_film_distance_mm: None, wavelengths_nm };
+                    LrtfTable::bake(&lens, &opts, &|f| bar.set_position((f * 1000.0) as u64))?
+                }
+                "scene-to-film" => {
+                    if wavelengths_nm.is_some() {
+                        return Err(Error::Optics("--wavelengths: scene-to-film tables use the lens's own wavelengths".into()));
+                    }
+                    SceneToFilmTable::bake(&lens, resolution, 5.0, &|f| bar.set_position((f * 1000.0) as u64))?.table
+                }
+                d => return Err(Error::Optics(format!("--direction: expected film-to-scene or scene-to-film, got '{d}'"))),
+            };
             bar.finish_and_clear();
             table.save(&output)?;
             eprintln!(
-                "baked {} at {}×{}×{} × {} wavelength(s) in {:.2} s: {:.1} MiB → {}",
+                "baked {} ({direction}) at {}×{}×{} × {} wavelength(s) in {:.2} s: {:.1} MiB → {}",
                 lens.name(),
                 table.header.resolution,
                 table.header.resolution,
@@ -75,7 +91,14 @@ pub fn run(cmd: LrtfCommand) -> Result<(), Error> {
         }
         LrtfCommand::Info { lens, file } => {
             let lens = petzval_renderer::load_lens(&lens)?;
-            let table = LrtfTable::load(&file, &lens)?;
+            // a film → scene table of the lens, or a scene → film one (of the reversed lens)
+            let table = match LrtfTable::load(&file, &lens) {
+                Ok(t) => t,
+                Err(e) => match SceneToFilmTable::load(&file, &lens) {
+                    Ok(t) => t.table,
+                    Err(_) => return Err(e),
+                },
+            };
             println!("{}", serde_json::to_string_pretty(&table.header).unwrap_or_default());
             Ok(())
         }

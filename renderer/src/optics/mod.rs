@@ -13,3 +13,4 @@ pub mod pupil;
 pub mod surface;
 pub mod draw;
 pub mod lrtf;
+pub mod lrtf_scene;
