@@ -16,9 +16,9 @@
 //! stop crossing; the margin, interpolated, decides vignetting by the rims.
 //!
 //! Lookup runs in f32 without trigonometry (the key's rotation uses the dome point's
-//! (x, y)/ρ; each stereographic map costs one division) and reads a cell's eight corners as
-//! four cache lines: in memory each entry is stored together with its σy neighbour (twice the
-//! file's size). Files store each entry once, in format version 1.
+//! (x, y)/ρ; each stereographic map costs one division), reads a cell's eight corners as four
+//! σy-adjacent pairs of 32-byte entries (columns padded to whole cache lines) and blends them
+//! as 4-lane vectors. The file stores the same entries (format version 1).
 //!
 //! | name | type | unit | default |
 //! |---|---|---|---|
@@ -88,23 +88,25 @@ pub struct LrtfHeader {
 
 /// A baked table.
 ///
-/// In memory each entry is stored with its σy neighbour as one *record* of 64 bytes, aligned
-/// to a cache line: a cell's eight corners are then four whole cache lines, read as 4-lane
-/// vectors. This doubles the entries' memory (27 MiB per wavelength at 96³); files keep the
-/// entries once.
+/// In memory the entries are 32-byte pairs of 4-lane vectors, two to a 64-byte line, each
+/// (u, σx) column padded to whole lines: a cell's eight corners are four σy-adjacent pairs.
+/// (Storing every entry twice, so each pair is exactly one line, measured no faster: lookups
+/// of large tables are bound by cache misses, and doubling the memory adds misses.)
 #[derive(Debug, Clone)]
 pub struct LrtfTable {
     /// Header.
     pub header: LrtfHeader,
-    records: Vec<Record>,
+    lines: Vec<Line>,
     key: Key,
 }
 
-/// The entries (iu, ix, iy) and (iu, ix, iy + 1), channels interleaved: `0[j]` holds channel
-/// 2j at iy and at iy + 1, then channel 2j + 1 at iy and at iy + 1.
+/// One entry: (w.x, w.y, e.x, e.y) and (stop.x, stop.y, margin, validity).
+type Entry = [Vec4; 2];
+
+/// Two consecutive entries of a column, aligned to a cache line.
 #[derive(Debug, Clone, Copy, Default)]
 #[repr(C, align(64))]
-struct Record([Vec4; CHANNELS / 2]);
+struct Line([Entry; 2]);
 
 /// Constants of the lookup's key computation (f32, relative to the input dome's centre).
 #[derive(Debug, Clone, Copy)]
@@ -128,7 +130,7 @@ struct Key {
     /// Index of the last cell along u and σx, and along σy.
     last_cell: i32,
     last_cell_y: i32,
-    /// Record strides along σx, u and wavelength.
+    /// Entry strides along σx (the column, padded to an even count), u and wavelength.
     stride_x: usize,
     stride_u: usize,
     stride_w: usize,
@@ -153,9 +155,9 @@ impl Key {
             ny,
             last_cell: n as i32 - 2,
             last_cell_y: ny as i32 - 2,
-            stride_x: ny - 1,
-            stride_u: n * (ny - 1),
-            stride_w: n * n * (ny - 1),
+            stride_x: ny + ny % 2,
+            stride_u: n * (ny + ny % 2),
+            stride_w: n * n * (ny + ny % 2),
             out_centre_z: h.out_centre_z_mm,
             out_radius: h.out_radius_mm as f32,
         }
@@ -300,28 +302,25 @@ impl Default for BakeOptions {
 }
 
 impl LrtfTable {
-    /// Builds the in-memory records from entries laid out as in the file (per wavelength, u,
-    /// σx, σy, then the channels).
+    /// Builds the in-memory table from entries laid out as in the file (per wavelength, u, σx,
+    /// σy, then the channels).
     fn from_entries(header: LrtfHeader, data: &[f32]) -> Self {
         let key = Key::new(&header);
         let (n, ny) = (key.n, key.ny);
         let nw = header.wavelengths_nm.len();
-        let mut records = vec![Record::default(); nw * key.stride_w];
+        let mut lines = vec![Line::default(); nw * key.stride_w / 2];
         for wi in 0..nw {
             for iu in 0..n {
                 for ix in 0..n {
-                    let e = ((wi * n + iu) * n + ix) * ny * CHANNELS;
-                    for iy in 0..ny - 1 {
-                        let (a, b) = (&data[e + iy * CHANNELS..], &data[e + (iy + 1) * CHANNELS..]);
-                        let r = &mut records[wi * key.stride_w + iu * key.stride_u + ix * key.stride_x + iy];
-                        for j in 0..CHANNELS / 2 {
-                            r.0[j] = Vec4::new(a[2 * j], b[2 * j], a[2 * j + 1], b[2 * j + 1]);
-                        }
+                    for iy in 0..ny {
+                        let e = &data[(((wi * n + iu) * n + ix) * ny + iy) * CHANNELS..][..CHANNELS];
+                        let i = wi * key.stride_w + iu * key.stride_u + ix * key.stride_x + iy;
+                        lines[i / 2].0[i % 2] = [Vec4::new(e[0], e[1], e[2], e[3]), Vec4::new(e[4], e[5], e[6], e[7])];
                     }
                 }
             }
         }
-        LrtfTable { header, records, key }
+        LrtfTable { header, lines, key }
     }
 
     /// The entries as laid out in the file (inverse of [`Self::from_entries`]).
@@ -329,19 +328,15 @@ impl LrtfTable {
         let k = &self.key;
         let (n, ny) = (k.n, k.ny);
         let nw = self.header.wavelengths_nm.len();
-        let mut data = vec![0f32; nw * n * n * ny * CHANNELS];
+        let mut data = Vec::with_capacity(nw * n * n * ny * CHANNELS);
         for wi in 0..nw {
             for iu in 0..n {
                 for ix in 0..n {
                     for iy in 0..ny {
-                        // the record holding this entry, and its lane there
-                        let (ry, dy) = if iy < ny - 1 { (iy, 0) } else { (ny - 2, 1) };
-                        let r = &self.records[wi * k.stride_w + iu * k.stride_u + ix * k.stride_x + ry];
-                        let e = ((wi * n + iu) * n + ix) * ny * CHANNELS + iy * CHANNELS;
-                        for j in 0..CHANNELS / 2 {
-                            data[e + 2 * j] = r.0[j][dy];
-                            data[e + 2 * j + 1] = r.0[j][2 + dy];
-                        }
+                        let i = wi * k.stride_w + iu * k.stride_u + ix * k.stride_x + iy;
+                        let [a, b] = self.lines[i / 2].0[i % 2];
+                        data.extend_from_slice(&a.to_array());
+                        data.extend_from_slice(&b.to_array());
                     }
                 }
             }
@@ -349,9 +344,9 @@ impl LrtfTable {
         data
     }
 
-    /// Bytes of table data in memory (each entry twice; files hold it once).
+    /// Bytes of table data in memory.
     pub fn data_bytes(&self) -> usize {
-        self.records.len() * std::mem::size_of::<Record>()
+        self.lines.len() * std::mem::size_of::<Line>()
     }
 
     /// Bakes the table for `lens` (rotationally symmetric lenses only). `progress` gets the
@@ -595,31 +590,30 @@ impl LrtfTable {
             // outside the baked domain: only the exact trace can say
             return LrtfLookup::Uncertain;
         }
-        // 3. The cell: four records (σx, u corners), each holding both σy samples.
+        // 3. The cell: four σy-adjacent pairs of entries (one or two cache lines each).
         let wi = self.nearest_wavelength(wavelength_nm);
         // (i32 conversions: one instruction each; the domain test above excluded NaN and < 0)
         let (iu, ix, iy) = ((fu as i32).min(k.last_cell), (fx as i32).min(k.last_cell), (fy as i32).min(k.last_cell_y));
         let (tu, tx, ty) = (fu - iu as f32, fx - ix as f32, fy - iy as f32);
         let base = wi * k.stride_w + iu as usize * k.stride_u + ix as usize * k.stride_x + iy as usize;
-        let last = base + k.stride_u + k.stride_x;
-        if last >= self.records.len() {
+        if (base + k.stride_u + k.stride_x + 1) / 2 >= self.lines.len() {
             return LrtfLookup::Miss;
         }
-        let rec = [&self.records[base], &self.records[base + k.stride_x], &self.records[base + k.stride_u], &self.records[last]];
-        let wy = Vec4::new(1.0 - ty, ty, 1.0 - ty, ty);
-        let w = [wy * ((1.0 - tu) * (1.0 - tx)), wy * ((1.0 - tu) * tx), wy * (tu * (1.0 - tx)), wy * (tu * tx)];
+        let at = |i: usize| &self.lines[i / 2].0[i % 2];
+        let idx = [base, base + k.stride_x, base + k.stride_u, base + k.stride_u + k.stride_x];
+        let e = [at(idx[0]), at(idx[0] + 1), at(idx[1]), at(idx[1] + 1), at(idx[2]), at(idx[2] + 1), at(idx[3]), at(idx[3] + 1)];
+        let (su, sx_, sy_) = (1.0 - tu, 1.0 - tx, 1.0 - ty);
+        let w = [su * sx_ * sy_, su * sx_ * ty, su * tx * sy_, su * tx * ty, tu * sx_ * sy_, tu * sx_ * ty, tu * tx * sy_, tu * tx * ty];
         // 4. Corners must agree on passing (margin > 0; failed traces carry negative margins).
-        //    Lanes 0 and 1 of `0[3]` are the margins.
-        let m_lo = rec[0].0[3].min(rec[1].0[3]).min(rec[2].0[3].min(rec[3].0[3]));
-        let m_hi = rec[0].0[3].max(rec[1].0[3]).max(rec[2].0[3].max(rec[3].0[3]));
-        let m_max = m_hi.x.max(m_hi.y);
+        let lo = e[0][1].min(e[1][1]).min(e[2][1].min(e[3][1])).min(e[4][1].min(e[5][1]).min(e[6][1].min(e[7][1])));
+        let hi = e[0][1].max(e[1][1]).max(e[2][1].max(e[3][1])).max(e[4][1].max(e[5][1]).max(e[6][1].max(e[7][1])));
+        let (m_min, m_max) = (lo.z, hi.z);
         if !(m_max > 0.0) {
             return LrtfLookup::Miss;
         }
-        let acc = |j: usize| (w[0] * rec[0].0[j] + w[1] * rec[1].0[j]) + (w[2] * rec[2].0[j] + w[3] * rec[3].0[j]);
-        let a3 = acc(3); // margin (lanes 0, 1), validity
-        let margin = a3.x + a3.y;
-        let m_min = m_lo.x.min(m_lo.y);
+        let acc = |c: usize| ((e[0][c] * w[0] + e[1][c] * w[1]) + (e[2][c] * w[2] + e[3][c] * w[3])) + ((e[4][c] * w[4] + e[5][c] * w[5]) + (e[6][c] * w[6] + e[7][c] * w[7]));
+        let st = acc(1); // stop.x, stop.y, margin
+        let margin = st.z;
         if !(m_min > 0.0) {
             // The rim boundary crosses this cell. The margin is smooth there (one rim clips), so
             // its interpolation decides, except within a band of a tenth of the corners' spread
@@ -632,10 +626,10 @@ impl LrtfTable {
                 return LrtfLookup::Miss;
             }
         }
-        // 5. Blend: each lane pair sums the two σy samples of a channel.
-        let (a0, a1, a2) = (acc(0), acc(1), acc(2));
-        let (wx, wy_, ex, ey) = (a0.x + a0.y, a0.z + a0.w, a1.x + a1.y, a1.z + a1.w);
-        let (stx, sty) = (a2.x + a2.y, a2.z + a2.w);
+        // 5. Blend of the outputs.
+        let a = acc(0);
+        let (wx, wy_, ex, ey) = (a.x, a.y, a.z, a.w);
+        let (stx, sty) = (st.x, st.y);
         // 6. Back to the lens frame: undo the mirror, the stereographic maps and the rotation.
         let sign = if sy < 0.0 { -1.0 } else { 1.0 };
         let (wy_, ey, sty) = (sign * wy_, sign * ey, sign * sty);
