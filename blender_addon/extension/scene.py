@@ -15,7 +15,8 @@ listed (once) in the render's warning report.
 
 Lights: point and spot as punctual lights (intensity = power / 4 pi, as Blender's glTF exporter),
 sun as a directional light, area lights as one-sided emissive quads/discs with Cycles' radiance
-power / (area * pi). World: Background colour x strength, or an Environment Texture image.
+power / (area * pi) (being geometry, they also block light behind them, which Cycles' lights do
+not). World: Background colour x strength, or an Environment Texture image.
 """
 
 from __future__ import annotations
@@ -531,9 +532,10 @@ def add_area_light(pz, obj, m, colour, notes, materials) -> None:
     pz.add_mesh(v.astype(np.float32), t, material_ids=np.full(len(t), mat, dtype=np.uint32), normals=normals,
                 transform=m, name=obj.name)
     if not getattr(obj, "visible_camera", True):
-        notes.note("area lights are emissive surfaces here, seen by the camera (Cycles hides lights from camera rays by default)")
+        notes.note("area lights are emissive surfaces here: seen by the camera (Cycles hides lights from camera rays by "
+                   "default) and casting shadows (Cycles' lights do not)")
     else:
-        notes.note("area lights are rendered as emissive surfaces")
+        notes.note("area lights are emissive surfaces here: they cast shadows (Cycles' lights do not)")
 
 
 # ------------------------------------------------------------------------------------------
@@ -573,7 +575,9 @@ def add_world(pz, world, notes, materials) -> None:
                 rot = tuple(value(mapping, "Rotation", (0.0, 0.0, 0.0)))
                 loc = tuple(value(mapping, "Location", (0.0, 0.0, 0.0)))
                 scl = tuple(value(mapping, "Scale", (1.0, 1.0, 1.0)))
-                rotation = float(rot[2])
+                # petzval's rotation_rad is a Texture-type Mapping Z rotation (the map turns by it);
+                # Point/Vector/Normal types rotate the lookup direction instead: the opposite turn
+                rotation = float(rot[2]) if mapping.vector_type == "TEXTURE" else -float(rot[2])
                 if abs(rot[0]) > 1e-6 or abs(rot[1]) > 1e-6 or any(abs(x) > 1e-6 for x in loc) or any(abs(s - 1) > 1e-6 for s in scl):
                     notes.warn(f"world '{world.name}': Mapping node other than a Z rotation (only its Z rotation used)")
             else:

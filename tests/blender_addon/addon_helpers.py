@@ -247,3 +247,125 @@ def build_tilt_scene(resolution=(360, 240)):
     scene.render.resolution_x, scene.render.resolution_y = resolution
     scene.render.resolution_percentage = 100
     return cam
+
+
+# Lights-and-world scene: what tests/blender's glTF scene cannot carry (area lights, an
+# environment texture with a Mapping rotation), for a direct add-on-vs-Cycles comparison.
+LIGHTS_RESOLUTION = (160, 96)
+LIGHTS_ENV_ROTATION_DEG = 40.0
+
+
+def _principled_lambert(name, base):
+    b = bpy()
+    mat = b.data.materials.new(name)
+    if mat.node_tree is None:
+        mat.use_nodes = True
+    bsdf = mat.node_tree.nodes.get("Principled BSDF")
+    bsdf.inputs["Base Color"].default_value = (*base, 1.0)
+    bsdf.inputs["Roughness"].default_value = 1.0
+    bsdf.inputs["Specular IOR Level"].default_value = 0.0
+    return mat
+
+
+def _environment_image():
+    """A float equirectangular sky: a blue-to-white gradient with a small bright warm patch, saved
+    and packed. With the Mapping node's 40° Z rotation the patch is seen 15° right of the view
+    axis of LightsCam, just above the horizon; with the rotation the wrong way round it would be
+    out of view."""
+    import numpy as np
+
+    b = bpy()
+    w, h = 256, 128
+    img = b.data.images.new("Sky", w, h, alpha=False, float_buffer=True)
+    img.colorspace_settings.name = "Linear Rec.709"
+    v = (np.arange(h)[::-1] + 0.5) / h  # 0 at the bottom row: Blender's pixel rows go bottom up
+    u = (np.arange(w) + 0.5) / w
+    uu, vv = np.meshgrid(u, v)
+    sky = np.zeros((h, w, 4), np.float32)
+    sky[..., 0] = 0.25 + 0.3 * vv
+    sky[..., 1] = 0.35 + 0.3 * vv
+    sky[..., 2] = 0.6 + 0.2 * vv
+    sky[..., 3] = 1.0
+    # Blender's equirectangular lookup (Cycles direction_to_equirectangular): u = 0.5 - atan2(y, x) / 2pi,
+    # v = 0.5 + asin(z) / pi, of the direction rotated by the Mapping node: azimuth atan2(y, x) = 75°
+    # (15° right of the camera's +y view) + 40° -> u = 0.5 - 115 / 360
+    u0 = 0.5 - (75.0 + LIGHTS_ENV_ROTATION_DEG) / 360.0
+    blob = ((uu - u0) ** 2 / 0.02**2 + (vv - 0.53) ** 2 / 0.025**2) < 1.0
+    sky[blob, :3] = (20.0, 15.0, 10.0)
+    img.pixels.foreach_set(sky[::-1].ravel())  # rows bottom-first for Blender
+    OUT.mkdir(parents=True, exist_ok=True)
+    img.filepath_raw = str(OUT / "sky.exr")
+    img.file_format = "OPEN_EXR"
+    img.save()
+    img.pack()
+    return img
+
+
+def build_lights_scene(variant: str):
+    """Diffuse ground and spheres lit by a rectangular and a disc area light (``variant``
+    "area", black world) or by an environment texture rotated by a Mapping node ("world", no
+    lights). The two are separate because the add-on's area lights are emissive geometry, which
+    shadows the sky (Cycles' lights do not); the lights are out of view (Cycles hides them from the
+    camera)."""
+    b = bpy()
+    reset_blender()
+    scene = b.context.scene
+    world = b.data.worlds.new("World")
+    if world.node_tree is None:
+        world.use_nodes = True
+    nt = world.node_tree
+    bg = nt.nodes.get("Background")
+    bg.inputs["Strength"].default_value = 0.5 if variant == "world" else 0.0
+    env = nt.nodes.new("ShaderNodeTexEnvironment")
+    env.image = _environment_image()
+    mapping = nt.nodes.new("ShaderNodeMapping")
+    mapping.inputs["Rotation"].default_value = (0.0, 0.0, math.radians(LIGHTS_ENV_ROTATION_DEG))
+    coords = nt.nodes.new("ShaderNodeTexCoord")
+    nt.links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
+    nt.links.new(mapping.outputs["Vector"], env.inputs["Vector"])
+    nt.links.new(env.outputs["Color"], bg.inputs["Color"])
+    scene.world = world
+
+    b.ops.mesh.primitive_plane_add(size=8.0, location=(0.0, 2.0, 0.0))
+    b.context.active_object.data.materials.append(_principled_lambert("Ground", (0.5, 0.5, 0.5)))
+    for loc, r, col in (((-0.5, 1.5, 0.35), 0.35, (0.7, 0.2, 0.15)), ((0.6, 2.2, 0.5), 0.5, (0.2, 0.6, 0.3))):
+        b.ops.mesh.primitive_uv_sphere_add(segments=32, ring_count=16, radius=r, location=loc)
+        b.ops.object.shade_smooth()
+        b.context.active_object.data.materials.append(_principled_lambert("Sphere", col))
+
+    lights = (("Rect", "RECTANGLE", 1.0, 0.5, (0.8, 1.0, 2.6), 300.0, (1.0, 0.85, 0.7)),
+              ("Disc", "DISK", 0.6, 0.6, (-1.2, 2.5, 2.4), 150.0, (0.7, 0.8, 1.0)))
+    for name, shape, size, size_y, loc, power, colour in (lights if variant == "area" else ()):
+        data = b.data.lights.new(name, "AREA")
+        data.shape = shape
+        data.size = size
+        data.size_y = size_y
+        data.energy = power
+        data.color = colour
+        obj = b.data.objects.new(name, data)
+        scene.collection.objects.link(obj)
+        obj.location = loc  # no rotation: emits down (-z)
+    cam = add_camera("LightsCam", (0.0, -2.6, 0.9), (math.radians(80.0), 0.0, 0.0), lens_mm=28.0)
+    cam.data.dof.use_dof = False
+    scene.render.resolution_x, scene.render.resolution_y = LIGHTS_RESOLUTION
+    scene.render.resolution_percentage = 100
+    return cam
+
+
+def lights_cycles_reference(variant: str, seed: int, spp: int) -> Path:
+    """Cycles render of build_lights_scene(variant) (cached by this file's text and the Blender
+    build; the scene must be built)."""
+    import os
+
+    b = bpy()
+    h = hashlib.sha256()
+    h.update(Path(__file__).read_bytes())
+    h.update(b.app.version_string.encode())
+    h.update(str(b.app.build_hash).encode())
+    cache = OUT / f"cycles-{h.hexdigest()[:16]}"
+    cache.mkdir(parents=True, exist_ok=True)
+    exr = cache / f"cycles_lights_{variant}_spp{spp}_seed{seed}.exr"
+    if exr.is_file() and not os.environ.get("PETZVAL_BLENDER_NO_CACHE"):
+        return exr
+    S.render_cycles(S.CyclesSettings(samples=spp, seed=seed), "LightsCam", exr)
+    return exr

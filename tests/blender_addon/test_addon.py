@@ -212,6 +212,43 @@ def test_real_lens_round_trip_matches_gltf_path(main_scene, report):
     assert _passes(v), f"the add-on and the glTF path differ beyond noise: {_fmt(v)}"
 
 
+SPP_LIGHTS = 128
+
+
+@pytest.mark.parametrize("variant", ["area", "world"])
+def test_area_lights_and_environment_match_cycles(addon, report, variant):
+    """What tests/blender's glTF scene cannot carry, against Cycles (8x8 block z-test and image
+    means, both sides two seeds): "area": a rectangle and a disc area light (one-sided emitters of
+    radiance power / (area pi)); "world": an environment texture turned 40° by a Mapping node,
+    whose bright patch, seen directly, must land on the same pixels."""
+    H.build_lights_scene(variant)
+    cyc = [B.read_rgb(H.lights_cycles_reference(variant, seed, SPP_LIGHTS)) for seed in SEEDS]
+    pz = []
+    for seed in SEEDS:
+        H.configure_petzval(SPP_LIGHTS, seed=seed, camera="LightsCam")
+        secs, entry = H.render_still(OUT / "lights" / f"addon_{variant}_seed{seed}.exr")
+        pz.append(B.read_rgb(OUT / "lights" / f"addon_{variant}_seed{seed}.exr"))
+    cmp = B.compare_blocks(cyc[0], cyc[1], pz[0], pz[1])
+    v = _verdict(cmp)
+    ratio = B.mean_ratio((pz[0] + pz[1]) / 2, (cyc[0] + cyc[1]) / 2)
+    w, h = H.LIGHTS_RESOLUTION
+    what = "area lights (rectangle, disc)" if variant == "area" else f"environment texture turned {H.LIGHTS_ENV_ROTATION_DEG:g}° by a Mapping node"
+    report.line(f"{what} vs Cycles, {w}x{h} {SPP_LIGHTS} spp x seeds {SEEDS} ({secs:.1f} s per F12)")
+    report.line(f"  blocks: {_fmt(v)}; image mean add-on/Cycles R,G,B {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f}")
+    assert not entry["notes"]["unsupported"], entry["notes"]["unsupported"]
+    if variant == "world":
+        patch = []
+        for img in ((cyc[0] + cyc[1]) / 2, (pz[0] + pz[1]) / 2):
+            ys, xs = np.nonzero(B.luminance(img) > 5.0)
+            patch.append((len(ys), float(ys.mean()) if len(ys) else float("nan"), float(xs.mean()) if len(xs) else float("nan")))
+        report.line(f"  the sky's bright patch seen directly: Cycles {patch[0][0]} px centred at ({patch[0][2]:.2f}, {patch[0][1]:.2f}), "
+                    f"add-on {patch[1][0]} px at ({patch[1][2]:.2f}, {patch[1][1]:.2f})")
+        assert patch[0][0] > 50 and patch[1][0] > 0.8 * patch[0][0], patch
+        assert math.hypot(patch[0][1] - patch[1][1], patch[0][2] - patch[1][2]) < 0.5, patch
+    assert np.all(np.abs(ratio - 1) <= MEAN_TOL), f"image mean ratio {ratio}"
+    assert _passes(v), f"blocks differ beyond noise: {_fmt(v)}"
+
+
 # ------------------------------------------------------------------------------------------
 # tilt-shift
 
