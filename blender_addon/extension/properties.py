@@ -13,6 +13,9 @@ LENS_THIN = "THIN"
 LENS_PINHOLE = "PINHOLE"
 LENS_FILE = "FILE"
 
+# Blender 5 wants path properties that accept "//" (relative to the .blend) to say so
+PATH_OPTIONS = {"PATH_SUPPORTS_BLEND_RELATIVE"} if bpy.app.version >= (5, 0, 0) else set()
+
 LENS_MODELS = (
     ("AUTO", "Automatic", "The cheapest model within the tolerance (pinhole, thin, thick, lens table, exact)", 0),
     ("EXACT", "Exact", "Trace every ray through every surface of the lens", 1),
@@ -46,6 +49,7 @@ class PetzvalCameraSettings(bpy.types.PropertyGroup):
         name="Lens File",
         description="Lens prescription: Petzval .toml, pbrt .dat, Zemax .zmx, or lentil FILE.json#ID",
         subtype="FILE_PATH",
+        options=PATH_OPTIONS,
     )
     lens_model: EnumProperty(name="Lens Model", items=LENS_MODELS, default="AUTO",
                              description="How rays are traced through a real lens")
@@ -68,6 +72,7 @@ class PetzvalCameraSettings(bpy.types.PropertyGroup):
         name="Aperture Image",
         description="A mask image (PNG or EXR) for the shape of the aperture stop; empty uses Blender's blades",
         subtype="FILE_PATH",
+        options=PATH_OPTIONS,
     )
 
 

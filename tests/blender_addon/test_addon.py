@@ -611,3 +611,135 @@ def test_unsupported_features_listed_once(addon, report):
     assert any("GlassMat" in u and "Glass" in u for u in unsupported)
     assert any("CoatMat" in u and "Coat" in u for u in unsupported)
     assert entry.get("complete") is True
+
+
+# ------------------------------------------------------------------------------------------
+# camera mapping and UI (no rendering)
+
+
+def test_camera_settings_mapping(addon):
+    """What the add-on passes to petzval.render for Blender's camera settings (see camera.py)."""
+    from mathutils import Vector
+
+    mod = H.reset_blender()
+    scene = bpy.context.scene
+    cam_obj = H.add_camera("MapCam", (1.0, 2.0, 3.0), (math.radians(90), 0.0, 0.0), lens_mm=35.0)
+    cam_obj.scale = (2.0, 2.0, 2.0)
+    cam = cam_obj.data
+    target = bpy.data.objects.new("Target", None)
+    scene.collection.objects.link(target)
+    target.location = cam_obj.location + Vector((0.3, 2.5, -0.4))  # 2.5 m along the view axis (+y)
+    cam.sensor_fit = "VERTICAL"
+    cam.sensor_height = 20.0
+    cam.shift_x, cam.shift_y = 0.1, -0.05
+    cam.clip_start, cam.clip_end = 0.2, 50.0
+    dof = cam.dof
+    dof.aperture_fstop = 4.0
+    dof.aperture_blades = 0
+    dof.aperture_rotation = 0.3
+    dof.aperture_ratio = 1.5
+    cam.petzval.tilt_x = math.radians(3.0)
+    cam.petzval.tilt_y = math.radians(-1.5)
+
+    def kwargs():
+        cam.update_tag()  # a script changing add-on properties does not tag the camera (the UI does)
+        dg = bpy.context.evaluated_depsgraph_get()
+        notes = mod.notes.Notes()
+        return mod.camera.camera_kwargs(scene, cam_obj.evaluated_get(dg), dg, notes), notes
+
+    dof.use_dof = False
+    kw, _ = kwargs()
+    assert kw["lens"] == "thin" and kw["fstop"] is None and kw["focus_distance_m"] is None  # Blender: no DoF
+    assert kw["focal_length_mm"] == pytest.approx(35.0)
+    assert kw["sensor_fit"] == "vertical" and kw["sensor_height_mm"] == pytest.approx(20.0)
+    assert (kw["shift_x"], kw["shift_y"]) == (pytest.approx(0.1), pytest.approx(-0.05))
+    assert (kw["clip_start_m"], kw["clip_end_m"]) == (pytest.approx(0.2), pytest.approx(50.0))
+    assert kw["aperture_blades"] == 0  # no blades: a circle
+    assert kw["aperture_rotation_rad"] == pytest.approx(0.3) and kw["aperture_ratio"] == pytest.approx(1.5)
+    assert (kw["tilt_x_deg"], kw["tilt_y_deg"]) == (pytest.approx(3.0), pytest.approx(-1.5))
+    m = kw["camera_to_world"]
+    np.testing.assert_allclose(m[:3, 3], [1.0, 3.0, -2.0], atol=1e-6)  # Blender (x, y, z) -> (x, z, -y)
+    np.testing.assert_allclose(m[:3, :3].T @ m[:3, :3], np.eye(3), atol=1e-6)  # the object's scale dropped
+    np.testing.assert_allclose(m[:3, :3] @ [0, 0, -1.0], [0.0, 0.0, -1.0], atol=1e-6)  # looks along Blender +y = glTF -z
+
+    dof.use_dof = True
+    dof.aperture_blades = 6
+    dof.focus_distance = 7.0
+    dof.focus_object = target
+    kw, _ = kwargs()
+    assert kw["fstop"] == pytest.approx(4.0) and kw["aperture_blades"] == 6
+    assert kw["focus_distance_m"] == pytest.approx(2.5, abs=1e-5)  # along the view axis, as Cycles
+
+    cam.petzval.lens = "double-gauss-50mm"
+    dof.use_dof = False
+    kw, notes = kwargs()
+    assert kw["lens"] == "double-gauss-50mm" and kw["fstop"] is None and kw["focus_distance_m"] == pytest.approx(2.5, abs=1e-5)
+    assert any("wide open" in n for n in notes.info), notes.info
+
+    cam.petzval.lens = "PINHOLE"
+    kw, _ = kwargs()
+    assert kw["lens"] == "pinhole" and kw["fstop"] is None
+
+    cam.petzval.lens = "FILE"
+    cam.petzval.lens_file = ""
+    with pytest.raises(mod.camera.SettingsError, match="no file"):
+        kwargs()
+    cam.petzval.lens_file = "//lenses/my.toml"
+    kw, _ = kwargs()
+    assert kw["lens"] == bpy.path.abspath("//lenses/my.toml")
+
+    cam.type = "ORTHO"
+    with pytest.raises(mod.camera.SettingsError, match="perspective"):
+        kwargs()
+
+
+class _Layout:
+    """Stands in for a UI layout: records labels, checks every drawn property exists."""
+
+    def __init__(self, log):
+        self.__dict__["log"] = log
+
+    def __setattr__(self, name, value):
+        pass
+
+    def prop(self, data, name, **kw):
+        assert name in data.bl_rna.properties, f"{type(data).__name__} has no property {name!r}"
+        self.log.append(("prop", name))
+        return self
+
+    def label(self, text="", **kw):
+        self.log.append(("label", text))
+        return self
+
+    def __getattr__(self, name):  # column, row, box, split, separator, operator, ...
+        return lambda *a, **k: self
+
+
+def test_panels_draw(addon):
+    """Every Petzval panel polls True for PETZVAL (False for Cycles) and draws without error for
+    each kind of lens; the properties they show exist."""
+    import types
+
+    mod = H.reset_blender()
+    scene = bpy.context.scene
+    scene.render.engine = "PETZVAL"
+    cam = H.add_camera("UICam", (0, 0, 0), (0, 0, 0)).data
+    for lens in ("THIN", "PINHOLE", "double-gauss-50mm", "FILE"):
+        cam.petzval.lens = lens
+        cam.petzval.tilt_x = math.radians(2.0)
+        for engine in ("PETZVAL", "CYCLES"):
+            ctx = types.SimpleNamespace(camera=cam, engine=engine, scene=scene, view_layer=bpy.context.view_layer)
+            for panel in mod.ui.classes:
+                shown = panel.poll(ctx)
+                assert shown == (engine == "PETZVAL"), (panel.__name__, engine)
+                if shown:
+                    log = []
+                    panel.draw(types.SimpleNamespace(layout=_Layout(log)), ctx)
+                    assert log, panel.__name__
+    # the lens panel shows the file field only for a lens file
+    for lens, expect in (("FILE", True), ("double-gauss-50mm", False)):
+        cam.petzval.lens = lens
+        log = []
+        ctx = types.SimpleNamespace(camera=cam, engine="PETZVAL", scene=scene, view_layer=bpy.context.view_layer)
+        mod.ui.PETZVAL_PT_camera_lens.draw(types.SimpleNamespace(layout=_Layout(log)), ctx)
+        assert (("prop", "lens_file") in log) == expect, log
