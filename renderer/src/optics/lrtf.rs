@@ -164,6 +164,13 @@ impl Key {
     }
 }
 
+/// Σ_k w[k]·e[k][c]: half `c` of the eight corner entries, weighted (a function, not a
+/// closure, so that it is inlined).
+#[inline(always)]
+fn blend(e: &[&Entry; 8], w: &[f32; 8], c: usize) -> Vec4 {
+    ((e[0][c] * w[0] + e[1][c] * w[1]) + (e[2][c] * w[2] + e[3][c] * w[3])) + ((e[4][c] * w[4] + e[5][c] * w[5]) + (e[6][c] * w[6] + e[7][c] * w[7]))
+}
+
 /// What a lookup returns.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LrtfRay {
@@ -611,8 +618,7 @@ impl LrtfTable {
         if !(m_max > 0.0) {
             return LrtfLookup::Miss;
         }
-        let acc = |c: usize| ((e[0][c] * w[0] + e[1][c] * w[1]) + (e[2][c] * w[2] + e[3][c] * w[3])) + ((e[4][c] * w[4] + e[5][c] * w[5]) + (e[6][c] * w[6] + e[7][c] * w[7]));
-        let st = acc(1); // stop.x, stop.y, margin
+        let st = blend(&e, &w, 1); // stop.x, stop.y, margin
         let margin = st.z;
         if !(m_min > 0.0) {
             // The rim boundary crosses this cell. The margin is smooth there (one rim clips), so
@@ -627,7 +633,7 @@ impl LrtfTable {
             }
         }
         // 5. Blend of the outputs.
-        let a = acc(0);
+        let a = blend(&e, &w, 0);
         let (wx, wy_, ex, ey) = (a.x, a.y, a.z, a.w);
         let (stx, sty) = (st.x, st.y);
         // 6. Back to the lens frame: undo the mirror, the stereographic maps and the rotation.
