@@ -16,7 +16,8 @@ Get Extensions > Install from Disk (or drag the zip into Blender), then pick "Pe
 render engine.
 
 Options: ``--wheel PATH`` packs an existing wheel instead of building one; ``--out DIR``
-(default ``target/blender``).
+(default ``target/blender``); ``--wheels-dir DIR`` (default ``target/wheels``). Cargo's usual
+``CARGO_TARGET_DIR`` applies to the maturin build.
 """
 
 from __future__ import annotations
@@ -60,9 +61,9 @@ def find_maturin() -> list[str]:
     raise BuildError("maturin is not installed: `.venv/bin/python -m pip install 'maturin>=1.7,<2'` (tests/run does it)")
 
 
-def build_wheel() -> Path:
+def build_wheel(wheels_dir: Path = WHEELS) -> Path:
     """Runs maturin; returns the wheel it built."""
-    cmd = [*find_maturin(), "build", "--release", "-m", str(HERE / "Cargo.toml"), "-o", str(WHEELS)]
+    cmd = [*find_maturin(), "build", "--release", "-m", str(HERE / "Cargo.toml"), "-o", str(wheels_dir)]
     print("+", " ".join(cmd), file=sys.stderr, flush=True)
     proc = subprocess.run(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     sys.stderr.write(proc.stdout)
@@ -71,9 +72,9 @@ def build_wheel() -> Path:
     built = re.findall(r"(\S+petzval-[^\s/]+\.whl)", proc.stdout)
     if built:
         return Path(built[-1])
-    wheels = sorted(WHEELS.glob("petzval-*.whl"), key=lambda p: p.stat().st_mtime)
+    wheels = sorted(wheels_dir.glob("petzval-*.whl"), key=lambda p: p.stat().st_mtime)
     if not wheels:
-        raise BuildError(f"maturin reported success but there is no petzval-*.whl in {WHEELS}")
+        raise BuildError(f"maturin reported success but there is no petzval-*.whl in {wheels_dir}")
     return wheels[-1]
 
 
@@ -180,9 +181,10 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--wheel", type=Path, help="pack this wheel instead of building one with maturin")
     ap.add_argument("--out", type=Path, default=REPO / "target" / "blender", help="output directory (default target/blender)")
+    ap.add_argument("--wheels-dir", type=Path, default=WHEELS, help="where maturin writes the wheel (default target/wheels)")
     args = ap.parse_args(argv)
     try:
-        wheel = args.wheel.resolve() if args.wheel else build_wheel()
+        wheel = args.wheel.resolve() if args.wheel else build_wheel(args.wheels_dir.resolve())
         if not wheel.is_file():
             raise BuildError(f"no wheel at {wheel}")
         args.out.mkdir(parents=True, exist_ok=True)

@@ -89,6 +89,10 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
         r = scene.render
         if abs(r.pixel_aspect_x - r.pixel_aspect_y) > 1e-6:
             notes.warn("non-square pixel aspect (square pixels rendered)")
+        if r.use_motion_blur:
+            notes.warn("motion blur")
+        if r.use_multiview:
+            notes.warn("stereoscopy / multi-view (the active view rendered)")
         window = camera_mod.border_window(scene, width, height)
         crop = camera_mod.crop_top_first(window, height) if window else None
         out_w, out_h = (window[2] - window[0], window[3] - window[1]) if window else (width, height)
@@ -196,14 +200,13 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
 
 
 def _error_message(e: Exception) -> str:
+    """One line for the report: settings errors as they are, others with their type (petzval's
+    errors name the file, line and field themselves)."""
     if isinstance(e, FileNotFoundError):
         return f"file not found: {e.filename or e}"
     text = str(e) or type(e).__name__
     if isinstance(e, (camera_mod.SettingsError, ImportError)):
         return text
-    mod = type(e).__module__ or ""
-    if mod.startswith("petzval"):
-        return f"{type(e).__name__}: {text}"
     return f"{type(e).__name__}: {text}"
 
 

@@ -160,6 +160,9 @@ def test_thin_lens_matches_cycles(main_scene, thin_renders, report):
     assert kw["max_depth"] == S.PETZVAL_MAX_DEPTH
     notes = entries[0]["notes"]
     assert not notes["unsupported"], f"the comparison scene should translate fully: {notes['unsupported']}"
+    # progressive: the image was handed to Blender after passes, not only at the end
+    assert entries[0]["result_updates"] >= 1 and entries[0]["progress_callbacks"] >= entries[0]["result_updates"]
+    assert entries[0]["complete"] is True and entries[0]["spp"] == SPP_THIN
     cmp = B.compare_blocks(cyc[0], cyc[1], pz[0], pz[1])
     v = _verdict(cmp)
     ratio = B.mean_ratio((pz[0] + pz[1]) / 2, (cyc[0] + cyc[1]) / 2)
