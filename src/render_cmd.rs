@@ -215,7 +215,8 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         (None, Some(d)) => Some(Aperture { shape: ApertureShape::Blades { count: d.blades, curvature: 0.0 }, rotation_rad: d.blade_rotation_deg.to_radians(), anamorphic_ratio: 1.0 }),
         (None, None) => None,
     };
-    let fstop = args.fstop.or_else(|| demo_shot.as_ref().map(|d| d.f_number));
+    // The demo's f-number belongs to its lens; another lens opens to its own.
+    let fstop = args.fstop.or_else(|| demo_shot.as_ref().filter(|_| args.lens.is_none()).map(|d| d.f_number));
     // 3. Focus: given, the demo's, or autofocus on what the image centre sees.
     let focus_m = match (args.focus, &demo_shot) {
         (Some(f), _) => Some(f),

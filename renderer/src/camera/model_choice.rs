@@ -22,8 +22,8 @@
 //! Among the models that meet the budget the cheapest in estimated camera-ray time wins. The
 //! estimate is a fixed cost model (measured with `petzval bench lens` and `bench lens-models`,
 //! see docs/speed-vs-error.md), not a timing, so the choice — and the image — is the same on
-//! every run and thread count: exact 40 ns per surface, LRTF 110 ns plus its exact fallback
-//! (3 % of rays), thick lens 60 ns, thin lens 50 ns, pinhole 30 ns, times the render's camera
+//! every run and thread count: exact 40 ns per surface, LRTF 60 ns plus its exact fallback
+//! (5 % of an exact trace), thick lens 60 ns, thin lens 50 ns, pinhole 30 ns, times the render's camera
 //! rays (width × height × spp); an LRTF adds its bake (about five exact traces per table entry)
 //! and is only baked when it can pay off. Baked tables are cached for the process.
 //!
@@ -224,7 +224,7 @@ fn nominal_ns(model: LensModel, surfaces: usize) -> f64 {
         LensModel::Pinhole => 30.0,
         LensModel::Thin => 50.0,
         LensModel::Thick => 60.0,
-        LensModel::Lrtf { .. } => 110.0 + 0.03 * exact,
+        LensModel::Lrtf { .. } => 60.0 + 0.05 * exact,
         LensModel::Exact | LensModel::Auto => exact,
     }
 }
