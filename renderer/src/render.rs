@@ -198,8 +198,11 @@ pub fn render_observed(scene: &RenderScene, rig: &CameraRig, settings: &RenderSe
                     px.alpha += sample.alpha * w;
                     px.alpha_weight += w;
                     if sample.depth_m.is_finite() {
+                        // Z: the hit's distance along the camera's view axis (Cycles' Z pass).
+                        let dir = ray.direction.normalize();
+                        let z = -(ray.origin.z + dir.z * sample.depth_m as f64);
                         px.hits += 1;
-                        px.depth += sample.depth_m;
+                        px.depth += z as f32;
                         px.normal += sample.normal;
                         px.albedo += sample.albedo;
                     }

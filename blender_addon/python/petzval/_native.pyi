@@ -139,7 +139,10 @@ class Scene:
         """A uniform environment radiance."""
     def set_environment_map(self, pixels: NDArray[np.float32], strength: float = 1.0, rotation_rad: float = 0.0, name: str = "") -> None:
         """An equirectangular environment ``(H, W, 3|4)``, row 0 at the top, mapped as
-        Blender's Environment Texture node maps it (see the renderer's environment docs)."""
+        Blender's Environment Texture node maps it (see the renderer's environment docs).
+        ``rotation_rad`` turns the map about the world's up axis as a Blender Mapping node of
+        type *Texture* with that Z rotation does (a *Point* mapping turns the other way: pass
+        the negated angle)."""
     @property
     def triangle_count(self) -> int: ...
     @property
@@ -187,9 +190,8 @@ def render(
     "spp": int, "complete": bool, "seconds": float, "lens_model": str, "lens_model_reason":
     str, "warnings": list[str], "camera_rays": int, "dropped_samples": int}``. Row 0 of the
     images is the TOP row (flip for Blender's render result, whose row 0 is the bottom). Depth
-    is the distance from the lens along the camera ray to the first hit, averaged over the
-    pixel's samples that hit (Cycles' Z pass of a perspective camera), ``inf`` where nothing
-    was hit.
+    is the first hit's distance along the camera's view axis (planar, as Cycles' Z pass),
+    averaged over the pixel's samples that hit, ``inf`` where nothing was hit.
 
     The camera follows Blender's camera data: ``lens`` ``"thin"`` or ``"pinhole"`` use
     ``focal_length_mm``; a library name or lens file brings its own focal length and f-number

@@ -141,7 +141,8 @@ pub struct Image {
     /// pixel through the lens that comes from geometry (camera rays weighted as their radiance
     /// is; samples blocked inside the lens do not count), so `rgb = α·surface + (1 − α)·env`.
     pub rgba: Vec<[f32; 4]>,
-    /// Depth (metres along the camera ray to the first hit; +inf where nothing was hit).
+    /// Depth: the first hit's distance along the camera's view axis (metres; planar, as Cycles'
+    /// Z pass); +inf where nothing was hit.
     pub depth: Vec<f32>,
     /// First-hit normal.
     pub normal: Vec<[f32; 3]>,
