@@ -418,16 +418,7 @@ def configure_cycles(cfg: CyclesSettings, camera: str) -> None:
     c.film_exposure = 1.0
     if hasattr(c, "use_guiding"):
         c.use_guiding = False
-    vs = scene.view_settings
-    vs.view_transform = "Standard"
-    vs.look = "None"
-    vs.exposure = 0.0
-    vs.gamma = 1.0
-    im = r.image_settings
-    im.file_format = "OPEN_EXR"
-    im.color_depth = "32"
-    im.color_mode = "RGBA"
-    im.exr_codec = "ZIP"
+    linear_exr_output(scene)
 
 
 def render_cycles(cfg: CyclesSettings, camera: str, out_exr: Path) -> float:
@@ -528,3 +519,20 @@ if __name__ == "__main__":
         print(f"cycles {spec.name}: {t:.2f} s")
         print("petzval render", glb, "-o", out / f"petzval_{spec.name}.exr", " ".join(petzval_cycles_args(spec)),
               "--environment", world_rgb_arg(), "--max-depth", PETZVAL_MAX_DEPTH, "--resolution", "x".join(map(str, RESOLUTION)))
+
+
+def linear_exr_output(scene) -> None:
+    """Standard view transform (no look, exposure 0, gamma 1) and RGBA float32 EXR output: the
+    pixels saved are the renderer's linear values, whichever engine made them."""
+    vs = scene.view_settings
+    vs.view_transform = "Standard"
+    vs.look = "None"
+    vs.exposure = 0.0
+    vs.gamma = 1.0
+    im = scene.render.image_settings
+    if hasattr(im, "media_type"):
+        im.media_type = "IMAGE"
+    im.file_format = "OPEN_EXR"
+    im.color_depth = "32"
+    im.color_mode = "RGBA"
+    im.exr_codec = "ZIP"

@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 import pytest
+from suite_report import SuiteReport
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[1]
@@ -35,29 +36,16 @@ import petzval_cli  # noqa: E402  (binary location/build shared with the optics 
 
 OUT = REPO / "tests" / "out" / "blender"
 
-_REPORT: list[str] = []
-
-
-class Report:
-    def line(self, text: str = "") -> None:
-        _REPORT.append(text)
-        print(text)
+_SUITE_REPORT = SuiteReport("Cycles comparison (tests/blender)", OUT)
 
 
 @pytest.fixture(scope="session")
-def report() -> Report:
-    return Report()
+def report() -> SuiteReport:
+    return _SUITE_REPORT
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config):
-    if not _REPORT:
-        return
-    if config.option.capture != "no":  # with -s they were printed already
-        terminalreporter.section("Cycles comparison (tests/blender)")
-        for line in _REPORT:
-            terminalreporter.write_line(line)
-    OUT.mkdir(parents=True, exist_ok=True)
-    (OUT / "report.md").write_text("\n".join(_REPORT) + "\n")
+    _SUITE_REPORT.terminal_summary(terminalreporter, config)
 
 
 class BlenderRun:

@@ -75,17 +75,7 @@ def configure_petzval(spp: int, seed: int = 0, max_bounces: int = S.CYCLES_MAX_B
     p.filter_width = 1.5
     p.natural_vignetting = False
     p.spectral = False
-    vs = scene.view_settings
-    vs.view_transform = "Standard"
-    vs.look = "None"
-    vs.exposure = 0.0
-    vs.gamma = 1.0
-    im = r.image_settings
-    im.media_type = "IMAGE"
-    im.file_format = "OPEN_EXR"
-    im.color_depth = "32"
-    im.color_mode = "RGBA"
-    im.exr_codec = "ZIP"
+    S.linear_exr_output(scene)
 
 
 def render_still(out_exr: Path) -> tuple[float, dict]:

@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from suite_report import SuiteReport
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[1]
@@ -31,29 +32,16 @@ for p in (HERE, REPO / "tests" / "blender", REPO / "tests" / "optics"):
 OUT = REPO / "tests" / "out" / "blender_addon"
 ADDON_MODULE = "bl_ext.user_default.petzval"
 
-_REPORT: list[str] = []
-
-
-class Report:
-    def line(self, text: str = "") -> None:
-        _REPORT.append(text)
-        print(text)
+_SUITE_REPORT = SuiteReport("Blender add-on (tests/blender_addon)", OUT)
 
 
 @pytest.fixture(scope="session")
-def report() -> Report:
-    return Report()
+def report() -> SuiteReport:
+    return _SUITE_REPORT
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config):
-    if not _REPORT:
-        return
-    if config.option.capture != "no":
-        terminalreporter.section("Blender add-on (tests/blender_addon)")
-        for line in _REPORT:
-            terminalreporter.write_line(line)
-    OUT.mkdir(parents=True, exist_ok=True)
-    (OUT / "report.md").write_text("\n".join(_REPORT) + "\n")
+    _SUITE_REPORT.terminal_summary(terminalreporter, config)
 
 
 @pytest.fixture(scope="session")
