@@ -124,6 +124,7 @@ def _quiet(log: Path):
     sys.stdout.flush()
     sys.stderr.flush()
     saved = [os.dup(1), os.dup(2)]
+    log.parent.mkdir(parents=True, exist_ok=True)
     with open(log, "ab") as f:
         try:
             os.dup2(f.fileno(), 1)
