@@ -291,7 +291,7 @@ pub fn parse_toml(text: &str, file: &str) -> Result<(Prescription, SourceMap)> {
     let p: Prescription = toml::from_str(text).map_err(|e| {
         let line = e.span().map(|s| line_of(text, s.start)).unwrap_or(0);
         let msg = e.message().to_string();
-        let field = field_from_message(&msg).unwrap_or_else(|| "toml".into());
+        let field = field_from_message(&msg).or_else(|| key_on_line(text, line)).unwrap_or_else(|| "toml".into());
         Error::lens_file(file, line, field, msg)
     })?;
     // 2. Remember where each table starts, for validation errors.
@@ -320,6 +320,14 @@ pub fn parse_toml(text: &str, file: &str) -> Result<(Prescription, SourceMap)> {
 
 fn line_of(text: &str, byte: usize) -> usize {
     text[..byte.min(text.len())].bytes().filter(|&b| b == b'\n').count() + 1
+}
+
+/// The key assigned on 1-based line `line` (`key = value`), for errors whose message names none
+/// (a value of the wrong type).
+fn key_on_line(text: &str, line: usize) -> Option<String> {
+    let l = text.lines().nth(line.checked_sub(1)?)?;
+    let key = l.split_once('=')?.0.trim();
+    (!key.is_empty() && key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '.' || c == '-')).then(|| key.to_string())
 }
 
 fn field_from_message(msg: &str) -> Option<String> {

@@ -1,0 +1,185 @@
+"""The Python API of the native module: lenses, scenes from buffers, render, and the mapping of
+every error to a Python exception (never a crash). Optics against the CLI, which tests/optics
+checks against optiland."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import petzval_cli  # tests/optics: where the CLI binary is (built if needed)
+
+
+def ground_scene(pz):
+    """A grey ground plane (y = 0, 20 m square) under a white sky, and a wall 3 m ahead."""
+    s = pz.Scene()
+    grey = s.add_material("grey", base_color=(0.5, 0.5, 0.5, 1.0), roughness=1.0, specular=0.0)
+    quad = np.array([[-10, 0, -10], [10, 0, -10], [10, 0, 10], [-10, 0, 10]], np.float32)
+    s.add_mesh(quad, np.array([[0, 2, 1], [0, 3, 2]]), material_ids=np.array([grey, grey]), name="ground")
+    wall = np.array([[-20, -20, -3], [20, -20, -3], [20, 20, -3], [-20, 20, -3]], np.float32)
+    s.add_mesh(wall, np.array([[0, 1, 2], [0, 2, 3]]), name="wall")
+    s.set_environment_color((1.0, 1.0, 1.0))
+    return s
+
+
+def camera(height_m=1.0):
+    m = np.eye(4)
+    m[1, 3] = height_m
+    return m
+
+
+def test_library_and_lens_info(petzval):
+    lib = petzval.library_lenses()
+    assert len(lib) >= 13
+    names = [e["name"] for e in lib]
+    assert names == sorted(names) and "double-gauss-50mm" in names
+    for e in lib:
+        assert set(e) >= {"name", "description", "focal_length_mm", "f_number", "source"}
+        assert e["focal_length_mm"] > 0 and e["f_number"] > 0 and e["source"]
+    lens = petzval.Lens("double-gauss-50mm")
+    assert abs(lens.focal_length_mm - 50.358) < 0.01
+    info = lens.info()
+    cli = json.loads(subprocess.run([str(petzval_cli.ensure_binary()), "lens", "info", "double-gauss-50mm", "--json"], capture_output=True, text=True, check=True).stdout)
+    assert info == cli
+
+
+def test_trace_matches_the_cli_and_reverses(petzval):
+    lens = petzval.Lens("double-gauss-50mm")
+    rng = np.random.default_rng(1)
+    n = 200
+    info = lens.info()
+    film_z = info["sensor_z_mm"]
+    film = np.column_stack([rng.uniform(-10, 10, n), rng.uniform(-10, 10, n), np.full(n, film_z)])
+    rear = np.column_stack([rng.uniform(-8, 8, n), rng.uniform(-8, 8, n), np.full(n, info["lens_length_mm"])])
+    d = rear - film
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    o, dirs, ok = lens.trace(film, d)
+    assert o.shape == (n, 3) and dirs.shape == (n, 3) and ok.dtype == bool
+    assert 20 < ok.sum() < n, ok.sum()
+    assert np.isnan(o[~ok]).all() and np.isfinite(o[ok]).all()
+    # the CLI's `lens trace` (JSON lines) gives the same rays
+    lines = "\n".join(json.dumps([*film[i], *d[i]]) for i in range(n))
+    out = subprocess.run([str(petzval_cli.ensure_binary()), "lens", "trace", "double-gauss-50mm", "--direction", "film-to-scene"], input=lines, capture_output=True, text=True, check=True).stdout.splitlines()
+    for i, line in enumerate(out):
+        r = json.loads(line)
+        assert r["ok"] == bool(ok[i])
+        if r["ok"]:
+            np.testing.assert_allclose(o[i], r["origin"], atol=1e-12)
+            np.testing.assert_allclose(dirs[i], r["direction"], atol=1e-12)
+    # scene → film: the reversed rays come back to their film points
+    back_o, back_d, back_ok = lens.trace(o[ok] + 5 * dirs[ok], -dirs[ok], direction="scene_to_film")
+    assert back_ok.all()
+    t = (film_z - back_o[:, 2]) / back_d[:, 2]
+    np.testing.assert_allclose(back_o + back_d * t[:, None], film[ok], atol=1e-8)
+
+
+def test_render_thin_lens_exposure_depth_and_determinism(petzval):
+    s = ground_scene(petzval)
+    kw = dict(lens="thin", focal_length_mm=20.0, fstop=None, spp=8, seed=3)
+    r1 = petzval.render(s, camera(), 64, 48, threads=1, **kw)
+    r2 = petzval.render(s, camera(), 64, 48, threads=2, **kw)
+    assert r1["lens_model"] == "pinhole" and "pinhole" in r1["lens_model_reason"]
+    assert r1["rgba"].shape == (48, 64, 4) and r1["rgba"].dtype == np.float32
+    assert r1["depth"].shape == (48, 64)
+    assert np.array_equal(r1["rgba"], r2["rgba"]) and np.array_equal(r1["depth"], r2["depth"]), "thread count changed the image"
+    # the wall (white-lit Lambertian grey, half the sky visible: 0.5 * 0.5 = 0.25 at the top
+    # rows; depth along the view axis = 3 m in every pixel that sees it
+    top = r1["depth"][:8]
+    assert np.allclose(top[np.isfinite(top)], 3.0, atol=1e-4), top
+    # the ground below: row 0 is the top of the image
+    assert np.all(r1["depth"][-1] < r1["depth"][0])
+
+
+def test_progress_images_and_cancel(petzval):
+    s = ground_scene(petzval)
+    seen = []
+
+    def progress(fraction, spp, rgba):
+        seen.append((fraction, spp, None if rgba is None else rgba.shape))
+        return None  # None continues
+
+    r = petzval.render(s, camera(), 160, 120, spp=64, progress=progress, progress_interval_s=0.02)
+    assert r["complete"] and r["spp"] == 64
+    assert seen and seen[-1][1] == 64 and seen[-1][2] == (120, 160, 4)
+    assert all(a[0] <= b[0] + 1e-6 for a, b in zip(seen, seen[1:])), "fraction goes backwards"
+    # cancel before the first pass finishes: CancelledError
+    with pytest.raises(petzval.CancelledError):
+        petzval.render(s, camera(), 2048, 2048, spp=4, lens="double-gauss-50mm", lens_model="exact", progress=lambda f, n, img: False, progress_interval_s=0.01)
+    # cancel later: what converged comes back, promptly
+    t = {}
+
+    def stop_after_first_pass(f, n, img):
+        if n >= 1 and "at" not in t:
+            t["at"] = time.perf_counter()
+        return "at" not in t
+
+    r = petzval.render(s, camera(), 400, 300, spp=100000, progress=stop_after_first_pass, progress_interval_s=0.05)
+    latency = time.perf_counter() - t["at"]
+    assert not r["complete"] and 1 <= r["spp"] < 100000
+    assert latency < 0.5, f"render returned {latency:.3f} s after cancel"
+    # an exception in the callback cancels and is re-raised
+    with pytest.raises(ZeroDivisionError):
+        petzval.render(s, camera(), 64, 48, spp=16, progress=lambda f, n, img: 1 / 0)
+
+
+def test_render_releases_the_gil(petzval):
+    s = ground_scene(petzval)
+    ticks = []
+    stop = threading.Event()
+
+    def ticker():
+        while not stop.is_set():
+            ticks.append(time.perf_counter())
+            time.sleep(0.01)
+
+    th = threading.Thread(target=ticker)
+    th.start()
+    try:
+        petzval.render(s, camera(), 256, 192, spp=16)
+    finally:
+        stop.set()
+        th.join()
+    gaps = np.diff(ticks)
+    assert len(ticks) > 5 and gaps.max() < 0.3, f"another Python thread stalled {gaps.max():.2f} s"
+
+
+@pytest.mark.parametrize(
+    "call, exc, words",
+    [
+        (lambda pz: pz.Lens("/nonexistent/lens.toml"), FileNotFoundError, ["lens.toml"]),
+        (lambda pz: pz.Scene().add_mesh(np.zeros((3, 3)), np.array([[0, 1, 5]]), name="Cube"), "InvalidSceneError", ["Cube", "triangles", "5"]),
+        (lambda pz: pz.Scene().add_mesh(np.full((3, 3), np.nan), np.array([[0, 1, 2]]), name="Nan"), "InvalidSceneError", ["Nan", "positions"]),
+        (lambda pz: pz.Scene().add_material("m", base_color=(1, 2)), "InvalidSceneError", ["'m'", "base_color"]),
+        (lambda pz: pz.Scene().add_material("m", base_color_texture=3), "InvalidSceneError", ["base_color_texture", "3"]),
+        (lambda pz: pz.render(pz.Scene(), np.eye(4), 0, 10), "InvalidSettingsError", ["resolution"]),
+        (lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, tilt_x_deg=80), "InvalidSettingsError", ["tilt_x_deg"]),
+        (lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, lens_model="fast"), "InvalidSettingsError", ["lens_model"]),
+        (lambda pz: pz.render(pz.Scene(), np.zeros((4, 4)), 10, 10), "InvalidSettingsError", ["camera_to_world"]),
+        (lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, crop=(5, 5, 20, 20)), "InvalidSettingsError", ["crop"]),
+        (lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, lens="double-gauss-50mm", fstop=0.5), "InvalidLensError", ["f/0.5"]),
+        (lambda pz: pz.Lens("double-gauss-50mm").trace(np.zeros((2, 2)), np.zeros((2, 2))), "InvalidSettingsError", ["(N, 3)"]),
+    ],
+)
+def test_errors_map_to_python_exceptions(petzval, call, exc, words):
+    exc_type = getattr(petzval, exc) if isinstance(exc, str) else exc
+    with pytest.raises(exc_type) as info:
+        call(petzval)
+    msg = str(info.value)
+    for w in words:
+        assert w in msg, f"{w!r} not in {msg!r}"
+    assert issubclass(petzval.InvalidLensError, petzval.PetzvalError)
+    assert issubclass(petzval.CancelledError, petzval.PetzvalError)
+
+
+def test_broken_lens_file_names_file_and_line(petzval, tmp_path):
+    p = tmp_path / "broken.toml"
+    p.write_text('[lens]\nname = "x"\nsource = "test"\n\n[[surface]]\nradius_mm = "a"\nthickness_mm = 1\nsemi_diameter_mm = 5\n')
+    with pytest.raises(petzval.InvalidLensError) as info:
+        petzval.Lens(str(p))
+    msg = str(info.value)
+    assert "broken.toml" in msg and ":6" in msg and "radius_mm" in msg, msg
