@@ -11,6 +11,7 @@ import numpy as np
 from . import camera as camera_mod
 from . import native
 from . import scene as scene_mod
+from . import viewport as viewport_mod
 from .notes import Notes
 
 # Background depth (Blender's Z pass convention: a large finite number, as Cycles writes).
@@ -36,7 +37,7 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
     bl_idname = "PETZVAL"
     bl_label = "Petzval"
     bl_use_preview = False
-    bl_use_eevee_viewport = True  # the viewport's Material Preview / Rendered shading use EEVEE
+    bl_use_eevee_viewport = True  # Material Preview uses EEVEE; Rendered shading is our preview (view_draw)
     bl_use_postprocess = True
 
     # -- passes
@@ -190,6 +191,87 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
                 self.report({"WARNING"}, f"Petzval: {summary}")
             else:
                 self.report({"INFO"}, f"Petzval: {summary}")
+
+    # -- viewport preview (Rendered shading)
+
+    def __del__(self):
+        preview = getattr(self, "_preview", None)
+        if preview is not None:
+            preview.cancel(wait_s=0.0)
+
+    def view_update(self, context, depsgraph):
+        """Any change of the scene: translate it again; the next draw restarts the preview."""
+        try:
+            pz = native.get()
+            notes = Notes()
+            pz_scene, _ = scene_mod.build(pz, depsgraph, notes)
+            if pz_scene is not None:
+                scene_mod.add_world(pz_scene, depsgraph.scene_eval.world, notes, None)
+            self._vp_scene = pz_scene
+            self._vp_error = None
+        except Exception as e:
+            self._vp_scene = None
+            self._vp_error = _error_message(e)
+            traceback.print_exc()
+        self._vp_key = None
+
+    def _view_kwargs(self, context, depsgraph) -> dict:
+        """Camera arguments of the view being drawn (see viewport.py)."""
+        scene = depsgraph.scene_eval
+        rv3d = context.region_data
+        if rv3d.view_perspective == "CAMERA" and scene.camera is not None and scene.camera.type == "CAMERA":
+            return camera_mod.camera_kwargs(scene, scene.camera.evaluated_get(depsgraph), depsgraph, Notes())
+        if not rv3d.is_perspective:
+            raise camera_mod.SettingsError("orthographic views are not previewed (Petzval renders perspective cameras only)")
+        space = context.space_data
+        return viewport_mod.free_view_kwargs(rv3d.view_matrix.inverted(), space.lens, space.clip_start, space.clip_end)
+
+    def view_draw(self, context, depsgraph):
+        """Draws the newest pass of the preview, (re)starting it when the view changed."""
+        import gpu
+        from gpu_extras.presets import draw_texture_2d
+
+        region = context.region
+        scene = depsgraph.scene_eval
+        settings = scene.petzval
+        divisor = max(1, int(settings.viewport_divisor))
+        w, h = max(1, region.width // divisor), max(1, region.height // divisor)
+        preview = getattr(self, "_preview", None)
+        try:
+            if getattr(self, "_vp_scene", None) is None and getattr(self, "_vp_error", None) is None:
+                self.view_update(context, depsgraph)
+            if self._vp_scene is not None:
+                kw = self._view_kwargs(context, depsgraph)
+                render_kw = camera_mod.render_kwargs(scene, scene.frame_current)
+                render_kw.pop("spp")
+                key = viewport_mod.view_key({**kw, **render_kw}, w, h)
+                if key != getattr(self, "_vp_key", None):
+                    if preview is not None:
+                        preview.cancel(wait_s=0.5)
+                    preview = self._preview = viewport_mod.PreviewRender(
+                        native.get(), self._vp_scene, {**kw, **render_kw}, w, h, int(settings.viewport_samples))
+                    self._vp_key = key
+        except Exception as e:
+            self._vp_error = _error_message(e)
+        error = getattr(self, "_vp_error", None) or (preview.error if preview is not None else None)
+        if error:
+            self.update_stats("", f"Petzval viewport: {error}")
+        rgba = preview.latest() if preview is not None else None
+        if rgba is not None:
+            hh, ww = rgba.shape[:2]
+            img = np.array(rgba[::-1], dtype=np.float32)
+            img[..., 3] = 1.0
+            buf = gpu.types.Buffer("FLOAT", ww * hh * 4, img.ravel())
+            texture = gpu.types.GPUTexture((ww, hh), format="RGBA16F", data=buf)
+            gpu.state.blend_set("ALPHA_PREMULT")
+            self.bind_display_space_shader(scene)
+            draw_texture_2d(texture, (0, 0), region.width, region.height)
+            self.unbind_display_space_shader()
+            gpu.state.blend_set("NONE")
+            if not error:
+                self.update_stats("", f"Petzval viewport | Sample {preview.spp_done}/{preview.spp}")
+        if preview is not None and not preview.finished:
+            self.tag_redraw()
 
     @staticmethod
     def _write(layer, rgba: np.ndarray, opaque: bool) -> None:

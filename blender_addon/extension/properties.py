@@ -78,6 +78,12 @@ class PetzvalCameraSettings(bpy.types.PropertyGroup):
 
 class PetzvalRenderSettings(bpy.types.PropertyGroup):
     samples: IntProperty(name="Samples", description="Samples per pixel", default=64, min=1, soft_max=4096)
+    viewport_samples: IntProperty(name="Viewport Samples", description="Samples per pixel of the viewport's Rendered shading", default=16, min=1, soft_max=1024)
+    viewport_divisor: IntProperty(
+        name="Viewport Resolution Divisor",
+        description="The viewport preview renders at the viewport's size divided by this",
+        default=4, min=1, max=16,
+    )
     seed: IntProperty(name="Seed", description="Seed of the sample pattern", default=0, min=0)
     use_animated_seed: BoolProperty(name="Animated Seed", description="Add the frame number to the seed so the noise changes per frame", default=False)
     max_bounces: IntProperty(

@@ -143,6 +143,9 @@ class PETZVAL_PT_sampling(PetzvalPanel, bpy.types.Panel):
         col.prop(s, "filter_width")
         col.prop(s, "natural_vignetting")
         col.prop(s, "spectral")
+        col = layout.column(heading="Viewport")
+        col.prop(s, "viewport_samples", text="Samples")
+        col.prop(s, "viewport_divisor", text="Resolution Divisor")
 
 
 class PETZVAL_PT_passes(PetzvalPanel, bpy.types.Panel):

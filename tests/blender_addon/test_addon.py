@@ -746,3 +746,68 @@ def test_panels_draw(addon):
         ctx = types.SimpleNamespace(camera=cam, engine="PETZVAL", scene=scene, view_layer=bpy.context.view_layer)
         mod.ui.PETZVAL_PT_camera_lens.draw(types.SimpleNamespace(layout=_Layout(log)), ctx)
         assert (("prop", "lens_file") in log) == expect, log
+
+
+# ------------------------------------------------------------------------------------------
+# viewport preview (the drawing itself needs a GPU context, which bpy as a module lacks: this
+# tests what view_draw runs — the free-view camera, the background render, restart and cancel)
+
+
+def test_viewport_preview_renders_the_view_in_the_background(main_scene, report):
+    import importlib
+    import time
+
+    import petzval
+
+    _use_main_scene(main_scene)
+    H.configure_petzval(spp=16, camera="MainCam")
+    vp = importlib.import_module(H.ADDON_MODULE + ".viewport")
+    cam_mod = importlib.import_module(H.ADDON_MODULE + ".camera")
+    scene_mod = importlib.import_module(H.ADDON_MODULE + ".scene")
+    notes_mod = importlib.import_module(H.ADDON_MODULE + ".notes")
+    scene = bpy.context.scene
+    cam_obj = bpy.data.objects["MainCam"]
+    cam_obj.data.dof.use_dof = False
+    try:
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        notes = notes_mod.Notes()
+        pz_scene, _ = scene_mod.build(petzval, depsgraph, notes)
+        scene_mod.add_world(pz_scene, scene.world, notes, None)
+        render_kw = cam_mod.render_kwargs(scene, scene.frame_current)
+        render_kw.pop("spp")
+        w, h = 60, 40
+        # A free view with the camera's matrix and twice its focal length (Blender's viewport
+        # sensor is 72 mm) sees exactly what the depth-of-field-free camera sees.
+        free = vp.free_view_kwargs(cam_obj.matrix_world, 2 * cam_obj.data.lens, cam_obj.data.clip_start, cam_obj.data.clip_end)
+        t0 = time.perf_counter()
+        preview = vp.PreviewRender(petzval, pz_scene, {**free, **render_kw}, w, h, 16)
+        seen_passes = set()
+        while not preview.finished and time.perf_counter() - t0 < 60:
+            img = preview.latest()
+            if img is not None:
+                seen_passes.add(preview.spp_done)
+            time.sleep(0.005)
+        assert preview.finished and preview.error is None, preview.error
+        got = preview.latest()
+        cam_kw = cam_mod.camera_kwargs(scene, cam_obj.evaluated_get(depsgraph), depsgraph, notes)
+        ref = petzval.render(pz_scene, cam_kw.pop("camera_to_world"), w, h, spp=16, **cam_kw, **render_kw)["rgba"]
+        assert got.shape == (h, w, 4)
+        assert np.array_equal(got, ref), f"free view differs from the camera: max |Δ| {np.abs(got - ref).max()}"
+        # a change of view changes the key (the next draw restarts); the same view keeps it
+        k1 = vp.view_key({**free, **render_kw}, w, h)
+        moved = cam_obj.matrix_world.copy()
+        moved.translation.x += 0.01
+        k2 = vp.view_key({**vp.free_view_kwargs(moved, 2 * cam_obj.data.lens, 0.1, 100.0), **render_kw}, w, h)
+        assert k1 == vp.view_key({**free, **render_kw}, w, h) and k1 != k2
+        # a restart cancels the running preview promptly
+        slow = vp.PreviewRender(petzval, pz_scene, {**free, **render_kw}, 240, 160, 1 << 16)
+        while slow.latest() is None and time.perf_counter() - t0 < 60:
+            time.sleep(0.005)
+        t1 = time.perf_counter()
+        slow.cancel(wait_s=2.0)
+        cancel_s = time.perf_counter() - t1
+        assert slow.finished and cancel_s < 0.5, f"cancel took {cancel_s:.3f} s"
+        report.line(f"viewport preview: free view = camera view (identical {w}x{h} image, passes seen {sorted(seen_passes)}), "
+                    f"restart cancels in {cancel_s * 1000:.0f} ms")
+    finally:
+        cam_obj.data.dof.use_dof = True
