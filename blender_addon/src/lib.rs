@@ -124,7 +124,10 @@ fn library_lenses(py: Python<'_>) -> PyResult<Py<PyList>> {
             let lens = petzval_renderer::library_lens(e.name).map_err(py_err)?;
             let d = PyDict::new(py);
             d.set_item("name", e.name)?;
-            d.set_item("description", lens.name())?;
+            // The source's first clause names the design ("D-GAUSS F/2 22deg HFOV", a patent).
+            let source = &lens.prescription().lens.source;
+            let description = source.split(';').next().map(str::trim).filter(|d| !d.is_empty()).unwrap_or(lens.name());
+            d.set_item("description", description)?;
             d.set_item("focal_length_mm", lens.paraxial().efl_mm)?;
             d.set_item("f_number", lens.paraxial().f_number)?;
             d.set_item("source", lens.prescription().lens.source.clone())?;
