@@ -64,13 +64,18 @@ def _native_problem(layout) -> bool:
     return bool(err)
 
 
-class PETZVAL_PT_camera_lens(PetzvalPanel, bpy.types.Panel):
-    bl_label = "Petzval Lens"
+class CameraPanel(PetzvalPanel):
+    """A panel in Properties › Camera (object data) for our engine."""
+
     bl_context = "data"
 
     @classmethod
     def poll(cls, context):
         return context.camera is not None and super().poll(context)
+
+
+class PETZVAL_PT_camera_lens(CameraPanel, bpy.types.Panel):
+    bl_label = "Petzval Lens"
 
     def draw(self, context):
         layout = self.layout
@@ -99,14 +104,9 @@ class PETZVAL_PT_camera_lens(PetzvalPanel, bpy.types.Panel):
             layout.label(text="Petzval renders perspective cameras only", icon="ERROR")
 
 
-class PETZVAL_PT_camera_tilt(PetzvalPanel, bpy.types.Panel):
+class PETZVAL_PT_camera_tilt(CameraPanel, bpy.types.Panel):
     bl_label = "Tilt (Scheimpflug)"
-    bl_context = "data"
     bl_parent_id = "PETZVAL_PT_camera_lens"
-
-    @classmethod
-    def poll(cls, context):
-        return context.camera is not None and super().poll(context)
 
     def draw(self, context):
         layout = self.layout

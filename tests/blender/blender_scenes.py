@@ -305,13 +305,7 @@ def build_scene(tmpdir: Path) -> BuiltScene:
     scene = bpy.context.scene
 
     # World: constant colour, strength 1.
-    world = bpy.data.worlds.new("World")
-    if world.node_tree is None:
-        world.use_nodes = True
-    bg = world.node_tree.nodes.get("Background")
-    bg.inputs["Color"].default_value = (*WORLD_RGB, 1.0)
-    bg.inputs["Strength"].default_value = 1.0
-    scene.world = world
+    set_world_colour(bpy, scene, WORLD_RGB)
 
     checker = _checker_image(bpy, tmpdir)
     m_ground = _principled(bpy, "Ground", image=checker)
@@ -537,3 +531,14 @@ def linear_exr_output(scene) -> None:
     im.color_depth = "32"
     im.color_mode = "RGBA"
     im.exr_codec = "ZIP"
+
+
+def set_world_colour(bpy, scene, rgb) -> None:
+    """A new world of constant colour `rgb` (Background node, strength 1) for `scene`."""
+    world = bpy.data.worlds.new("World")
+    if world.node_tree is None:
+        world.use_nodes = True
+    bg = world.node_tree.nodes.get("Background")
+    bg.inputs["Color"].default_value = (*rgb, 1.0)
+    bg.inputs["Strength"].default_value = 1.0
+    scene.world = world

@@ -203,13 +203,7 @@ def add_camera(name: str, location, rotation_euler, lens_mm=50.0, sensor_mm=36.0
 
 def set_world_colour(rgb) -> None:
     b = bpy()
-    world = b.data.worlds.new("World")
-    if world.node_tree is None:
-        world.use_nodes = True
-    bg = world.node_tree.nodes.get("Background")
-    bg.inputs["Color"].default_value = (*rgb, 1.0)
-    bg.inputs["Strength"].default_value = 1.0
-    b.context.scene.world = world
+    S.set_world_colour(b, b.context.scene, rgb)
 
 
 # Tilt-shift scene: a camera `TILT_HEIGHT_M` above an emissive checkerboard ground, pitched down
