@@ -657,7 +657,7 @@ fn toml_bad_input_names_file_line_and_field() {
         // no stop
         (good.replace("stop = true\n", ""), 0, "surface.stop", "no aperture stop"),
         // wrong type
-        (good.replace("thickness_mm = 48.0", "thickness_mm = \"far\""), 18, "toml", "invalid type"),
+        (good.replace("thickness_mm = 48.0", "thickness_mm = \"far\""), 18, "thickness_mm", "invalid type"),
     ];
     for (text, line, field, needle) in cases {
         let err = Lens::from_toml(&text, "bad.toml", None).unwrap_err();
