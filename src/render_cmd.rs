@@ -5,9 +5,9 @@ use glam::{DAffine3, DVec2, DVec3};
 use indicatif::{ProgressBar, ProgressStyle};
 use petzval_renderer::film::{write_exr, write_png, ExrLayers, Metadata, PixelFilter, ToneMap};
 use petzval_renderer::integrator::RenderScene;
-use petzval_renderer::render::{render, scene_depth_range_m, CameraRig, RenderSettings};
+use petzval_renderer::render::{render, CameraRig, RenderSettings};
 use petzval_renderer::scene::{demo, gltf_load, Environment, Scene, SceneCamera};
-use petzval_renderer::{load_lens, Aperture, ApertureMask, ApertureShape, Camera, CameraSpec, Error, LensModel, Sensor, ShotContext};
+use petzval_renderer::{Aperture, ApertureMask, ApertureShape, Camera, CameraSpec, Error, LensModel, Sensor};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -264,16 +264,8 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     };
     spec.validate()?;
     // 4. The camera: auto picks the cheapest model within the error budget for this shot.
-    let probe_focal = if ideal { spec.focal_length_mm } else { load_lens(&lens_name)?.paraxial().efl_mm };
-    let shot = ShotContext {
-        width,
-        height,
-        spp: args.spp,
-        depth_range_m: scene_depth_range_m(&render_scene, &to_world, &sensor, probe_focal),
-        spectral: args.spectral,
-    };
     let t0 = std::time::Instant::now();
-    let built = spec.build(&shot)?;
+    let built = spec.build_for_scene(&render_scene, &to_world, width, height, args.spp, args.spectral)?;
     if model == LensModel::Auto {
         eprintln!("lens model: {} (auto, {:.2} s to decide) — {}", built.choice.model, t0.elapsed().as_secs_f64(), built.choice.reason);
         for c in &built.choice.candidates {
@@ -300,11 +292,7 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     }
     // 4. Render with a progress bar; Ctrl-C stops and keeps what converged.
     // Model only what the scene needs: one wavelength per ray only where the lens disperses.
-    let dispersive = match &rig.camera {
-        Camera::Realistic(c) => c.lens.has_dispersion(),
-        Camera::Lrtf(c) => c.exact.lens.has_dispersion() && c.table.header.wavelengths_nm.len() > 1,
-        _ => false,
-    };
+    let dispersive = rig.camera.is_dispersive();
     let spectral = args.spectral && dispersive;
     if args.spectral && !dispersive {
         eprintln!("note: --spectral ignored: the {} has no dispersion, so RGB transport is exact here", if matches!(&rig.camera, Camera::Realistic(_)) { "lens" } else { "camera model" });

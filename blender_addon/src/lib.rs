@@ -26,11 +26,11 @@ use numpy::ndarray::{Array2, Array3};
 use numpy::{AllowTypeChange, IntoPyArray, PyArrayLike1, PyArrayLike2, PyArrayLike3};
 use petzval_renderer::film::{Image, PixelFilter};
 use petzval_renderer::integrator::RenderScene;
-use petzval_renderer::render::{render_observed, scene_depth_range_m, CameraRig, RenderResult, RenderSettings};
+use petzval_renderer::render::{render_observed, CameraRig, RenderResult, RenderSettings};
 use petzval_renderer::scene::environment::EnvironmentMap;
 use petzval_renderer::scene::texture::Wrap;
 use petzval_renderer::scene::{AlphaMode, Environment, Light, Material, Mesh, Texture, TextureRef};
-use petzval_renderer::{Aperture, ApertureMask, ApertureShape, CameraSpec, Error, Lens, LensModel, Ray, Sensor, ShotContext, TraceDirection, LIBRARY};
+use petzval_renderer::{Aperture, ApertureMask, ApertureShape, CameraSpec, Error, Lens, LensModel, Ray, Sensor, TraceDirection, LIBRARY};
 use pyo3::exceptions::{PyException, PyFileNotFoundError, PyOSError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -688,6 +688,15 @@ fn render(
         }
         let to_world = rigid(affine_from_rows("camera", "camera_to_world", &camera_to_world.as_array()).map_err(|e| settings_err("camera_to_world", e.to_string()))?)?;
         let sensor = blender_sensor(width, height, sensor_width_mm, sensor_height_mm, &sensor_fit, DVec2::new(shift_x, shift_y), DVec2::new(tilt_x_deg, tilt_y_deg))?;
+        if !aperture_rotation_rad.is_finite() {
+            return Err(settings_err("aperture_rotation_rad", format!("must be finite, got {aperture_rotation_rad}")));
+        }
+        if threads > 1024 {
+            return Err(settings_err("threads", format!("{threads} is more than 1024 (0 uses every core)")));
+        }
+        if focus_distance_m.is_some_and(|d| d.is_nan()) {
+            return Err(settings_err("focus_distance_m", "is NaN (None or inf focuses at infinity)".into()));
+        }
         if !(aperture_ratio.is_finite() && aperture_ratio > 0.0) {
             return Err(settings_err("aperture_ratio", format!("must be positive, got {aperture_ratio}")));
         }
@@ -704,15 +713,13 @@ fn render(
             tolerance_px,
             focal_length_mm,
             f_number: fstop,
-            focus_distance_m: focus_distance_m.filter(|d| d.is_finite()),
+            focus_distance_m: focus_distance_m.filter(|d| *d != f64::INFINITY),
             aperture,
             sensor,
             natural_vignetting,
             lrtf_file: None,
         };
         spec.validate().map_err(py_err)?;
-        // The lens loads now, so a broken lens file is reported before the scene is built.
-        let _ = if lens == "thin" || lens == "pinhole" { None } else { Some(petzval_renderer::load_lens(&lens).map_err(py_err)?) };
         let mut scene_data = scene.scene.clone();
         if !scene.all_tangents {
             scene_data.mesh.tangents.clear();
@@ -728,19 +735,9 @@ fn render(
                 let run = || -> Outcome {
                     let render_scene = RenderScene::new(scene_data)?;
                     let warnings = render_scene.scene().warnings.clone();
-                    let probe_focal = match petzval_renderer::load_lens(&spec.lens) {
-                        Ok(l) if spec.lens != "thin" && spec.lens != "pinhole" => l.paraxial().efl_mm,
-                        _ => spec.focal_length_mm,
-                    };
-                    let shot = ShotContext { width, height, spp, depth_range_m: scene_depth_range_m(&render_scene, &to_world, &spec.sensor, probe_focal), spectral };
-                    let built = spec.build(&shot)?;
+                    let built = spec.build_for_scene(&render_scene, &to_world, width, height, spp, spectral)?;
                     let rig = CameraRig { camera: built.camera, to_world };
-                    let dispersive = match &rig.camera {
-                        petzval_renderer::Camera::Realistic(c) => c.lens.has_dispersion(),
-                        petzval_renderer::Camera::Lrtf(c) => c.exact.lens.has_dispersion(),
-                        _ => false,
-                    };
-                    let settings = RenderSettings { spectral: settings.spectral && dispersive, ..settings.clone() };
+                    let settings = RenderSettings { spectral: settings.spectral && rig.camera.is_dispersive(), ..settings.clone() };
                     let on_progress = |f: f32| {
                         shared.fraction.store(f.to_bits(), Ordering::Relaxed);
                         !shared.cancel.load(Ordering::Relaxed)

@@ -161,6 +161,8 @@ def test_render_releases_the_gil(petzval):
         (lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, lens_model="fast"), "InvalidSettingsError", ["lens_model"]),
         (lambda pz: pz.render(pz.Scene(), np.zeros((4, 4)), 10, 10), "InvalidSettingsError", ["camera_to_world"]),
         (lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, crop=(5, 5, 20, 20)), "InvalidSettingsError", ["crop"]),
+        (lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, fstop=2.0, focus_distance_m=float("nan")), "InvalidSettingsError", ["focus_distance_m"]),
+        (lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, aperture_blades=6, aperture_rotation_rad=float("nan")), "InvalidSettingsError", ["aperture_rotation_rad"]),
         (lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, lens="double-gauss-50mm", fstop=0.5), "InvalidLensError", ["f/0.5"]),
         (lambda pz: pz.Lens("double-gauss-50mm").trace(np.zeros((2, 2)), np.zeros((2, 2))), "InvalidSettingsError", ["(N, 3)"]),
     ],

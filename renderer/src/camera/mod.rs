@@ -550,6 +550,16 @@ impl Camera {
         }
     }
 
+    /// Whether wavelengths take different paths: a real lens with dispersive glass, traced or
+    /// through a table with more than one wavelength. Only then is spectral rendering needed.
+    pub fn is_dispersive(&self) -> bool {
+        match self {
+            Camera::Realistic(c) => c.lens.has_dispersion(),
+            Camera::Lrtf(c) => c.exact.lens.has_dispersion() && c.table.header.wavelengths_nm.len() > 1,
+            _ => false,
+        }
+    }
+
     /// Model name.
     pub fn model_name(&self) -> &'static str {
         match self {

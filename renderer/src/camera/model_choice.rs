@@ -126,7 +126,7 @@ fn pixel_pitch_mm(spec: &CameraSpec, shot: &ShotContext) -> f64 {
 }
 
 fn choose_ideal(spec: &CameraSpec, shot: &ShotContext) -> ModelChoice {
-    let Some(n) = spec.f_number.filter(|_| spec.lens != "pinhole") else {
+    let Some(n) = spec.f_number.filter(|_| !spec.is_pinhole()) else {
         return ModelChoice { model: LensModel::Pinhole, reason: "pinhole camera: no lens to model".into(), candidates: Vec::new() };
     };
     // Blender's thin lens: film at F, lens of focal length F·s/(F+s), aperture diameter F/N.

@@ -17,6 +17,9 @@
 use super::model_choice::{choose_model, ModelChoice, ShotContext};
 use super::{Camera, LrtfCamera, PinholeCamera, RealisticCamera, Sensor, ThickLensCamera, ThinLensCamera};
 use crate::error::{Error, Result};
+use crate::integrator::RenderScene;
+use crate::render::scene_depth_range_m;
+use glam::DAffine3;
 use crate::optics::aperture::Aperture;
 use crate::optics::lens::Lens;
 use crate::optics::library::load_lens;
@@ -195,7 +198,24 @@ impl CameraSpec {
     /// Builds the camera; `shot` (resolution, samples, scene depth range) informs `auto`.
     pub fn build(&self, shot: &ShotContext) -> Result<BuiltCamera> {
         self.validate()?;
+        self.build_loaded(self.load_lens()?, shot)
+    }
+
+    /// Builds the camera for a shot of `scene` seen from `to_world` at `width` × `height` and
+    /// `spp`: the depth range `auto` must honour is probed in the scene through a pinhole of the
+    /// lens's focal length. The lens is loaded once.
+    pub fn build_for_scene(&self, scene: &RenderScene, to_world: &DAffine3, width: u32, height: u32, spp: u32, spectral: bool) -> Result<BuiltCamera> {
+        self.validate()?;
         let lens = self.load_lens()?;
+        let probe_focal_mm = match &lens {
+            SpecLens::Ideal => self.focal_length_mm,
+            SpecLens::Real(l) => l.paraxial().efl_mm,
+        };
+        let depth_range_m = scene_depth_range_m(scene, to_world, &self.sensor, probe_focal_mm);
+        self.build_loaded(lens, &ShotContext { width, height, spp, depth_range_m, spectral })
+    }
+
+    fn build_loaded(&self, lens: SpecLens, shot: &ShotContext) -> Result<BuiltCamera> {
         let (choice, camera) = match self.model {
             LensModel::Auto => choose_model(self, &lens, shot)?,
             m => (ModelChoice::fixed(m), None),
@@ -205,11 +225,16 @@ impl CameraSpec {
             None => self.build_model(&lens, choice.model, None)?,
         };
         let (lens_label, focal_length_mm, f_number) = match &lens {
-            SpecLens::Ideal if self.lens == "pinhole" || self.f_number.is_none() => ("pinhole".to_string(), self.focal_length_mm, f64::INFINITY),
+            SpecLens::Ideal if self.is_pinhole() => ("pinhole".to_string(), self.focal_length_mm, f64::INFINITY),
             SpecLens::Ideal => ("thin".to_string(), self.focal_length_mm, self.f_number.unwrap_or(f64::INFINITY)),
             SpecLens::Real(l) => (l.name().to_string(), l.paraxial().efl_mm, l.paraxial().f_number),
         };
         Ok(BuiltCamera { camera, lens_label, focal_length_mm, f_number, choice })
+    }
+
+    /// An ideal lens without an aperture: `"pinhole"`, or `"thin"` without an f-number.
+    pub(crate) fn is_pinhole(&self) -> bool {
+        self.lens == "pinhole" || (self.lens == "thin" && self.f_number.is_none())
     }
 
     /// The camera of one model (not `Auto`); `exact` is the exact camera when already built
@@ -219,8 +244,7 @@ impl CameraSpec {
         let focus = self.focus_distance_m;
         match lens {
             SpecLens::Ideal => {
-                let pinhole = self.lens == "pinhole" || self.f_number.is_none();
-                match (model, pinhole) {
+                match (model, self.is_pinhole()) {
                     (LensModel::Pinhole, _) | (LensModel::Exact | LensModel::Thin | LensModel::Auto, true) => {
                         let mut c = PinholeCamera::new(sensor, self.focal_length_mm)?;
                         c.natural_vignetting = self.natural_vignetting;
