@@ -102,6 +102,23 @@ impl SplitMix {
     }
 }
 
+/// Up to `count` camera rays as the realistic camera draws them: (image position, film point,
+/// rear-plane point inside the exit-pupil bounds), drawn from `rng`; film points outside the
+/// image circle (empty bounds) are skipped.
+fn camera_ray_samples(sensor: &Sensor, bounds: &petzval_renderer::optics::pupil::ExitPupilBounds, film_z: f64, count: usize, rng: &mut SplitMix) -> Vec<(DVec2, DVec3, DVec3)> {
+    let mut out = Vec::with_capacity(count);
+    let mut guard = 0;
+    while out.len() < count && guard < count * 50 {
+        guard += 1;
+        let u = rng.next2();
+        let p = sensor.film_point(u, film_z);
+        if let Some(s) = bounds.sample(DVec2::new(p.x, p.y), rng.next2()) {
+            out.push((u, p, s.point));
+        }
+    }
+    out
+}
+
 fn bench_lens(only: Option<String>, rays: usize, json: bool) -> Result<(), Error> {
     let names: Vec<String> = match only {
         Some(n) => vec![n],
@@ -124,16 +141,7 @@ fn bench_lens(only: Option<String>, rays: usize, json: bool) -> Result<(), Error
         let build_ms = t0.elapsed().as_secs_f64() * 1e3;
         // 1. Sample film points whose bounds are non-empty (inside the image circle).
         let mut rng = SplitMix(0x5eed);
-        let mut samples: Vec<(DVec3, DVec3)> = Vec::with_capacity(rays);
-        let mut guard = 0;
-        while samples.len() < rays && guard < rays * 50 {
-            guard += 1;
-            let u = rng.next2();
-            let p = sensor.film_point(u, film_z);
-            if let Some(s) = bounds.sample(DVec2::new(p.x, p.y), rng.next2()) {
-                samples.push((p, s.point));
-            }
-        }
+        let samples: Vec<(DVec3, DVec3)> = camera_ray_samples(&sensor, &bounds, film_z, rays, &mut rng).into_iter().map(|(_, p, q)| (p, q)).collect();
         let wl = lens.primary_wavelength_nm();
         // 2. Time the traces.
         let t0 = Instant::now();
@@ -335,19 +343,9 @@ fn bench_lens_models(only: Option<String>, rays: usize, resolutions: &str, json:
         let sensor = Sensor::default();
         let bounds = ExitPupilBounds::compute(&lens, film_z, 0.0, sensor.extent().0 * 1.001);
         // 1. The camera's ray distribution: film points over the sensor, rear points in bounds.
-        let mut rng = SplitMix(0xbe9c);
-        let mut samples: Vec<Ray> = Vec::with_capacity(rays);
-        let mut film_uv: Vec<DVec2> = Vec::with_capacity(rays);
-        let mut guard = 0;
-        while samples.len() < rays && guard < rays * 50 {
-            guard += 1;
-            let u = rng.next2();
-            let p = sensor.film_point(u, film_z);
-            if let Some(s) = bounds.sample(DVec2::new(p.x, p.y), rng.next2()) {
-                samples.push(Ray::new(p, s.point - p));
-                film_uv.push(u);
-            }
-        }
+        let drawn = camera_ray_samples(&sensor, &bounds, film_z, rays, &mut SplitMix(0xbe9c));
+        let samples: Vec<Ray> = drawn.iter().map(|(_, p, q)| Ray::new(*p, *q - *p)).collect();
+        let film_uv: Vec<DVec2> = drawn.iter().map(|(u, _, _)| *u).collect();
         // The same rays in raster order (sorted by pixel of a 1920-wide image), as a renderer
         // generates them: neighbouring rays share film points, so table cells stay in cache.
         let raster: Vec<Ray> = {
