@@ -614,6 +614,7 @@ struct Shared {
     fraction: AtomicU32,
     cancel: AtomicBool,
     latest: Mutex<Option<(Image, u32)>>,
+    spp_done: AtomicU32,
 }
 
 fn image_arrays(py: Python<'_>, img: &Image) -> (Py<PyAny>, Py<PyAny>) {
@@ -726,7 +727,7 @@ fn render(
         }
         // 2. Build, decide and render on a worker thread; this thread (holding the GIL only to
         //    call `progress`) polls it.
-        let shared = Arc::new(Shared { fraction: AtomicU32::new(0), cancel: AtomicBool::new(false), latest: Mutex::new(None) });
+        let shared = Arc::new(Shared { fraction: AtomicU32::new(0), cancel: AtomicBool::new(false), latest: Mutex::new(None), spp_done: AtomicU32::new(0) });
         let pool = if threads > 0 { Some(rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| PetzvalError::new_err(e.to_string()))?) } else { None };
         type Outcome = Result<(RenderResult, String, String, Vec<String>), Error>;
         let work = {
@@ -743,6 +744,7 @@ fn render(
                         !shared.cancel.load(Ordering::Relaxed)
                     };
                     let on_pass = |img: &Image, spp_done: u32| {
+                        shared.spp_done.store(spp_done, Ordering::Relaxed);
                         if let Ok(mut l) = shared.latest.lock() {
                             *l = Some((img.clone(), spp_done));
                         }
@@ -775,9 +777,10 @@ fn render(
                 if let (Some(cb), None) = (&progress, &callback_error) {
                     let snapshot = shared.latest.lock().ok().and_then(|mut l| l.take());
                     let fraction = f32::from_bits(shared.fraction.load(Ordering::Relaxed));
+                    // samples done so far always; the image only when a pass finished since the last call
                     let (spp_done, rgba) = match &snapshot {
                         Some((img, n)) => (*n, Some(image_arrays(py, img).0)),
-                        None => (0, None),
+                        None => (shared.spp_done.load(Ordering::Relaxed), None),
                     };
                     match cb.call1(py, (fraction, spp_done, rgba)) {
                         Ok(r) => {

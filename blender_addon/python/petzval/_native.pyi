@@ -210,7 +210,8 @@ def render(
     top, renders only that window (Blender's border with "crop to border"); the returned
     arrays are the window's size.
 
-    ``progress(fraction, spp_done, rgba_or_None)`` is called from the calling thread about
+    ``progress(fraction, spp_done, rgba_or_None)`` (``spp_done``: samples per pixel finished so
+    far) is called from the calling thread about
     every ``progress_interval_s`` seconds and once per finished pass with the image so far
     (``rgba`` as above, else None); return ``False`` to cancel (``None`` or ``True``
     continue). An exception raised by the callback cancels and is re-raised. A cancelled
