@@ -93,7 +93,7 @@ pub enum Direction {
 pub fn open_lens(name: &str, fstop: Option<f64>) -> Result<Lens, Error> {
     let lens = load_lens(name)?;
     match fstop {
-        Some(n) => lens.stopped_down(n),
+        Some(n) => Ok(lens.stopped_down(n)?),
         None => Ok(lens),
     }
 }
@@ -238,13 +238,13 @@ fn trace_stdin(lens: &Lens, direction: Direction, wavelength: Option<f64>, open_
         if line.trim().is_empty() {
             continue;
         }
-        let v: Vec<f64> = serde_json::from_str(&line).map_err(|e| Error::lens_file("<stdin>", n + 1, "ray", e.to_string()))?;
+        let v: Vec<f64> = serde_json::from_str(&line).map_err(|e| Error::settings(format!("<stdin>:{}: ray", n + 1), e.to_string()))?;
         if v.len() != 6 || v.iter().any(|x| !x.is_finite()) {
-            return Err(Error::lens_file("<stdin>", n + 1, "ray", "expected [ox, oy, oz, dx, dy, dz] with finite numbers"));
+            return Err(Error::settings(format!("<stdin>:{}: ray", n + 1), "expected [ox, oy, oz, dx, dy, dz] with finite numbers"));
         }
         let d = DVec3::new(v[3], v[4], v[5]);
         if d.length() == 0.0 {
-            return Err(Error::lens_file("<stdin>", n + 1, "ray", "zero direction"));
+            return Err(Error::settings(format!("<stdin>:{}: ray", n + 1), "zero direction"));
         }
         let ray = Ray::new(DVec3::new(v[0], v[1], v[2]), d);
         let result = match lens.trace_detailed(&ray, wl, dir, stop) {

@@ -46,15 +46,23 @@ pyo3::create_exception!(_native, InvalidSettingsError, PetzvalError, "Camera or 
 pyo3::create_exception!(_native, CancelledError, PetzvalError, "The render was cancelled before a pass finished.");
 
 /// Maps the renderer's errors to Python exceptions.
-fn py_err(e: Error) -> PyErr {
+fn py_err(e: impl Into<Error>) -> PyErr {
+    use petzval_renderer::optics::Error as OpticsError;
+    let e = e.into();
     let msg = e.to_string();
     match e {
         Error::Io { source, .. } if source.kind() == std::io::ErrorKind::NotFound => PyFileNotFoundError::new_err(msg),
         Error::Io { .. } => PyOSError::new_err(msg),
-        Error::UnknownLens(_) => PyFileNotFoundError::new_err(msg),
-        Error::LensFile { .. } | Error::UnknownGlass { .. } | Error::Optics(_) => InvalidLensError::new_err(msg),
-        Error::Camera { .. } | Error::ApertureImage { .. } => InvalidSettingsError::new_err(msg),
+        Error::Optics(OpticsError::UnknownLens(_)) => PyFileNotFoundError::new_err(msg),
+        Error::Optics(OpticsError::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {
+            PyFileNotFoundError::new_err(msg)
+        }
+        Error::Optics(OpticsError::Io { .. }) => PyOSError::new_err(msg),
+        Error::Optics(OpticsError::ApertureImage { .. }) => InvalidSettingsError::new_err(msg),
+        Error::Optics(_) => InvalidLensError::new_err(msg),
+        Error::Camera { .. } | Error::Settings { .. } => InvalidSettingsError::new_err(msg),
         Error::Scene { .. } => InvalidSceneError::new_err(msg),
+        Error::Metrics(_) | Error::Internal(_) => PetzvalError::new_err(msg),
     }
 }
 

@@ -1,4 +1,4 @@
-//! The crate's one error type.
+//! The renderer crate's one error type.
 
 use std::path::PathBuf;
 
@@ -6,18 +6,9 @@ use std::path::PathBuf;
 /// input came from, so a user can fix the input without reading code.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    /// A lens file (our TOML, pbrt `.dat`, Zemax `.zmx`, lentil JSON) is malformed or invalid.
-    #[error("{file}:{line}: {field}: {message}")]
-    LensFile {
-        /// File name (or `library:NAME` for embedded lenses).
-        file: String,
-        /// 1-based line number (0 when the problem is not tied to one line).
-        line: usize,
-        /// The offending field, e.g. `surface[3].radius_mm`.
-        field: String,
-        /// What is wrong.
-        message: String,
-    },
+    /// An error of the lens optics (a lens file, glass, aperture image, focusing request).
+    #[error(transparent)]
+    Optics(petzval_optics::Error),
     /// A file could not be read or written.
     #[error("{path}: {source}")]
     Io {
@@ -26,24 +17,18 @@ pub enum Error {
         /// The underlying error.
         source: std::io::Error,
     },
-    /// A lens name that is neither in the library nor an existing file.
-    #[error("unknown lens '{0}': not in the library (see `petzval lens list`) and no such file")]
-    UnknownLens(String),
-    /// An unknown glass name.
-    #[error("unknown glass '{name}'{suggestion}")]
-    UnknownGlass {
-        /// The name as written.
-        name: String,
-        /// ", did you mean ...?" or empty.
-        suggestion: String,
-    },
-    /// A request the optics cannot satisfy (focus closer than possible, f-number out of range...).
-    #[error("{0}")]
-    Optics(String),
-    /// An invalid camera or sensor setting.
+    /// An invalid camera or sensor setting (focal length, tilt, sensor size, focus...).
     #[error("camera: {field}: {message}")]
     Camera {
         /// The setting, e.g. `tilt_x_deg`.
+        field: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// An invalid render setting (resolution, samples, threads, tolerance, output options...).
+    #[error("{field}: {message}")]
+    Settings {
+        /// The setting as the user names it, e.g. `--spp` or `resolution`.
         field: String,
         /// What is wrong.
         message: String,
@@ -58,14 +43,12 @@ pub enum Error {
         /// What is wrong.
         message: String,
     },
-    /// An aperture image that cannot be used.
-    #[error("aperture image {path}: {message}")]
-    ApertureImage {
-        /// The image file.
-        path: PathBuf,
-        /// What is wrong.
-        message: String,
-    },
+    /// Images that cannot be compared (different sizes, a black or non-finite reference).
+    #[error("image comparison: {0}")]
+    Metrics(String),
+    /// A fault inside the renderer (a poisoned lock after a panicked worker); not the input's fault.
+    #[error("internal error: {0}")]
+    Internal(String),
 }
 
 fn location_prefix(location: &str) -> String {
@@ -76,20 +59,21 @@ fn location_prefix(location: &str) -> String {
     }
 }
 
+/// Optics errors convert as they are, except file-system errors, which stay [`Error::Io`] so
+/// every front end sees one kind for "file not found" whichever crate read the file.
+impl From<petzval_optics::Error> for Error {
+    fn from(e: petzval_optics::Error) -> Self {
+        match e {
+            petzval_optics::Error::Io { path, source } => Error::Io { path, source },
+            other => Error::Optics(other),
+        }
+    }
+}
+
 /// Shorthand result type.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 impl Error {
-    /// Builds a [`Error::LensFile`].
-    pub fn lens_file(
-        file: impl Into<String>,
-        line: usize,
-        field: impl Into<String>,
-        message: impl Into<String>,
-    ) -> Self {
-        Error::LensFile { file: file.into(), line, field: field.into(), message: message.into() }
-    }
-
     /// Builds an [`Error::Scene`].
     pub fn scene(file: impl Into<String>, location: impl Into<String>, message: impl Into<String>) -> Self {
         Error::Scene { file: file.into(), location: location.into(), message: message.into() }
@@ -98,5 +82,15 @@ impl Error {
     /// Builds an [`Error::Io`].
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io { path: path.into(), source }
+    }
+
+    /// Builds an [`Error::Settings`].
+    pub fn settings(field: impl Into<String>, message: impl Into<String>) -> Self {
+        Error::Settings { field: field.into(), message: message.into() }
+    }
+
+    /// Builds an [`Error::Camera`].
+    pub fn camera(field: impl Into<String>, message: impl Into<String>) -> Self {
+        Error::Camera { field: field.into(), message: message.into() }
     }
 }

@@ -2,17 +2,17 @@
 //! cameras and sensors. Data flows one way: lens file → [`Lens`] → [`Camera`].
 
 mod error;
-pub mod io;
 pub mod film;
 pub mod integrator;
-pub mod optics;
 pub mod render;
 pub mod sampler;
 pub mod spectral;
 pub mod scene;
 
 pub use error::{Error, Result};
-pub use io::write_atomic;
+pub use petzval_optics::write_atomic;
+/// The lens optics crate, re-exported (`petzval_renderer::optics::…`).
+pub use petzval_optics as optics;
 pub use optics::aperture::{Aperture, ApertureMask, ApertureShape};
 pub use optics::glass::Material;
 pub use optics::import::{load_lens_file, read_prescription};

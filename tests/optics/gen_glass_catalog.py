@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Generate renderer/data/glass_catalog.tsv from the refractiveindex.info database.
+"""Generate renderer/optics/data/glass_catalog.tsv from the refractiveindex.info database.
 
 The data come from the refractiveindex.info database (CC0 1.0, Mikhail Polyanskiy), as
 shipped inside the `optiland` PyPI package (optiland/database/data-nk/glass/<maker>/<glass>.yml).
@@ -35,7 +35,7 @@ from pathlib import Path
 import yaml
 
 REPO = Path(__file__).resolve().parents[2]
-OUT = REPO / "renderer" / "data" / "glass_catalog.tsv"
+OUT = REPO / "renderer" / "optics" / "data" / "glass_catalog.tsv"
 
 
 def database_root() -> Path:

@@ -1,7 +1,7 @@
-"""Cross-check renderer/data/glass_catalog.tsv against optiland's own refractive indices.
+"""Cross-check renderer/optics/data/glass_catalog.tsv against optiland's own refractive indices.
 
 For every catalogue row, the index is computed with a tiny pure-Python copy of the renderer's
-two formulas (renderer/src/optics/glass.rs, `Dispersion::index`) and compared with the index
+two formulas (renderer/optics/src/glass.rs, `Dispersion::index`) and compared with the index
 optiland computes for the same glass, at 400, 486.1327 (F), 587.5618 (d), 656.2725 (C) and
 760 nm. The optiland material is created through its catalogue API,
 ``optiland.materials.Material(name, catalog=<maker>)``, when that resolves to the very file the
@@ -28,7 +28,7 @@ from optiland.materials import Material, MaterialFile
 from optiland.materials.material_spec import MatchPolicy
 
 REPO = Path(__file__).resolve().parents[2]
-TSV = REPO / "renderer" / "data" / "glass_catalog.tsv"
+TSV = REPO / "renderer" / "optics" / "data" / "glass_catalog.tsv"
 GENERATOR = Path(__file__).resolve().parent / "gen_glass_catalog.py"
 DATA_NK = Path(os.path.dirname(optiland.database.__file__)) / "data-nk"
 

@@ -784,7 +784,7 @@ def _stop_opening_is_circular(name: str) -> bool:
     table with another shape or an anamorphic ratio). `lens export` does not carry the shape."""
     import tomllib
 
-    path = pz.REPO / "renderer" / "lenses" / f"{name}.toml"
+    path = pz.REPO / "renderer" / "optics" / "lenses" / f"{name}.toml"
     if not path.is_file():
         return True
     ap = tomllib.loads(path.read_text()).get("aperture", {})

@@ -1,6 +1,6 @@
 """Writes Zemax .zmx test fixtures with optiland (PyPI), an independent optics package.
 
-    .venv/bin/python tests/optics/write_optiland_zmx.py renderer/tests/data/zmx
+    .venv/bin/python tests/optics/write_optiland_zmx.py renderer/optics/tests/data/zmx
 
 For each sample lens, optiland computes its paraxial data (so the file carries DIAM
 semi-apertures) and writes it with ``optiland.fileio.save_zemax_file`` (UTF-8 text).

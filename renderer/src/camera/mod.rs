@@ -231,11 +231,10 @@ fn thin_lens_image_distance(f: f64, u: Option<f64>) -> Result<f64> {
     match u {
         None => Ok(f),
         Some(u) if u > f => Ok(1.0 / (1.0 / f - 1.0 / u)),
-        Some(u) => Err(Error::Optics(format!(
-            "cannot focus at {:.4} m: closer than the focal length {:.4} m",
-            u * 1e-3,
-            f * 1e-3
-        ))),
+        Some(u) => Err(Error::camera(
+            "focus_distance_m",
+            format!("cannot focus at {:.4} m: closer than the focal length {:.4} m", u * 1e-3, f * 1e-3),
+        )),
     }
 }
 
@@ -430,7 +429,7 @@ impl RealisticCamera {
         let centre = cam.sensor.axis_film_coord();
         let mean = centre_mean(|u| cam.raw_ray(centre, u, cam.lens.primary_wavelength_nm()).map(|r| r.weight));
         if !(mean > 0.0) {
-            return Err(Error::Optics(format!("no light reaches the centre of the sensor through '{}'", cam.lens.name())));
+            return Err(Error::camera("lens", format!("no light reaches the centre of the sensor through '{}'", cam.lens.name())));
         }
         cam.exposure = 1.0 / mean;
         Ok(cam)

@@ -304,11 +304,11 @@ fn table_cache() -> &'static Mutex<HashMap<TableKey, Arc<LrtfTable>>> {
 /// tables are kept.
 pub fn cached_lrtf(lens: &Lens, resolution: u32) -> Result<Arc<LrtfTable>> {
     let key = (crate::optics::lrtf::lens_hash(lens), resolution);
-    if let Some(t) = table_cache().lock().map_err(|_| Error::Optics("LRTF cache poisoned".into()))?.get(&key) {
+    if let Some(t) = table_cache().lock().map_err(|_| Error::Internal("LRTF cache poisoned".into()))?.get(&key) {
         return Ok(t.clone());
     }
     let table = Arc::new(LrtfTable::bake(lens, &BakeOptions { resolution, ..BakeOptions::default() }, &|_| {})?);
-    let mut cache = table_cache().lock().map_err(|_| Error::Optics("LRTF cache poisoned".into()))?;
+    let mut cache = table_cache().lock().map_err(|_| Error::Internal("LRTF cache poisoned".into()))?;
     if cache.len() >= 8 {
         cache.clear();
     }

@@ -77,7 +77,7 @@ pub fn relative_rmse(reference: &Image, test: &Image) -> Result<f64> {
         }
     }
     if !(den > 0.0) || !num.is_finite() {
-        return Err(Error::Optics("relative RMSE: the reference image is black or not finite".into()));
+        return Err(Error::Metrics("relative RMSE: the reference image is black or not finite".into()));
     }
     Ok((num / den).sqrt())
 }

@@ -4,7 +4,7 @@
 
 use super::Image;
 use crate::error::{Error, Result};
-use crate::io::write_atomic;
+use petzval_optics::write_atomic;
 use crate::scene::texture::linear_to_srgb;
 use exr::prelude::*;
 use std::path::Path;
@@ -67,7 +67,7 @@ pub fn write_exr(path: &Path, image: &Image, layers: ExrLayers, metadata: &Metad
     }
     let mut buf = std::io::Cursor::new(Vec::new());
     img.write().to_buffered(&mut buf).map_err(|e| Error::io(path, std::io::Error::other(e.to_string())))?;
-    write_atomic(path, buf.get_ref())
+    Ok(write_atomic(path, buf.get_ref())?)
 }
 
 /// Narkowicz's fit of the ACES filmic curve.
@@ -94,5 +94,5 @@ pub fn write_png(path: &Path, image: &Image, exposure_stops: f32, tone: ToneMap)
         .ok_or_else(|| Error::io(path, std::io::Error::other("image size mismatch")))?;
     let mut out = std::io::Cursor::new(Vec::new());
     buf.write_to(&mut out, image::ImageFormat::Png).map_err(|e| Error::io(path, std::io::Error::other(e.to_string())))?;
-    write_atomic(path, out.get_ref())
+    Ok(write_atomic(path, out.get_ref())?)
 }

@@ -1,0 +1,33 @@
+//! Petzval's lens optics: glass, prescriptions and importers, surfaces, exact sequential
+//! tracing (f64), apertures, paraxial analysis, exit-pupil bounds, the embedded lens library and
+//! lens ray transfer function (LRTF) tables. It knows no scene: the renderer and lens-fit build on
+//! it, never the other way round.
+//!
+//! Data flows one way: lens file → [`Prescription`] → [`Lens`] → (traced rays, [`lrtf`] tables).
+
+mod error;
+mod io;
+
+pub mod aperture;
+pub mod draw;
+pub mod glass;
+pub mod import;
+pub mod info;
+pub mod lens;
+pub mod library;
+pub mod lrtf;
+pub mod lrtf_scene;
+pub mod paraxial;
+pub mod prescription;
+pub mod pupil;
+pub mod surface;
+
+pub use aperture::{Aperture, ApertureMask, ApertureShape};
+pub use error::{Error, Result};
+pub use glass::Material;
+pub use import::{load_lens_file, read_prescription};
+pub use io::write_atomic;
+pub use lens::{Absorbed, Lens, LensSurface, Ray, StopMode, TraceDirection, Traced};
+pub use library::{library_lens, load_lens, LIBRARY};
+pub use paraxial::ParaxialData;
+pub use prescription::Prescription;

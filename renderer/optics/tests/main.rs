@@ -1,0 +1,7 @@
+//! Integration tests of the optics crate (one binary; modules per area).
+
+mod aperture;
+mod import;
+mod lrtf;
+mod lrtf_cases;
+mod optics;

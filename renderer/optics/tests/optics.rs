@@ -1,0 +1,398 @@
+//! Optics: hard numerical cases, property tests and exit-pupil bounds against brute force.
+
+use glam::{DVec2, DVec3};
+use petzval_optics::pupil::ExitPupilBounds;
+use petzval_optics::{library_lens, Absorbed, Lens, Ray, StopMode, TraceDirection};
+use proptest::prelude::*;
+
+const WL: f64 = 587.5618;
+
+fn lens(text: &str) -> Lens {
+    Lens::from_toml(text, "test.toml", None).expect("test lens must build")
+}
+
+/// A thick N-BK7 slab between two planes, 10 mm thick.
+const PLATE: &str = r#"
+[lens]
+name = "plate"
+source = "test"
+[[surface]]
+thickness_mm = 1.0
+semi_diameter_mm = 20.0
+stop = true
+[[surface]]
+thickness_mm = 10.0
+material = { nd = 1.5, vd = 0 }
+semi_diameter_mm = 20.0
+[[surface]]
+thickness_mm = 20.0
+semi_diameter_mm = 20.0
+"#;
+
+#[test]
+fn plane_parallel_plate_shifts_ray_by_snell() {
+    let l = lens(PLATE);
+    let theta: f64 = 0.4;
+    let d = DVec3::new(theta.sin(), 0.0, theta.cos());
+    let out = l.trace(&Ray::new(DVec3::new(0.0, 0.0, -5.0), d), WL, TraceDirection::SceneToFilm).unwrap();
+    // direction unchanged, lateral offset inside the slab = t·tan θ'
+    assert!((out.ray.direction - d).length() < 1e-14);
+    let theta_t = (theta.sin() / 1.5).asin();
+    let x_expected = 6.0 * theta.tan() + 10.0 * theta_t.tan();
+    assert!((out.ray.origin.x - x_expected).abs() < 1e-12, "{} vs {x_expected}", out.ray.origin.x);
+    assert!((out.ray.origin.z - 11.0).abs() < 1e-12);
+}
+
+#[test]
+fn on_axis_ray_stays_on_axis() {
+    for name in ["double-gauss-50mm", "fisheye-10mm", "telephoto-250mm", "wide-22mm"] {
+        let l = library_lens(name).unwrap();
+        let out = l.trace(&Ray::new(DVec3::new(0.0, 0.0, -10.0), DVec3::Z), WL, TraceDirection::SceneToFilm).unwrap();
+        assert_eq!(out.ray.origin.x, 0.0, "{name}");
+        assert_eq!(out.ray.origin.y, 0.0, "{name}");
+        assert_eq!(out.ray.direction, DVec3::Z, "{name}");
+    }
+}
+
+#[test]
+fn total_internal_reflection_is_absorbed() {
+    let prism = lens(r#"
+[lens]
+name = "steep"
+source = "test"
+[[surface]]
+thickness_mm = 1.0
+semi_diameter_mm = 9.0
+stop = true
+[[surface]]
+radius_mm = 0
+thickness_mm = 3.0
+material = { nd = 1.9, vd = 0 }
+semi_diameter_mm = 9.0
+[[surface]]
+radius_mm = 10.0
+thickness_mm = 20.0
+semi_diameter_mm = 9.0
+"#);
+    // A parallel ray at height 8 mm meets the back sphere (R = 10) at incidence asin(0.8) = 53° > critical 31.8°.
+    let res = prism.trace_detailed(&Ray::new(DVec3::new(0.0, 8.0, -1.0), DVec3::Z), WL, TraceDirection::SceneToFilm, StopMode::Apply);
+    assert_eq!(res.err(), Some(Absorbed::TotalInternalReflection(2)));
+}
+
+#[test]
+fn grazing_and_tangent_rays_never_nan() {
+    let l = library_lens("double-gauss-50mm").unwrap();
+    let mut n_pass = 0;
+    for i in 0..2000 {
+        let a = (i as f64 / 2000.0) * std::f64::consts::FRAC_PI_2 * 0.9999;
+        let d = DVec3::new(a.sin(), 0.0, a.cos());
+        for y in [-12.0, -6.0, 0.0, 6.0, 12.0] {
+            let ray = Ray::new(DVec3::new(-30.0 * a.tan(), y, -30.0), d);
+            if let Some(t) = l.trace(&ray, WL, TraceDirection::SceneToFilm) {
+                assert!(t.ray.origin.is_finite() && t.ray.direction.is_finite());
+                assert!((t.ray.direction.length() - 1.0).abs() < 1e-12);
+                n_pass += 1;
+            }
+        }
+    }
+    assert!(n_pass > 0);
+    // A ray exactly tangent to the first sphere (R = 29.475) at its apex height is a miss, not NaN.
+    let r = 29.475;
+    let tangent = Ray::new(DVec3::new(0.0, r, r - 50.0), DVec3::Z);
+    let res = l.trace_detailed(&tangent, WL, TraceDirection::SceneToFilm, StopMode::Apply);
+    assert!(res.is_err());
+}
+
+#[test]
+fn ray_through_exact_edge_passes_and_just_beyond_is_clipped() {
+    let l = lens(PLATE);
+    let at_edge = Ray::new(DVec3::new(20.0, 0.0, -1.0), DVec3::Z);
+    assert!(l.trace(&at_edge, WL, TraceDirection::SceneToFilm).is_some());
+    let beyond = Ray::new(DVec3::new(20.0 + 1e-9, 0.0, -1.0), DVec3::Z);
+    assert_eq!(l.trace_detailed(&beyond, WL, TraceDirection::SceneToFilm, StopMode::Apply).err(), Some(Absorbed::Clipped(0)));
+}
+
+#[test]
+fn huge_radius_behaves_like_a_plane() {
+    let flat = lens(&PLATE.replace("radius_mm = 0\n", ""));
+    let curved = lens(&PLATE.replacen("thickness_mm = 10.0", "radius_mm = 1e5\nthickness_mm = 10.0", 1));
+    let d = DVec3::new(0.2, 0.1, 1.0).normalize();
+    let r = Ray::new(DVec3::new(3.0, -2.0, -5.0), d);
+    let a = flat.trace(&r, WL, TraceDirection::SceneToFilm).unwrap();
+    let b = curved.trace(&r, WL, TraceDirection::SceneToFilm).unwrap();
+    // sag at r ≈ 4 mm is 8e-5 mm; the refracted directions differ by ~ r/R
+    assert!((a.ray.direction - b.ray.direction).length() < 1e-4);
+    assert!(b.ray.origin.is_finite());
+}
+
+#[test]
+fn f_0_95_lens_traces_marginal_rays() {
+    let l = lens(r#"
+[lens]
+name = "fast"
+source = "test: biconvex f ≈ 50 mm opened to f/0.95"
+[[surface]]
+thickness_mm = 0.5
+semi_diameter_mm = 27.0
+stop = true
+[[surface]]
+radius_mm = 45.0
+thickness_mm = 22.0
+material = { nd = 1.9, vd = 0 }
+semi_diameter_mm = 28.0
+[[surface]]
+radius_mm = -200.0
+thickness_mm = 20.0
+semi_diameter_mm = 28.0
+"#);
+    let l = l.stopped_down(0.95).unwrap();
+    assert!((l.paraxial().f_number - 0.95).abs() < 1e-9);
+    let h = 0.5 * l.paraxial().entrance_pupil_diameter_mm;
+    let out = l.trace(&Ray::new(DVec3::new(0.0, 0.999 * h, -1.0), DVec3::Z), WL, TraceDirection::SceneToFilm).unwrap();
+    assert!(out.ray.direction.is_finite());
+    assert!(out.ray.direction.y < -0.4, "marginal ray must converge steeply at f/0.95");
+    assert!(l.stopped_down(0.5).is_err(), "cannot open past the stop's housing");
+}
+
+/// Parallel rays at `field_deg` from the axis (in the x–z plane, from the scene) over a wide grid
+/// in front of the lens: how many pass, with every output finite.
+fn rays_passing_at_field(l: &Lens, field_deg: f64) -> usize {
+    let a = field_deg.to_radians();
+    let d = DVec3::new(a.sin(), 0.0, a.cos());
+    let front = l.surfaces()[0].semi_diameter_mm;
+    // a grid on the plane through the axis point (0, 0, front/2) perpendicular to the beam
+    let e1 = DVec3::new(a.cos(), 0.0, -a.sin());
+    let centre = DVec3::new(0.0, 0.0, 0.5 * front);
+    let mut pass = 0;
+    for i in 0..1200 {
+        for j in 0..100 {
+            let u = -3.0 * front + 6.0 * front * i as f64 / 1199.0;
+            let v = -front + 2.0 * front * j as f64 / 99.0;
+            let p = centre + e1 * u + DVec3::Y * v - d * 100.0;
+            if let Some(t) = l.trace(&Ray::new(p, d), WL, TraceDirection::SceneToFilm) {
+                assert!(t.ray.origin.is_finite() && t.ray.direction.is_finite());
+                pass += 1;
+            }
+        }
+    }
+    pass
+}
+
+#[test]
+fn fisheyes_pass_light_at_their_full_field() {
+    // Muller 155.9° fisheye (pbrt data): light passes up to about 76.6° from the axis (153°
+    // full field); the design's 155.9° needs a front element larger than the file's 30.34 mm
+    // aperture, and optiland's trace agrees on the vignetting (tests/optics).
+    let l = library_lens("fisheye-10mm").unwrap();
+    assert!(rays_passing_at_field(&l, 76.5) > 0, "fisheye-10mm passes nothing at 76.5°");
+    assert_eq!(rays_passing_at_field(&l, 77.9), 0, "the file's apertures cut the beam before 77.9°");
+    // the 181° aspheric fisheye: light from 90.5°, i.e. from behind the front vertex plane
+    let a = library_lens("aspheric-fisheye-10mm").unwrap();
+    assert!(rays_passing_at_field(&a, 90.5) > 0, "aspheric-fisheye-10mm passes nothing at 90.5°");
+}
+
+#[test]
+fn aspheric_newton_failure_is_absorbed_not_nan() {
+    let wild = lens(r#"
+[lens]
+name = "wild"
+source = "test: absurd aspheric coefficients"
+[[surface]]
+thickness_mm = 1.0
+semi_diameter_mm = 10.0
+stop = true
+[[surface]]
+radius_mm = 20.0
+thickness_mm = 5.0
+material = { nd = 1.5, vd = 0 }
+semi_diameter_mm = 1.0
+aspheric = [1e-1, -1e-1, 1e-1]
+[[surface]]
+radius_mm = -20.0
+thickness_mm = 20.0
+semi_diameter_mm = 1.0
+"#);
+    let mut absorbed = 0;
+    for i in 0..400 {
+        let y = -12.0 + 24.0 * i as f64 / 400.0;
+        let d = DVec3::new(0.0, 0.3, 1.0).normalize();
+        match wild.trace(&Ray::new(DVec3::new(0.0, y, -1.0), d), WL, TraceDirection::SceneToFilm) {
+            Some(t) => assert!(t.ray.origin.is_finite() && t.ray.direction.is_finite()),
+            None => absorbed += 1,
+        }
+    }
+    assert!(absorbed > 0);
+}
+
+fn arb_scene_ray() -> impl Strategy<Value = (f64, f64, f64, f64)> {
+    (-10.0..10.0f64, -10.0..10.0f64, -0.3..0.3f64, -0.3..0.3f64)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(2000))]
+
+    /// Forward then backward returns the ray within 1e-9 mm.
+    #[test]
+    fn forward_then_backward_returns_the_ray((x, y, dx, dy) in arb_scene_ray()) {
+        let l = library_lens("double-gauss-50mm").unwrap();
+        let ray = Ray::new(DVec3::new(x, y, -5.0), DVec3::new(dx, dy, 1.0));
+        if let Some(fwd) = l.trace(&ray, WL, TraceDirection::SceneToFilm) {
+            let back_in = Ray::new(fwd.ray.origin + fwd.ray.direction * 30.0, -fwd.ray.direction);
+            let back = l.trace(&back_in, WL, TraceDirection::FilmToScene).expect("the reverse ray must pass");
+            // back.origin lies on the first surface, on the original ray's line
+            let v = back.ray.origin - ray.origin;
+            let off_line = (v - ray.direction * v.dot(ray.direction)).length();
+            prop_assert!(off_line < 1e-9, "off line by {off_line}");
+            prop_assert!((back.ray.direction + ray.direction).length() < 1e-9);
+        }
+    }
+
+    /// Tracing commutes with rotation about the optical axis.
+    #[test]
+    fn tracing_commutes_with_rotation((x, y, dx, dy) in arb_scene_ray(), angle in 0.0..std::f64::consts::TAU) {
+        let l = library_lens("double-gauss-50mm").unwrap();
+        let rot = glam::DMat3::from_rotation_z(angle);
+        let ray = Ray::new(DVec3::new(x, y, -5.0), DVec3::new(dx, dy, 1.0));
+        let rray = Ray::new(rot * ray.origin, rot * ray.direction);
+        let a = l.trace(&ray, WL, TraceDirection::SceneToFilm);
+        let b = l.trace(&rray, WL, TraceDirection::SceneToFilm);
+        match (a, b) {
+            (Some(a), Some(b)) => {
+                prop_assert!((rot * a.ray.origin - b.ray.origin).length() < 1e-9);
+                prop_assert!((rot * a.ray.direction - b.ray.direction).length() < 1e-9);
+            }
+            (None, None) => {}
+            _ => prop_assert!(false, "vignetting must not depend on the azimuth"),
+        }
+    }
+}
+
+/// Exit-pupil bounds never cut off a ray that passes (brute force over the rear plane).
+#[test]
+fn exit_pupil_bounds_contain_every_passing_ray() {
+    let blades = petzval_optics::Aperture {
+        shape: petzval_optics::ApertureShape::Blades { count: 5, curvature: 0.0 },
+        rotation_rad: 0.4,
+        anamorphic_ratio: 1.0,
+    };
+    let lenses = vec![
+        ("double-gauss-50mm", library_lens("double-gauss-50mm").unwrap()),
+        ("wide-22mm", library_lens("wide-22mm").unwrap()),
+        ("telephoto-250mm", library_lens("telephoto-250mm").unwrap()),
+        ("fisheye-10mm", library_lens("fisheye-10mm").unwrap()),
+        ("double-gauss-50mm f/4 5 blades", library_lens("double-gauss-50mm").unwrap().stopped_down(4.0).unwrap().with_aperture(blades)),
+        ("schneider-anamorphic-31mm", library_lens("schneider-anamorphic-31mm").unwrap()),
+    ];
+    for (name, l) in lenses {
+        let film_z = l.last_vertex_z_mm() + l.focus_image_distance_mm(None).unwrap();
+        let r_max = 21.7;
+        let b = ExitPupilBounds::compute(&l, film_z, 0.0, r_max);
+        let rear = 1.5 * l.rear_semi_diameter_mm();
+        let mut state = 12345u64;
+        let mut rnd = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut passed, mut outside, mut sampled_in_bounds, mut pass_in_bounds) = (0, 0, 0, 0);
+        for _ in 0..200_000 {
+            let r = r_max * rnd().sqrt();
+            let phi = std::f64::consts::TAU * rnd();
+            let film = DVec3::new(r * phi.cos(), r * phi.sin(), film_z);
+            let q = DVec3::new(rear * (2.0 * rnd() - 1.0), rear * (2.0 * rnd() - 1.0), l.last_vertex_z_mm());
+            let ok = l.trace(&Ray::new(film, q - film), WL, TraceDirection::FilmToScene).is_some();
+            let inside = b.contains(DVec2::new(film.x, film.y), DVec2::new(q.x, q.y));
+            if inside {
+                sampled_in_bounds += 1;
+                pass_in_bounds += ok as usize;
+            }
+            if ok {
+                passed += 1;
+                if !inside {
+                    outside += 1;
+                }
+            }
+        }
+        assert!(passed > 1000, "{name}: too few passing rays ({passed})");
+        assert_eq!(outside, 0, "{name}: {outside} of {passed} passing rays fall outside the bounds");
+        eprintln!("{name}: rejection inside bounds {:.1}%", 100.0 * (1.0 - pass_in_bounds as f64 / sampled_in_bounds as f64));
+    }
+}
+
+#[test]
+fn focusing_moves_the_sensor_and_refuses_the_impossible() {
+    let l = library_lens("double-gauss-50mm").unwrap();
+    let inf = l.focus_image_distance_mm(None).unwrap();
+    let near = l.focus_image_distance_mm(Some(1000.0)).unwrap();
+    assert!(near > inf);
+    // Newton's equation from the focal points: x x' = f²
+    let p = l.paraxial();
+    let object_z = p.entrance_pupil_z_mm - 1000.0;
+    let x = p.front_focal_z_mm - object_z;
+    let x_img = l.last_vertex_z_mm() + near - p.rear_focal_z_mm;
+    assert!((x * x_img - p.efl_mm * p.efl_mm).abs() < 1e-6 * p.efl_mm * p.efl_mm);
+    // real rays from the object point converge at the sensor (small aperture: within 5 µm)
+    let small = l.stopped_down(16.0).unwrap();
+    let film_z = l.last_vertex_z_mm() + near;
+    let mut hits = vec![];
+    for k in -3..=3 {
+        let h = 0.1 * k as f64;
+        let target = DVec3::new(0.0, h, p.entrance_pupil_z_mm);
+        let o = DVec3::new(0.0, 0.0, object_z);
+        if let Some(t) = small.trace(&Ray::new(o, target - o), WL, TraceDirection::SceneToFilm) {
+            let s = (film_z - t.ray.origin.z) / t.ray.direction.z;
+            hits.push((t.ray.origin + t.ray.direction * s).y);
+        }
+    }
+    assert!(hits.len() >= 5);
+    assert!(hits.iter().all(|y| y.abs() < 5e-3), "{hits:?}");
+    let err = l.focus_image_distance_mm(Some(30.0)).unwrap_err().to_string();
+    assert!(err.contains("cannot focus"), "{err}");
+}
+
+
+/// Tracing scene → film through a lens is tracing film → scene through its reversal (mirrored
+/// in z): a film → scene ray, sent back, arrives at its film point in the reversed lens.
+#[test]
+fn reversed_lens_traces_rays_backwards() {
+    use petzval_optics::{library_lens, Ray, TraceDirection};
+    for name in ["double-gauss-50mm", "cooke-speed-panchro-25mm", "fisheye-10mm", "aspheric-fisheye-10mm", "petzval-portrait-100mm"] {
+        let lens = library_lens(name).unwrap();
+        let rev = lens.reversed().unwrap();
+        assert_eq!(rev.surfaces().len(), lens.surfaces().len());
+        assert!((rev.paraxial().efl_mm - lens.paraxial().efl_mm).abs() < 1e-9 * lens.paraxial().efl_mm.abs(), "{name}: EFL");
+        // twice reversed: the same optics
+        let back = rev.reversed().unwrap();
+        assert!((back.paraxial().bfl_mm - lens.paraxial().bfl_mm).abs() < 1e-9, "{name}: BFL after two reversals");
+        let l = lens.last_vertex_z_mm();
+        let mirror = |v: glam::DVec3| glam::DVec3::new(v.x, v.y, l - v.z);
+        let mirror_dir = |v: glam::DVec3| glam::DVec3::new(v.x, v.y, -v.z);
+        let film_z = l + lens.focus_image_distance_mm(None).unwrap();
+        let wl = lens.primary_wavelength_nm();
+        let mut passed = 0;
+        let mut state = 99u64;
+        let mut rnd = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..4000 {
+            let p = glam::DVec3::new(12.0 * (rnd() - 0.5), 12.0 * (rnd() - 0.5), film_z);
+            let r = lens.rear_semi_diameter_mm() * rnd().sqrt();
+            let phi = std::f64::consts::TAU * rnd();
+            let target = glam::DVec3::new(r * phi.cos(), r * phi.sin(), l);
+            let din = (target - p).normalize();
+            let Some(out) = lens.trace(&Ray::new(p, din), wl, TraceDirection::FilmToScene) else { continue };
+            passed += 1;
+            // back from the scene side, mirrored into the reversed lens
+            let start = out.ray.origin + out.ray.direction * 5.0;
+            let back_ray = Ray::new(mirror(start), mirror_dir(-out.ray.direction));
+            let arrived = rev.trace(&back_ray, wl, TraceDirection::FilmToScene).unwrap_or_else(|| panic!("{name}: the reversed ray was absorbed"));
+            let o = mirror(arrived.ray.origin);
+            let d = mirror_dir(arrived.ray.direction);
+            assert!((d + din).length() < 1e-9, "{name}: direction {d} vs {}", -din);
+            // the line through o along d passes through the film point p
+            let miss = (p - o).cross(d).length();
+            assert!(miss < 1e-8, "{name}: misses the film point by {miss} mm");
+        }
+        assert!(passed > 200, "{name}: only {passed} rays to compare");
+    }
+}
