@@ -83,7 +83,9 @@ pub fn run(cmd: BenchCommand) -> Result<(), Error> {
         BenchCommand::Lens { lens, rays, json } => bench_lens(lens, rays, json),
         BenchCommand::Render { resolution, spp, triangles } => bench_render(&resolution, spp, triangles),
         BenchCommand::LensModels { lens, rays, resolutions, json } => bench_lens_models(lens, rays, &resolutions, json),
-        BenchCommand::RenderModels { resolution, spp, resolutions, seed, save, json } => bench_render_models(&resolution, spp, &resolutions, seed, save.as_deref(), json),
+        BenchCommand::RenderModels { resolution, spp, resolutions, seed, save, json } => {
+            bench_render_models(&resolution, spp, &resolutions, seed, save.as_deref(), json)
+        }
     }
 }
 
@@ -105,7 +107,13 @@ impl SplitMix {
 /// Up to `count` camera rays as the realistic camera draws them: (image position, film point,
 /// rear-plane point inside the exit-pupil bounds), drawn from `rng`; film points outside the
 /// image circle (empty bounds) are skipped.
-fn camera_ray_samples(sensor: &Sensor, bounds: &petzval_renderer::optics::pupil::ExitPupilBounds, film_z: f64, count: usize, rng: &mut SplitMix) -> Vec<(DVec2, DVec3, DVec3)> {
+fn camera_ray_samples(
+    sensor: &Sensor,
+    bounds: &petzval_renderer::optics::pupil::ExitPupilBounds,
+    film_z: f64,
+    count: usize,
+    rng: &mut SplitMix,
+) -> Vec<(DVec2, DVec3, DVec3)> {
     let mut out = Vec::with_capacity(count);
     let mut guard = 0;
     while out.len() < count && guard < count * 50 {
@@ -126,7 +134,9 @@ fn bench_lens(only: Option<String>, rays: usize, json: bool) -> Result<(), Error
     };
     if !json {
         println!("Exact trace, film → scene, primary wavelength, 1 thread, {rays} rays per lens; film points uniform over a 36×24 mm sensor");
-        println!("(clamped to the lens's image circle), rear-plane points from the exit-pupil bounds, focus at infinity.");
+        println!(
+            "(clamped to the lens's image circle), rear-plane points from the exit-pupil bounds, focus at infinity."
+        );
         println!();
         println!("| lens | surfaces | ns/ray (all) | ns/ray (passing) | rejection (pupil bounds) | rejection (whole rear disc) | bounds build ms |");
         println!("|---|---|---|---|---|---|---|");
@@ -141,7 +151,8 @@ fn bench_lens(only: Option<String>, rays: usize, json: bool) -> Result<(), Error
         let build_ms = t0.elapsed().as_secs_f64() * 1e3;
         // 1. Sample film points whose bounds are non-empty (inside the image circle).
         let mut rng = SplitMix(0x5eed);
-        let samples: Vec<(DVec3, DVec3)> = camera_ray_samples(&sensor, &bounds, film_z, rays, &mut rng).into_iter().map(|(_, p, q)| (p, q)).collect();
+        let samples: Vec<(DVec3, DVec3)> =
+            camera_ray_samples(&sensor, &bounds, film_z, rays, &mut rng).into_iter().map(|(_, p, q)| (p, q)).collect();
         let wl = lens.primary_wavelength_nm();
         // 2. Time the traces.
         let t0 = Instant::now();
@@ -248,7 +259,10 @@ fn bench_render(resolution: &str, spp: u32, triangles: usize) -> Result<(), Erro
     let (w, h) = resolution
         .split_once('x')
         .and_then(|(a, b)| Some((a.parse::<u32>().ok()?, b.parse::<u32>().ok()?)))
-        .ok_or_else(|| Error::Camera { field: "resolution".into(), message: format!("expected WxH, got '{resolution}'") })?;
+        .ok_or_else(|| Error::Camera {
+        field: "resolution".into(),
+        message: format!("expected WxH, got '{resolution}'"),
+    })?;
     // 1. Throughput on a dense scene (one thread).
     let scene = dense_scene(triangles);
     let t0 = Instant::now();
@@ -286,7 +300,10 @@ fn bench_render(resolution: &str, spp: u32, triangles: usize) -> Result<(), Erro
         ("exact (double-gauss-50mm)", Camera::Realistic(RealisticCamera::new(sensor, lens.clone(), focus)?)),
     ];
     let settings = RenderSettings { width: w, height: h, spp, ..RenderSettings::default() };
-    println!("## Render time by camera model (built-in demo, {w}x{h}, {spp} spp, {} threads)", rayon::current_num_threads());
+    println!(
+        "## Render time by camera model (built-in demo, {w}x{h}, {spp} spp, {} threads)",
+        rayon::current_num_threads()
+    );
     println!();
     println!("| camera model | seconds | ratio to pinhole | camera rays/s |");
     println!("|---|---|---|---|");
@@ -297,7 +314,12 @@ fn bench_render(resolution: &str, spp: u32, triangles: usize) -> Result<(), Erro
         if pinhole_s == 0.0 {
             pinhole_s = r.seconds;
         }
-        println!("| {name} | {:.2} | {:.2}× | {:.2} M |", r.seconds, r.seconds / pinhole_s, r.camera_rays as f64 / r.seconds / 1e6);
+        println!(
+            "| {name} | {:.2} | {:.2}× | {:.2} M |",
+            r.seconds,
+            r.seconds / pinhole_s,
+            r.camera_rays as f64 / r.seconds / 1e6
+        );
     }
     Ok(())
 }
@@ -349,14 +371,29 @@ fn bench_lens_models(only: Option<String>, rays: usize, resolutions: &str, json:
         // The same rays in raster order (sorted by pixel of a 1920-wide image), as a renderer
         // generates them: neighbouring rays share film points, so table cells stay in cache.
         let raster: Vec<Ray> = {
-            let mut idx: Vec<(u64, usize)> = film_uv.iter().enumerate().map(|(i, u)| (((u.y * 1280.0) as u64) * 1920 + (u.x * 1920.0) as u64, i)).collect();
+            let mut idx: Vec<(u64, usize)> = film_uv
+                .iter()
+                .enumerate()
+                .map(|(i, u)| (((u.y * 1280.0) as u64) * 1920 + (u.x * 1920.0) as u64, i))
+                .collect();
             idx.sort_unstable();
             idx.iter().map(|(_, i)| samples[*i]).collect()
         };
         // 2. Exact reference (timed; best of REPEATS, without storing results).
-        let exact_ns = best_ns_per_ray(&samples, |r| lens.trace(r, wl, TraceDirection::FilmToScene).map_or(0.0, |t| t.ray.direction.x));
-        let exact: Vec<Option<Ray>> = samples.iter().map(|r| lens.trace(r, wl, TraceDirection::FilmToScene).map(|t| t.ray)).collect();
-        let mut push = |model: &str, res: Option<u32>, ns: f64, pos_um: Option<f64>, dir_mrad: f64, mean_px: f64, max_px: f64, mis: Option<f64>, extra: serde_json::Value| {
+        let exact_ns = best_ns_per_ray(&samples, |r| {
+            lens.trace(r, wl, TraceDirection::FilmToScene).map_or(0.0, |t| t.ray.direction.x)
+        });
+        let exact: Vec<Option<Ray>> =
+            samples.iter().map(|r| lens.trace(r, wl, TraceDirection::FilmToScene).map(|t| t.ray)).collect();
+        let mut push = |model: &str,
+                        res: Option<u32>,
+                        ns: f64,
+                        pos_um: Option<f64>,
+                        dir_mrad: f64,
+                        mean_px: f64,
+                        max_px: f64,
+                        mis: Option<f64>,
+                        extra: serde_json::Value| {
             let mut v = serde_json::json!({
                 "lens": name, "model": model, "resolution": res, "ns_per_ray": ns,
                 "mean_position_error_um": pos_um, "mean_direction_error_mrad": dir_mrad,
@@ -372,7 +409,9 @@ fn bench_lens_models(only: Option<String>, rays: usize, resolutions: &str, json:
         push("exact", None, exact_ns, Some(0.0), 0.0, 0.0, 0.0, Some(0.0), serde_json::json!({}));
         // 3. Pinhole, thin and thick: distortion of the chief ray against the exact lens, on a
         //    grid of film points; time per generated camera ray.
-        let grid: Vec<DVec2> = (0..15).flat_map(|i| (0..10).map(move |j| DVec2::new((i as f64 + 0.5) / 15.0, (j as f64 + 0.5) / 10.0))).collect();
+        let grid: Vec<DVec2> = (0..15)
+            .flat_map(|i| (0..10).map(move |j| DVec2::new((i as f64 + 0.5) / 15.0, (j as f64 + 0.5) / 10.0)))
+            .collect();
         let mut chief: Vec<(DVec3, DVec3)> = Vec::new(); // (film point, exact chief direction)
         for u in &grid {
             let p = sensor.film_point(*u, film_z);
@@ -382,7 +421,16 @@ fn bench_lens_models(only: Option<String>, rays: usize, resolutions: &str, json:
         }
         let analytic: Vec<(&str, Camera)> = vec![
             ("pinhole", Camera::Pinhole(PinholeCamera::new(sensor, efl.abs())?)),
-            ("thin", Camera::ThinLens(ThinLensCamera::new(sensor, efl.abs(), lens.paraxial().f_number, None, Aperture::default())?)),
+            (
+                "thin",
+                Camera::ThinLens(ThinLensCamera::new(
+                    sensor,
+                    efl.abs(),
+                    lens.paraxial().f_number,
+                    None,
+                    Aperture::default(),
+                )?),
+            ),
             ("thick", Camera::ThickLens(ThickLensCamera::new(sensor, &lens, None, None, Aperture::default())?)),
         ];
         for (model, cam) in analytic {
@@ -407,29 +455,46 @@ fn bench_lens_models(only: Option<String>, rays: usize, resolutions: &str, json:
                 max_px = max_px.max(px);
             }
             let n = chief.len().max(1) as f64;
-            push(model, None, ns, None, sum_mrad / n, sum_px / n, max_px, None, serde_json::json!({"note": "chief-ray distortion against the exact lens; no vignetting"}));
+            push(
+                model,
+                None,
+                ns,
+                None,
+                sum_mrad / n,
+                sum_px / n,
+                max_px,
+                None,
+                serde_json::json!({"note": "chief-ray distortion against the exact lens; no vignetting"}),
+            );
         }
         // 4. LRTF tables at each resolution.
         if lens.is_rotationally_symmetric() {
             for &res in &res_list {
                 let t0 = Instant::now();
-                let table = LrtfTable::bake(&lens, &BakeOptions { resolution: res, ..BakeOptions::default() }, &|_| {})?;
+                let table =
+                    LrtfTable::bake(&lens, &BakeOptions { resolution: res, ..BakeOptions::default() }, &|_| {})?;
                 let bake_s = t0.elapsed().as_secs_f64();
                 let map = |r: &Ray| match table.lookup(r, wl) {
-                    LrtfLookup::Hit(h) => (lens.aperture().transmission(h.stop_point.x, h.stop_point.y, lens.stop_semi_diameter_mm()) > 0.0).then_some(h.ray),
+                    LrtfLookup::Hit(h) => {
+                        (lens.aperture().transmission(h.stop_point.x, h.stop_point.y, lens.stop_semi_diameter_mm())
+                            > 0.0)
+                            .then_some(h.ray)
+                    }
                     LrtfLookup::Miss => None,
                     LrtfLookup::Uncertain => lens.trace(r, wl, TraceDirection::FilmToScene).map(|t| t.ray),
                 };
                 let with_fallback = |r: &Ray| map(r).map_or(0.0, |o| o.direction.x);
                 // the table lookup alone (no exact fallback, no stop test)
-                let alone = |r: &Ray| if let LrtfLookup::Hit(h) = table.lookup(r, wl) { h.ray.direction.x } else { 0.0 };
+                let alone =
+                    |r: &Ray| if let LrtfLookup::Hit(h) = table.lookup(r, wl) { h.ray.direction.x } else { 0.0 };
                 let ns = best_ns_per_ray(&samples, with_fallback);
                 let lookup_ns = best_ns_per_ray(&samples, alone);
                 let ns_raster = best_ns_per_ray(&raster, with_fallback);
                 let lookup_ns_raster = best_ns_per_ray(&raster, alone);
                 let out: Vec<Option<Ray>> = samples.iter().map(map).collect();
                 let uncertain = samples.iter().filter(|r| matches!(table.lookup(r, wl), LrtfLookup::Uncertain)).count();
-                let (mut mis, mut both, mut sum_um, mut sum_mrad, mut sum_px, mut max_px) = (0usize, 0usize, 0.0, 0.0, 0.0, 0.0f64);
+                let (mut mis, mut both, mut sum_um, mut sum_mrad, mut sum_px, mut max_px) =
+                    (0usize, 0usize, 0.0, 0.0, 0.0, 0.0f64);
                 let centre = DVec3::new(0.0, 0.0, table.header.out_centre_z_mm);
                 for (e, a) in exact.iter().zip(&out) {
                     match (e, a) {
@@ -506,7 +571,10 @@ fn parse_wxh(resolution: &str) -> Result<(u32, u32), Error> {
         .split_once('x')
         .and_then(|(a, b)| Some((a.trim().parse::<u32>().ok()?, b.trim().parse::<u32>().ok()?)))
         .filter(|(w, h)| *w > 0 && *h > 0)
-        .ok_or_else(|| Error::Camera { field: "resolution".into(), message: format!("expected WxH such as 480x320, got '{resolution}'") })
+        .ok_or_else(|| Error::Camera {
+            field: "resolution".into(),
+            message: format!("expected WxH such as 480x320, got '{resolution}'"),
+        })
 }
 
 /// Parses a comma-separated list of LRTF resolutions.
@@ -522,14 +590,23 @@ fn parse_resolutions(list: &str) -> Result<Vec<u32>, Error> {
         .collect()
 }
 
-fn bench_render_models(resolution: &str, spp: u32, resolutions: &str, seed: u32, save: Option<&std::path::Path>, json: bool) -> Result<(), Error> {
+fn bench_render_models(
+    resolution: &str,
+    spp: u32,
+    resolutions: &str,
+    seed: u32,
+    save: Option<&std::path::Path>,
+    json: bool,
+) -> Result<(), Error> {
     use petzval_renderer::film::metrics::{flip_mean, relative_rmse};
     use petzval_renderer::film::{write_png, Image, ToneMap};
     use petzval_renderer::integrator::RenderScene;
     use petzval_renderer::optics::lrtf::{BakeOptions, LrtfTable};
     use petzval_renderer::render::{render, CameraRig, RenderSettings};
     use petzval_renderer::scene::demo;
-    use petzval_renderer::{Aperture, ApertureShape, Camera, LrtfCamera, PinholeCamera, RealisticCamera, ThickLensCamera, ThinLensCamera};
+    use petzval_renderer::{
+        Aperture, ApertureShape, Camera, LrtfCamera, PinholeCamera, RealisticCamera, ThickLensCamera, ThinLensCamera,
+    };
     use std::sync::Arc;
     let (w, h) = parse_wxh(resolution)?;
     let res_list = parse_resolutions(resolutions)?;
@@ -541,13 +618,21 @@ fn bench_render_models(resolution: &str, spp: u32, resolutions: &str, seed: u32,
     // 1. The demo as `petzval render` shoots it: its lens stopped down, bladed stop, tilted
     //    sensor 36 mm across the larger image dimension, the demo's focus.
     let (scene, shot) = demo::demo_scene();
-    let cam = scene.cameras.first().cloned().ok_or_else(|| Error::Camera { field: "camera".into(), message: "the demo has no camera".into() })?;
+    let cam = scene
+        .cameras
+        .first()
+        .cloned()
+        .ok_or_else(|| Error::Camera { field: "camera".into(), message: "the demo has no camera".into() })?;
     let to_world = glam::DAffine3::from_cols_array(&cam.to_world.to_cols_array().map(|v| v as f64));
     let rs = RenderScene::new(scene)?;
     let aspect = w as f64 / h as f64;
     let (sw, sh) = if w >= h { (36.0, 36.0 / aspect) } else { (36.0 * aspect, 36.0) };
     let sensor = Sensor { width_mm: sw, height_mm: sh, tilt_x_deg: shot.tilt_x_deg, ..Sensor::default() };
-    let aperture = Aperture { shape: ApertureShape::Blades { count: shot.blades, curvature: 0.0 }, rotation_rad: shot.blade_rotation_deg.to_radians(), anamorphic_ratio: 1.0 };
+    let aperture = Aperture {
+        shape: ApertureShape::Blades { count: shot.blades, curvature: 0.0 },
+        rotation_rad: shot.blade_rotation_deg.to_radians(),
+        anamorphic_ratio: 1.0,
+    };
     let lens = load_lens(shot.lens)?.stopped_down(shot.f_number)?.with_aperture(aperture.clone());
     let focus = Some(shot.focus_distance_m);
     let efl = lens.paraxial().efl_mm;
@@ -569,22 +654,57 @@ fn bench_render_models(resolution: &str, spp: u32, resolutions: &str, seed: u32,
             eprintln!("{model}{}: {:.2} s", res.map(|r| format!(" {r}")).unwrap_or_default(), r.seconds);
         }
         if let Some(dir) = save {
-            let name = format!("{model}{}{}.png", res.map(|r| format!("-{r}")).unwrap_or_default(), if seed != settings.seed { "-seed" } else { "" });
+            let name = format!(
+                "{model}{}{}.png",
+                res.map(|r| format!("-{r}")).unwrap_or_default(),
+                if seed != settings.seed { "-seed" } else { "" }
+            );
             write_png(&dir.join(name), &r.image, 0.0, ToneMap::Srgb)?;
         }
-        rows.push(Row { model: model.to_string(), resolution: res, seed, seconds: r.seconds, bake_seconds: bake, image: r.image });
+        rows.push(Row {
+            model: model.to_string(),
+            resolution: res,
+            seed,
+            seconds: r.seconds,
+            bake_seconds: bake,
+            image: r.image,
+        });
         Ok(())
     };
     run("exact", None, None, Camera::Realistic(RealisticCamera::new(sensor, lens.clone(), focus)?), seed)?;
-    run("exact", None, None, Camera::Realistic(RealisticCamera::new(sensor, lens.clone(), focus)?), seed.wrapping_add(1))?;
+    run(
+        "exact",
+        None,
+        None,
+        Camera::Realistic(RealisticCamera::new(sensor, lens.clone(), focus)?),
+        seed.wrapping_add(1),
+    )?;
     run("pinhole", None, None, Camera::Pinhole(PinholeCamera::new(sensor, efl)?), seed)?;
-    run("thin", None, None, Camera::ThinLens(ThinLensCamera::new(sensor, efl, f_number, focus, aperture.clone())?), seed)?;
-    run("thick", None, None, Camera::ThickLens(ThickLensCamera::new(sensor, &lens, None, focus, aperture.clone())?), seed)?;
+    run(
+        "thin",
+        None,
+        None,
+        Camera::ThinLens(ThinLensCamera::new(sensor, efl, f_number, focus, aperture.clone())?),
+        seed,
+    )?;
+    run(
+        "thick",
+        None,
+        None,
+        Camera::ThickLens(ThickLensCamera::new(sensor, &lens, None, focus, aperture.clone())?),
+        seed,
+    )?;
     for &res in &res_list {
         let t0 = Instant::now();
         let table = LrtfTable::bake(&lens, &BakeOptions { resolution: res, ..BakeOptions::default() }, &|_| {})?;
         let bake_s = t0.elapsed().as_secs_f64();
-        run("lrtf", Some(res), Some(bake_s), Camera::Lrtf(LrtfCamera::new(sensor, lens.clone(), focus, Arc::new(table))?), seed)?;
+        run(
+            "lrtf",
+            Some(res),
+            Some(bake_s),
+            Camera::Lrtf(LrtfCamera::new(sensor, lens.clone(), focus, Arc::new(table))?),
+            seed,
+        )?;
     }
     // 3. Errors against the exact render.
     let reference = rows[0].image.clone();

@@ -168,18 +168,44 @@ fn print_info(v: &Value) {
     println!("  wavelength        {:.2} nm", f("wavelength_nm"));
     println!("  EFL               {:.4} mm", f("efl_mm"));
     if (f("efl_x_mm") - f("efl_mm")).abs() > 1e-6 {
-        println!("  EFL (x meridian)  {:.4} mm  (anamorphic squeeze {:.3})", f("efl_x_mm"), f("efl_mm") / f("efl_x_mm"));
+        println!(
+            "  EFL (x meridian)  {:.4} mm  (anamorphic squeeze {:.3})",
+            f("efl_x_mm"),
+            f("efl_mm") / f("efl_x_mm")
+        );
     }
     println!("  BFL / FFL         {:.4} / {:.4} mm", f("bfl_mm"), f("ffl_mm"));
-    println!("  f-number          f/{:.3}  (widest f/{:.3}, working f/{:.3})", f("f_number"), f("widest_f_number"), f("working_f_number"));
-    println!("  entrance pupil    z = {:.4} mm, diameter {:.4} mm", v["entrance_pupil"]["z_mm"].as_f64().unwrap_or(0.0), v["entrance_pupil"]["diameter_mm"].as_f64().unwrap_or(0.0));
-    println!("  exit pupil        z = {:.4} mm, diameter {:.4} mm", v["exit_pupil"]["z_mm"].as_f64().unwrap_or(0.0), v["exit_pupil"]["diameter_mm"].as_f64().unwrap_or(0.0));
-    println!("  principal planes  H z = {:.4} mm, H' z = {:.4} mm", v["principal_planes"]["front_z_mm"].as_f64().unwrap_or(0.0), v["principal_planes"]["back_z_mm"].as_f64().unwrap_or(0.0));
+    println!(
+        "  f-number          f/{:.3}  (widest f/{:.3}, working f/{:.3})",
+        f("f_number"),
+        f("widest_f_number"),
+        f("working_f_number")
+    );
+    println!(
+        "  entrance pupil    z = {:.4} mm, diameter {:.4} mm",
+        v["entrance_pupil"]["z_mm"].as_f64().unwrap_or(0.0),
+        v["entrance_pupil"]["diameter_mm"].as_f64().unwrap_or(0.0)
+    );
+    println!(
+        "  exit pupil        z = {:.4} mm, diameter {:.4} mm",
+        v["exit_pupil"]["z_mm"].as_f64().unwrap_or(0.0),
+        v["exit_pupil"]["diameter_mm"].as_f64().unwrap_or(0.0)
+    );
+    println!(
+        "  principal planes  H z = {:.4} mm, H' z = {:.4} mm",
+        v["principal_planes"]["front_z_mm"].as_f64().unwrap_or(0.0),
+        v["principal_planes"]["back_z_mm"].as_f64().unwrap_or(0.0)
+    );
     println!("  sensor plane      z = {:.4} mm (image distance {:.4} mm)", f("sensor_z_mm"), f("image_distance_mm"));
-    println!("  surfaces          {} (stop: surface {})", v["surface_count"], v["stop_index"].as_u64().unwrap_or(0) + 1);
+    println!(
+        "  surfaces          {} (stop: surface {})",
+        v["surface_count"],
+        v["stop_index"].as_u64().unwrap_or(0) + 1
+    );
     println!("  Petzval sum       {:.6} /mm", f("petzval_sum_per_mm"));
     let fov = &v["field_of_view_deg"];
-    let angle = |k: &str| fov[k].as_f64().map(|a| format!("{a:.2}°")).unwrap_or_else(|| "beyond the image circle".into());
+    let angle =
+        |k: &str| fov[k].as_f64().map(|a| format!("{a:.2}°")).unwrap_or_else(|| "beyond the image circle".into());
     println!(
         "  field of view     {} h × {} v, {} diagonal (paraxial {:.2}°) on {}×{} mm",
         angle("horizontal"),
@@ -238,9 +264,13 @@ fn trace_stdin(lens: &Lens, direction: Direction, wavelength: Option<f64>, open_
         if line.trim().is_empty() {
             continue;
         }
-        let v: Vec<f64> = serde_json::from_str(&line).map_err(|e| Error::settings(format!("<stdin>:{}: ray", n + 1), e.to_string()))?;
+        let v: Vec<f64> = serde_json::from_str(&line)
+            .map_err(|e| Error::settings(format!("<stdin>:{}: ray", n + 1), e.to_string()))?;
         if v.len() != 6 || v.iter().any(|x| !x.is_finite()) {
-            return Err(Error::settings(format!("<stdin>:{}: ray", n + 1), "expected [ox, oy, oz, dx, dy, dz] with finite numbers"));
+            return Err(Error::settings(
+                format!("<stdin>:{}: ray", n + 1),
+                "expected [ox, oy, oz, dx, dy, dz] with finite numbers",
+            ));
         }
         let d = DVec3::new(v[3], v[4], v[5]);
         if d.length() == 0.0 {

@@ -52,27 +52,45 @@ pub fn run(cmd: LrtfCommand) -> Result<(), Error> {
                     w.split(',')
                         .map(|v| v.trim().parse::<f64>().ok().filter(|x| (380.0..=780.0).contains(x)))
                         .collect::<Option<Vec<f64>>>()
-                        .ok_or_else(|| Error::settings("--wavelengths", format!("expected numbers in 380..780 nm, got '{w}'")))?,
+                        .ok_or_else(|| {
+                            Error::settings("--wavelengths", format!("expected numbers in 380..780 nm, got '{w}'"))
+                        })?,
                 ),
             };
             if !(8..=512).contains(&resolution) {
                 return Err(Error::settings("--resolution", format!("{resolution} must be in 8..=512")));
             }
             let bar = ProgressBar::new(1000);
-            bar.set_style(ProgressStyle::with_template("baking {spinner} [{elapsed_precise}] {wide_bar} {percent}% ETA {eta}").unwrap_or_else(|_| ProgressStyle::default_bar()));
+            bar.set_style(
+                ProgressStyle::with_template("baking {spinner} [{elapsed_precise}] {wide_bar} {percent}% ETA {eta}")
+                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            );
             let t0 = std::time::Instant::now();
             let table = match direction.as_str() {
                 "film-to-scene" => {
-                    let opts = BakeOptions { resolution, max_film_radius_mm: max_film_radius, min_film_distance_mm: None, wavelengths_nm };
+                    let opts = BakeOptions {
+                        resolution,
+                        max_film_radius_mm: max_film_radius,
+                        min_film_distance_mm: None,
+                        wavelengths_nm,
+                    };
                     LrtfTable::bake(&lens, &opts, &|f| bar.set_position((f * 1000.0) as u64))?
                 }
                 "scene-to-film" => {
                     if wavelengths_nm.is_some() {
-                        return Err(Error::settings("--wavelengths", "scene-to-film tables use the lens's own wavelengths"));
+                        return Err(Error::settings(
+                            "--wavelengths",
+                            "scene-to-film tables use the lens's own wavelengths",
+                        ));
                     }
                     SceneToFilmTable::bake(&lens, resolution, 5.0, &|f| bar.set_position((f * 1000.0) as u64))?.table
                 }
-                d => return Err(Error::settings("--direction", format!("expected film-to-scene or scene-to-film, got '{d}'"))),
+                d => {
+                    return Err(Error::settings(
+                        "--direction",
+                        format!("expected film-to-scene or scene-to-film, got '{d}'"),
+                    ))
+                }
             };
             bar.finish_and_clear();
             table.save(&output)?;

@@ -128,7 +128,9 @@ fn parse_resolution(s: &str) -> Result<(u32, u32), Error> {
 
 /// Parses `--aperture`.
 pub fn parse_aperture(s: &str) -> Result<Aperture, Error> {
-    let bad = |m: &str| camera_err("aperture", format!("{m} (got '{s}'; expected circle, blades:N[:ROTATION_DEG] or image:PATH)"));
+    let bad = |m: &str| {
+        camera_err("aperture", format!("{m} (got '{s}'; expected circle, blades:N[:ROTATION_DEG] or image:PATH)"))
+    };
     if s == "circle" {
         return Ok(Aperture::default());
     }
@@ -142,7 +144,11 @@ pub fn parse_aperture(s: &str) -> Result<Aperture, Error> {
             Some(r) => r.parse().map_err(|_| bad("rotation must be a number of degrees"))?,
             None => 0.0,
         };
-        return Ok(Aperture { shape: ApertureShape::Blades { count: n, curvature: 0.0 }, rotation_rad: rot.to_radians(), anamorphic_ratio: 1.0 });
+        return Ok(Aperture {
+            shape: ApertureShape::Blades { count: n, curvature: 0.0 },
+            rotation_rad: rot.to_radians(),
+            anamorphic_ratio: 1.0,
+        });
     }
     if let Some(path) = s.strip_prefix("image:") {
         let mask = ApertureMask::load(std::path::Path::new(path))?;
@@ -155,7 +161,11 @@ fn parse_environment(s: &str, strength: f32) -> Result<Environment, Error> {
     if s.to_ascii_lowercase().ends_with(".exr") {
         return petzval_renderer::scene::environment::load_environment_exr(std::path::Path::new(s), strength, 0.0);
     }
-    let v: Vec<f32> = s.split(',').map(|c| c.trim().parse::<f32>()).collect::<Result<_, _>>().map_err(|_| camera_err("environment", format!("expected R,G,B or FILE.exr, got '{s}'")))?;
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|c| c.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| camera_err("environment", format!("expected R,G,B or FILE.exr, got '{s}'")))?;
     let c = match v.as_slice() {
         [g] => glam::Vec3::splat(*g),
         [r, g, b] => glam::Vec3::new(*r, *g, *b),
@@ -177,7 +187,8 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     }
     let (width, height) = parse_resolution(&args.resolution)?;
     // Check the settings before loading anything.
-    RenderSettings { width, height, spp: args.spp, max_depth: args.max_depth, ..RenderSettings::default() }.validate()?;
+    RenderSettings { width, height, spp: args.spp, max_depth: args.max_depth, ..RenderSettings::default() }
+        .validate()?;
     // 1. Scene (file or demo) and the shot's defaults.
     let (mut scene, demo_shot): (Scene, Option<demo::DemoShot>) = match &args.scene {
         Some(path) => (gltf_load::load_gltf(path)?, None),
@@ -197,7 +208,11 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
             let names: Vec<&str> = scene.cameras.iter().map(|c| c.name.as_str()).collect();
             camera_err("camera", format!("no camera named '{name}' in the scene (cameras: {})", names.join(", ")))
         })?,
-        None => scene.cameras.first().cloned().ok_or_else(|| camera_err("camera", "the scene has no camera; add one in the glTF file".into()))?,
+        None => scene
+            .cameras
+            .first()
+            .cloned()
+            .ok_or_else(|| camera_err("camera", "the scene has no camera; add one in the glTF file".into()))?,
     };
     let to_world = DAffine3::from_cols_array(&scene_cam.to_world.to_cols_array().map(|v| v as f64));
     let t0 = std::time::Instant::now();
@@ -205,14 +220,29 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     eprintln!("scene: {} triangles, BVH built in {:.2} s", render_scene.triangle_count(), t0.elapsed().as_secs_f64());
     // 2. Sensor: the width spans the larger image dimension (Blender's automatic fit).
     let aspect = width as f64 / height as f64;
-    let (sw, sh) = if width >= height { (args.sensor_width, args.sensor_width / aspect) } else { (args.sensor_width * aspect, args.sensor_width) };
+    let (sw, sh) = if width >= height {
+        (args.sensor_width, args.sensor_width / aspect)
+    } else {
+        (args.sensor_width * aspect, args.sensor_width)
+    };
     let tilt_x = if args.tilt_x == 0.0 { demo_shot.as_ref().map(|d| d.tilt_x_deg).unwrap_or(0.0) } else { args.tilt_x };
-    let sensor = Sensor { width_mm: sw, height_mm: sh, shift_mm: DVec2::new(args.shift_x, args.shift_y), tilt_x_deg: tilt_x, tilt_y_deg: args.tilt_y };
+    let sensor = Sensor {
+        width_mm: sw,
+        height_mm: sh,
+        shift_mm: DVec2::new(args.shift_x, args.shift_y),
+        tilt_x_deg: tilt_x,
+        tilt_y_deg: args.tilt_y,
+    };
     sensor.validate()?;
-    let lens_name = args.lens.clone().or_else(|| demo_shot.as_ref().map(|d| d.lens.to_string())).unwrap_or_else(|| "thin".into());
+    let lens_name =
+        args.lens.clone().or_else(|| demo_shot.as_ref().map(|d| d.lens.to_string())).unwrap_or_else(|| "thin".into());
     let aperture = match (&args.aperture, &demo_shot) {
         (Some(a), _) => Some(parse_aperture(a)?),
-        (None, Some(d)) => Some(Aperture { shape: ApertureShape::Blades { count: d.blades, curvature: 0.0 }, rotation_rad: d.blade_rotation_deg.to_radians(), anamorphic_ratio: 1.0 }),
+        (None, Some(d)) => Some(Aperture {
+            shape: ApertureShape::Blades { count: d.blades, curvature: 0.0 },
+            rotation_rad: d.blade_rotation_deg.to_radians(),
+            anamorphic_ratio: 1.0,
+        }),
         (None, None) => None,
     };
     // The demo's f-number belongs to its lens; another lens opens to its own.
@@ -240,7 +270,11 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     // Focal length for thin/pinhole from the scene camera's field of view.
     let fov_focal = || {
         let tan_half_y = (scene_cam.yfov_rad as f64 * 0.5).tan();
-        if width >= height { 0.5 * sw / (tan_half_y * aspect) } else { 0.5 * sh / tan_half_y }
+        if width >= height {
+            0.5 * sw / (tan_half_y * aspect)
+        } else {
+            0.5 * sh / tan_half_y
+        }
     };
     let ideal = lens_name == "thin" || lens_name == "pinhole";
     if !ideal && args.focal_length.is_some() {
@@ -267,7 +301,12 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     let t0 = std::time::Instant::now();
     let built = spec.build_for_scene(&render_scene, &to_world, width, height, args.spp, args.spectral)?;
     if model == LensModel::Auto {
-        eprintln!("lens model: {} (auto, {:.2} s to decide) — {}", built.choice.model, t0.elapsed().as_secs_f64(), built.choice.reason);
+        eprintln!(
+            "lens model: {} (auto, {:.2} s to decide) — {}",
+            built.choice.model,
+            t0.elapsed().as_secs_f64(),
+            built.choice.reason
+        );
         for c in &built.choice.candidates {
             eprintln!(
                 "  {:<9} max {:>9.3} px  mean {:>9.3} px  vignetting {:>6.2} %  {:>7.1} ns/ray  est. {:>8.2} s  {}",
@@ -283,11 +322,15 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     } else if matches!(model, LensModel::Lrtf { .. }) && args.lrtf_file.is_none() {
         eprintln!("lrtf: table baked in {:.2} s", t0.elapsed().as_secs_f64());
     }
-    let (camera, lens_label, focal_mm, f_number) = (built.camera, built.lens_label, built.focal_length_mm, built.f_number);
+    let (camera, lens_label, focal_mm, f_number) =
+        (built.camera, built.lens_label, built.focal_length_mm, built.f_number);
     let rig = CameraRig { camera, to_world };
     if let Some(p) = rig.camera.focus_plane() {
         if let Some(j) = p.hinge_distance_m {
-            eprintln!("tilted focus plane: hinge line {j:.3} m from the lens, {:.1}° to the sensor", p.angle_to_sensor_deg);
+            eprintln!(
+                "tilted focus plane: hinge line {j:.3} m from the lens, {:.1}° to the sensor",
+                p.angle_to_sensor_deg
+            );
         }
     }
     // 4. Render with a progress bar; Ctrl-C stops and keeps what converged.
@@ -295,7 +338,10 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     let dispersive = rig.camera.is_dispersive();
     let spectral = args.spectral && dispersive;
     if args.spectral && !dispersive {
-        eprintln!("note: --spectral ignored: the {} has no dispersion, so RGB transport is exact here", if matches!(&rig.camera, Camera::Realistic(_)) { "lens" } else { "camera model" });
+        eprintln!(
+            "note: --spectral ignored: the {} has no dispersion, so RGB transport is exact here",
+            if matches!(&rig.camera, Camera::Realistic(_)) { "lens" } else { "camera model" }
+        );
     }
     let settings = RenderSettings {
         width,
@@ -305,7 +351,11 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         max_depth: args.max_depth,
         spectral,
         time_limit: args.time_limit.map(Duration::from_secs_f64),
-        filter: if args.filter_width > 0.0 { PixelFilter::BlackmanHarris { width_px: 2.0 * args.filter_width } } else { PixelFilter::Box { width_px: 1.0 } },
+        filter: if args.filter_width > 0.0 {
+            PixelFilter::BlackmanHarris { width_px: 2.0 * args.filter_width }
+        } else {
+            PixelFilter::Box { width_px: 1.0 }
+        },
         ..RenderSettings::default()
     };
     settings.validate()?;
@@ -320,7 +370,10 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         });
     }
     let bar = ProgressBar::new(1000);
-    bar.set_style(ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {percent}% ETA {eta}").unwrap_or_else(|_| ProgressStyle::default_bar()));
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {percent}% ETA {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
     let progress = |f: f32| {
         bar.set_position((f * 1000.0) as u64);
         !interrupted.load(Ordering::Relaxed)
@@ -359,10 +412,17 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         ("sppRequested".into(), format!("{}", args.spp)),
         ("seed".into(), format!("{}", args.seed)),
         ("spectral".into(), format!("{spectral}")),
-        ("complete".into(), if result.complete { "true".into() } else { "false: stopped early, partially converged".into() }),
+        (
+            "complete".into(),
+            if result.complete { "true".into() } else { "false: stopped early, partially converged".into() },
+        ),
         ("renderSeconds".into(), format!("{:.3}", result.seconds)),
     ];
-    let layers = ExrLayers { depth: args.aovs.contains("depth"), normal: args.aovs.contains("normal"), albedo: args.aovs.contains("albedo") };
+    let layers = ExrLayers {
+        depth: args.aovs.contains("depth"),
+        normal: args.aovs.contains("normal"),
+        albedo: args.aovs.contains("albedo"),
+    };
     write_exr(&args.output, &result.image, layers, &metadata)?;
     eprintln!("wrote {}", args.output.display());
     if !args.no_png {

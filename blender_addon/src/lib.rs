@@ -30,7 +30,9 @@ use petzval_renderer::render::{render_observed, CameraRig, RenderResult, RenderS
 use petzval_renderer::scene::environment::EnvironmentMap;
 use petzval_renderer::scene::texture::Wrap;
 use petzval_renderer::scene::{AlphaMode, Environment, Light, Material, Mesh, Texture, TextureRef};
-use petzval_renderer::{Aperture, ApertureMask, ApertureShape, CameraSpec, Error, Lens, LensModel, Ray, Sensor, TraceDirection, LIBRARY};
+use petzval_renderer::{
+    Aperture, ApertureMask, ApertureShape, CameraSpec, Error, Lens, LensModel, Ray, Sensor, TraceDirection, LIBRARY,
+};
 use pyo3::exceptions::{PyException, PyFileNotFoundError, PyOSError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -67,16 +69,23 @@ fn py_err(e: impl Into<Error>) -> PyErr {
 }
 
 fn panic_message(p: Box<dyn std::any::Any + Send>) -> String {
-    p.downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| p.downcast_ref::<String>().cloned()).unwrap_or_else(|| "unknown panic".into())
+    p.downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| p.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "unknown panic".into())
 }
 
 /// Runs `f`, turning a Rust panic into `PetzvalError` (no panic crosses into Python).
 fn guard<T>(f: impl FnOnce() -> PyResult<T>) -> PyResult<T> {
-    catch_unwind(AssertUnwindSafe(f)).unwrap_or_else(|p| Err(PetzvalError::new_err(format!("internal error (please report): {}", panic_message(p)))))
+    catch_unwind(AssertUnwindSafe(f))
+        .unwrap_or_else(|p| Err(PetzvalError::new_err(format!("internal error (please report): {}", panic_message(p)))))
 }
 
 fn scene_err(name: &str, field: &str, message: String) -> PyErr {
-    InvalidSceneError::new_err(format!("{}{field}: {message}", if name.is_empty() { String::new() } else { format!("'{name}': ") }))
+    InvalidSceneError::new_err(format!(
+        "{}{field}: {message}",
+        if name.is_empty() { String::new() } else { format!("'{name}': ") }
+    ))
 }
 
 fn settings_err(field: &str, message: String) -> PyErr {
@@ -199,17 +208,27 @@ impl PyLens {
             let dir = match direction {
                 "film_to_scene" => TraceDirection::FilmToScene,
                 "scene_to_film" => TraceDirection::SceneToFilm,
-                d => return Err(settings_err("direction", format!("expected 'film_to_scene' or 'scene_to_film', got '{d}'"))),
+                d => {
+                    return Err(settings_err(
+                        "direction",
+                        format!("expected 'film_to_scene' or 'scene_to_film', got '{d}'"),
+                    ))
+                }
             };
             if !(wavelength_nm.is_finite() && (300.0..=1100.0).contains(&wavelength_nm)) {
                 return Err(settings_err("wavelength_nm", format!("{wavelength_nm} is outside 300–1100 nm")));
             }
             let (o, d) = (origins.as_array(), directions.as_array());
             if o.ncols() != 3 || d.ncols() != 3 || o.nrows() != d.nrows() {
-                return Err(settings_err("origins/directions", format!("expected two (N, 3) arrays of the same N, got {:?} and {:?}", o.shape(), d.shape())));
+                return Err(settings_err(
+                    "origins/directions",
+                    format!("expected two (N, 3) arrays of the same N, got {:?} and {:?}", o.shape(), d.shape()),
+                ));
             }
             let n = o.nrows();
-            let rays: Vec<(DVec3, DVec3)> = (0..n).map(|i| (DVec3::new(o[[i, 0]], o[[i, 1]], o[[i, 2]]), DVec3::new(d[[i, 0]], d[[i, 1]], d[[i, 2]]))).collect();
+            let rays: Vec<(DVec3, DVec3)> = (0..n)
+                .map(|i| (DVec3::new(o[[i, 0]], o[[i, 1]], o[[i, 2]]), DVec3::new(d[[i, 0]], d[[i, 1]], d[[i, 2]])))
+                .collect();
             let lens = &self.lens;
             let out: Vec<Option<Ray>> = py.detach(|| {
                 use rayon::prelude::*;
@@ -234,12 +253,21 @@ impl PyLens {
                     ok[i] = true;
                 }
             }
-            Ok((po.into_pyarray(py).into_any().unbind(), pd.into_pyarray(py).into_any().unbind(), ok.into_pyarray(py).into_any().unbind()))
+            Ok((
+                po.into_pyarray(py).into_any().unbind(),
+                pd.into_pyarray(py).into_any().unbind(),
+                ok.into_pyarray(py).into_any().unbind(),
+            ))
         })
     }
 
     fn __repr__(&self) -> String {
-        format!("Lens('{}', f={:.2} mm, f/{:.2})", self.lens.name(), self.lens.paraxial().efl_mm, self.lens.paraxial().f_number)
+        format!(
+            "Lens('{}', f={:.2} mm, f/{:.2})",
+            self.lens.name(),
+            self.lens.paraxial().efl_mm,
+            self.lens.paraxial().f_number
+        )
     }
 }
 
@@ -259,7 +287,11 @@ fn parse_alpha_mode(mode: &str, cutoff: f64) -> PyResult<AlphaMode> {
         "opaque" => AlphaMode::Opaque,
         "blend" => AlphaMode::Blend,
         "mask" => AlphaMode::Mask(cutoff as f32),
-        m => return Err(InvalidSceneError::new_err(format!("alpha_mode: expected 'opaque', 'blend' or 'mask', got '{m}'"))),
+        m => {
+            return Err(InvalidSceneError::new_err(format!(
+                "alpha_mode: expected 'opaque', 'blend' or 'mask', got '{m}'"
+            )))
+        }
     })
 }
 
@@ -268,7 +300,11 @@ impl PyScene {
         match index {
             None => Ok(None),
             Some(i) if i < self.scene.textures.len() => Ok(Some(TextureRef { index: i, uv_set: 0 })),
-            Some(i) => Err(scene_err(name, field, format!("texture {i} does not exist ({} textures)", self.scene.textures.len()))),
+            Some(i) => Err(scene_err(
+                name,
+                field,
+                format!("texture {i} does not exist ({} textures)", self.scene.textures.len()),
+            )),
         }
     }
 }
@@ -282,7 +318,13 @@ impl PyScene {
 
     /// Adds a texture from (H, W, 4|3) linear values, row 0 at the top.
     #[pyo3(signature = (pixels, name = "", interpolation = "linear", extension = "repeat"))]
-    fn add_texture(&mut self, pixels: PyArrayLike3<'_, f32, AllowTypeChange>, name: &str, interpolation: &str, extension: &str) -> PyResult<usize> {
+    fn add_texture(
+        &mut self,
+        pixels: PyArrayLike3<'_, f32, AllowTypeChange>,
+        name: &str,
+        interpolation: &str,
+        extension: &str,
+    ) -> PyResult<usize> {
         guard(|| {
             let a = pixels.as_array();
             let (h, w, c) = a.dim();
@@ -292,25 +334,45 @@ impl PyScene {
             let bilinear = match interpolation {
                 "linear" | "cubic" | "smart" => true,
                 "closest" => false,
-                i => return Err(scene_err(name, "interpolation", format!("expected 'linear' or 'closest', got '{i}'"))),
+                i => {
+                    return Err(scene_err(name, "interpolation", format!("expected 'linear' or 'closest', got '{i}'")))
+                }
             };
             let wrap = match extension {
                 "repeat" => Wrap::Repeat,
                 "clip" | "extend" => Wrap::ClampToEdge,
                 "mirror" => Wrap::MirroredRepeat,
-                e => return Err(scene_err(name, "extension", format!("expected 'repeat', 'clip' or 'mirror', got '{e}'"))),
+                e => {
+                    return Err(scene_err(
+                        name,
+                        "extension",
+                        format!("expected 'repeat', 'clip' or 'mirror', got '{e}'"),
+                    ))
+                }
             };
             let mut texels = Vec::with_capacity(h * w);
             for y in 0..h {
                 for x in 0..w {
                     let g = |k: usize| {
                         let v = a[[y, x, k]];
-                        if v.is_finite() { v } else { 0.0 }
+                        if v.is_finite() {
+                            v
+                        } else {
+                            0.0
+                        }
                     };
                     texels.push(Vec4::new(g(0), g(1), g(2), if c == 4 { g(3) } else { 1.0 }));
                 }
             }
-            self.scene.textures.push(Arc::new(Texture { name: name.to_string(), width: w as u32, height: h as u32, texels, wrap_s: wrap, wrap_t: wrap, bilinear }));
+            self.scene.textures.push(Arc::new(Texture {
+                name: name.to_string(),
+                width: w as u32,
+                height: h as u32,
+                texels,
+                wrap_s: wrap,
+                wrap_t: wrap,
+                bilinear,
+            }));
             Ok(self.scene.textures.len() - 1)
         })
     }
@@ -343,9 +405,20 @@ impl PyScene {
                 v => return Err(scene_err(name, "base_color", format!("expected 3 or 4 numbers, got {v:?}"))),
             };
             if !bc.is_finite() || bc.min_element() < 0.0 {
-                return Err(scene_err(name, "base_color", format!("must be finite and non-negative, got {base_color:?}")));
+                return Err(scene_err(
+                    name,
+                    "base_color",
+                    format!("must be finite and non-negative, got {base_color:?}"),
+                ));
             }
-            for (field, v, lo, hi) in [("metallic", metallic, 0.0, 1.0), ("roughness", roughness, 0.0, 1.0), ("ior", ior, 1.0, 10.0), ("specular", specular, 0.0, 100.0), ("normal_scale", normal_scale, -100.0, 100.0), ("alpha_cutoff", alpha_cutoff, 0.0, 1.0)] {
+            for (field, v, lo, hi) in [
+                ("metallic", metallic, 0.0, 1.0),
+                ("roughness", roughness, 0.0, 1.0),
+                ("ior", ior, 1.0, 10.0),
+                ("specular", specular, 0.0, 100.0),
+                ("normal_scale", normal_scale, -100.0, 100.0),
+                ("alpha_cutoff", alpha_cutoff, 0.0, 1.0),
+            ] {
                 if !(v.is_finite() && v >= lo && v <= hi) {
                     return Err(scene_err(name, field, format!("{v} is outside [{lo}, {hi}]")));
                 }
@@ -356,14 +429,19 @@ impl PyScene {
                 base_color_texture: self.texture_ref(name, "base_color_texture", base_color_texture)?,
                 metallic: metallic as f32,
                 roughness: roughness as f32,
-                metallic_roughness_texture: self.texture_ref(name, "metallic_roughness_texture", metallic_roughness_texture)?,
+                metallic_roughness_texture: self.texture_ref(
+                    name,
+                    "metallic_roughness_texture",
+                    metallic_roughness_texture,
+                )?,
                 normal_texture: self.texture_ref(name, "normal_texture", normal_texture)?,
                 normal_scale: normal_scale as f32,
                 emissive: non_negative_rgb(name, "emission", &emission)?,
                 emissive_texture: self.texture_ref(name, "emission_texture", emission_texture)?,
                 specular: specular as f32,
                 ior: ior as f32,
-                alpha_mode: parse_alpha_mode(alpha_mode, alpha_cutoff).map_err(|e| scene_err(name, "", e.to_string()))?,
+                alpha_mode: parse_alpha_mode(alpha_mode, alpha_cutoff)
+                    .map_err(|e| scene_err(name, "", e.to_string()))?,
                 double_sided,
             };
             self.scene.materials.push(m);
@@ -410,12 +488,20 @@ impl PyScene {
             let flip = xf.matrix3.determinant() < 0.0;
             // 2. World-space attributes.
             let mut mesh = Mesh::default();
-            mesh.positions = (0..nv).map(|i| xf.transform_point3(DVec3::new(p[[i, 0]] as f64, p[[i, 1]] as f64, p[[i, 2]] as f64)).as_vec3()).collect();
+            mesh.positions = (0..nv)
+                .map(|i| {
+                    xf.transform_point3(DVec3::new(p[[i, 0]] as f64, p[[i, 1]] as f64, p[[i, 2]] as f64)).as_vec3()
+                })
+                .collect();
             mesh.indices = (0..nt)
                 .map(|i| {
                     let tri = [t[[i, 0]] as u32, t[[i, 1]] as u32, t[[i, 2]] as u32];
                     // A mirroring transform turns the winding; keep faces facing outwards.
-                    if flip { [tri[0], tri[2], tri[1]] } else { tri }
+                    if flip {
+                        [tri[0], tri[2], tri[1]]
+                    } else {
+                        tri
+                    }
                 })
                 .collect();
             mesh.material_ids = match &material_ids {
@@ -425,7 +511,11 @@ impl PyScene {
                         return Err(scene_err(name, "material_ids", format!("{} ids for {nt} triangles", m.len())));
                     }
                     if let Some(bad) = m.iter().find(|&&i| i < 0 || i as usize >= self.scene.materials.len().max(1)) {
-                        return Err(scene_err(name, "material_ids", format!("material {bad} does not exist ({} materials)", self.scene.materials.len())));
+                        return Err(scene_err(
+                            name,
+                            "material_ids",
+                            format!("material {bad} does not exist ({} materials)", self.scene.materials.len()),
+                        ));
                     }
                     m.iter().map(|&i| i as u32).collect()
                 }
@@ -455,7 +545,10 @@ impl PyScene {
                     if u.shape() != [nv, 2] {
                         return Err(scene_err(name, "uvs", format!("expected ({nv}, 2), got {:?}", u.shape())));
                     }
-                    (0..nv).map(|i| Vec2::new(u[[i, 0]], u[[i, 1]])).map(|v| if v.is_finite() { v } else { Vec2::ZERO }).collect()
+                    (0..nv)
+                        .map(|i| Vec2::new(u[[i, 0]], u[[i, 1]]))
+                        .map(|v| if v.is_finite() { v } else { Vec2::ZERO })
+                        .collect()
                 }
                 None => vec![Vec2::ZERO; nv],
             };
@@ -467,7 +560,9 @@ impl PyScene {
                     }
                     mesh.tangents = (0..nv)
                         .map(|i| {
-                            let v = (xf.matrix3 * DVec3::new(tg[[i, 0]] as f64, tg[[i, 1]] as f64, tg[[i, 2]] as f64)).normalize_or_zero().as_vec3();
+                            let v = (xf.matrix3 * DVec3::new(tg[[i, 0]] as f64, tg[[i, 1]] as f64, tg[[i, 2]] as f64))
+                                .normalize_or_zero()
+                                .as_vec3();
                             let w = if flip { -tg[[i, 3]] } else { tg[[i, 3]] };
                             Vec4::new(v.x, v.y, v.z, if w < 0.0 { -1.0 } else { 1.0 })
                         })
@@ -487,7 +582,11 @@ impl PyScene {
     #[pyo3(signature = (position, intensity_w_sr, name = ""))]
     fn add_point_light(&mut self, position: Vec<f64>, intensity_w_sr: Vec<f64>, name: &str) -> PyResult<()> {
         guard(|| {
-            let light = Light::Point { position: vec3_arg(name, "position", &position)?, intensity: non_negative_rgb(name, "intensity_w_sr", &intensity_w_sr)?, range: None };
+            let light = Light::Point {
+                position: vec3_arg(name, "position", &position)?,
+                intensity: non_negative_rgb(name, "intensity_w_sr", &intensity_w_sr)?,
+                range: None,
+            };
             self.scene.lights.push(light);
             Ok(())
         })
@@ -495,14 +594,30 @@ impl PyScene {
 
     /// A spot light.
     #[pyo3(signature = (position, direction, intensity_w_sr, inner_cone_rad, outer_cone_rad, name = ""))]
-    fn add_spot_light(&mut self, position: Vec<f64>, direction: Vec<f64>, intensity_w_sr: Vec<f64>, inner_cone_rad: f64, outer_cone_rad: f64, name: &str) -> PyResult<()> {
+    fn add_spot_light(
+        &mut self,
+        position: Vec<f64>,
+        direction: Vec<f64>,
+        intensity_w_sr: Vec<f64>,
+        inner_cone_rad: f64,
+        outer_cone_rad: f64,
+        name: &str,
+    ) -> PyResult<()> {
         guard(|| {
             let d = vec3_arg(name, "direction", &direction)?.normalize_or_zero();
             if d == Vec3::ZERO {
                 return Err(scene_err(name, "direction", "must not be zero".into()));
             }
-            if !(outer_cone_rad > 0.0 && outer_cone_rad <= std::f64::consts::PI && inner_cone_rad >= 0.0 && inner_cone_rad <= outer_cone_rad) {
-                return Err(scene_err(name, "cone", format!("need 0 ≤ inner ({inner_cone_rad}) ≤ outer ({outer_cone_rad}) ≤ π")));
+            if !(outer_cone_rad > 0.0
+                && outer_cone_rad <= std::f64::consts::PI
+                && inner_cone_rad >= 0.0
+                && inner_cone_rad <= outer_cone_rad)
+            {
+                return Err(scene_err(
+                    name,
+                    "cone",
+                    format!("need 0 ≤ inner ({inner_cone_rad}) ≤ outer ({outer_cone_rad}) ≤ π"),
+                ));
             }
             self.scene.lights.push(Light::Spot {
                 position: vec3_arg(name, "position", &position)?,
@@ -524,7 +639,10 @@ impl PyScene {
             if d == Vec3::ZERO {
                 return Err(scene_err(name, "direction", "must not be zero".into()));
             }
-            self.scene.lights.push(Light::Directional { direction: d, irradiance: non_negative_rgb(name, "irradiance_w_m2", &irradiance_w_m2)? });
+            self.scene.lights.push(Light::Directional {
+                direction: d,
+                irradiance: non_negative_rgb(name, "irradiance_w_m2", &irradiance_w_m2)?,
+            });
             Ok(())
         })
     }
@@ -540,14 +658,23 @@ impl PyScene {
 
     /// An equirectangular environment, row 0 at the top.
     #[pyo3(signature = (pixels, strength = 1.0, rotation_rad = 0.0, name = ""))]
-    fn set_environment_map(&mut self, pixels: PyArrayLike3<'_, f32, AllowTypeChange>, strength: f64, rotation_rad: f64, name: &str) -> PyResult<()> {
+    fn set_environment_map(
+        &mut self,
+        pixels: PyArrayLike3<'_, f32, AllowTypeChange>,
+        strength: f64,
+        rotation_rad: f64,
+        name: &str,
+    ) -> PyResult<()> {
         guard(|| {
             let a = pixels.as_array();
             let (h, w, c) = a.dim();
             if h == 0 || w == 0 || c < 3 {
                 return Err(scene_err(name, "pixels", format!("expected an (H, W, 3|4) image, got {:?}", a.shape())));
             }
-            let texels: Vec<Vec3> = (0..h).flat_map(|y| (0..w).map(move |x| (y, x))).map(|(y, x)| Vec3::new(a[[y, x, 0]], a[[y, x, 1]], a[[y, x, 2]])).collect();
+            let texels: Vec<Vec3> = (0..h)
+                .flat_map(|y| (0..w).map(move |x| (y, x)))
+                .map(|(y, x)| Vec3::new(a[[y, x, 0]], a[[y, x, 1]], a[[y, x, 2]]))
+                .collect();
             let label = if name.is_empty() { "environment" } else { name };
             let map = EnvironmentMap::new(label, w, h, texels, strength as f32, rotation_rad as f32).map_err(py_err)?;
             self.scene.environment = Environment::Map(map);
@@ -585,7 +712,15 @@ fn face_normals(positions: &[Vec3], indices: &[[u32; 3]]) -> Vec<Vec3> {
 // Rendering
 
 /// Sensor of the frame from Blender's sensor size and fit; shift in mm from Blender's shift.
-fn blender_sensor(width: u32, height: u32, sensor_width_mm: f64, sensor_height_mm: f64, fit: &str, shift: DVec2, tilt: DVec2) -> PyResult<Sensor> {
+fn blender_sensor(
+    width: u32,
+    height: u32,
+    sensor_width_mm: f64,
+    sensor_height_mm: f64,
+    fit: &str,
+    shift: DVec2,
+    tilt: DVec2,
+) -> PyResult<Sensor> {
     let aspect = width as f64 / height as f64;
     let horizontal = match fit {
         "auto" | "AUTO" => width >= height,
@@ -683,7 +818,11 @@ fn render(
             max_depth,
             spectral,
             time_limit: None,
-            filter: if filter_width_px > 0.0 { PixelFilter::BlackmanHarris { width_px: 2.0 * filter_width_px as f32 } } else { PixelFilter::Box { width_px: 1.0 } },
+            filter: if filter_width_px > 0.0 {
+                PixelFilter::BlackmanHarris { width_px: 2.0 * filter_width_px as f32 }
+            } else {
+                PixelFilter::Box { width_px: 1.0 }
+            },
             clip_start_m,
             clip_end_m,
             crop: crop.map(|(x0, y0, x1, y1)| [x0, y0, x1, y1]),
@@ -695,8 +834,19 @@ fn render(
         if !(progress_interval_s.is_finite() && progress_interval_s > 0.0) {
             return Err(settings_err("progress_interval_s", format!("must be positive, got {progress_interval_s}")));
         }
-        let to_world = rigid(affine_from_rows("camera", "camera_to_world", &camera_to_world.as_array()).map_err(|e| settings_err("camera_to_world", e.to_string()))?)?;
-        let sensor = blender_sensor(width, height, sensor_width_mm, sensor_height_mm, &sensor_fit, DVec2::new(shift_x, shift_y), DVec2::new(tilt_x_deg, tilt_y_deg))?;
+        let to_world = rigid(
+            affine_from_rows("camera", "camera_to_world", &camera_to_world.as_array())
+                .map_err(|e| settings_err("camera_to_world", e.to_string()))?,
+        )?;
+        let sensor = blender_sensor(
+            width,
+            height,
+            sensor_width_mm,
+            sensor_height_mm,
+            &sensor_fit,
+            DVec2::new(shift_x, shift_y),
+            DVec2::new(tilt_x_deg, tilt_y_deg),
+        )?;
         if !aperture_rotation_rad.is_finite() {
             return Err(settings_err("aperture_rotation_rad", format!("must be finite, got {aperture_rotation_rad}")));
         }
@@ -710,9 +860,19 @@ fn render(
             return Err(settings_err("aperture_ratio", format!("must be positive, got {aperture_ratio}")));
         }
         let aperture = match (&aperture_image, aperture_blades) {
-            (Some(path), _) => Some(Aperture { shape: ApertureShape::Mask(Arc::new(ApertureMask::load(std::path::Path::new(path)).map_err(py_err)?)), rotation_rad: aperture_rotation_rad, anamorphic_ratio: aperture_ratio }),
-            (None, n) if n >= 3 => Some(Aperture { shape: ApertureShape::Blades { count: n, curvature: 0.0 }, rotation_rad: aperture_rotation_rad, anamorphic_ratio: aperture_ratio }),
-            (None, _) if aperture_ratio != 1.0 => Some(Aperture { shape: ApertureShape::Circle, rotation_rad: 0.0, anamorphic_ratio: aperture_ratio }),
+            (Some(path), _) => Some(Aperture {
+                shape: ApertureShape::Mask(Arc::new(ApertureMask::load(std::path::Path::new(path)).map_err(py_err)?)),
+                rotation_rad: aperture_rotation_rad,
+                anamorphic_ratio: aperture_ratio,
+            }),
+            (None, n) if n >= 3 => Some(Aperture {
+                shape: ApertureShape::Blades { count: n, curvature: 0.0 },
+                rotation_rad: aperture_rotation_rad,
+                anamorphic_ratio: aperture_ratio,
+            }),
+            (None, _) if aperture_ratio != 1.0 => {
+                Some(Aperture { shape: ApertureShape::Circle, rotation_rad: 0.0, anamorphic_ratio: aperture_ratio })
+            }
             _ => None,
         };
         let model: LensModel = lens_model.parse().map_err(py_err)?;
@@ -735,8 +895,22 @@ fn render(
         }
         // 2. Build, decide and render on a worker thread; this thread (holding the GIL only to
         //    call `progress`) polls it.
-        let shared = Arc::new(Shared { fraction: AtomicU32::new(0), cancel: AtomicBool::new(false), latest: Mutex::new(None), spp_done: AtomicU32::new(0) });
-        let pool = if threads > 0 { Some(rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| PetzvalError::new_err(e.to_string()))?) } else { None };
+        let shared = Arc::new(Shared {
+            fraction: AtomicU32::new(0),
+            cancel: AtomicBool::new(false),
+            latest: Mutex::new(None),
+            spp_done: AtomicU32::new(0),
+        });
+        let pool = if threads > 0 {
+            Some(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .map_err(|e| PetzvalError::new_err(e.to_string()))?,
+            )
+        } else {
+            None
+        };
         type Outcome = Result<(RenderResult, String, String, Vec<String>), Error>;
         let work = {
             let shared = shared.clone();
@@ -746,7 +920,10 @@ fn render(
                     let warnings = render_scene.scene().warnings.clone();
                     let built = spec.build_for_scene(&render_scene, &to_world, width, height, spp, spectral)?;
                     let rig = CameraRig { camera: built.camera, to_world };
-                    let settings = RenderSettings { spectral: settings.spectral && rig.camera.is_dispersive(), ..settings.clone() };
+                    let settings = RenderSettings {
+                        spectral: settings.spectral && rig.camera.is_dispersive(),
+                        ..settings.clone()
+                    };
                     let on_progress = |f: f32| {
                         shared.fraction.store(f.to_bits(), Ordering::Relaxed);
                         !shared.cancel.load(Ordering::Relaxed)
@@ -815,7 +992,9 @@ fn render(
         let (result, model_name, reason, warnings) = match outcome {
             Ok(Ok(v)) => v,
             Ok(Err(e)) => return Err(py_err(e)),
-            Err(p) => return Err(PetzvalError::new_err(format!("internal error (please report): {}", panic_message(p)))),
+            Err(p) => {
+                return Err(PetzvalError::new_err(format!("internal error (please report): {}", panic_message(p))))
+            }
         };
         if result.spp_done == 0 {
             return Err(CancelledError::new_err("cancelled before the first pass finished"));

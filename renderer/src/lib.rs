@@ -6,13 +6,10 @@ pub mod film;
 pub mod integrator;
 pub mod render;
 pub mod sampler;
-pub mod spectral;
 pub mod scene;
+pub mod spectral;
 
 pub use error::{Error, Result};
-pub use petzval_optics::write_atomic;
-/// The lens optics crate, re-exported (`petzval_renderer::optics::…`).
-pub use petzval_optics as optics;
 pub use optics::aperture::{Aperture, ApertureMask, ApertureShape};
 pub use optics::glass::Material;
 pub use optics::import::{load_lens_file, read_prescription};
@@ -20,6 +17,12 @@ pub use optics::lens::{Absorbed, Lens, LensSurface, Ray, StopMode, TraceDirectio
 pub use optics::library::{library_lens, load_lens, LIBRARY};
 pub use optics::paraxial::ParaxialData;
 pub use optics::prescription::Prescription;
+/// The lens optics crate, re-exported (`petzval_renderer::optics::…`).
+pub use petzval_optics as optics;
+pub use petzval_optics::write_atomic;
 pub mod camera;
-pub use camera::{BuiltCamera, Camera, CameraRay, CameraSpec, FocusPlane, LensModel, ModelChoice, ShotContext, LrtfCamera, PinholeCamera, RealisticCamera, Sensor, ThickLensCamera, ThinLensCamera};
+pub use camera::{
+    BuiltCamera, Camera, CameraRay, CameraSpec, FocusPlane, LensModel, LrtfCamera, ModelChoice, PinholeCamera,
+    RealisticCamera, Sensor, ShotContext, ThickLensCamera, ThinLensCamera,
+};
 pub use integrator::{PathSample, PathTracer, RenderScene, SurfaceHit};

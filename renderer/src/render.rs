@@ -95,12 +95,24 @@ impl RenderSettings {
         if self.max_depth == 0 || self.max_depth > 1024 {
             return bad("max_depth", format!("{} must be in 1..=1024", self.max_depth));
         }
-        if !(self.clip_start_m >= 0.0 && self.clip_start_m.is_finite()) || self.clip_end_m.is_nan() || self.clip_end_m <= self.clip_start_m {
-            return bad("clip", format!("clip start {} and end {} must satisfy 0 ≤ start < end", self.clip_start_m, self.clip_end_m));
+        if !(self.clip_start_m >= 0.0 && self.clip_start_m.is_finite())
+            || self.clip_end_m.is_nan()
+            || self.clip_end_m <= self.clip_start_m
+        {
+            return bad(
+                "clip",
+                format!("clip start {} and end {} must satisfy 0 ≤ start < end", self.clip_start_m, self.clip_end_m),
+            );
         }
         if let Some([x0, y0, x1, y1]) = self.crop {
             if !(x0 < x1 && y0 < y1 && x1 <= self.width && y1 <= self.height) {
-                return bad("crop", format!("window [{x0}, {y0}, {x1}, {y1}) is empty or outside the {}x{} frame", self.width, self.height));
+                return bad(
+                    "crop",
+                    format!(
+                        "window [{x0}, {y0}, {x1}, {y1}) is empty or outside the {}x{} frame",
+                        self.width, self.height
+                    ),
+                );
             }
         }
         Ok(())
@@ -131,12 +143,23 @@ pub type Progress<'a> = &'a (dyn Fn(f32) -> bool + Sync);
 pub type PassObserver<'a> = &'a (dyn Fn(&Image, u32) + Sync);
 
 /// Renders `scene` through `rig`.
-pub fn render(scene: &RenderScene, rig: &CameraRig, settings: &RenderSettings, progress: Progress) -> Result<RenderResult> {
+pub fn render(
+    scene: &RenderScene,
+    rig: &CameraRig,
+    settings: &RenderSettings,
+    progress: Progress,
+) -> Result<RenderResult> {
     render_observed(scene, rig, settings, progress, &|_, _| {})
 }
 
 /// Renders `scene` through `rig`, showing every finished pass to `on_pass` (progressive display).
-pub fn render_observed(scene: &RenderScene, rig: &CameraRig, settings: &RenderSettings, progress: Progress, on_pass: PassObserver) -> Result<RenderResult> {
+pub fn render_observed(
+    scene: &RenderScene,
+    rig: &CameraRig,
+    settings: &RenderSettings,
+    progress: Progress,
+    on_pass: PassObserver,
+) -> Result<RenderResult> {
     settings.validate()?;
     let start = Instant::now();
     let (w, h) = (settings.width, settings.height);
@@ -173,12 +196,21 @@ pub fn render_observed(scene: &RenderScene, rig: &CameraRig, settings: &RenderSe
                     // 2. Camera sample: filter offset, lens point, wavelength.
                     let mut sampler = PixelSampler::new(x as u32, y as u32, s, settings.seed);
                     let off = filter.sample(sampler.next_2d());
-                    let film_uv = DVec2::new((x as f64 + 0.5 + off.x as f64) / w as f64, (y as f64 + 0.5 + off.y as f64) / h as f64);
+                    let film_uv = DVec2::new(
+                        (x as f64 + 0.5 + off.x as f64) / w as f64,
+                        (y as f64 + 0.5 + off.y as f64) / h as f64,
+                    );
                     let lens_u = sampler.next_2d();
                     let u_lambda = sampler.next_1d();
-                    let (lambda, lambda_weight) = if settings.spectral { spectral::sample_wavelength(u_lambda) } else { (wavelength_primary as f32, Vec3::ONE) };
+                    let (lambda, lambda_weight) = if settings.spectral {
+                        spectral::sample_wavelength(u_lambda)
+                    } else {
+                        (wavelength_primary as f32, Vec3::ONE)
+                    };
                     px.samples += 1;
-                    let Some(ray) = rig.camera.generate_ray(film_uv, lens_u.as_dvec2(), lambda as f64) else { continue };
+                    let Some(ray) = rig.camera.generate_ray(film_uv, lens_u.as_dvec2(), lambda as f64) else {
+                        continue;
+                    };
                     // 3. World ray, clipping planes (along the view axis) and the path.
                     let o = rig.to_world.transform_point3(ray.origin).as_vec3();
                     let d = rig.to_world.transform_vector3(ray.direction).normalize().as_vec3();
@@ -242,7 +274,12 @@ pub fn render_observed(scene: &RenderScene, rig: &CameraRig, settings: &RenderSe
 /// length `focal_length_mm` on `sensor` (a 32 × 24 grid of rays from the camera origin); the far
 /// end is infinite when some ray escapes. `None` when no ray hits anything. Used to size the
 /// depth of field that `--lens-model auto` must honour.
-pub fn scene_depth_range_m(scene: &RenderScene, to_world: &DAffine3, sensor: &crate::camera::Sensor, focal_length_mm: f64) -> Option<(f64, f64)> {
+pub fn scene_depth_range_m(
+    scene: &RenderScene,
+    to_world: &DAffine3,
+    sensor: &crate::camera::Sensor,
+    focal_length_mm: f64,
+) -> Option<(f64, f64)> {
     let pinhole = crate::camera::PinholeCamera::new(*sensor, focal_length_mm).ok()?;
     let camera = Camera::Pinhole(pinhole);
     let (mut near, mut far, mut any) = (f64::INFINITY, 0.0f64, false);
@@ -250,7 +287,9 @@ pub fn scene_depth_range_m(scene: &RenderScene, to_world: &DAffine3, sensor: &cr
     for j in 0..ny {
         for i in 0..nx {
             let film = DVec2::new((i as f64 + 0.5) / nx as f64, (j as f64 + 0.5) / ny as f64);
-            let Some(ray) = camera.generate_ray(film, DVec2::splat(0.5), crate::optics::glass::WAVELENGTH_D_NM) else { continue };
+            let Some(ray) = camera.generate_ray(film, DVec2::splat(0.5), crate::optics::glass::WAVELENGTH_D_NM) else {
+                continue;
+            };
             let o = to_world.transform_point3(ray.origin).as_vec3();
             let d = to_world.transform_vector3(ray.direction).normalize().as_vec3();
             match scene.intersect(o, d, f32::INFINITY) {

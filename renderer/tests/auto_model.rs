@@ -9,7 +9,12 @@ fn shot(width: u32, height: u32, spp: u32, depth: Option<(f64, f64)>) -> ShotCon
 
 #[test]
 fn pinhole_sized_thin_aperture_picks_pinhole() {
-    let spec = CameraSpec { lens: "thin".into(), f_number: Some(2000.0), focus_distance_m: Some(2.0), ..CameraSpec::default() };
+    let spec = CameraSpec {
+        lens: "thin".into(),
+        f_number: Some(2000.0),
+        focus_distance_m: Some(2.0),
+        ..CameraSpec::default()
+    };
     let built = spec.build(&shot(1920, 1080, 16, Some((0.5, f64::INFINITY)))).unwrap();
     assert_eq!(built.choice.model, LensModel::Pinhole, "{}", built.choice.reason);
     assert_eq!(built.camera.model_name(), "pinhole");
@@ -17,7 +22,8 @@ fn pinhole_sized_thin_aperture_picks_pinhole() {
 
 #[test]
 fn open_thin_lens_keeps_its_depth_of_field() {
-    let spec = CameraSpec { lens: "thin".into(), f_number: Some(2.8), focus_distance_m: Some(2.0), ..CameraSpec::default() };
+    let spec =
+        CameraSpec { lens: "thin".into(), f_number: Some(2.8), focus_distance_m: Some(2.0), ..CameraSpec::default() };
     let built = spec.build(&shot(1920, 1080, 16, Some((1.0, 10.0)))).unwrap();
     assert_eq!(built.choice.model, LensModel::Thin, "{}", built.choice.reason);
     // The same lens over a depth range inside its depth of field at a tiny resolution is a pinhole:
@@ -28,7 +34,12 @@ fn open_thin_lens_keeps_its_depth_of_field() {
 
 #[test]
 fn wide_open_double_gauss_at_4k_is_not_a_thin_lens() {
-    let spec = CameraSpec { lens: "double-gauss-50mm".into(), focus_distance_m: Some(2.0), sensor: Sensor { width_mm: 36.0, height_mm: 20.25, ..Sensor::default() }, ..CameraSpec::default() };
+    let spec = CameraSpec {
+        lens: "double-gauss-50mm".into(),
+        focus_distance_m: Some(2.0),
+        sensor: Sensor { width_mm: 36.0, height_mm: 20.25, ..Sensor::default() },
+        ..CameraSpec::default()
+    };
     let built = spec.build(&shot(3840, 2160, 64, Some((1.0, f64::INFINITY)))).unwrap();
     let model = built.choice.model;
     assert!(!matches!(model, LensModel::Thin | LensModel::Pinhole), "picked {model}: {}", built.choice.reason);
@@ -44,7 +55,17 @@ fn the_choice_is_the_cheapest_candidate_that_meets_the_budget() {
     let built = spec.build(&shot(1920, 1280, 256, Some((20.0, f64::INFINITY)))).unwrap();
     let c = &built.choice;
     for r in &c.candidates {
-        eprintln!("{:<9} mean {:.3} max {:.3} irr {:.4} ns {:.1} est {:.2} meets {} {}", r.model.to_string(), r.mean_error_px, r.max_error_px, r.irradiance_error, r.ns_per_ray, r.estimated_seconds, r.meets, r.note);
+        eprintln!(
+            "{:<9} mean {:.3} max {:.3} irr {:.4} ns {:.1} est {:.2} meets {} {}",
+            r.model.to_string(),
+            r.mean_error_px,
+            r.max_error_px,
+            r.irradiance_error,
+            r.ns_per_ray,
+            r.estimated_seconds,
+            r.meets,
+            r.note
+        );
     }
     let chosen = c.candidates.iter().find(|r| r.model == c.model).expect("chosen is a candidate");
     assert!(chosen.meets, "{}", c.reason);
@@ -52,14 +73,17 @@ fn the_choice_is_the_cheapest_candidate_that_meets_the_budget() {
     for r in c.candidates.iter().filter(|r| r.meets) {
         assert!(chosen.estimated_seconds <= r.estimated_seconds, "{} is cheaper than the chosen {}", r.model, c.model);
     }
-    assert_eq!(built.camera.model_name(), match c.model {
-        LensModel::Lrtf { .. } => "lrtf",
-        LensModel::Exact => "exact",
-        LensModel::Thick => "thick",
-        LensModel::Thin => "thin",
-        LensModel::Pinhole => "pinhole",
-        LensModel::Auto => unreachable!(),
-    });
+    assert_eq!(
+        built.camera.model_name(),
+        match c.model {
+            LensModel::Lrtf { .. } => "lrtf",
+            LensModel::Exact => "exact",
+            LensModel::Thick => "thick",
+            LensModel::Thin => "thin",
+            LensModel::Pinhole => "pinhole",
+            LensModel::Auto => unreachable!(),
+        }
+    );
 }
 
 #[test]
@@ -72,7 +96,12 @@ fn lens_model_names_parse_and_bad_ones_name_the_field() {
         assert!(e.contains("lens_model"), "{e}");
     }
     // A table model needs a real lens.
-    let spec = CameraSpec { lens: "thin".into(), f_number: Some(2.0), model: LensModel::Lrtf { resolution: 32 }, ..CameraSpec::default() };
+    let spec = CameraSpec {
+        lens: "thin".into(),
+        f_number: Some(2.0),
+        model: LensModel::Lrtf { resolution: 32 },
+        ..CameraSpec::default()
+    };
     let e = spec.build(&ShotContext::default()).unwrap_err().to_string();
     assert!(e.contains("needs a real lens"), "{e}");
 }

@@ -73,7 +73,8 @@ fn tilted_sensor_focus_plane_thin_lens_is_exact() {
             .iter()
             .filter_map(|u| cam.generate_ray(film, *u, WL))
             .collect();
-        let pts: Vec<DVec3> = rays.iter().map(|r| r.origin + r.direction * plane.intersect(r.origin, r.direction).unwrap()).collect();
+        let pts: Vec<DVec3> =
+            rays.iter().map(|r| r.origin + r.direction * plane.intersect(r.origin, r.direction).unwrap()).collect();
         for p in &pts[1..] {
             assert!((*p - pts[0]).length() < 1e-9, "rays meet the plane at one point");
         }
@@ -101,7 +102,8 @@ fn sensor_tilted_30_degrees_realistic_focus_plane_verified_by_tracing() {
         }
         let mean_dir = rays.iter().fold(DVec3::ZERO, |a, r| a + r.direction).normalize();
         let spread_at = |t: f64| {
-            let pts: Vec<DVec3> = rays.iter().map(|r| r.origin + r.direction * (t / r.direction.dot(mean_dir))).collect();
+            let pts: Vec<DVec3> =
+                rays.iter().map(|r| r.origin + r.direction * (t / r.direction.dot(mean_dir))).collect();
             let c = pts.iter().fold(DVec3::ZERO, |a, p| a + *p) / pts.len() as f64;
             pts.iter().map(|p| (*p - c).length_squared()).sum::<f64>()
         };
@@ -109,7 +111,11 @@ fn sensor_tilted_30_degrees_realistic_focus_plane_verified_by_tracing() {
         for _ in 0..200 {
             let m1 = lo + (hi - lo) / 3.0;
             let m2 = hi - (hi - lo) / 3.0;
-            if spread_at(m1) < spread_at(m2) { hi = m2 } else { lo = m1 }
+            if spread_at(m1) < spread_at(m2) {
+                hi = m2
+            } else {
+                lo = m1
+            }
         }
         let t_best = 0.5 * (lo + hi);
         let c = rays[0].origin;
@@ -120,7 +126,6 @@ fn sensor_tilted_30_degrees_realistic_focus_plane_verified_by_tracing() {
     }
     assert!(checked >= 2);
 }
-
 
 /// Spectral rays: through a lens with dispersive glass the same film and lens sample leave in
 /// different directions for blue and red (lateral colour grows off axis); a lens without

@@ -47,7 +47,10 @@ fn find_triangle(scene: &Scene, expected: [Vec3; 3]) -> [u32; 3] {
             return *t;
         }
     }
-    panic!("no triangle {expected:?} in {:?}", m.indices.iter().map(|t| t.map(|i| m.positions[i as usize])).collect::<Vec<_>>());
+    panic!(
+        "no triangle {expected:?} in {:?}",
+        m.indices.iter().map(|t| t.map(|i| m.positions[i as usize])).collect::<Vec<_>>()
+    );
 }
 
 fn geometric_normal(scene: &Scene, t: [u32; 3]) -> Vec3 {
@@ -90,7 +93,11 @@ fn gltf_node_hierarchy_world_positions() {
     // No material in the file: the glTF default.
     assert_eq!(s.materials, vec![Material::default()]);
     assert!(s.mesh.material_ids.iter().all(|&m| m == 0));
-    assert!(s.warnings.iter().any(|w| w.contains("NoNormals") && w.contains("primitive 1") && w.contains("Lines")), "{:?}", s.warnings);
+    assert!(
+        s.warnings.iter().any(|w| w.contains("NoNormals") && w.contains("primitive 1") && w.contains("Lines")),
+        "{:?}",
+        s.warnings
+    );
 }
 
 #[test]
@@ -134,7 +141,8 @@ fn gltf_textured_quad_material_and_texel_lookup() {
     let yellow = texel(Vec2::new(-0.25, -0.5));
     assert!((yellow - Vec4::new(1.0, 1.0, 0.0, 128.0 / 255.0)).abs().max_element() < 1e-6, "{yellow}");
     let brown = texel(Vec2::new(0.75, -0.5));
-    let expect = Vec4::new(srgb_to_linear(64.0 / 255.0), srgb_to_linear(32.0 / 255.0), srgb_to_linear(16.0 / 255.0), 1.0);
+    let expect =
+        Vec4::new(srgb_to_linear(64.0 / 255.0), srgb_to_linear(32.0 / 255.0), srgb_to_linear(16.0 / 255.0), 1.0);
     assert!((brown - expect).abs().max_element() < 1e-6, "{brown} vs {expect}");
 
     // Metallic-roughness: linear (not sRGB-decoded), UV set 1, bilinear.
@@ -156,7 +164,11 @@ fn gltf_textured_quad_material_and_texel_lookup() {
     assert!(s.mesh.uv1.iter().all(|u| *u == Vec2::splat(0.5)));
     assert!(s.mesh.normals.iter().all(|n| *n == Vec3::Z));
 
-    assert!(s.warnings.iter().any(|w| w.contains("KHR_texture_transform") && w.contains("emissiveTexture")), "{:?}", s.warnings);
+    assert!(
+        s.warnings.iter().any(|w| w.contains("KHR_texture_transform") && w.contains("emissiveTexture")),
+        "{:?}",
+        s.warnings
+    );
     assert!(s.warnings.iter().any(|w| w.contains("KHR_materials_clearcoat")), "{:?}", s.warnings);
 }
 
@@ -238,11 +250,8 @@ fn gltf_missing_texture_is_a_warning_with_fallback() {
     assert_eq!(base.texels[0], Vec4::new(1.0, 0.0, 1.0, 1.0), "magenta fallback");
     let normal = &s.textures[m.normal_texture.unwrap().index];
     assert_eq!(normal.texels[0], Vec4::new(0.5, 0.5, 1.0, 1.0), "flat normal fallback");
-    let missing = s
-        .warnings
-        .iter()
-        .find(|w| w.contains("does_not_exist.png"))
-        .unwrap_or_else(|| panic!("{:?}", s.warnings));
+    let missing =
+        s.warnings.iter().find(|w| w.contains("does_not_exist.png")).unwrap_or_else(|| panic!("{:?}", s.warnings));
     assert!(missing.contains("missing_texture.gltf") && missing.contains("'Gone'"), "{missing}");
     assert!(s.warnings.iter().any(|w| w.contains("not-an-image") && w.contains("decode")), "{:?}", s.warnings);
     assert_eq!(s.mesh.triangle_count(), 2);
@@ -254,7 +263,8 @@ fn gltf_jpeg_texture() {
     std::fs::create_dir_all(&dir).unwrap();
     let img = image::RgbImage::from_pixel(8, 8, image::Rgb([200, 100, 50]));
     img.save(dir.join("tex.jpg")).unwrap();
-    let gltf_text = std::fs::read_to_string(data("missing_texture.gltf")).unwrap().replace("does_not_exist.png", "tex.jpg");
+    let gltf_text =
+        std::fs::read_to_string(data("missing_texture.gltf")).unwrap().replace("does_not_exist.png", "tex.jpg");
     let path = dir.join("scene.gltf");
     std::fs::write(&path, gltf_text).unwrap();
     let s = load_gltf(&path).unwrap();
@@ -270,7 +280,11 @@ fn gltf_non_finite_vertices() {
     let s = load("nan_vertices.gltf");
     assert_eq!(s.mesh.triangle_count(), 2);
     assert!(s.mesh.positions.iter().all(|p| p.is_finite()));
-    assert!(s.warnings.iter().any(|w| w.contains("dropped 1 of 3 triangles") && w.contains("Partly NaN")), "{:?}", s.warnings);
+    assert!(
+        s.warnings.iter().any(|w| w.contains("dropped 1 of 3 triangles") && w.contains("Partly NaN")),
+        "{:?}",
+        s.warnings
+    );
     let e = load_err("all_nan.gltf");
     assert!(e.contains("non-finite"), "{e}");
 }
@@ -305,7 +319,15 @@ fn gltf_bad_files_are_errors() {
 
 #[test]
 fn gltf_truncated_and_mutated_inputs_never_panic() {
-    for name in ["box.glb", "hierarchy.gltf", "textured_quad.gltf", "lights.gltf", "camera.gltf", "accessors.gltf", "missing_texture.gltf"] {
+    for name in [
+        "box.glb",
+        "hierarchy.gltf",
+        "textured_quad.gltf",
+        "lights.gltf",
+        "camera.gltf",
+        "accessors.gltf",
+        "missing_texture.gltf",
+    ] {
         let bytes = std::fs::read(data(name)).unwrap();
         let base = data("");
         // Every strict prefix of a .glb is invalid (its header states the length).
@@ -316,7 +338,8 @@ fn gltf_truncated_and_mutated_inputs_never_panic() {
             }
         }
         // Flipped bits and bytes set to extremes: any result but a panic.
-        let step = std::env::var("PETZVAL_FUZZ_STEP").ok().and_then(|s| s.parse().ok()).unwrap_or((bytes.len() / 400).max(1));
+        let step =
+            std::env::var("PETZVAL_FUZZ_STEP").ok().and_then(|s| s.parse().ok()).unwrap_or((bytes.len() / 400).max(1));
         for i in (0..bytes.len()).step_by(step) {
             for v in [bytes[i] ^ 0x01, bytes[i] ^ 0x80, 0x00, 0xFF, b'9', b'0', b'-', b'"', b'}'] {
                 let mut m = bytes.clone();

@@ -32,7 +32,6 @@ fn emitter(le: Vec3, double_sided: bool) -> Material {
     Material { emissive: le, double_sided, ..diffuse(Vec3::ZERO) }
 }
 
-
 /// A quad with corners `o`, `o + a`, `o + a + b`, `o + b`; front side along a × b; uv (0,0)
 /// at `o`, u along a, v along b.
 fn quad(o: Vec3, a: Vec3, b: Vec3, material: u32) -> Mesh {
@@ -188,7 +187,13 @@ fn spawned_rays_do_not_self_intersect_far_from_origin() {
         // Inward: must reach the far side, not the starting triangle.
         let inw = -ng;
         let so_in = h.spawn_origin(inw);
-        let h2 = rs.intersect(so_in, inw, f32::INFINITY).unwrap_or_else(|| panic!("inward ray must hit the far side: hit {:?} origin {so_in:?} (dist from centre {}) dir {inw:?}", h, (so_in - c).length()));
+        let h2 = rs.intersect(so_in, inw, f32::INFINITY).unwrap_or_else(|| {
+            panic!(
+                "inward ray must hit the far side: hit {:?} origin {so_in:?} (dist from centre {}) dir {inw:?}",
+                h,
+                (so_in - c).length()
+            )
+        });
         assert!(h2.t > 0.5 * r, "inward ray hit at t = {}", h2.t);
     }
     assert!(tested > 10_000);
@@ -437,7 +442,11 @@ fn bsdf_sample_histogram_matches_pdf() {
             }
             // Integral of pdf is 1 (minus samples rejected below the horizon).
             let accepted = (n - none) as f64;
-            assert!((total_expected - n as f64).abs() / (n as f64) < 0.02 + none as f64 / n as f64, "{name}: ∫pdf = {}", total_expected / n as f64);
+            assert!(
+                (total_expected - n as f64).abs() / (n as f64) < 0.02 + none as f64 / n as f64,
+                "{name}: ∫pdf = {}",
+                total_expected / n as f64
+            );
             assert!(accepted > 0.0);
             // Generous bound (bin integration error dominates for peaked bins): χ²/dof < 3.
             let ratio = chi2 / dof.max(1) as f64;
@@ -459,7 +468,10 @@ fn bsdf_reciprocity() {
             let f1 = b.eval(wo, wi) / wi.z;
             let f2 = b.eval(wi, wo) / wo.z;
             let m = f1.max_element().max(f2.max_element());
-            assert!((f1 - f2).abs().max_element() <= 1e-4 * m.max(1e-3), "{name}: f(wo,wi) = {f1:?} ≠ f(wi,wo) = {f2:?}");
+            assert!(
+                (f1 - f2).abs().max_element() <= 1e-4 * m.max(1e-3),
+                "{name}: f(wo,wi) = {f1:?} ≠ f(wi,wo) = {f2:?}"
+            );
         }
         assert_eq!(b.eval(Vec3::new(0.0, 0.6, 0.8), Vec3::new(0.0, 0.6, -0.8)), Vec3::ZERO, "no transmission");
     }
@@ -562,10 +574,20 @@ fn point_and_spot_lights_on_diffuse_plane() {
         let cd = dir.dot(-d.normalize());
         let ramp = ((cd - outer.cos()) / (inner.cos() - outer.cos())).clamp(0.0, 1.0).powi(2);
         let mut s = plane_scene(albedo);
-        s.lights.push(Light::Spot { position: lp, direction: dir, intensity, inner_cone_rad: inner, outer_cone_rad: outer, range: None });
+        s.lights.push(Light::Spot {
+            position: lp,
+            direction: dir,
+            intensity,
+            inner_cone_rad: inner,
+            outer_cone_rad: outer,
+            range: None,
+        });
         let l = plane_radiance(s, p, 16);
         let e = expected * ramp;
-        assert!((l.y - e.y).abs() <= 0.01 * expected.y * ramp.max(1e-6) + 1e-7, "spot {inner}/{outer} tilt {tilt_deg}: {l:?} vs {e:?}");
+        assert!(
+            (l.y - e.y).abs() <= 0.01 * expected.y * ramp.max(1e-6) + 1e-7,
+            "spot {inner}/{outer} tilt {tilt_deg}: {l:?} vs {e:?}"
+        );
     }
 
     // Directional: E·cosθ·albedo/π.
@@ -611,7 +633,8 @@ fn square_irradiance(le: f32, s: f32, h: f32) -> f32 {
     let a = (s / 2.0) / h;
     let b = a;
     let fq = 1.0 / (2.0 * PI)
-        * (a / (1.0 + a * a).sqrt() * (b / (1.0 + a * a).sqrt()).atan() + b / (1.0 + b * b).sqrt() * (a / (1.0 + b * b).sqrt()).atan());
+        * (a / (1.0 + a * a).sqrt() * (b / (1.0 + a * a).sqrt()).atan()
+            + b / (1.0 + b * b).sqrt() * (a / (1.0 + b * b).sqrt()).atan());
     le * PI * 4.0 * fq
 }
 
@@ -631,7 +654,9 @@ fn area_light_strategies_agree_with_analytic() {
     let eye = Vec3::new(1.5, 0.5, 1.5);
     let expected = albedo / PI * square_irradiance(le, side, h);
     let mut results = vec![];
-    for (strategy, spp) in [(LightStrategy::Mis, 4096), (LightStrategy::LightOnly, 4096), (LightStrategy::BsdfOnly, 65536)] {
+    for (strategy, spp) in
+        [(LightStrategy::Mis, 4096), (LightStrategy::LightOnly, 4096), (LightStrategy::BsdfOnly, 65536)]
+    {
         let tracer = PathTracer { strategy, ..PathTracer::default() };
         let (l, _) = mean_radiance(&tracer, &rs, eye, p - eye, 9, spp);
         results.push((strategy, l.x));
@@ -680,7 +705,12 @@ fn deterministic_and_finite() {
         ],
         vec![
             diffuse(Vec3::splat(0.5)),
-            Material { base_color: Vec4::new(0.9, 0.6, 0.3, 1.0), metallic: 1.0, roughness: 0.0, ..Material::default() },
+            Material {
+                base_color: Vec4::new(0.9, 0.6, 0.3, 1.0),
+                metallic: 1.0,
+                roughness: 0.0,
+                ..Material::default()
+            },
             emitter(Vec3::splat(10.0), false),
         ],
     );
@@ -790,7 +820,8 @@ fn bench_million_triangles() {
             let mut hits = 0;
             for i in 0..side * side {
                 let (x, y) = ((i % side) as f32 + 0.5, (i / side) as f32 + 0.5);
-                let d = right * ((x / side as f32) * 2.0 - 1.0) * half + up * (1.0 - (y / side as f32) * 2.0) * half - back;
+                let d =
+                    right * ((x / side as f32) * 2.0 - 1.0) * half + up * (1.0 - (y / side as f32) * 2.0) * half - back;
                 hits += rs.intersect(eye, d, f32::INFINITY).is_some() as u32;
             }
             hits as f64 / (side * side) as f64
@@ -837,7 +868,10 @@ fn light_grid(albedo: f32) -> (Scene, Vec<(f32, [Vec3; 4])>) {
             let level = (i * 7 + j * 3) % levels.len();
             let q = quad(o, Vec3::new(s, 0.0, 0.0), Vec3::new(0.0, 0.0, s), 1 + level as u32);
             assert!(q.normals[0].y < -0.99);
-            emitters.push((levels[level], [o, o + Vec3::new(s, 0.0, 0.0), o + Vec3::new(s, 0.0, s), o + Vec3::new(0.0, 0.0, s)]));
+            emitters.push((
+                levels[level],
+                [o, o + Vec3::new(s, 0.0, 0.0), o + Vec3::new(s, 0.0, s), o + Vec3::new(0.0, 0.0, s)],
+            ));
             meshes.push(q);
         }
     }
@@ -870,7 +904,8 @@ fn light_tree_many_lights_matches_analytic() {
     assert_eq!(rs.light_count(), 200);
     assert_eq!(rs.light_selection(), LightSelection::Tree);
     // Under a quad, between quads, at the grid's edge, outside the grid.
-    let points = [Vec3::new(-0.375, 0.0, 0.125), Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.1, 0.0, -0.9), Vec3::new(1.9, 0.0, 0.4)];
+    let points =
+        [Vec3::new(-0.375, 0.0, 0.125), Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.1, 0.0, -0.9), Vec3::new(1.9, 0.0, 0.4)];
     // Tree: 32768 samples (error ≲ 0.5% at 1σ even without the sampler's stratification);
     // power-proportional selection, for comparison only, 8192.
     for (k, &p) in points.iter().enumerate() {
@@ -885,7 +920,11 @@ fn light_tree_many_lights_matches_analytic() {
                 let spp = if selection == LightSelection::Tree { 32768 } else { 8192 };
                 let (mean, se) = plane_estimate(&tracer, &rs, p + Vec3::new(0.6, 0.3, 0.8), p, k as u32, spp);
                 let err = (mean - expected).abs() / expected;
-                line += &format!(", {selection:?}/{strategy:?} {mean:.5} (err {:.2}%, rel. std. dev. per sample {:.3})", err * 100.0, se / mean * (spp as f64).sqrt());
+                line += &format!(
+                    ", {selection:?}/{strategy:?} {mean:.5} (err {:.2}%, rel. std. dev. per sample {:.3})",
+                    err * 100.0,
+                    se / mean * (spp as f64).sqrt()
+                );
                 if selection == LightSelection::Tree {
                     assert!(err < 0.01, "{selection:?}/{strategy:?} at {p}: {mean} vs analytic {expected}");
                 }
@@ -960,7 +999,11 @@ fn light_tree_pmf_consistent() {
             for i in 0..nl {
                 let expected = pmfs[i] as f64 * m as f64;
                 // Stratified u: counts are within a few of the expectation.
-                assert!((counts[i] as f64 - expected).abs() <= 2.0 + 1e-3 * expected, "{name}: light {i}: {} picks, expected {expected:.1}", counts[i]);
+                assert!(
+                    (counts[i] as f64 - expected).abs() <= 2.0 + 1e-3 * expected,
+                    "{name}: light {i}: {} picks, expected {expected:.1}",
+                    counts[i]
+                );
             }
         }
         // MIS: the light pdf of the emitter hit by a light sample's ray is the sample's pdf.

@@ -1,8 +1,8 @@
 //! Integration tests of the renderer crate (one binary; modules per area).
 
 mod auto_model;
-mod common;
 mod camera;
+mod common;
 mod gltf;
 mod integrator;
 mod render;

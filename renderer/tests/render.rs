@@ -18,20 +18,28 @@ use petzval_renderer::integrator::RenderScene;
 use petzval_renderer::render::{render, CameraRig, RenderResult, RenderSettings};
 use petzval_renderer::scene::texture::Wrap;
 use petzval_renderer::scene::{demo, Environment, Material, Mesh, Scene, Texture, TextureRef};
-use petzval_renderer::{library_lens, Aperture, ApertureShape, Camera, PinholeCamera, RealisticCamera, Sensor, ThinLensCamera};
+use petzval_renderer::{
+    library_lens, Aperture, ApertureShape, Camera, PinholeCamera, RealisticCamera, Sensor, ThinLensCamera,
+};
 
 // ------------------------------------------------------------------------------------------
 // Scene helpers.
 
 fn diffuse(base: Vec3) -> Material {
-    Material { name: "diffuse".into(), base_color: base.extend(1.0), metallic: 0.0, roughness: 1.0, specular: 0.0, ..Material::default() }
+    Material {
+        name: "diffuse".into(),
+        base_color: base.extend(1.0),
+        metallic: 0.0,
+        roughness: 1.0,
+        specular: 0.0,
+        ..Material::default()
+    }
 }
 
 /// A black, double-sided emitter of radiance `le` (nothing but its emission reaches the camera).
 fn emitter(le: f32) -> Material {
     Material { emissive: Vec3::splat(le), double_sided: true, ..diffuse(Vec3::ZERO) }
 }
-
 
 /// Number of sides of the flat emitter discs (a regular polygon).
 const DISC_SIDES: u32 = 64;
@@ -75,7 +83,17 @@ fn scene_of(meshes: &[Mesh], materials: Vec<Material>, env: Environment) -> Rend
 }
 
 fn settings(w: u32, h: u32, spp: u32, seed: u32, filter: PixelFilter) -> RenderSettings {
-    RenderSettings { width: w, height: h, spp, seed, max_depth: 8, spectral: false, time_limit: None, filter, ..RenderSettings::default() }
+    RenderSettings {
+        width: w,
+        height: h,
+        spp,
+        seed,
+        max_depth: 8,
+        spectral: false,
+        time_limit: None,
+        filter,
+        ..RenderSettings::default()
+    }
 }
 
 const BOX1: PixelFilter = PixelFilter::Box { width_px: 1.0 };
@@ -178,7 +196,11 @@ fn thin_lens_coc_mm(f: f64, n: f64, s_mm: f64, d_mm: f64) -> f64 {
 /// silhouette — must read 1.
 #[test]
 fn render_furnace_white_sphere_pinhole() {
-    let rs = scene_of(&[icosphere(Vec3::new(0.0, 0.0, -4.0), 1.0, 4, 0)], vec![diffuse(Vec3::ONE)], Environment::Constant(Vec3::ONE));
+    let rs = scene_of(
+        &[icosphere(Vec3::new(0.0, 0.0, -4.0), 1.0, 4, 0)],
+        vec![diffuse(Vec3::ONE)],
+        Environment::Constant(Vec3::ONE),
+    );
     let mut cam = PinholeCamera::new(Sensor::default(), 50.0).unwrap();
     cam.natural_vignetting = false;
     let (w, h) = (72, 48);
@@ -209,7 +231,9 @@ fn render_furnace_white_sphere_pinhole() {
         }
     }
     let means: Vec<f64> = sum.iter().map(|s| s / n as f64).collect();
-    eprintln!("furnace (pinhole): image means {means:?}, per-pixel noise σ = {sigma:.2e}, worst pixel |L−1| = {worst:.2e}");
+    eprintln!(
+        "furnace (pinhole): image means {means:?}, per-pixel noise σ = {sigma:.2e}, worst pixel |L−1| = {worst:.2e}"
+    );
     // The image average of 2·3456 pixels has noise σ/√6912 ≪ 1%: 1% is a pure bias bound.
     for m in &means {
         assert!((m - 1.0).abs() < 0.01, "image mean {m}");
@@ -224,7 +248,11 @@ fn render_furnace_white_sphere_pinhole() {
 /// so every pixel reads 1 (the exposure normalisation must match the weights actually used).
 #[test]
 fn render_furnace_thin_lens_without_natural_vignetting() {
-    let rs = scene_of(&[icosphere(Vec3::new(0.0, 0.0, -4.0), 1.0, 4, 0)], vec![diffuse(Vec3::ONE)], Environment::Constant(Vec3::ONE));
+    let rs = scene_of(
+        &[icosphere(Vec3::new(0.0, 0.0, -4.0), 1.0, 4, 0)],
+        vec![diffuse(Vec3::ONE)],
+        Environment::Constant(Vec3::ONE),
+    );
     let cam = thin(Sensor::default(), 50.0, 2.0, 4.0, Aperture::default(), false);
     let img = shoot_img(&rs, cam, &settings(48, 32, 64, 1, PixelFilter::default()));
     let n = img.rgba.len();
@@ -235,7 +263,10 @@ fn render_furnace_thin_lens_without_natural_vignetting() {
     let (lo, hi) = sky.iter().fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(*v), hi.max(*v)));
     eprintln!("furnace (thin f/2, vignetting off): image mean {mean:.4}, {} sky pixels in {lo:.6}..{hi:.6}", sky.len());
     assert!(sky.len() > n / 4);
-    assert!(lo > 1.0 - 1e-4 && hi < 1.0 + 1e-4, "sky pixels {lo}..{hi}: thin lens with natural_vignetting = false is not exposure-normalised");
+    assert!(
+        lo > 1.0 - 1e-4 && hi < 1.0 + 1e-4,
+        "sky pixels {lo}..{hi}: thin lens with natural_vignetting = false is not exposure-normalised"
+    );
     // the whole image (sphere noise at 64 spp ≈ 1.2% per pixel): mean within 1%
     assert!((mean - 1.0).abs() < 0.01, "mean {mean}");
 }
@@ -258,7 +289,11 @@ fn render_thin_lens_circle_of_confusion() {
         let pitch = c_mm / 56.0;
         let r_src_px = 4.0;
         let rho_m = r_src_px * pitch * s_mm / v_d * 1e-3;
-        let rs = scene_of(&[disc(Vec3::new(0.0, 0.0, -(s_mm * 1e-3) as f32), rho_m as f32, 0)], vec![emitter(1.0)], Environment::Black);
+        let rs = scene_of(
+            &[disc(Vec3::new(0.0, 0.0, -(s_mm * 1e-3) as f32), rho_m as f32, 0)],
+            vec![emitter(1.0)],
+            Environment::Black,
+        );
         let cam = thin(square_sensor(w as f64 * pitch), f, n, d_mm * 1e-3, Aperture::default(), false);
         let mut st = settings(w, h, 256, 3, BOX1);
         st.max_depth = 1;
@@ -284,7 +319,11 @@ fn render_thin_lens_circle_of_confusion() {
 /// Renders a flat on-axis emitter of fixed angular radius `alpha` (radius ∝ distance) at
 /// distance `s_m` and returns the image moments.
 fn emitter_moments(cam: &Camera, s_m: f64, alpha: f64, w: u32, spp: u32, seed: u32) -> Moments {
-    let rs = scene_of(&[disc(Vec3::new(0.0, 0.0, -s_m as f32), (alpha * s_m) as f32, 0)], vec![emitter(1.0)], Environment::Black);
+    let rs = scene_of(
+        &[disc(Vec3::new(0.0, 0.0, -s_m as f32), (alpha * s_m) as f32, 0)],
+        vec![emitter(1.0)],
+        Environment::Black,
+    );
     let mut st = settings(w, w, spp, seed, BOX1);
     st.max_depth = 1;
     Moments::of(&shoot_img(&rs, cam.clone(), &st))
@@ -302,7 +341,11 @@ fn power_through_lens(lens: &petzval_renderer::Lens, s_mm: f64) -> f64 {
     let mut sum = 0.0;
     for i in 0..n {
         for j in 0..n {
-            let d = DVec3::new((2.0 * (i as f64 + 0.5) / n as f64 - 1.0) * t, (2.0 * (j as f64 + 0.5) / n as f64 - 1.0) * t, 1.0);
+            let d = DVec3::new(
+                (2.0 * (i as f64 + 0.5) / n as f64 - 1.0) * t,
+                (2.0 * (j as f64 + 0.5) / n as f64 - 1.0) * t,
+                1.0,
+            );
             // dω = cos³θ dA on the plane z = 1, times the source's cos θ
             let c = 1.0 / d.length();
             if let Some(tr) = lens.trace(&Ray::new(src, d), lens.primary_wavelength_nm(), TraceDirection::SceneToFilm) {
@@ -363,7 +406,8 @@ fn render_defocus_conserves_flux() {
     // independently by tracing from the source through the lens (it differs from 1 by ≈ 0.5%:
     // pupil aberration moves the real entrance pupil for a near source).
     let lens = library_lens("double-gauss-50mm").unwrap();
-    let expected = power_through_lens(&lens, 600.0) * 0.6f64.powi(2) / (power_through_lens(&lens, 2000.0) * 2.0f64.powi(2));
+    let expected =
+        power_through_lens(&lens, 600.0) * 0.6f64.powi(2) / (power_through_lens(&lens, 2000.0) * 2.0f64.powi(2));
     let pitch = 0.03125;
     let w = 128u32;
     let cam = Camera::Realistic(RealisticCamera::new(square_sensor(w as f64 * pitch), lens, Some(d)).unwrap());
@@ -381,7 +425,10 @@ fn render_defocus_conserves_flux() {
     // 1% (the brief) both against 1 and against the traced power ratio. Measured over seeds
     // 1–9: ratio 1.0043 ± 0.0025 (σ), so 1% is 4σ from the traced value 1.0047.
     assert!((ratio - 1.0).abs() < 0.01, "realistic lens: defocused/focused flux {ratio}");
-    assert!((ratio / expected - 1.0).abs() < 0.01, "realistic lens: flux ratio {ratio} vs traced power ratio {expected}");
+    assert!(
+        (ratio / expected - 1.0).abs() < 0.01,
+        "realistic lens: flux ratio {ratio} vs traced power ratio {expected}"
+    );
 }
 
 // ------------------------------------------------------------------------------------------
@@ -453,7 +500,9 @@ fn boundary_radius(img: &Image, cx: f64, cy: f64, phi_deg: f64, level: f64) -> f
         let a = (phi_deg + 0.5 * k as f64).to_radians();
         let (dx, dy) = (a.cos(), a.sin());
         // walk outwards, averaging a 3-px wide strip across the direction
-        let prof = |r: f64| -> f64 { (-1..=1).map(|j| sample(cx + dx * r - dy * j as f64, cy + dy * r + dx * j as f64)).sum::<f64>() / 3.0 };
+        let prof = |r: f64| -> f64 {
+            (-1..=1).map(|j| sample(cx + dx * r - dy * j as f64, cy + dy * r + dx * j as f64)).sum::<f64>() / 3.0
+        };
         let mut r = 0.0;
         let step = 0.05;
         while prof(r + step) > level && r < w as f64 {
@@ -476,7 +525,11 @@ fn render_bokeh_hexagon_area_and_orientation() {
     let pitch = c_mm / 60.0; // circumradius 30 px
     let r_src_px = 6.0;
     let rho = r_src_px * pitch * s_mm / v_d * 1e-3;
-    let rs = scene_of(&[disc(Vec3::new(0.0, 0.0, -(s_mm * 1e-3) as f32), rho as f32, 0)], vec![emitter(1.0)], Environment::Black);
+    let rs = scene_of(
+        &[disc(Vec3::new(0.0, 0.0, -(s_mm * 1e-3) as f32), rho as f32, 0)],
+        vec![emitter(1.0)],
+        Environment::Black,
+    );
     let mut st = settings(w, w, 512, 11, BOX1);
     st.max_depth = 1;
     let sensor = square_sensor(w as f64 * pitch);
@@ -489,7 +542,11 @@ fn render_bokeh_hexagon_area_and_orientation() {
     let inner = 0.866 * 30.0 - r_src_px - 1.5;
     let p_circle = plateau(&circle, mc.cx, mc.cy, inner);
     for rot_deg in [0.0f64, 13.0, 40.0] {
-        let ap = Aperture { shape: ApertureShape::Blades { count: 6, curvature: 0.0 }, rotation_rad: rot_deg.to_radians(), anamorphic_ratio: 1.0 };
+        let ap = Aperture {
+            shape: ApertureShape::Blades { count: 6, curvature: 0.0 },
+            rotation_rad: rot_deg.to_radians(),
+            anamorphic_ratio: 1.0,
+        };
         let hex = shoot_img(&rs, thin(sensor, f, n, d_mm * 1e-3, ap, false), &st);
         let mh = Moments::of(&hex);
         let p_hex = plateau(&hex, mh.cx, mh.cy, inner);
@@ -565,10 +622,12 @@ fn render_bokeh_cats_eye_double_gauss() {
     // A 4 mm square window on a full-frame sensor, shifted to the axis and towards the corner
     // (15, 10) mm — 18 mm off axis, 83% of the full-frame half-diagonal.
     for shift in [DVec2::ZERO, DVec2::new(15.0, 10.0)] {
-        let sensor = Sensor { width_mm: w as f64 * pitch, height_mm: w as f64 * pitch, shift_mm: shift, ..Sensor::default() };
+        let sensor =
+            Sensor { width_mm: w as f64 * pitch, height_mm: w as f64 * pitch, shift_mm: shift, ..Sensor::default() };
         let cam = Camera::Realistic(RealisticCamera::new(sensor, lens.clone(), Some(2.0)).unwrap());
         // aim the emitter along the ray through the window centre and the pupil centre
-        let ray = cam.generate_ray(DVec2::new(0.5, 0.5), DVec2::new(0.5, 0.5), 587.56).expect("window centre sees the scene");
+        let ray =
+            cam.generate_ray(DVec2::new(0.5, 0.5), DVec2::new(0.5, 0.5), 587.56).expect("window centre sees the scene");
         let s = 0.7;
         let dist = s / -ray.direction.z;
         let p = ray.origin + ray.direction * dist;
@@ -606,7 +665,15 @@ fn render_bokeh_cats_eye_double_gauss() {
 /// across), with u set per vertex: u is exact along the cell edges of constant depth and its
 /// bilinear error inside a cell is below 0.01 stripe periods.
 fn striped_ground(h: f64, cam_to_world: &DAffine3, stripes_per_radian: f64) -> RenderScene {
-    let texture = Texture { name: "stripes".into(), width: 2, height: 1, texels: vec![Vec4::new(0.2, 0.2, 0.2, 1.0), Vec4::ONE], wrap_s: Wrap::Repeat, wrap_t: Wrap::Repeat, bilinear: false };
+    let texture = Texture {
+        name: "stripes".into(),
+        width: 2,
+        height: 1,
+        texels: vec![Vec4::new(0.2, 0.2, 0.2, 1.0), Vec4::ONE],
+        wrap_s: Wrap::Repeat,
+        wrap_t: Wrap::Repeat,
+        bilinear: false,
+    };
     let to_cam = cam_to_world.inverse();
     let mut mesh = Mesh::default();
     let columns = 48;
@@ -615,7 +682,12 @@ fn striped_ground(h: f64, cam_to_world: &DAffine3, stripes_per_radian: f64) -> R
     while z0 > -400.0 {
         let z1 = z0 * 1.02;
         for k in 0..columns {
-            let corners = [DVec3::new(q(k) * -z0, -h, z0), DVec3::new(q(k + 1) * -z0, -h, z0), DVec3::new(q(k + 1) * -z1, -h, z1), DVec3::new(q(k) * -z1, -h, z1)];
+            let corners = [
+                DVec3::new(q(k) * -z0, -h, z0),
+                DVec3::new(q(k + 1) * -z0, -h, z0),
+                DVec3::new(q(k + 1) * -z1, -h, z1),
+                DVec3::new(q(k) * -z1, -h, z1),
+            ];
             let base = mesh.positions.len() as u32;
             for c in corners {
                 let pc = to_cam.transform_point3(c);
@@ -631,8 +703,10 @@ fn striped_ground(h: f64, cam_to_world: &DAffine3, stripes_per_radian: f64) -> R
         }
         z0 = z1;
     }
-    let mat = Material { emissive: Vec3::ONE, emissive_texture: Some(TextureRef { index: 0, uv_set: 0 }), ..emitter(1.0) };
-    RenderScene::new(Scene { mesh, materials: vec![mat], textures: vec![Arc::new(texture)], ..Scene::default() }).unwrap()
+    let mat =
+        Material { emissive: Vec3::ONE, emissive_texture: Some(TextureRef { index: 0, uv_set: 0 }), ..emitter(1.0) };
+    RenderScene::new(Scene { mesh, materials: vec![mat], textures: vec![Arc::new(texture)], ..Scene::default() })
+        .unwrap()
 }
 
 /// Per-row sharpness: mean |∂x I| / mean I over the central columns; `None` where the row is
@@ -697,7 +771,13 @@ fn measured_sharp_row(ratio: &[Option<f64>]) -> (f64, f64) {
             Some((ratio[y - 1]? + ratio[y]? + ratio[y + 1]?) / 3.0)
         })
         .collect();
-    let (best, peak) = smooth.iter().enumerate().filter_map(|(y, v)| v.map(|v| (y, v))).fold((0, f64::MIN), |a, b| if b.1 > a.1 { b } else { a });
+    let (best, peak) = smooth.iter().enumerate().filter_map(|(y, v)| v.map(|v| (y, v))).fold((0, f64::MIN), |a, b| {
+        if b.1 > a.1 {
+            b
+        } else {
+            a
+        }
+    });
     // normal equations for r = c0 + c1·t + c2·t², t = y − best
     let mut m = [[0.0f64; 3]; 3];
     let mut rhs = [0.0f64; 3];
@@ -713,7 +793,8 @@ fn measured_sharp_row(ratio: &[Option<f64>]) -> (f64, f64) {
         }
     }
     let det3 = |m: &[[f64; 3]; 3]| -> f64 {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
     };
     let solve = |k: usize| -> f64 {
         let mut mk = m;
@@ -769,7 +850,8 @@ fn render_tilted_sensor_focus_on_the_ground() {
     let mut rows_found = Vec::new();
     for (tilt, focus) in [(0.0, 0.25), (3.0, 0.6)] {
         let (ratio, cam) = ratio_for(&rs, tilt, focus);
-        let predicted = predicted_sharp_row(&cam, ground_n, h, rows).expect("the plane of focus meets the ground in the image");
+        let predicted =
+            predicted_sharp_row(&cam, ground_n, h, rows).expect("the plane of focus meets the ground in the image");
         let (measured, peak) = measured_sharp_row(&ratio);
         let ground_rows = ratio.iter().flatten().count();
         let sharp_rows = ratio.iter().flatten().filter(|r| **r > 0.8 * peak).count();
@@ -816,7 +898,11 @@ fn render_tilted_sensor_focus_on_the_ground() {
     let (mut lo, mut hi) = (0.5 * f, f);
     for _ in 0..200 {
         let mid = 0.5 * (lo + hi);
-        if sensor_line(mid).1 < f { lo = mid } else { hi = mid }
+        if sensor_line(mid).1 < f {
+            lo = mid
+        } else {
+            hi = mid
+        }
     }
     let f_lens = 0.5 * (lo + hi);
     let (tilt, _) = sensor_line(f_lens);
@@ -858,7 +944,12 @@ fn render_tilted_sensor_focus_on_the_ground() {
 fn render_alpha_is_coverage_through_a_real_lens() {
     // wall x < 0 at 3 m, facing the camera; grey sky
     let wall = Mesh {
-        positions: vec![Vec3::new(-50.0, -50.0, -3.0), Vec3::new(0.0, -50.0, -3.0), Vec3::new(0.0, 50.0, -3.0), Vec3::new(-50.0, 50.0, -3.0)],
+        positions: vec![
+            Vec3::new(-50.0, -50.0, -3.0),
+            Vec3::new(0.0, -50.0, -3.0),
+            Vec3::new(0.0, 50.0, -3.0),
+            Vec3::new(-50.0, 50.0, -3.0),
+        ],
         normals: vec![Vec3::Z; 4],
         tangents: vec![Vec4::ZERO; 4],
         uv0: vec![Vec2::ZERO; 4],
@@ -940,7 +1031,11 @@ fn render_is_deterministic_across_thread_counts() {
 // 7. Cancellation and time limits.
 
 fn furnace_for_interrupts() -> (RenderScene, CameraRig) {
-    let rs = scene_of(&[icosphere(Vec3::new(0.0, 0.0, -4.0), 1.0, 3, 0)], vec![diffuse(Vec3::ONE)], Environment::Constant(Vec3::ONE));
+    let rs = scene_of(
+        &[icosphere(Vec3::new(0.0, 0.0, -4.0), 1.0, 3, 0)],
+        vec![diffuse(Vec3::ONE)],
+        Environment::Constant(Vec3::ONE),
+    );
     let mut cam = PinholeCamera::new(Sensor::default(), 50.0).unwrap();
     cam.natural_vignetting = false;
     (rs, CameraRig { camera: Camera::Pinhole(cam), to_world: DAffine3::IDENTITY })
@@ -991,7 +1086,11 @@ fn render_cancel_via_progress_returns_promptly() {
     let r = own_pool().install(|| render(&rs, &rig, &st, &progress)).unwrap();
     let t = start.elapsed().as_secs_f64();
     let after = cancelled_at.lock().unwrap().expect("cancelled").elapsed().as_secs_f64();
-    eprintln!("cancel: returned {after:.4} s after the cancel ({t:.3} s in all), spp_done {}, {} progress calls", r.spp_done, calls.load(Ordering::Relaxed));
+    eprintln!(
+        "cancel: returned {after:.4} s after the cancel ({t:.3} s in all), spp_done {}, {} progress calls",
+        r.spp_done,
+        calls.load(Ordering::Relaxed)
+    );
     assert!(!r.complete);
     assert!(r.spp_done >= 1 && r.spp_done < st.spp, "spp_done {}", r.spp_done);
     // "promptly": the cancel flag is checked per row; rows in flight (one per thread, ≤ 16 spp
@@ -1012,7 +1111,10 @@ fn render_cancel_via_progress_returns_promptly() {
 #[test]
 fn render_time_limit_stops_early() {
     let (rs, rig) = furnace_for_interrupts();
-    let st = RenderSettings { time_limit: Some(Duration::from_millis(250)), ..settings(160, 100, 1 << 20, 0, PixelFilter::default()) };
+    let st = RenderSettings {
+        time_limit: Some(Duration::from_millis(250)),
+        ..settings(160, 100, 1 << 20, 0, PixelFilter::default())
+    };
     let pool = own_pool();
     let start = Instant::now();
     let r = pool.install(|| render(&rs, &rig, &st, &|_| true)).unwrap();

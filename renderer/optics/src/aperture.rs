@@ -52,7 +52,11 @@ impl ApertureMask {
                 .pixels()
                 .map(|p| {
                     let [r, g, b, a] = p.0;
-                    if has_alpha { a } else { 0.2126 * r + 0.7152 * g + 0.0722 * b }
+                    if has_alpha {
+                        a
+                    } else {
+                        0.2126 * r + 0.7152 * g + 0.0722 * b
+                    }
                 })
                 .collect();
             (w, h, px)
@@ -191,7 +195,11 @@ mod tests {
 
     #[test]
     fn hexagon_area_matches_formula() {
-        let ap = Aperture { shape: ApertureShape::Blades { count: 6, curvature: 0.0 }, rotation_rad: 0.3, anamorphic_ratio: 1.0 };
+        let ap = Aperture {
+            shape: ApertureShape::Blades { count: 6, curvature: 0.0 },
+            rotation_rad: 0.3,
+            anamorphic_ratio: 1.0,
+        };
         let n = 800;
         let mut inside = 0usize;
         for i in 0..n {
@@ -210,7 +218,11 @@ mod tests {
 
     #[test]
     fn fully_curved_blades_are_a_circle() {
-        let ap = Aperture { shape: ApertureShape::Blades { count: 5, curvature: 1.0 }, rotation_rad: 0.0, anamorphic_ratio: 1.0 };
+        let ap = Aperture {
+            shape: ApertureShape::Blades { count: 5, curvature: 1.0 },
+            rotation_rad: 0.0,
+            anamorphic_ratio: 1.0,
+        };
         for k in 0..360 {
             let a = (k as f64).to_radians();
             assert!(ap.transmission(0.999 * a.cos(), 0.999 * a.sin(), 1.0) > 0.0);

@@ -32,21 +32,36 @@ pub fn section_svg(lens: &Lens, film_z_mm: f64) -> String {
         svg,
         r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width:.0}" height="{height:.0}" viewBox="0 0 {width:.0} {height:.0}"><rect width="100%" height="100%" fill="white"/>"#
     );
-    let _ = writeln!(svg, r#"<text x="8" y="{:.0}" font-family="sans-serif" font-size="14">{} — f = {:.2} mm, f/{:.2}</text>"#, height - 8.0, xml(lens.name()), lens.paraxial().efl_mm, lens.paraxial().f_number);
+    let _ = writeln!(
+        svg,
+        r#"<text x="8" y="{:.0}" font-family="sans-serif" font-size="14">{} — f = {:.2} mm, f/{:.2}</text>"#,
+        height - 8.0,
+        xml(lens.name()),
+        lens.paraxial().efl_mm,
+        lens.paraxial().f_number
+    );
     // 2. Optical axis and film plane.
     let (ax0, ay) = to_svg(z_min, 0.0);
     let (ax1, _) = to_svg(z_max, 0.0);
-    let _ = writeln!(svg, r##"<line x1="{ax0:.2}" y1="{ay:.2}" x2="{ax1:.2}" y2="{ay:.2}" stroke="#999" stroke-dasharray="6 4"/>"##);
+    let _ = writeln!(
+        svg,
+        r##"<line x1="{ax0:.2}" y1="{ay:.2}" x2="{ax1:.2}" y2="{ay:.2}" stroke="#999" stroke-dasharray="6 4"/>"##
+    );
     let (fx, fy0) = to_svg(film_z_mm, x_ext);
     let (_, fy1) = to_svg(film_z_mm, -x_ext);
-    let _ = writeln!(svg, r##"<line x1="{fx:.2}" y1="{fy0:.2}" x2="{fx:.2}" y2="{fy1:.2}" stroke="#333" stroke-width="2"/>"##);
+    let _ = writeln!(
+        svg,
+        r##"<line x1="{fx:.2}" y1="{fy0:.2}" x2="{fx:.2}" y2="{fy1:.2}" stroke="#333" stroke-width="2"/>"##
+    );
     // 3. Elements: glass between surface i and i+1.
     let profile = |i: usize, r: f64| -> Vec<(f64, f64)> {
         let s = &surfaces[i];
-        (0..=40).map(|k| {
-            let x = -r + 2.0 * r * k as f64 / 40.0;
-            (s.z_mm + s.shape.sag(x, 0.0).unwrap_or(0.0), x)
-        }).collect()
+        (0..=40)
+            .map(|k| {
+                let x = -r + 2.0 * r * k as f64 / 40.0;
+                (s.z_mm + s.shape.sag(x, 0.0).unwrap_or(0.0), x)
+            })
+            .collect()
     };
     for i in 0..surfaces.len() {
         let s = &surfaces[i];
@@ -55,7 +70,10 @@ pub fn section_svg(lens: &Lens, film_z_mm: f64) -> String {
             let (_, y1) = to_svg(s.z_mm, lens.stop_semi_diameter_mm());
             let (_, y2) = to_svg(s.z_mm, -lens.stop_semi_diameter_mm());
             let (_, y3) = to_svg(s.z_mm, -s.housing_semi_diameter_mm.max(lens.stop_semi_diameter_mm() * 1.3));
-            let _ = writeln!(svg, r#"<line x1="{x:.2}" y1="{y0:.2}" x2="{x:.2}" y2="{y1:.2}" stroke="black" stroke-width="3"/><line x1="{x:.2}" y1="{y2:.2}" x2="{x:.2}" y2="{y3:.2}" stroke="black" stroke-width="3"/>"#);
+            let _ = writeln!(
+                svg,
+                r#"<line x1="{x:.2}" y1="{y0:.2}" x2="{x:.2}" y2="{y1:.2}" stroke="black" stroke-width="3"/><line x1="{x:.2}" y1="{y2:.2}" x2="{x:.2}" y2="{y3:.2}" stroke="black" stroke-width="3"/>"#
+            );
             continue;
         }
         if s.material_after == super::glass::Material::Air || i + 1 >= surfaces.len() {
@@ -74,8 +92,18 @@ pub fn section_svg(lens: &Lens, film_z_mm: f64) -> String {
         let last = pts.last().copied().unwrap_or_default();
         pts.push((last.0, -r));
         pts.push((pts[0].0, -r));
-        let d: Vec<String> = pts.iter().map(|&(z, x)| { let (a, b) = to_svg(z, x); format!("{a:.2},{b:.2}") }).collect();
-        let _ = writeln!(svg, r##"<polygon points="{}" fill="#cfe3f7" stroke="#2a5d8f" stroke-width="1.2"/>"##, d.join(" "));
+        let d: Vec<String> = pts
+            .iter()
+            .map(|&(z, x)| {
+                let (a, b) = to_svg(z, x);
+                format!("{a:.2},{b:.2}")
+            })
+            .collect();
+        let _ = writeln!(
+            svg,
+            r##"<polygon points="{}" fill="#cfe3f7" stroke="#2a5d8f" stroke-width="1.2"/>"##,
+            d.join(" ")
+        );
     }
     // 4. Ray fans from three film heights, traced film → scene through the exit-pupil bounds.
     let colours = ["#d62728", "#2ca02c", "#1f77b4"];
@@ -92,12 +120,27 @@ pub fn section_svg(lens: &Lens, film_z_mm: f64) -> String {
                 x = -x; // box is for a film point on +x; mirror
             }
             let target = DVec3::new(x, 0.0, lens.last_vertex_z_mm());
-            let (pts, result) = lens.trace_path(&Ray::new(film, target - film), lens.primary_wavelength_nm(), TraceDirection::FilmToScene);
+            let (pts, result) = lens.trace_path(
+                &Ray::new(film, target - film),
+                lens.primary_wavelength_nm(),
+                TraceDirection::FilmToScene,
+            );
             let Ok(out) = result else { continue };
             let t = (out.ray.origin.z - z_min) / (-out.ray.direction.z).max(0.2);
             let end = out.ray.origin + out.ray.direction * t.min(3.0 * lead);
-            let d: Vec<String> = pts.iter().chain(std::iter::once(&end)).map(|p| { let (a, b) = to_svg(p.z, p.x); format!("{a:.2},{b:.2}") }).collect();
-            let _ = writeln!(svg, r#"<polyline points="{}" fill="none" stroke="{colour}" stroke-width="0.8" opacity="0.85"/>"#, d.join(" "));
+            let d: Vec<String> = pts
+                .iter()
+                .chain(std::iter::once(&end))
+                .map(|p| {
+                    let (a, b) = to_svg(p.z, p.x);
+                    format!("{a:.2},{b:.2}")
+                })
+                .collect();
+            let _ = writeln!(
+                svg,
+                r#"<polyline points="{}" fill="none" stroke="{colour}" stroke-width="0.8" opacity="0.85"/>"#,
+                d.join(" ")
+            );
         }
     }
     svg.push_str("</svg>\n");

@@ -152,11 +152,7 @@ impl Material {
             .map(|g| g.name.as_str())
             .take(5)
             .collect();
-        let suggestion = if close.is_empty() {
-            String::new()
-        } else {
-            format!(", did you mean {}?", close.join(", "))
-        };
+        let suggestion = if close.is_empty() { String::new() } else { format!(", did you mean {}?", close.join(", ")) };
         Err(Error::UnknownGlass { name: name.to_string(), suggestion })
     }
 }
@@ -173,10 +169,7 @@ pub struct CatalogGlass {
 }
 
 fn normalize(name: &str) -> String {
-    name.chars()
-        .filter(|c| !matches!(c, '-' | '_' | ' ' | '.'))
-        .flat_map(|c| c.to_uppercase())
-        .collect()
+    name.chars().filter(|c| !matches!(c, '-' | '_' | ' ' | '.')).flat_map(|c| c.to_uppercase()).collect()
 }
 
 const CATALOG_TSV: &str = include_str!("../data/glass_catalog.tsv");
@@ -213,11 +206,7 @@ fn parse_catalog(text: &str) -> Vec<CatalogGlass> {
             }
             _ => continue,
         };
-        out.push(CatalogGlass {
-            name: cols[0].to_string(),
-            catalogue: cols[1].to_string(),
-            dispersion,
-        });
+        out.push(CatalogGlass { name: cols[0].to_string(), catalogue: cols[1].to_string(), dispersion });
     }
     out
 }
@@ -228,10 +217,7 @@ mod tests {
 
     #[test]
     fn catalogue_rows_all_parse_and_are_physical() {
-        let rows = CATALOG_TSV
-            .lines()
-            .filter(|l| !l.trim().is_empty() && !l.trim_start().starts_with('#'))
-            .count();
+        let rows = CATALOG_TSV.lines().filter(|l| !l.trim().is_empty() && !l.trim_start().starts_with('#')).count();
         assert_eq!(rows, catalog().len(), "every catalogue row must parse");
         for g in catalog() {
             for wl in [380.0, 480.0, 587.5618, 700.0, 780.0] {

@@ -53,7 +53,7 @@ pub fn lens_info(lens: &Lens, focus_m: Option<f64>, wavelength: Option<f64>, sen
             "horizontal": fov(0.5 * w, 0.0),
             "vertical": fov(0.0, 0.5 * h),
             "diagonal": fov(0.5 * w, 0.5 * h),
-"image_circle": pupil::field_angle_deg(lens, image_circle * (1.0 - 1e-9), 0.0, film_z).map(|a| 2.0 * a),
+    "image_circle": pupil::field_angle_deg(lens, image_circle * (1.0 - 1e-9), 0.0, film_z).map(|a| 2.0 * a),
             "paraxial_diagonal": 2.0 * (0.5 * w.hypot(h) / p.efl_mm.abs()).atan().to_degrees(),
         },
         "thick_lens": {
@@ -63,4 +63,3 @@ pub fn lens_info(lens: &Lens, focus_m: Option<f64>, wavelength: Option<f64>, sen
         },
     }))
 }
-

@@ -150,7 +150,9 @@ impl Lens {
         let a = &p.aperture;
         let shape = match a.shape {
             ApertureShapeSpec::Circle => ApertureShape::Circle,
-            ApertureShapeSpec::Blades => ApertureShape::Blades { count: a.blades.unwrap_or(6), curvature: a.blade_curvature },
+            ApertureShapeSpec::Blades => {
+                ApertureShape::Blades { count: a.blades.unwrap_or(6), curvature: a.blade_curvature }
+            }
             ApertureShapeSpec::Image => {
                 let rel = a.image.clone().unwrap_or_default();
                 let path = match base_dir {
@@ -160,7 +162,8 @@ impl Lens {
                 ApertureShape::Mask(Arc::new(ApertureMask::load(&path)?))
             }
         };
-        let aperture = Aperture { shape, rotation_rad: a.rotation_deg.to_radians(), anamorphic_ratio: a.anamorphic_ratio };
+        let aperture =
+            Aperture { shape, rotation_rad: a.rotation_deg.to_radians(), anamorphic_ratio: a.anamorphic_ratio };
         let primary = p.lens.primary_wavelength_nm.unwrap_or(WAVELENGTH_D_NM);
         let wavelengths = p.lens.wavelengths_nm.clone().unwrap_or_else(|| DEFAULT_WAVELENGTHS_NM.to_vec());
         let primary_index_after = surfaces.iter().map(|s| s.material_after.index(primary)).collect();
@@ -180,7 +183,9 @@ impl Lens {
             rotationally_symmetric,
         };
         // 4. Precompute first-order data.
-        lens.paraxial = Some(paraxial::analyse(&lens, primary).map_err(|e| Error::lens_file(&map.file, 0, "surface", e.to_string()))?);
+        lens.paraxial = Some(
+            paraxial::analyse(&lens, primary).map_err(|e| Error::lens_file(&map.file, 0, "surface", e.to_string()))?,
+        );
         Ok(lens)
     }
 
@@ -396,7 +401,12 @@ impl Lens {
     }
 
     /// Traces a ray and also returns every surface hit point (for drawing).
-    pub fn trace_path(&self, ray: &Ray, wavelength_nm: f64, direction: TraceDirection) -> (Vec<DVec3>, Result<Traced, Absorbed>) {
+    pub fn trace_path(
+        &self,
+        ray: &Ray,
+        wavelength_nm: f64,
+        direction: TraceDirection,
+    ) -> (Vec<DVec3>, Result<Traced, Absorbed>) {
         let mut points = vec![ray.origin];
         let r = self.trace_visiting(ray, wavelength_nm, direction, StopMode::Apply, |p| points.push(p));
         (points, r)
@@ -447,8 +457,12 @@ impl Lens {
             }
             // 3. Refract (a stop is usually a plane in air, where nothing happens).
             let (n1, n2) = match direction {
-                TraceDirection::SceneToFilm => (self.index_before(i, wavelength_nm), self.index_after(i, wavelength_nm)),
-                TraceDirection::FilmToScene => (self.index_after(i, wavelength_nm), self.index_before(i, wavelength_nm)),
+                TraceDirection::SceneToFilm => {
+                    (self.index_before(i, wavelength_nm), self.index_after(i, wavelength_nm))
+                }
+                TraceDirection::FilmToScene => {
+                    (self.index_after(i, wavelength_nm), self.index_before(i, wavelength_nm))
+                }
             };
             if n1 != n2 {
                 let normal = s.shape.normal(p).ok_or(Absorbed::Missed(i))?;

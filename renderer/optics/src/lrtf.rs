@@ -168,7 +168,8 @@ impl Key {
 /// closure, so that it is inlined).
 #[inline(always)]
 fn blend(e: &[&Entry; 8], w: &[f32; 8], c: usize) -> Vec4 {
-    ((e[0][c] * w[0] + e[1][c] * w[1]) + (e[2][c] * w[2] + e[3][c] * w[3])) + ((e[4][c] * w[4] + e[5][c] * w[5]) + (e[6][c] * w[6] + e[7][c] * w[7]))
+    ((e[0][c] * w[0] + e[1][c] * w[1]) + (e[2][c] * w[2] + e[3][c] * w[3]))
+        + ((e[4][c] * w[4] + e[5][c] * w[5]) + (e[6][c] * w[6] + e[7][c] * w[7]))
 }
 
 /// What a lookup returns.
@@ -244,7 +245,8 @@ fn trace_unclipped(lens: &Lens, ray: &Ray, wavelength_nm: f64) -> Unclipped {
     let mut margin = f64::INFINITY;
     let mut stop = DVec2::ZERO;
     let surfaces = lens.surfaces();
-    let fail = |margin: f64, stop: DVec2| Unclipped { ray: None, stop, margin: if margin < 0.0 { margin } else { -1.0 } };
+    let fail =
+        |margin: f64, stop: DVec2| Unclipped { ray: None, stop, margin: if margin < 0.0 { margin } else { -1.0 } };
     for i in (0..surfaces.len()).rev() {
         let s = &surfaces[i];
         let local = DVec3::new(o.x, o.y, o.z - s.z_mm);
@@ -372,12 +374,18 @@ impl LrtfTable {
         let last = surfaces.last().ok_or_else(|| Error::Optics("empty lens".into()))?;
         let first = &surfaces[0];
         let samples = 64;
-        let (mut z_rear_max, mut z_rear_min, mut z_front, mut r_out) = (f64::NEG_INFINITY, f64::INFINITY, f64::INFINITY, 0.0f64);
-        let rear_z_at = |r: f64| (last.z_mm + last.shape.sag(r, 0.0).unwrap_or(0.0)).max(last.z_mm + last.shape.sag(0.0, r).unwrap_or(0.0));
+        let (mut z_rear_max, mut z_rear_min, mut z_front, mut r_out) =
+            (f64::NEG_INFINITY, f64::INFINITY, f64::INFINITY, 0.0f64);
+        let rear_z_at = |r: f64| {
+            (last.z_mm + last.shape.sag(r, 0.0).unwrap_or(0.0)).max(last.z_mm + last.shape.sag(0.0, r).unwrap_or(0.0))
+        };
         for k in 0..=samples {
             let r = last.semi_diameter_mm * k as f64 / samples as f64;
             z_rear_max = z_rear_max.max(rear_z_at(r));
-            z_rear_min = z_rear_min.min((last.z_mm + last.shape.sag(r, 0.0).unwrap_or(0.0)).min(last.z_mm + last.shape.sag(0.0, r).unwrap_or(0.0)));
+            z_rear_min = z_rear_min.min(
+                (last.z_mm + last.shape.sag(r, 0.0).unwrap_or(0.0))
+                    .min(last.z_mm + last.shape.sag(0.0, r).unwrap_or(0.0)),
+            );
             let rf = first.semi_diameter_mm * k as f64 / samples as f64;
             z_front = z_front.min(first.z_mm + first.shape.sag(rf, 0.0).unwrap_or(0.0));
         }
@@ -391,9 +399,13 @@ impl LrtfTable {
         //    ray from the film, whose z only decreases, crosses the dome before any point of the
         //    rear surface) and must cover that surface; it is a hemisphere when the film leaves
         //    room, else a flatter cap reaching at most 40 % of the way to the film.
-        let min_film = options.min_film_distance_mm.unwrap_or((lens.paraxial().bfl_mm + lens.last_vertex_z_mm() - z_rear_max) - 5.0);
+        let min_film = options
+            .min_film_distance_mm
+            .unwrap_or((lens.paraxial().bfl_mm + lens.last_vertex_z_mm() - z_rear_max) - 5.0);
         if !(min_film > 0.5) {
-            return Err(Error::Optics(format!("the film ({min_film:.2} mm behind the rear element) is too close to the lens for a table")));
+            return Err(Error::Optics(format!(
+                "the film ({min_film:.2} mm behind the rear element) is too close to the lens for a table"
+            )));
         }
         let depth = z_rear_max - z_rear_min;
         let mut dome = None;
@@ -413,11 +425,14 @@ impl LrtfTable {
             base_radius *= 1.05;
         }
         let Some((cap_height, in_radius, in_centre_z)) = dome else {
-            return Err(Error::Optics(format!("no input dome fits between the rear element and the film ({min_film:.2} mm)")));
+            return Err(Error::Optics(format!(
+                "no input dome fits between the rear element and the film ({min_film:.2} mm)"
+            )));
         };
         let z_rear = z_rear_min;
         let min_film = min_film + depth; // from the dome's base plane
-        let alpha_max = ((options.max_film_radius_mm + base_radius) / (min_film - cap_height)).atan().min(89f64.to_radians());
+        let alpha_max =
+            ((options.max_film_radius_mm + base_radius) / (min_film - cap_height)).atan().min(89f64.to_radians());
         let s_max = (0.5 * alpha_max).tan() * 1.02;
         let wavelengths = match &options.wavelengths_nm {
             Some(w) if !w.is_empty() => w.clone(),
@@ -461,13 +476,27 @@ impl LrtfTable {
                         let d = unstereo(DVec2::new(sx, sy));
                         let e = &mut out[(ix * ny + iy) * CHANNELS..(ix * ny + iy + 1) * CHANNELS];
                         let u = trace_unclipped(lens, &Ray { origin: p, direction: d.normalize() }, wl);
-                        let out_ray = u.ray.and_then(|r| Some((exit_sphere(r.origin, r.direction, DVec3::new(0.0, 0.0, z_front), out_radius)?, r.direction)));
+                        let out_ray = u.ray.and_then(|r| {
+                            Some((
+                                exit_sphere(r.origin, r.direction, DVec3::new(0.0, 0.0, z_front), out_radius)?,
+                                r.direction,
+                            ))
+                        });
                         let margin = u.margin.max(-1.0) as f32;
                         match out_ray {
                             Some((q, dir)) => {
                                 let w = stereo((q - DVec3::new(0.0, 0.0, z_front)) / out_radius);
                                 let es = stereo(dir);
-                                e.copy_from_slice(&[w.x as f32, w.y as f32, es.x as f32, es.y as f32, u.stop.x as f32, u.stop.y as f32, margin, 1.0]);
+                                e.copy_from_slice(&[
+                                    w.x as f32,
+                                    w.y as f32,
+                                    es.x as f32,
+                                    es.y as f32,
+                                    u.stop.x as f32,
+                                    u.stop.y as f32,
+                                    margin,
+                                    1.0,
+                                ]);
                             }
                             None => e.copy_from_slice(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, margin.min(-1e-6), 0.0]),
                         }
@@ -505,7 +534,9 @@ fn fill_invalid(header: &LrtfHeader, data: &mut [f32]) {
                         let mut cnt = 0;
                         let mut near = [0f32; 6];
                         let mut near_cnt = 0;
-                        for (du, dx, dy) in [(1i64, 0i64, 0i64), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)] {
+                        for (du, dx, dy) in
+                            [(1i64, 0i64, 0i64), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)]
+                        {
                             let at = |k: i64| -> Option<usize> {
                                 let (a, b, c) = (iu as i64 + du * k, ix as i64 + dx * k, iy as i64 + dy * k);
                                 if a < 0 || b < 0 || c < 0 || a >= n as i64 || b >= n as i64 || c >= ny as i64 {
@@ -608,9 +639,27 @@ impl LrtfTable {
         }
         let at = |i: usize| &self.lines[i / 2].0[i % 2];
         let idx = [base, base + k.stride_x, base + k.stride_u, base + k.stride_u + k.stride_x];
-        let e = [at(idx[0]), at(idx[0] + 1), at(idx[1]), at(idx[1] + 1), at(idx[2]), at(idx[2] + 1), at(idx[3]), at(idx[3] + 1)];
+        let e = [
+            at(idx[0]),
+            at(idx[0] + 1),
+            at(idx[1]),
+            at(idx[1] + 1),
+            at(idx[2]),
+            at(idx[2] + 1),
+            at(idx[3]),
+            at(idx[3] + 1),
+        ];
         let (su, sx_, sy_) = (1.0 - tu, 1.0 - tx, 1.0 - ty);
-        let w = [su * sx_ * sy_, su * sx_ * ty, su * tx * sy_, su * tx * ty, tu * sx_ * sy_, tu * sx_ * ty, tu * tx * sy_, tu * tx * ty];
+        let w = [
+            su * sx_ * sy_,
+            su * sx_ * ty,
+            su * tx * sy_,
+            su * tx * ty,
+            tu * sx_ * sy_,
+            tu * sx_ * ty,
+            tu * tx * sy_,
+            tu * tx * ty,
+        ];
         // 4. Corners must agree on passing (margin > 0; failed traces carry negative margins).
         let lo = e[0][1].min(e[1][1]).min(e[2][1].min(e[3][1])).min(e[4][1].min(e[5][1]).min(e[6][1].min(e[7][1])));
         let hi = e[0][1].max(e[1][1]).max(e[2][1].max(e[3][1])).max(e[4][1].max(e[5][1]).max(e[6][1].max(e[7][1])));
@@ -696,7 +745,8 @@ impl LrtfTable {
             return Err(bad(format!("LRTF format version {version}, this build reads version {LRTF_VERSION}: re-bake it with `petzval lrtf bake`")));
         }
         let hlen = u32::from_le_bytes([bytes[12], bytes[13], bytes[14], bytes[15]]) as usize;
-        let hend = 16usize.checked_add(hlen).filter(|e| *e <= bytes.len()).ok_or_else(|| bad("truncated header".into()))?;
+        let hend =
+            16usize.checked_add(hlen).filter(|e| *e <= bytes.len()).ok_or_else(|| bad("truncated header".into()))?;
         let header: LrtfHeader = serde_json::from_slice(&bytes[16..hend]).map_err(|e| bad(format!("header: {e}")))?;
         let expect_hash = lens_hash(lens);
         if header.lens_hash != expect_hash || header.lens_name != lens.name() {
@@ -717,11 +767,11 @@ impl LrtfTable {
         if bytes.len() != hend + count * 4 {
             return Err(bad(format!("expected {} bytes of table data, found {}", count * 4, bytes.len() - hend)));
         }
-        let data: Vec<f32> = bytes[hend..].chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+        let data: Vec<f32> =
+            bytes[hend..].chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
         if data.iter().any(|v| !v.is_finite()) {
             return Err(bad("non-finite values in the table".into()));
         }
         Ok(LrtfTable::from_entries(header, &data))
     }
 }
-

@@ -45,7 +45,12 @@ impl SceneToFilmTable {
         // 2. The reversed lens's "film" is the scene: rays come from at least its back focal
         //    distance and spread over the field.
         let d = (reversed.paraxial().bfl_mm.abs()).max(10.0);
-        let options = BakeOptions { resolution, max_film_radius_mm: d * alpha.tan(), min_film_distance_mm: Some(d), wavelengths_nm: None };
+        let options = BakeOptions {
+            resolution,
+            max_film_radius_mm: d * alpha.tan(),
+            min_film_distance_mm: Some(d),
+            wavelengths_nm: None,
+        };
         let table = LrtfTable::bake(&reversed, &options, progress)?;
         Ok(SceneToFilmTable { table, mirror_z_mm: lens.last_vertex_z_mm(), reversed })
     }
@@ -63,7 +68,10 @@ impl SceneToFilmTable {
     }
 
     fn mirror(&self, r: &Ray) -> Ray {
-        Ray { origin: DVec3::new(r.origin.x, r.origin.y, self.mirror_z_mm - r.origin.z), direction: DVec3::new(r.direction.x, r.direction.y, -r.direction.z) }
+        Ray {
+            origin: DVec3::new(r.origin.x, r.origin.y, self.mirror_z_mm - r.origin.z),
+            direction: DVec3::new(r.direction.x, r.direction.y, -r.direction.z),
+        }
     }
 
     /// Looks up a ray arriving from the scene (in this lens's coordinates, heading towards +z):
@@ -89,7 +97,9 @@ impl SceneToFilmTable {
                 (t > 0.0).then_some((h.ray, t))
             }
             LrtfLookup::Miss => None,
-            LrtfLookup::Uncertain => lens.trace(ray, wavelength_nm, super::lens::TraceDirection::SceneToFilm).map(|t| (t.ray, t.transmission)),
+            LrtfLookup::Uncertain => lens
+                .trace(ray, wavelength_nm, super::lens::TraceDirection::SceneToFilm)
+                .map(|t| (t.ray, t.transmission)),
         }
     }
 

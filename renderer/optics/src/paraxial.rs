@@ -144,11 +144,7 @@ pub fn analyse(lens: &Lens, wavelength_nm: f64) -> Result<ParaxialData> {
     let s = lens.stop_index();
     let stop_r = lens.stop_semi_diameter_mm();
     let front = matrix(lens, 0, s, wavelength_nm, Meridian::Y, true);
-    let (ep_z, ep_d) = if s == 0 {
-        (0.0, 2.0 * stop_r)
-    } else {
-        (front.b / front.a, 2.0 * stop_r / front.a.abs())
-    };
+    let (ep_z, ep_d) = if s == 0 { (0.0, 2.0 * stop_r) } else { (front.b / front.a, 2.0 * stop_r / front.a.abs()) };
     let back = matrix(lens, s, n, wavelength_nm, Meridian::Y, false);
     let (xp_z, xp_d) = if back.d.abs() < 1e-15 {
         (f64::INFINITY, f64::INFINITY)

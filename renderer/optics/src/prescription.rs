@@ -308,13 +308,7 @@ pub fn parse_toml(text: &str, file: &str) -> Result<(Prescription, SourceMap)> {
             lens_line = i + 1;
         }
     }
-    let map = SourceMap {
-        file: file.into(),
-        surface_lines,
-        text: Some(text.to_string()),
-        aperture_line,
-        lens_line,
-    };
+    let map = SourceMap { file: file.into(), surface_lines, text: Some(text.to_string()), aperture_line, lens_line };
     Ok((p, map))
 }
 
@@ -327,7 +321,8 @@ fn line_of(text: &str, byte: usize) -> usize {
 fn key_on_line(text: &str, line: usize) -> Option<String> {
     let l = text.lines().nth(line.checked_sub(1)?)?;
     let key = l.split_once('=')?.0.trim();
-    (!key.is_empty() && key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '.' || c == '-')).then(|| key.to_string())
+    (!key.is_empty() && key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '.' || c == '-'))
+        .then(|| key.to_string())
 }
 
 fn field_from_message(msg: &str) -> Option<String> {
@@ -352,9 +347,7 @@ pub(crate) struct ResolvedSurface {
 /// Checks every field and resolves materials. Geometry checks (intersecting elements) happen
 /// in [`super::lens::Lens::new`], where surface shapes exist.
 pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedSurface>> {
-    let lens_err = |field: &str, msg: String| {
-        Error::lens_file(&map.file, map.lens_line, format!("lens.{field}"), msg)
-    };
+    let lens_err = |field: &str, msg: String| Error::lens_file(&map.file, map.lens_line, format!("lens.{field}"), msg);
     if p.lens.name.trim().is_empty() {
         return Err(lens_err("name", "must not be empty".into()));
     }
@@ -419,7 +412,11 @@ pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedS
             return Err(map.surface_error(i, "thickness_mm", format!("negative thickness {}", s.thickness_mm)));
         }
         if s.semi_diameter_mm <= 0.0 {
-            return Err(map.surface_error(i, "semi_diameter_mm", format!("must be positive, got {}", s.semi_diameter_mm)));
+            return Err(map.surface_error(
+                i,
+                "semi_diameter_mm",
+                format!("must be positive, got {}", s.semi_diameter_mm),
+            ));
         }
         if s.stop {
             let housing = s.housing_semi_diameter_mm.unwrap_or(s.semi_diameter_mm);
@@ -443,8 +440,9 @@ pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedS
             return Err(map.surface_error(i, "housing_semi_diameter_mm", "only the stop has a housing radius"));
         }
         let material_after = match &s.material {
-            MaterialSpec::Name(n) => Material::from_catalog(n)
-                .map_err(|e| map.surface_error(i, "material", e.to_string()))?,
+            MaterialSpec::Name(n) => {
+                Material::from_catalog(n).map_err(|e| map.surface_error(i, "material", e.to_string()))?
+            }
             MaterialSpec::Model(m) => {
                 if !(m.nd.is_finite() && (1.0..=3.0).contains(&m.nd)) {
                     return Err(map.surface_error(i, "material", format!("nd = {} must be in [1, 3]", m.nd)));
@@ -463,7 +461,8 @@ pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedS
     }
     // Aperture table.
     let a = &p.aperture;
-    let ap_err = |field: &str, msg: String| Error::lens_file(&map.file, map.aperture_line, format!("aperture.{field}"), msg);
+    let ap_err =
+        |field: &str, msg: String| Error::lens_file(&map.file, map.aperture_line, format!("aperture.{field}"), msg);
     if !(a.anamorphic_ratio.is_finite() && a.anamorphic_ratio > 0.0) {
         return Err(ap_err("anamorphic_ratio", format!("must be positive, got {}", a.anamorphic_ratio)));
     }

@@ -87,7 +87,8 @@ impl ExitPupilBounds {
         if lens.is_rotationally_symmetric() {
             // A bladed, masked or squeezed opening lies inside its circumscribed circle, which
             // keeps the bounds rotationally symmetric (and conservative).
-            let circular = if lens.aperture().is_circular() { lens.clone() } else { lens.with_circumscribed_circular_stop() };
+            let circular =
+                if lens.aperture().is_circular() { lens.clone() } else { lens.with_circumscribed_circular_stop() };
             Self::compute_with(&circular, film_z_mm, film_dz_mm, max_film_radius_mm, 64, 16, 48)
         } else {
             // One union box serves every film point, so fewer intervals lose nothing; each
@@ -111,7 +112,11 @@ impl ExitPupilBounds {
         let cell = 2.0 * half / grid as f64;
         let wl = lens.primary_wavelength_nm();
         let symmetric = lens.is_rotationally_symmetric() && lens.aperture().is_circular();
-        let z_levels: Vec<f64> = if film_dz_mm > 0.0 { vec![film_z_mm - film_dz_mm, film_z_mm, film_z_mm + film_dz_mm] } else { vec![film_z_mm] };
+        let z_levels: Vec<f64> = if film_dz_mm > 0.0 {
+            vec![film_z_mm - film_dz_mm, film_z_mm, film_z_mm + film_dz_mm]
+        } else {
+            vec![film_z_mm]
+        };
         // 1. For each radial interval, trace a grid from film points in it.
         let boxes: Vec<Box2> = (0..intervals)
             .into_par_iter()
@@ -139,9 +144,16 @@ impl ExitPupilBounds {
                         for fp in film_pts {
                             for i in 0..grid {
                                 for j in 0..grid {
-                                    let p = DVec3::new(-half + (i as f64 + 0.5) * cell, -half + (j as f64 + 0.5) * cell, rear_z);
+                                    let p = DVec3::new(
+                                        -half + (i as f64 + 0.5) * cell,
+                                        -half + (j as f64 + 0.5) * cell,
+                                        rear_z,
+                                    );
                                     let ray = Ray::new(fp, p - fp);
-                                    if lens.trace_detailed(&ray, wl, TraceDirection::FilmToScene, StopMode::Apply).is_ok() {
+                                    if lens
+                                        .trace_detailed(&ray, wl, TraceDirection::FilmToScene, StopMode::Apply)
+                                        .is_ok()
+                                    {
                                         b.grow(DVec2::new(p.x, p.y));
                                     }
                                 }
@@ -255,7 +267,8 @@ pub fn chief_ray_from_film(lens: &Lens, film: DVec3, wavelength_nm: f64) -> Opti
 /// angle of its chief ray in object space; `None` outside the image circle (no chief ray).
 pub fn field_angle_deg(lens: &Lens, film_x_mm: f64, film_y_mm: f64, film_z_mm: f64) -> Option<f64> {
     let film = DVec3::new(film_x_mm, film_y_mm, film_z_mm);
-    chief_ray_from_film(lens, film, lens.primary_wavelength_nm()).map(|ray| (-ray.direction.z).clamp(-1.0, 1.0).acos().to_degrees())
+    chief_ray_from_film(lens, film, lens.primary_wavelength_nm())
+        .map(|ray| (-ray.direction.z).clamp(-1.0, 1.0).acos().to_degrees())
 }
 
 /// Radius of the image circle on the film plane at `film_z_mm`: the largest film radius whose
@@ -276,7 +289,11 @@ pub fn image_circle_radius_mm(lens: &Lens, film_z_mm: f64, max_mm: f64) -> f64 {
             let mut hi = r;
             for _ in 0..40 {
                 let mid = 0.5 * (lo + hi);
-                if ok(mid) { lo = mid } else { hi = mid }
+                if ok(mid) {
+                    lo = mid
+                } else {
+                    hi = mid
+                }
             }
             return lo;
         }

@@ -291,7 +291,13 @@ mod tests {
 
     #[test]
     fn asphere_sag_and_intersection_agree() {
-        let s = Shape { curvature_per_mm: 1.0 / 19.865, conic: 0.0, a2: 0.0, aspheric: vec![-1.5313e-05, 9.4893e-08, -1.8128e-09, 8.7528e-12], cylinder: None };
+        let s = Shape {
+            curvature_per_mm: 1.0 / 19.865,
+            conic: 0.0,
+            a2: 0.0,
+            aspheric: vec![-1.5313e-05, 9.4893e-08, -1.8128e-09, 8.7528e-12],
+            cylinder: None,
+        };
         let o = DVec3::new(2.0, -3.0, -5.0);
         let d = DVec3::new(0.05, 0.02, 1.0).normalize();
         let t = s.intersect(o, d).unwrap();

@@ -50,7 +50,9 @@ fn pass_fraction(lens: &Lens) -> f64 {
 #[test]
 fn blade_count_sets_the_area() {
     let circle = Lens::from_toml(&singlet_with(""), "t.toml", None).unwrap();
-    let hexagon = Lens::from_toml(&singlet_with("[aperture]\nshape = \"blades\"\nblades = 6\nrotation_deg = 15"), "t.toml", None).unwrap();
+    let hexagon =
+        Lens::from_toml(&singlet_with("[aperture]\nshape = \"blades\"\nblades = 6\nrotation_deg = 15"), "t.toml", None)
+            .unwrap();
     let (c, h) = (pass_fraction(&circle), pass_fraction(&hexagon));
     let ratio = h / c;
     let expected = 3.0 * 3f64.sqrt() / 2.0 / std::f64::consts::PI; // hexagon / circumcircle

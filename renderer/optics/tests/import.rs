@@ -73,7 +73,8 @@ fn pbrt_tables_import_and_match_their_design_focal_length() {
             .collect();
         assert_eq!(map.surface_lines, rows, "{file}");
         let stop = p.surfaces.iter().position(|s| s.stop).unwrap();
-        let stop_row: Vec<f64> = text.lines().nth(rows[stop] - 1).unwrap().split_whitespace().map(|t| t.parse().unwrap()).collect();
+        let stop_row: Vec<f64> =
+            text.lines().nth(rows[stop] - 1).unwrap().split_whitespace().map(|t| t.parse().unwrap()).collect();
         assert_eq!(stop_row[0], 0.0);
         assert_eq!(p.surfaces[stop].semi_diameter_mm, stop_row[3] / 2.0);
         let housing = p.surfaces[stop].housing_semi_diameter_mm.unwrap();
@@ -93,7 +94,10 @@ fn pbrt_reads_thickness_as_distance_to_next_even_with_an_axpos_header() {
     assert!(text.contains("axpos"));
     let (p, _) = import_pbrt(&text, "dgauss", "dg").unwrap();
     assert_eq!(p.surfaces[0].thickness_mm, 3.76);
-    assert_eq!(p.surfaces[0].material, MaterialSpec::Model(petzval_optics::prescription::ModelGlass { nd: 1.67, vd: 0.0 }));
+    assert_eq!(
+        p.surfaces[0].material,
+        MaterialSpec::Model(petzval_optics::prescription::ModelGlass { nd: 1.67, vd: 0.0 })
+    );
     assert_eq!(p.surfaces[1].material, MaterialSpec::Name("air".into()));
     assert_eq!(p.surfaces.last().unwrap().thickness_mm, 0.0);
 }
@@ -151,8 +155,8 @@ fn pbrt_bad_input_names_the_line() {
         ("29.475 3.76 7.5 25.2\n", 1, "N"),
         ("29.475 3.76 1.67 25.2\n84.83 0.12 1 25.2\n", 0, "radius"), // no stop
         ("0 1 0 10\n50 2 1.5 12\n0 1 0 10\n-50 30 1 12\n", 3, "radius"), // two stops
-        ("50 2 1.5 12\n0 1 1.5 10\n-50 30 1 12\n", 2, "N"), // stop followed by glass
-        ("50 2 1.5 12\n0 1 0 10\n-50 30 1 12\n", 2, "N"), // stop right after glass
+        ("50 2 1.5 12\n0 1 1.5 10\n-50 30 1 12\n", 2, "N"),          // stop followed by glass
+        ("50 2 1.5 12\n0 1 0 10\n-50 30 1 12\n", 2, "N"),            // stop right after glass
     ];
     for (text, line, field) in cases {
         let (l, f, m) = lens_file_err(import_pbrt(text, "bad.dat", "bad"));
@@ -181,7 +185,9 @@ fn expected_efl(sample: &str) -> f64 {
 
 #[test]
 fn zemax_files_from_optiland_match_optilands_focal_length() {
-    for sample in ["cooke_triplet", "tessar", "petzval", "double_gauss", "aspheric_singlet_a4", "aspheric_singlet_stop_on_glass"] {
+    for sample in
+        ["cooke_triplet", "tessar", "petzval", "double_gauss", "aspheric_singlet_a4", "aspheric_singlet_stop_on_glass"]
+    {
         let rel = format!("zmx/{sample}.zmx");
         let lens = build(import_zemax(&bytes(&rel), &rel)).unwrap_or_else(|e| panic!("{sample}: {e}"));
         let efl = lens.paraxial().efl_mm;
@@ -259,7 +265,9 @@ fn zemax_units_are_converted_to_mm() {
     let t = read("zmx/aspheric_singlet_a4.zmx").replace("UNIT MM", "UNIT CM");
     let (p, _) = import_zemax(t.as_bytes(), "a4cm.zmx").unwrap();
     let a = &p.surfaces[1].aspheric;
-    assert!(rel_close(a[0], -4.690412e-6 * 10f64.powi(-3), 1e-12) && rel_close(a[1], -6.404376e-8 * 10f64.powi(-5), 1e-12));
+    assert!(
+        rel_close(a[0], -4.690412e-6 * 10f64.powi(-3), 1e-12) && rel_close(a[1], -6.404376e-8 * 10f64.powi(-5), 1e-12)
+    );
 }
 
 #[test]
@@ -269,7 +277,8 @@ fn zemax_unknown_glass_falls_back_to_the_files_nd_vd_or_fails_at_its_line() {
     let (p, _) = import_zemax(t.as_bytes(), "g.zmx").unwrap();
     assert!(matches!(p.surfaces[2].material, MaterialSpec::Model(g) if (g.nd - 1.6200368335524609).abs() < 1e-12));
     assert!(p.lens.notes.contains("NOT-A-GLASS"));
-    let t = text.replacen("GLAS F2 0 0 1.6200368335524609E+00 3.6351379605603441E+01 0 0 0 0 0 0", "GLAS NOT-A-GLASS", 1);
+    let t =
+        text.replacen("GLAS F2 0 0 1.6200368335524609E+00 3.6351379605603441E+01 0 0 0 0 0 0", "GLAS NOT-A-GLASS", 1);
     let (line, field, _) = lens_file_err(import_zemax(t.as_bytes(), "g.zmx"));
     assert_eq!((line, field.as_str()), (line_containing(&t, "NOT-A-GLASS"), "GLAS"));
 }
@@ -434,7 +443,8 @@ fn lentil_bad_input_names_the_line() {
     let good = lentil_db(&singlet("abbe", "1.5168"));
     assert!(import_lentil(&good, "db.json", "7777").is_ok());
     // Missing field: the second surface without "thickness" → that surface's `{` line.
-    let t = good.replacen("        \"thickness\": 4\n", "        \"ior\": 1.5\n", 1).replacen("\"ior\": 1.5168,", "", 1);
+    let t =
+        good.replacen("        \"thickness\": 4\n", "        \"ior\": 1.5\n", 1).replacen("\"ior\": 1.5168,", "", 1);
     let (line, field, msg) = lens_file_err(import_lentil(&t, "db.json", "7777"));
     assert_eq!((line, field.as_str()), (obj_line(&t, 1), "7777.optical-elements-patent[1].thickness"), "{msg}\n{t}");
     // NaN (not JSON) and huge numbers.
@@ -462,7 +472,10 @@ fn lentil_bad_input_names_the_line() {
 fn lentil_entry_without_or_with_two_irises_names_the_line() {
     let no_iris = lentil_db(&singlet("abbe", "1.5").replacen("\"material\": \"iris\"", "\"material\": \"air\"", 1));
     let (line, field, _) = lens_file_err(import_lentil(&no_iris, "db.json", "7777"));
-    assert_eq!((line, field.as_str()), (line_containing(&no_iris, "optical-elements-patent"), "7777.optical-elements-patent"));
+    assert_eq!(
+        (line, field.as_str()),
+        (line_containing(&no_iris, "optical-elements-patent"), "7777.optical-elements-patent")
+    );
     let two = lentil_db(&[singlet("abbe", "1.5"), lentil_surface("99999", "5", "IRIS", "null", "5")].join(",\n"));
     let (line, field, _) = lens_file_err(import_lentil(&two, "db.json", "7777"));
     assert_eq!((line, field.as_str()), (obj_line(&two, 3), "7777.optical-elements-patent[3].material"));
@@ -526,7 +539,8 @@ fn every_library_lens_loads_and_has_its_design_focal_length() {
         match p.lens.focal_length_mm {
             Some(f) => {
                 // Anamorphic lenses: the design value belongs to one meridian.
-                let ok = rel_close(px.efl_mm, f, 0.10) || (!lens.is_rotationally_symmetric() && rel_close(px.efl_x_mm, f, 0.10));
+                let ok = rel_close(px.efl_mm, f, 0.10)
+                    || (!lens.is_rotationally_symmetric() && rel_close(px.efl_x_mm, f, 0.10));
                 assert!(ok, "{}: paraxial EFL {} (x {}) vs design {f}", e.name, px.efl_mm, px.efl_x_mm);
             }
             None => {
@@ -651,9 +665,22 @@ fn toml_bad_input_names_file_line_and_field() {
         // elements that intersect: 0.5 mm centre thickness between R 51 and R −51 at 8 mm
         (good.replace("thickness_mm = 4.0", "thickness_mm = 0.5"), 12, "surface[2].thickness_mm", "intersect"),
         // a stop larger than its housing
-        (good.replace("stop = true", "stop = true\nhousing_semi_diameter_mm = 2.0"), 7, "surface[1].semi_diameter_mm", "housing"),
+        (
+            good.replace("stop = true", "stop = true\nhousing_semi_diameter_mm = 2.0"),
+            7,
+            "surface[1].semi_diameter_mm",
+            "housing",
+        ),
         // a semi-diameter larger than the radius allows
-        (good.replace("semi_diameter_mm = 8.0\n\n[[surface]]\nradius_mm = -51.0", "semi_diameter_mm = 60.0\n\n[[surface]]\nradius_mm = -51.0"), 14, "surface[2].semi_diameter_mm", "radius"),
+        (
+            good.replace(
+                "semi_diameter_mm = 8.0\n\n[[surface]]\nradius_mm = -51.0",
+                "semi_diameter_mm = 60.0\n\n[[surface]]\nradius_mm = -51.0",
+            ),
+            14,
+            "surface[2].semi_diameter_mm",
+            "radius",
+        ),
         // no stop
         (good.replace("stop = true\n", ""), 0, "surface.stop", "no aperture stop"),
         // wrong type

@@ -38,7 +38,10 @@ fn lrtf_error_report_double_gauss() {
         for r in &rays {
             let exact = lens.trace_detailed(r, wl, TraceDirection::FilmToScene, StopMode::Apply).ok();
             let approx = match table.lookup(r, wl) {
-                LrtfLookup::Hit(l) => (lens.aperture().transmission(l.stop_point.x, l.stop_point.y, lens.stop_semi_diameter_mm()) > 0.0).then_some(l),
+                LrtfLookup::Hit(l) => {
+                    (lens.aperture().transmission(l.stop_point.x, l.stop_point.y, lens.stop_semi_diameter_mm()) > 0.0)
+                        .then_some(l)
+                }
                 LrtfLookup::Miss => None,
                 LrtfLookup::Uncertain => {
                     uncertain += 1;
@@ -72,12 +75,8 @@ fn lrtf_error_report_double_gauss() {
             assert!(mean_px < 0.1, "mean image error {mean_px} px");
             assert!(table.data_bytes() < 64 << 20);
         }
-
     }
 }
-
-
-
 
 /// Saved tables load back identically; a table for another lens, a foreign file and a truncated
 /// file are refused with a clear error; any f-number applies to a table baked with the stop open.
@@ -99,7 +98,10 @@ fn lrtf_file_round_trip_and_refusals() {
     // the in-memory layout (entries replicated with their σy neighbour) gives back the file's
     // entries exactly
     back.save(&dir.join("again.lrtf")).unwrap();
-    assert!(std::fs::read(&path).unwrap() == std::fs::read(dir.join("again.lrtf")).unwrap(), "save → load → save changed the file");
+    assert!(
+        std::fs::read(&path).unwrap() == std::fs::read(dir.join("again.lrtf")).unwrap(),
+        "save → load → save changed the file"
+    );
     // stale: another lens
     let other = library_lens("wide-22mm").unwrap();
     let err = LrtfTable::load(&path, &other).unwrap_err().to_string();
@@ -112,12 +114,20 @@ fn lrtf_file_round_trip_and_refusals() {
     assert!(LrtfTable::load(&dir.join("cut.lrtf"), &lens).is_err());
     // the stop is applied at lookup: stopping down never adds rays
     let f8 = lens.stopped_down(8.0).unwrap();
-    let pass = |l: &Lens| rays.iter().filter(|r| match table.lookup(r, wl) {
-        LrtfLookup::Hit(h) => l.aperture().transmission(h.stop_point.x, h.stop_point.y, l.stop_semi_diameter_mm()) > 0.0,
-        _ => false,
-    }).count();
+    let pass = |l: &Lens| {
+        rays.iter()
+            .filter(|r| match table.lookup(r, wl) {
+                LrtfLookup::Hit(h) => {
+                    l.aperture().transmission(h.stop_point.x, h.stop_point.y, l.stop_semi_diameter_mm()) > 0.0
+                }
+                _ => false,
+            })
+            .count()
+    };
     assert!(pass(&f8) < pass(&lens) / 4, "f/8 passes {} of the f/2 rays {}", pass(&f8), pass(&lens));
     // lenses with cylinders cannot be tabulated in 3-D
-    assert!(LrtfTable::bake(&library_lens("schneider-anamorphic-31mm").unwrap(), &BakeOptions::default(), &|_| {}).is_err());
+    assert!(
+        LrtfTable::bake(&library_lens("schneider-anamorphic-31mm").unwrap(), &BakeOptions::default(), &|_| {}).is_err()
+    );
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -112,7 +112,12 @@ fn grazing_rays_are_classified_like_the_exact_trace() {
     let wl = lens.primary_wavelength_nm();
     let passing_exact = rays.iter().filter(|r| exact_trace(&lens, r, wl).is_some()).count();
     let (mean, mis, both) = compare(&table, &lens, &rays);
-    eprintln!("grazing: {passing_exact} of {} pass exactly, {both} both, misclassified {:.3} %, mean {:.4} mrad", rays.len(), mis * 100.0, mean * 1e3);
+    eprintln!(
+        "grazing: {passing_exact} of {} pass exactly, {both} both, misclassified {:.3} %, mean {:.4} mrad",
+        rays.len(),
+        mis * 100.0,
+        mean * 1e3
+    );
     assert!(passing_exact > 500 && passing_exact < rays.len() / 2, "the case is grazing: {passing_exact} pass");
     assert!(mis <= 0.002, "misclassified {:.3} %", mis * 100.0);
     // EFL × mean angle stays below 0.5 px of a 1920-px-wide 36 mm sensor even here
@@ -143,7 +148,11 @@ fn vignetting_boundary_is_not_crossed_by_interpolation() {
         }
         for _ in 0..50 {
             let mid = 0.5 * (lo + hi);
-            if exact_trace(&lens, &at(mid), wl).is_some() { lo = mid } else { hi = mid }
+            if exact_trace(&lens, &at(mid), wl).is_some() {
+                lo = mid
+            } else {
+                hi = mid
+            }
         }
         // 2 % of the rear radius inside and outside
         let d = 0.02 * lens.rear_semi_diameter_mm();
@@ -164,14 +173,17 @@ fn fisheye_tables_match_the_exact_trace() {
     // so nothing folds at the hemisphere's edge.
     // The 181° aspheric fisheye needs a finer table for the same budget: its mean error is
     // 0.96 mrad at 96³, 0.55 at 128³, 0.25 at 192³ (measured with this test).
-    for (name, film_radius_mm, reaches_deg, res) in [("fisheye-10mm", 13.05, 70.0, 96u32), ("aspheric-fisheye-10mm", 14.9, 90.0, 192)] {
+    for (name, film_radius_mm, reaches_deg, res) in
+        [("fisheye-10mm", 13.05, 70.0, 96u32), ("aspheric-fisheye-10mm", 14.9, 90.0, 192)]
+    {
         let lens = library_lens(name).unwrap();
         let table = bake(&lens, res);
         let rays = rays_from_film(&lens, 0.0, film_radius_mm, 1.0, 60_000, 5);
         let wl = lens.primary_wavelength_nm();
         // rays travel towards −z: the angle off the axis is acos(−d.z)
         let cos_limit = -(reaches_deg as f64).to_radians().cos();
-        let far = rays.iter().filter_map(|r| exact_trace(&lens, r, wl)).filter(|(o, _)| o.direction.z > cos_limit).count();
+        let far =
+            rays.iter().filter_map(|r| exact_trace(&lens, r, wl)).filter(|(o, _)| o.direction.z > cos_limit).count();
         let (mean, mis, both) = compare(&table, &lens, &rays);
         eprintln!("{name} at {res}³: {both} rays pass both ({far} leave more than {reaches_deg}° off the axis), misclassified {:.3} %, mean {:.4} mrad", mis * 100.0, mean * 1e3);
         assert!(both > 2_000, "{name}: {both}");
@@ -200,7 +212,11 @@ fn stop_image_applies_at_lookup() {
         }
     }
     let mask = ApertureMask { width: n, height: n, transmission: t, path: "star (test)".into() };
-    let masked = lens.with_aperture(Aperture { shape: ApertureShape::Mask(Arc::new(mask)), rotation_rad: 0.3, anamorphic_ratio: 1.0 });
+    let masked = lens.with_aperture(Aperture {
+        shape: ApertureShape::Mask(Arc::new(mask)),
+        rotation_rad: 0.3,
+        anamorphic_ratio: 1.0,
+    });
     let rays = rays_from_film(&masked, 0.0, 15.0, 1.0, 30_000, 6);
     let wl = masked.primary_wavelength_nm();
     let (mut diff, mut sum_exact, mut n_exact) = (0.0, 0.0, 0usize);
@@ -211,7 +227,10 @@ fn stop_image_applies_at_lookup() {
         sum_exact += e;
         n_exact += (e > 0.0) as usize;
     }
-    eprintln!("stop image: {n_exact} rays pass the mask exactly; Σ|Δtransmission| / Σ transmission = {:.4}", diff / sum_exact);
+    eprintln!(
+        "stop image: {n_exact} rays pass the mask exactly; Σ|Δtransmission| / Σ transmission = {:.4}",
+        diff / sum_exact
+    );
     assert!(n_exact > 2_000);
     assert!(diff / sum_exact < 0.01, "transmission differs by {:.3} %", 100.0 * diff / sum_exact);
 }
@@ -278,7 +297,11 @@ fn scene_to_film_table_matches_the_exact_trace() {
     let fine = SceneToFilmTable::bake(&lens, 192, 5.0, &|_| {}).unwrap();
     let (e_coarse, mis_coarse, _) = scene_to_film_errors(&lens, &coarse);
     let (e_fine, mis_fine, both) = scene_to_film_errors(&lens, &fine);
-    eprintln!("scene → film: 48³ {e_coarse:.3} px ({:.3} % misclassified), 192³ {e_fine:.3} px ({:.3} %), {both} rays", mis_coarse * 100.0, mis_fine * 100.0);
+    eprintln!(
+        "scene → film: 48³ {e_coarse:.3} px ({:.3} % misclassified), 192³ {e_fine:.3} px ({:.3} %), {both} rays",
+        mis_coarse * 100.0,
+        mis_fine * 100.0
+    );
     assert!(both > 5_000, "{both}");
     assert!(mis_coarse <= 1e-3 && mis_fine <= 1e-3, "misclassified {mis_coarse}, {mis_fine}");
     assert!(e_fine <= 0.5, "mean film error {e_fine} px at 192³");

@@ -56,7 +56,8 @@ fn on_axis_ray_stays_on_axis() {
 
 #[test]
 fn total_internal_reflection_is_absorbed() {
-    let prism = lens(r#"
+    let prism = lens(
+        r#"
 [lens]
 name = "steep"
 source = "test"
@@ -73,9 +74,15 @@ semi_diameter_mm = 9.0
 radius_mm = 10.0
 thickness_mm = 20.0
 semi_diameter_mm = 9.0
-"#);
+"#,
+    );
     // A parallel ray at height 8 mm meets the back sphere (R = 10) at incidence asin(0.8) = 53° > critical 31.8°.
-    let res = prism.trace_detailed(&Ray::new(DVec3::new(0.0, 8.0, -1.0), DVec3::Z), WL, TraceDirection::SceneToFilm, StopMode::Apply);
+    let res = prism.trace_detailed(
+        &Ray::new(DVec3::new(0.0, 8.0, -1.0), DVec3::Z),
+        WL,
+        TraceDirection::SceneToFilm,
+        StopMode::Apply,
+    );
     assert_eq!(res.err(), Some(Absorbed::TotalInternalReflection(2)));
 }
 
@@ -109,7 +116,10 @@ fn ray_through_exact_edge_passes_and_just_beyond_is_clipped() {
     let at_edge = Ray::new(DVec3::new(20.0, 0.0, -1.0), DVec3::Z);
     assert!(l.trace(&at_edge, WL, TraceDirection::SceneToFilm).is_some());
     let beyond = Ray::new(DVec3::new(20.0 + 1e-9, 0.0, -1.0), DVec3::Z);
-    assert_eq!(l.trace_detailed(&beyond, WL, TraceDirection::SceneToFilm, StopMode::Apply).err(), Some(Absorbed::Clipped(0)));
+    assert_eq!(
+        l.trace_detailed(&beyond, WL, TraceDirection::SceneToFilm, StopMode::Apply).err(),
+        Some(Absorbed::Clipped(0))
+    );
 }
 
 #[test]
@@ -127,7 +137,8 @@ fn huge_radius_behaves_like_a_plane() {
 
 #[test]
 fn f_0_95_lens_traces_marginal_rays() {
-    let l = lens(r#"
+    let l = lens(
+        r#"
 [lens]
 name = "fast"
 source = "test: biconvex f ≈ 50 mm opened to f/0.95"
@@ -144,7 +155,8 @@ semi_diameter_mm = 28.0
 radius_mm = -200.0
 thickness_mm = 20.0
 semi_diameter_mm = 28.0
-"#);
+"#,
+    );
     let l = l.stopped_down(0.95).unwrap();
     assert!((l.paraxial().f_number - 0.95).abs() < 1e-9);
     let h = 0.5 * l.paraxial().entrance_pupil_diameter_mm;
@@ -193,7 +205,8 @@ fn fisheyes_pass_light_at_their_full_field() {
 
 #[test]
 fn aspheric_newton_failure_is_absorbed_not_nan() {
-    let wild = lens(r#"
+    let wild = lens(
+        r#"
 [lens]
 name = "wild"
 source = "test: absurd aspheric coefficients"
@@ -211,7 +224,8 @@ aspheric = [1e-1, -1e-1, 1e-1]
 radius_mm = -20.0
 thickness_mm = 20.0
 semi_diameter_mm = 1.0
-"#);
+"#,
+    );
     let mut absorbed = 0;
     for i in 0..400 {
         let y = -12.0 + 24.0 * i as f64 / 400.0;
@@ -280,7 +294,10 @@ fn exit_pupil_bounds_contain_every_passing_ray() {
         ("wide-22mm", library_lens("wide-22mm").unwrap()),
         ("telephoto-250mm", library_lens("telephoto-250mm").unwrap()),
         ("fisheye-10mm", library_lens("fisheye-10mm").unwrap()),
-        ("double-gauss-50mm f/4 5 blades", library_lens("double-gauss-50mm").unwrap().stopped_down(4.0).unwrap().with_aperture(blades)),
+        (
+            "double-gauss-50mm f/4 5 blades",
+            library_lens("double-gauss-50mm").unwrap().stopped_down(4.0).unwrap().with_aperture(blades),
+        ),
         ("schneider-anamorphic-31mm", library_lens("schneider-anamorphic-31mm").unwrap()),
     ];
     for (name, l) in lenses {
@@ -314,7 +331,10 @@ fn exit_pupil_bounds_contain_every_passing_ray() {
         }
         assert!(passed > 1000, "{name}: too few passing rays ({passed})");
         assert_eq!(outside, 0, "{name}: {outside} of {passed} passing rays fall outside the bounds");
-        eprintln!("{name}: rejection inside bounds {:.1}%", 100.0 * (1.0 - pass_in_bounds as f64 / sampled_in_bounds as f64));
+        eprintln!(
+            "{name}: rejection inside bounds {:.1}%",
+            100.0 * (1.0 - pass_in_bounds as f64 / sampled_in_bounds as f64)
+        );
     }
 }
 
@@ -349,17 +369,25 @@ fn focusing_moves_the_sensor_and_refuses_the_impossible() {
     assert!(err.contains("cannot focus"), "{err}");
 }
 
-
 /// Tracing scene → film through a lens is tracing film → scene through its reversal (mirrored
 /// in z): a film → scene ray, sent back, arrives at its film point in the reversed lens.
 #[test]
 fn reversed_lens_traces_rays_backwards() {
     use petzval_optics::{library_lens, Ray, TraceDirection};
-    for name in ["double-gauss-50mm", "cooke-speed-panchro-25mm", "fisheye-10mm", "aspheric-fisheye-10mm", "petzval-portrait-100mm"] {
+    for name in [
+        "double-gauss-50mm",
+        "cooke-speed-panchro-25mm",
+        "fisheye-10mm",
+        "aspheric-fisheye-10mm",
+        "petzval-portrait-100mm",
+    ] {
         let lens = library_lens(name).unwrap();
         let rev = lens.reversed().unwrap();
         assert_eq!(rev.surfaces().len(), lens.surfaces().len());
-        assert!((rev.paraxial().efl_mm - lens.paraxial().efl_mm).abs() < 1e-9 * lens.paraxial().efl_mm.abs(), "{name}: EFL");
+        assert!(
+            (rev.paraxial().efl_mm - lens.paraxial().efl_mm).abs() < 1e-9 * lens.paraxial().efl_mm.abs(),
+            "{name}: EFL"
+        );
         // twice reversed: the same optics
         let back = rev.reversed().unwrap();
         assert!((back.paraxial().bfl_mm - lens.paraxial().bfl_mm).abs() < 1e-9, "{name}: BFL after two reversals");
@@ -385,7 +413,9 @@ fn reversed_lens_traces_rays_backwards() {
             // back from the scene side, mirrored into the reversed lens
             let start = out.ray.origin + out.ray.direction * 5.0;
             let back_ray = Ray::new(mirror(start), mirror_dir(-out.ray.direction));
-            let arrived = rev.trace(&back_ray, wl, TraceDirection::FilmToScene).unwrap_or_else(|| panic!("{name}: the reversed ray was absorbed"));
+            let arrived = rev
+                .trace(&back_ray, wl, TraceDirection::FilmToScene)
+                .unwrap_or_else(|| panic!("{name}: the reversed ray was absorbed"));
             let o = mirror(arrived.ray.origin);
             let d = mirror_dir(arrived.ray.direction);
             assert!((d + din).length() < 1e-9, "{name}: direction {d} vs {}", -din);

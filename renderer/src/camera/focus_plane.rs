@@ -46,7 +46,9 @@ pub(super) fn focus_plane(cam: &Camera) -> Option<FocusPlane> {
     let (f, film_z, front_cam_z_mm) = match cam {
         Camera::Pinhole(_) => return None,
         Camera::ThinLens(c) => (c.lens_focal_length_mm(), c.film_distance_mm(), 0.0),
-        Camera::ThickLens(c) => (c.focal_length_mm, c.film_z_mm() - c.rear_principal_z_mm, c.front_principal_z_mm - c.entrance_pupil_z_mm),
+        Camera::ThickLens(c) => {
+            (c.focal_length_mm, c.film_z_mm() - c.rear_principal_z_mm, c.front_principal_z_mm - c.entrance_pupil_z_mm)
+        }
         Camera::Realistic(c) | Camera::Lrtf(crate::camera::LrtfCamera { exact: c, .. }) => {
             let p = c.lens.paraxial();
             (p.efl_mm, c.film_z_mm - p.rear_principal_z_mm, p.front_principal_z_mm - p.entrance_pupil_z_mm)

@@ -34,8 +34,8 @@ use crate::optics::aperture::Aperture;
 use crate::optics::lens::{Lens, Ray, TraceDirection};
 use crate::optics::lrtf::{LrtfLookup, LrtfTable};
 use crate::optics::pupil::ExitPupilBounds;
-use std::sync::Arc;
 use glam::{DMat3, DVec2, DVec3};
+use std::sync::Arc;
 
 /// A ray leaving the camera, in camera space (metres).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -283,7 +283,13 @@ impl PinholeCamera {
 
 impl ThinLensCamera {
     /// A thin-lens camera focused at `focus_distance_m` (None = infinity).
-    pub fn new(sensor: Sensor, focal_length_mm: f64, f_number: f64, focus_distance_m: Option<f64>, aperture: Aperture) -> Result<Self> {
+    pub fn new(
+        sensor: Sensor,
+        focal_length_mm: f64,
+        f_number: f64,
+        focus_distance_m: Option<f64>,
+        aperture: Aperture,
+    ) -> Result<Self> {
         sensor.validate()?;
         check_positive("focal_length_mm", focal_length_mm)?;
         check_positive("f_number", f_number)?;
@@ -295,7 +301,17 @@ impl ThinLensCamera {
             Some(s) => focal_length_mm * s * 1e3 / (focal_length_mm + s * 1e3),
             None => focal_length_mm,
         };
-        let mut cam = ThinLensCamera { sensor, focal_length_mm, f_number, focus_distance_m, aperture, natural_vignetting: true, film_z_mm: focal_length_mm, lens_focal_mm, exposure: [1.0; 2] };
+        let mut cam = ThinLensCamera {
+            sensor,
+            focal_length_mm,
+            f_number,
+            focus_distance_m,
+            aperture,
+            natural_vignetting: true,
+            film_z_mm: focal_length_mm,
+            lens_focal_mm,
+            exposure: [1.0; 2],
+        };
         let centre = cam.sensor.axis_film_coord();
         let natural = 1.0 / centre_mean(|u| cam.raw_ray(centre, u).map(|r| r.weight));
         cam.natural_vignetting = false;
@@ -349,7 +365,13 @@ impl ThickLensCamera {
     /// The thick-lens approximation of `lens` (its paraxial focal length and principal planes),
     /// at `f_number` (default: the lens's current), focused at `focus_distance_m` from the
     /// real lens's entrance pupil.
-    pub fn new(sensor: Sensor, lens: &Lens, f_number: Option<f64>, focus_distance_m: Option<f64>, aperture: Aperture) -> Result<Self> {
+    pub fn new(
+        sensor: Sensor,
+        lens: &Lens,
+        f_number: Option<f64>,
+        focus_distance_m: Option<f64>,
+        aperture: Aperture,
+    ) -> Result<Self> {
         sensor.validate()?;
         let p = lens.paraxial();
         let f_number = f_number.unwrap_or(p.f_number);
@@ -429,7 +451,10 @@ impl RealisticCamera {
         let centre = cam.sensor.axis_film_coord();
         let mean = centre_mean(|u| cam.raw_ray(centre, u, cam.lens.primary_wavelength_nm()).map(|r| r.weight));
         if !(mean > 0.0) {
-            return Err(Error::camera("lens", format!("no light reaches the centre of the sensor through '{}'", cam.lens.name())));
+            return Err(Error::camera(
+                "lens",
+                format!("no light reaches the centre of the sensor through '{}'", cam.lens.name()),
+            ));
         }
         cam.exposure = 1.0 / mean;
         Ok(cam)
@@ -444,7 +469,12 @@ impl RealisticCamera {
     /// The camera ray for a film and lens sample, with `through_lens` mapping the ray from the
     /// film to the ray leaving the front and its stop transmission (exact trace or a table).
     #[inline]
-    fn raw_ray_with(&self, film: DVec2, lens_u: DVec2, through_lens: impl Fn(&Ray) -> Option<(Ray, f64)>) -> Option<CameraRay> {
+    fn raw_ray_with(
+        &self,
+        film: DVec2,
+        lens_u: DVec2,
+        through_lens: impl Fn(&Ray) -> Option<(Ray, f64)>,
+    ) -> Option<CameraRay> {
         // 1. Film point and a rear-plane point inside the exit-pupil bounds.
         let p = self.sensor.film_point(film, self.film_z_mm);
         let s = self.pupil.sample(DVec2::new(p.x, p.y), lens_u)?;
@@ -507,7 +537,9 @@ impl LrtfCamera {
                 (tr > 0.0).then_some((hit.ray, tr))
             }
             LrtfLookup::Miss => None,
-            LrtfLookup::Uncertain => lens.trace(ray, wavelength_nm, TraceDirection::FilmToScene).map(|t| (t.ray, t.transmission)),
+            LrtfLookup::Uncertain => {
+                lens.trace(ray, wavelength_nm, TraceDirection::FilmToScene).map(|t| (t.ray, t.transmission))
+            }
         })
     }
 

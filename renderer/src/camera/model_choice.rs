@@ -110,7 +110,11 @@ const DEFAULT_DEPTH_RANGE_M: (f64, f64) = (0.3, f64::INFINITY);
 
 /// Picks the model for `spec` (whose model is `Auto`); returns the chosen camera when it was
 /// built on the way.
-pub(crate) fn choose_model(spec: &CameraSpec, lens: &SpecLens, shot: &ShotContext) -> Result<(ModelChoice, Option<Camera>)> {
+pub(crate) fn choose_model(
+    spec: &CameraSpec,
+    lens: &SpecLens,
+    shot: &ShotContext,
+) -> Result<(ModelChoice, Option<Camera>)> {
     if shot.width == 0 || shot.height == 0 {
         return Err(Error::Camera { field: "resolution".into(), message: "must be at least 1x1".into() });
     }
@@ -127,7 +131,11 @@ fn pixel_pitch_mm(spec: &CameraSpec, shot: &ShotContext) -> f64 {
 
 fn choose_ideal(spec: &CameraSpec, shot: &ShotContext) -> ModelChoice {
     let Some(n) = spec.f_number.filter(|_| !spec.is_pinhole()) else {
-        return ModelChoice { model: LensModel::Pinhole, reason: "pinhole camera: no lens to model".into(), candidates: Vec::new() };
+        return ModelChoice {
+            model: LensModel::Pinhole,
+            reason: "pinhole camera: no lens to model".into(),
+            candidates: Vec::new(),
+        };
     };
     // Blender's thin lens: film at F, lens of focal length F·s/(F+s), aperture diameter F/N.
     let f = spec.focal_length_mm;
@@ -146,7 +154,14 @@ fn choose_ideal(spec: &CameraSpec, shot: &ShotContext) -> ModelChoice {
     let coc_px = coc_mm(near * 1e3).max(coc_mm(far * 1e3)) / pixel_pitch_mm(spec, shot);
     let depth = if far.is_finite() { format!("{near:.2}–{far:.2} m") } else { format!("{near:.2} m–∞") };
     if coc_px <= spec.tolerance_px {
-        ModelChoice { model: LensModel::Pinhole, reason: format!("pinhole: the largest circle of confusion over the scene's depths ({depth}) is {coc_px:.3} px ≤ {} px", spec.tolerance_px), candidates: Vec::new() }
+        ModelChoice {
+            model: LensModel::Pinhole,
+            reason: format!(
+                "pinhole: the largest circle of confusion over the scene's depths ({depth}) is {coc_px:.3} px ≤ {} px",
+                spec.tolerance_px
+            ),
+            candidates: Vec::new(),
+        }
     } else {
         ModelChoice { model: LensModel::Thin, reason: format!("thin lens: circles of confusion reach {coc_px:.1} px over {depth} (> {} px), and an ideal lens has no aberrations to model", spec.tolerance_px), candidates: Vec::new() }
     }
@@ -245,7 +260,9 @@ fn compare(model: &[Landing], exact: &[Landing], footprint: &dyn Fn(usize, DVec3
         let mut err: f64 = 0.0;
         for k in 0..3 {
             match (m.stats(k), e.stats(k)) {
-                (Some((cm, rm)), Some((ce, re))) => err = err.max(((cm - ce).length() + (rm - re).abs()) / footprint(k, ce)),
+                (Some((cm, rm)), Some((ce, re))) => {
+                    err = err.max(((cm - ce).length() + (rm - re).abs()) / footprint(k, ce))
+                }
                 (None, None) => {}
                 // Light in one model and none in the other: as wrong as it gets.
                 _ => err = f64::INFINITY,
@@ -266,11 +283,20 @@ fn choose_real(spec: &CameraSpec, lens: &SpecLens, shot: &ShotContext) -> Result
     let surfaces = Surfaces { focus_m: spec.focus_distance_m, near_m: near.max(1e-3) };
     let (gx, gy) = GRID;
     let film_points: Vec<DVec2> = (0..gy)
-        .flat_map(|j| (0..gx).map(move |i| DVec2::new(0.03 + 0.94 * i as f64 / (gx - 1) as f64, 0.03 + 0.94 * j as f64 / (gy - 1) as f64)))
+        .flat_map(|j| {
+            (0..gx).map(move |i| {
+                DVec2::new(0.03 + 0.94 * i as f64 / (gx - 1) as f64, 0.03 + 0.94 * j as f64 / (gy - 1) as f64)
+            })
+        })
         .collect();
-    let wavelengths: Vec<f64> = if shot.spectral && real.has_dispersion() { real.wavelengths_nm().to_vec() } else { vec![real.primary_wavelength_nm()] };
+    let wavelengths: Vec<f64> = if shot.spectral && real.has_dispersion() {
+        real.wavelengths_nm().to_vec()
+    } else {
+        vec![real.primary_wavelength_nm()]
+    };
     let primary = real.primary_wavelength_nm();
-    let exact_landings: Vec<Vec<Landing>> = wavelengths.iter().map(|&w| measure(&exact, &surfaces, &film_points, w)).collect();
+    let exact_landings: Vec<Vec<Landing>> =
+        wavelengths.iter().map(|&w| measure(&exact, &surfaces, &film_points, w)).collect();
     let n_surfaces = real.surfaces().len();
     let exact_ns = nominal_ns(LensModel::Exact, n_surfaces);
     let table_wavelengths = if real.has_dispersion() { real.wavelengths_nm().len().max(1) } else { 1 };
@@ -293,7 +319,17 @@ fn choose_real(spec: &CameraSpec, lens: &SpecLens, shot: &ShotContext) -> Result
         LensModel::Lrtf { resolution: 128 },
     ];
     for model in candidates {
-        let mut report = CandidateReport { model, max_error_px: f64::INFINITY, mean_error_px: f64::INFINITY, irradiance_error: f64::INFINITY, ns_per_ray: f64::NAN, setup_seconds: 0.0, estimated_seconds: f64::INFINITY, meets: false, note: String::new() };
+        let mut report = CandidateReport {
+            model,
+            max_error_px: f64::INFINITY,
+            mean_error_px: f64::INFINITY,
+            irradiance_error: f64::INFINITY,
+            ns_per_ray: f64::NAN,
+            setup_seconds: 0.0,
+            estimated_seconds: f64::INFINITY,
+            meets: false,
+            note: String::new(),
+        };
         let mut setup = 0.0;
         if let LensModel::Lrtf { resolution } = model {
             if lrtf_met {
@@ -308,7 +344,10 @@ fn choose_real(spec: &CameraSpec, lens: &SpecLens, shot: &ShotContext) -> Result
             setup = nominal_bake_ns(resolution, table_wavelengths, n_surfaces) * 1e-9;
             if setup + render_seconds(nominal_ns(model, n_surfaces)) >= render_seconds(exact_ns) {
                 report.setup_seconds = setup;
-                report.note = format!("not baked: its bake (est. {setup:.2} s) costs more than it saves on {:.2e} camera rays", camera_rays);
+                report.note = format!(
+                    "not baked: its bake (est. {setup:.2} s) costs more than it saves on {:.2e} camera rays",
+                    camera_rays
+                );
                 reports.push(report);
                 continue;
             }
@@ -346,12 +385,17 @@ fn choose_real(spec: &CameraSpec, lens: &SpecLens, shot: &ShotContext) -> Result
         report.ns_per_ray = nominal_ns(model, n_surfaces);
         report.setup_seconds = setup;
         report.estimated_seconds = setup + render_seconds(report.ns_per_ray);
-        report.meets = report.mean_error_px <= spec.tolerance_px && report.max_error_px <= MAX_OVER_MEAN_BUDGET * spec.tolerance_px && irr <= IRRADIANCE_TOLERANCE;
+        report.meets = report.mean_error_px <= spec.tolerance_px
+            && report.max_error_px <= MAX_OVER_MEAN_BUDGET * spec.tolerance_px
+            && irr <= IRRADIANCE_TOLERANCE;
         if !report.meets {
             report.note = if report.mean_error_px > spec.tolerance_px {
                 format!("mean error {:.3} px > {} px", report.mean_error_px, spec.tolerance_px)
             } else if report.max_error_px > MAX_OVER_MEAN_BUDGET * spec.tolerance_px {
-                format!("largest error {:.3} px > {} × {} px", report.max_error_px, MAX_OVER_MEAN_BUDGET, spec.tolerance_px)
+                format!(
+                    "largest error {:.3} px > {} × {} px",
+                    report.max_error_px, MAX_OVER_MEAN_BUDGET, spec.tolerance_px
+                )
             } else {
                 format!("vignetting differs by {:.1} % (> {:.0} %)", irr * 100.0, IRRADIANCE_TOLERANCE * 100.0)
             };
@@ -384,11 +428,8 @@ fn choose_real(spec: &CameraSpec, lens: &SpecLens, shot: &ShotContext) -> Result
         .cloned()
         .unwrap_or_else(|| reports.last().cloned().expect("exact is always a candidate"));
     let best_index = reports.iter().position(|r| r.model == best.model).unwrap_or(reports.len());
-    let cheaper_failed: Vec<String> = reports[..best_index]
-        .iter()
-        .filter(|r| !r.meets)
-        .map(|r| format!("{} ({})", r.model, r.note))
-        .collect();
+    let cheaper_failed: Vec<String> =
+        reports[..best_index].iter().filter(|r| !r.meets).map(|r| format!("{} ({})", r.model, r.note)).collect();
     let reason = match best.model {
         LensModel::Exact => format!(
             "exact: nothing cheaper stays within {} px at {}x{}: {}",
@@ -410,6 +451,10 @@ fn choose_real(spec: &CameraSpec, lens: &SpecLens, shot: &ShotContext) -> Result
             if cheaper_failed.is_empty() { String::new() } else { format!("; cheaper ones fail: {}", cheaper_failed.join("; ")) }
         ),
     };
-    let camera = if best.model == LensModel::Exact { Some(exact) } else { cameras.into_iter().find(|(m, _)| *m == best.model).map(|(_, c)| c) };
+    let camera = if best.model == LensModel::Exact {
+        Some(exact)
+    } else {
+        cameras.into_iter().find(|(m, _)| *m == best.model).map(|(_, c)| c)
+    };
     Ok((ModelChoice { model: best.model, reason, candidates: reports }, camera))
 }

@@ -18,12 +18,12 @@ use super::model_choice::{choose_model, ModelChoice, ShotContext};
 use super::{Camera, LrtfCamera, PinholeCamera, RealisticCamera, Sensor, ThickLensCamera, ThinLensCamera};
 use crate::error::{Error, Result};
 use crate::integrator::RenderScene;
-use crate::render::scene_depth_range_m;
-use glam::DAffine3;
 use crate::optics::aperture::Aperture;
 use crate::optics::lens::Lens;
 use crate::optics::library::load_lens;
 use crate::optics::lrtf::{BakeOptions, LrtfTable};
+use crate::render::scene_depth_range_m;
+use glam::DAffine3;
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::str::FromStr;
@@ -55,7 +55,10 @@ pub enum LensModel {
 impl FromStr for LensModel {
     type Err = Error;
     fn from_str(s: &str) -> Result<Self> {
-        let bad = || Error::Camera { field: "lens_model".into(), message: format!("expected auto, exact, lrtf[:RESOLUTION], thick, thin or pinhole, got '{s}'") };
+        let bad = || Error::Camera {
+            field: "lens_model".into(),
+            message: format!("expected auto, exact, lrtf[:RESOLUTION], thick, thin or pinhole, got '{s}'"),
+        };
         Ok(match s {
             "auto" => LensModel::Auto,
             "exact" => LensModel::Exact,
@@ -67,7 +70,10 @@ impl FromStr for LensModel {
                 Some(r) => {
                     let resolution: u32 = r.parse().map_err(|_| bad())?;
                     if !(8..=256).contains(&resolution) {
-                        return Err(Error::Camera { field: "lens_model".into(), message: format!("LRTF resolution {resolution} is outside 8..=256") });
+                        return Err(Error::Camera {
+                            field: "lens_model".into(),
+                            message: format!("LRTF resolution {resolution} is outside 8..=256"),
+                        });
                     }
                     LensModel::Lrtf { resolution }
                 }
@@ -204,7 +210,15 @@ impl CameraSpec {
     /// Builds the camera for a shot of `scene` seen from `to_world` at `width` × `height` and
     /// `spp`: the depth range `auto` must honour is probed in the scene through a pinhole of the
     /// lens's focal length. The lens is loaded once.
-    pub fn build_for_scene(&self, scene: &RenderScene, to_world: &DAffine3, width: u32, height: u32, spp: u32, spectral: bool) -> Result<BuiltCamera> {
+    pub fn build_for_scene(
+        &self,
+        scene: &RenderScene,
+        to_world: &DAffine3,
+        width: u32,
+        height: u32,
+        spp: u32,
+        spectral: bool,
+    ) -> Result<BuiltCamera> {
         self.validate()?;
         let lens = self.load_lens()?;
         let probe_focal_mm = match &lens {
@@ -239,28 +253,45 @@ impl CameraSpec {
 
     /// The camera of one model (not `Auto`); `exact` is the exact camera when already built
     /// (its exit-pupil bounds are costly), for the LRTF.
-    pub(crate) fn build_model(&self, lens: &SpecLens, model: LensModel, exact: Option<&RealisticCamera>) -> Result<Camera> {
+    pub(crate) fn build_model(
+        &self,
+        lens: &SpecLens,
+        model: LensModel,
+        exact: Option<&RealisticCamera>,
+    ) -> Result<Camera> {
         let sensor = self.sensor;
         let focus = self.focus_distance_m;
         match lens {
-            SpecLens::Ideal => {
-                match (model, self.is_pinhole()) {
-                    (LensModel::Pinhole, _) | (LensModel::Exact | LensModel::Thin | LensModel::Auto, true) => {
-                        let mut c = PinholeCamera::new(sensor, self.focal_length_mm)?;
-                        c.natural_vignetting = self.natural_vignetting;
-                        Ok(Camera::Pinhole(c))
-                    }
-                    (LensModel::Exact | LensModel::Thin | LensModel::Auto, false) => {
-                        let n = self.f_number.unwrap_or(f64::INFINITY);
-                        let mut c = ThinLensCamera::new(sensor, self.focal_length_mm, n, focus, self.aperture.clone().unwrap_or_default())?;
-                        c.natural_vignetting = self.natural_vignetting;
-                        Ok(Camera::ThinLens(c))
-                    }
-                    (m, _) => Err(Error::Camera { field: "lens_model".into(), message: format!("the {} model needs a real lens (a library name or a lens file), not '{}'", m, self.lens) }),
+            SpecLens::Ideal => match (model, self.is_pinhole()) {
+                (LensModel::Pinhole, _) | (LensModel::Exact | LensModel::Thin | LensModel::Auto, true) => {
+                    let mut c = PinholeCamera::new(sensor, self.focal_length_mm)?;
+                    c.natural_vignetting = self.natural_vignetting;
+                    Ok(Camera::Pinhole(c))
                 }
-            }
+                (LensModel::Exact | LensModel::Thin | LensModel::Auto, false) => {
+                    let n = self.f_number.unwrap_or(f64::INFINITY);
+                    let mut c = ThinLensCamera::new(
+                        sensor,
+                        self.focal_length_mm,
+                        n,
+                        focus,
+                        self.aperture.clone().unwrap_or_default(),
+                    )?;
+                    c.natural_vignetting = self.natural_vignetting;
+                    Ok(Camera::ThinLens(c))
+                }
+                (m, _) => Err(Error::Camera {
+                    field: "lens_model".into(),
+                    message: format!(
+                        "the {} model needs a real lens (a library name or a lens file), not '{}'",
+                        m, self.lens
+                    ),
+                }),
+            },
             SpecLens::Real(lens) => match model {
-                LensModel::Exact | LensModel::Auto => Ok(Camera::Realistic(RealisticCamera::new(sensor, lens.clone(), focus)?)),
+                LensModel::Exact | LensModel::Auto => {
+                    Ok(Camera::Realistic(RealisticCamera::new(sensor, lens.clone(), focus)?))
+                }
                 LensModel::Lrtf { resolution } => {
                     let table = match &self.lrtf_file {
                         Some(path) => Arc::new(LrtfTable::load(path, lens)?),
@@ -272,7 +303,9 @@ impl CameraSpec {
                     };
                     Ok(Camera::Lrtf(LrtfCamera::with_exact(exact, table)?))
                 }
-                LensModel::Thick => Ok(Camera::ThickLens(ThickLensCamera::new(sensor, lens, None, focus, lens.aperture().clone())?)),
+                LensModel::Thick => {
+                    Ok(Camera::ThickLens(ThickLensCamera::new(sensor, lens, None, focus, lens.aperture().clone())?))
+                }
                 LensModel::Thin => {
                     let p = lens.paraxial();
                     let mut c = ThinLensCamera::new(sensor, p.efl_mm, p.f_number, focus, lens.aperture().clone())?;

@@ -84,7 +84,10 @@ pub fn relative_rmse(reference: &Image, test: &Image) -> Result<f64> {
 
 fn same_size(w: u32, h: u32, w2: u32, h2: u32) -> Result<()> {
     if (w, h) != (w2, h2) {
-        return Err(Error::Camera { field: "resolution".into(), message: format!("images of different sizes cannot be compared: {w}x{h} and {w2}x{h2}") });
+        return Err(Error::Camera {
+            field: "resolution".into(),
+            message: format!("images of different sizes cannot be compared: {w}x{h} and {w2}x{h2}"),
+        });
     }
     if w == 0 || h == 0 {
         return Err(Error::Camera { field: "resolution".into(), message: "empty image".into() });
@@ -249,7 +252,10 @@ pub fn flip_ldr(reference: &[[f32; 3]], test: &[[f32; 3]], width: usize, height:
     }
     same_size(width as u32, height as u32, width as u32, height as u32)?;
     if !(ppd.is_finite() && ppd > 0.0) {
-        return Err(Error::Camera { field: "pixels_per_degree".into(), message: format!("must be a positive number, got {ppd}") });
+        return Err(Error::Camera {
+            field: "pixels_per_degree".into(),
+            message: format!("must be a positive number, got {ppd}"),
+        });
     }
     let (w, h) = (width, height);
     let clampi = |v: isize, n: usize| v.clamp(0, n as isize - 1) as usize;
@@ -386,7 +392,11 @@ mod tests {
             for x in 0..w {
                 let (u, t) = (x as f32 / w as f32, y as f32 / h as f32);
                 let checker = if ((x / 12) + (y / 12)) % 2 == 0 { 0.8 } else { 0.2 };
-                let patch = if (20..40).contains(&x) && (10..30).contains(&y) { [0.9, 0.1, 0.1] } else { [checker, checker * 0.9 + 0.05 * u, 0.5 * t + 0.2] };
+                let patch = if (20..40).contains(&x) && (10..30).contains(&y) {
+                    [0.9, 0.1, 0.1]
+                } else {
+                    [checker, checker * 0.9 + 0.05 * u, 0.5 * t + 0.2]
+                };
                 v.push(patch);
             }
         }
@@ -440,7 +450,8 @@ mod tests {
                 let mut acc = [0.0f32; 3];
                 for dy in -1i32..=1 {
                     for dx in -1i32..=1 {
-                        let p = a[(y as i32 + dy).clamp(0, h as i32 - 1) as usize * w + (x as i32 + dx).clamp(0, w as i32 - 1) as usize];
+                        let p = a[(y as i32 + dy).clamp(0, h as i32 - 1) as usize * w
+                            + (x as i32 + dx).clamp(0, w as i32 - 1) as usize];
                         for k in 0..3 {
                             acc[k] += p[k] / 9.0;
                         }
@@ -456,9 +467,12 @@ mod tests {
         assert!(e_blur > 0.0 && e_noise > 3.0 * e_blur, "blur {e_blur}, noise {e_noise}");
         // more noise → more error
         let mut s = 11;
-        let light: Vec<[f32; 3]> = a.iter().map(|p| p.map(|c| (c + 0.05 * (rng(&mut s) - 0.5)).clamp(0.0, 1.0))).collect();
-        let heavy: Vec<[f32; 3]> = a.iter().map(|p| p.map(|c| (c + 0.4 * (rng(&mut s) - 0.5)).clamp(0.0, 1.0))).collect();
-        let (el, eh) = (mean(&flip_ldr(&a, &light, w, h, 67.0).unwrap()), mean(&flip_ldr(&a, &heavy, w, h, 67.0).unwrap()));
+        let light: Vec<[f32; 3]> =
+            a.iter().map(|p| p.map(|c| (c + 0.05 * (rng(&mut s) - 0.5)).clamp(0.0, 1.0))).collect();
+        let heavy: Vec<[f32; 3]> =
+            a.iter().map(|p| p.map(|c| (c + 0.4 * (rng(&mut s) - 0.5)).clamp(0.0, 1.0))).collect();
+        let (el, eh) =
+            (mean(&flip_ldr(&a, &light, w, h, 67.0).unwrap()), mean(&flip_ldr(&a, &heavy, w, h, 67.0).unwrap()));
         assert!(el < eh, "{el} {eh}");
     }
 
@@ -468,7 +482,14 @@ mod tests {
         assert!(flip_ldr(&a, &a, 4, 4, 67.0).is_err());
         assert!(flip_ldr(&a, &a, 4, 3, 0.0).is_err());
         assert!(flip_ldr(&a, &a, 4, 3, f32::NAN).is_err());
-        let img = |w, h| Image { width: w, height: h, rgba: vec![[1.0; 4]; (w * h) as usize], depth: vec![], normal: vec![], albedo: vec![] };
+        let img = |w, h| Image {
+            width: w,
+            height: h,
+            rgba: vec![[1.0; 4]; (w * h) as usize],
+            depth: vec![],
+            normal: vec![],
+            albedo: vec![],
+        };
         assert!(relative_rmse(&img(4, 3), &img(3, 4)).is_err());
         assert_eq!(relative_rmse(&img(4, 3), &img(4, 3)).unwrap(), 0.0);
         assert!(flip_mean(&img(4, 3), &img(2, 2), 0.0).is_err());
@@ -484,13 +505,16 @@ mod tests {
             for x in 0..w {
                 let (u, t) = (x as f32 / w as f32, y as f32 / h as f32);
                 let c = if ((x / 16) + (y / 10)) % 2 == 0 { 200.0 } else { 40.0 };
-                a[y * w + x] = [(c * (0.5 + 0.5 * u)) as u8, (255.0 * t) as u8, (c * 0.3 + 100.0 * (u * 7.0).sin().abs()) as u8];
+                a[y * w + x] =
+                    [(c * (0.5 + 0.5 * u)) as u8, (255.0 * t) as u8, (c * 0.3 + 100.0 * (u * 7.0).sin().abs()) as u8];
             }
         }
         let shifted: Vec<[u8; 3]> = (0..w * h).map(|i| a[if i % w + 1 < w { i + 1 } else { i }]).collect();
         let cast: Vec<[u8; 3]> = a.iter().map(|p| [p[0].saturating_add(30), p[1], p[2].saturating_sub(20)]).collect();
         let tof = |v: &Vec<[u8; 3]>| v.iter().map(|p| p.map(|c| c as f32 / 255.0)).collect::<Vec<[f32; 3]>>();
-        for (b, ppd, reference) in [(&shifted, 67.0, 0.098679), (&cast, 67.0, 0.318615), (&shifted, 30.0, 0.097797), (&cast, 30.0, 0.303949)] {
+        for (b, ppd, reference) in
+            [(&shifted, 67.0, 0.098679), (&cast, 67.0, 0.318615), (&shifted, 30.0, 0.097797), (&cast, 30.0, 0.303949)]
+        {
             let m = mean(&flip_ldr(&tof(&a), &tof(b), w, h, ppd).unwrap());
             assert!((m - reference).abs() < 2e-6, "ppd {ppd}: {m} vs the reference's {reference}");
         }

@@ -4,9 +4,9 @@
 
 use super::Image;
 use crate::error::{Error, Result};
-use petzval_optics::write_atomic;
 use crate::scene::texture::linear_to_srgb;
 use exr::prelude::*;
+use petzval_optics::write_atomic;
 use std::path::Path;
 
 /// Which extra EXR channels to write.
@@ -42,7 +42,8 @@ fn text(s: &str) -> Text {
 /// Writes `image` as an EXR file.
 pub fn write_exr(path: &Path, image: &Image, layers: ExrLayers, metadata: &Metadata) -> Result<()> {
     let (w, h) = (image.width as usize, image.height as usize);
-    let chan = |name: &str, f: &dyn Fn(usize) -> f32| AnyChannel::new(name, FlatSamples::F32((0..w * h).map(f).collect()));
+    let chan =
+        |name: &str, f: &dyn Fn(usize) -> f32| AnyChannel::new(name, FlatSamples::F32((0..w * h).map(f).collect()));
     let mut channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = SmallVec::new();
     for (k, name) in ["R", "G", "B", "A"].iter().enumerate() {
         channels.push(chan(name, &|i| image.rgba[i][k]));
@@ -93,6 +94,7 @@ pub fn write_png(path: &Path, image: &Image, exposure_stops: f32, tone: ToneMap)
     let buf = image::RgbImage::from_raw(image.width, image.height, bytes)
         .ok_or_else(|| Error::io(path, std::io::Error::other("image size mismatch")))?;
     let mut out = std::io::Cursor::new(Vec::new());
-    buf.write_to(&mut out, image::ImageFormat::Png).map_err(|e| Error::io(path, std::io::Error::other(e.to_string())))?;
+    buf.write_to(&mut out, image::ImageFormat::Png)
+        .map_err(|e| Error::io(path, std::io::Error::other(e.to_string())))?;
     Ok(write_atomic(path, out.get_ref())?)
 }

@@ -316,14 +316,21 @@ impl RenderScene {
         let bad_ids = scene.mesh.material_ids.iter().filter(|&&m| m >= n_mat).count();
         if bad_ids > 0 || scene.materials.is_empty() {
             let fallback = scene.materials.len() as u32;
-            scene.materials.push(Material { name: "petzval-default".into(), metallic: 0.0, roughness: 0.5, ..Material::default() });
+            scene.materials.push(Material {
+                name: "petzval-default".into(),
+                metallic: 0.0,
+                roughness: 0.5,
+                ..Material::default()
+            });
             for m in scene.mesh.material_ids.iter_mut() {
                 if *m >= n_mat {
                     *m = fallback;
                 }
             }
             if bad_ids > 0 {
-                scene.warnings.push(format!("{bad_ids} triangles had an out-of-range material id; they use a default material"));
+                scene
+                    .warnings
+                    .push(format!("{bad_ids} triangles had an out-of-range material id; they use a default material"));
             }
         }
         let has_normals = scene.mesh.normals.len() == nv;
@@ -360,7 +367,9 @@ impl RenderScene {
             valid.push(i as u32);
         }
         if invalid > 0 {
-            scene.warnings.push(format!("{invalid} triangles with bad vertex indices or non-finite positions were skipped"));
+            scene
+                .warnings
+                .push(format!("{invalid} triangles with bad vertex indices or non-finite positions were skipped"));
         }
 
         let start = Instant::now();

@@ -224,10 +224,7 @@ impl RoughnessRow {
 
     fn avg(&self, t: &EnergyTables) -> (f32, f32) {
         let i = self.i;
-        (
-            t.e1_avg[i] + (t.e1_avg[i + 1] - t.e1_avg[i]) * self.f,
-            t.e2_avg[i] + (t.e2_avg[i + 1] - t.e2_avg[i]) * self.f,
-        )
+        (t.e1_avg[i] + (t.e1_avg[i + 1] - t.e1_avg[i]) * self.f, t.e2_avg[i] + (t.e2_avg[i + 1] - t.e2_avg[i]) * self.f)
     }
 }
 

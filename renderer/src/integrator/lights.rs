@@ -235,7 +235,8 @@ impl LightBounds {
             let theta_w = (theta_o + theta_e).min(PI);
             let sin_o = safe_sqrt(1.0 - self.cos_o * self.cos_o);
             2.0 * PI * (1.0 - self.cos_o)
-                + FRAC_PI_2 * (2.0 * theta_w * sin_o - (theta_o - 2.0 * theta_w).cos() - 2.0 * theta_o * sin_o + self.cos_o)
+                + FRAC_PI_2
+                    * (2.0 * theta_w * sin_o - (theta_o - 2.0 * theta_w).cos() - 2.0 * theta_o * sin_o + self.cos_o)
         };
         let d = self.bmax - self.bmin;
         let area = 2.0 * (d.x * d.y + d.y * d.z + d.z * d.x);
@@ -554,7 +555,12 @@ impl LightTree {
 /// Builds the binary light BVH over `items` top-down (pbrt-v4's `buildBVH`: SAH-like cost over
 /// 12 buckets per axis; median split where that fails or below [`SAH_MAX_DEPTH`]); returns the
 /// bounds of `items`.
-fn build_binary(nodes: &mut Vec<BinNode>, items: &mut [(u32, LightBounds)], depth: u32, max_depth: &mut u32) -> LightBounds {
+fn build_binary(
+    nodes: &mut Vec<BinNode>,
+    items: &mut [(u32, LightBounds)],
+    depth: u32,
+    max_depth: &mut u32,
+) -> LightBounds {
     *max_depth = (*max_depth).max(depth);
     if items.len() == 1 {
         let (li, b) = items[0];
@@ -744,7 +750,9 @@ impl LightSet {
                 two_sided: false,
             };
             let b = match *l {
-                Light::Point { position, intensity, .. } => Some(point(position, intensity, Vec3::Z, -1.0, cos_half_pi)),
+                Light::Point { position, intensity, .. } => {
+                    Some(point(position, intensity, Vec3::Z, -1.0, cos_half_pi))
+                }
                 Light::Spot { position, direction, intensity, inner_cone_rad, outer_cone_rad, .. } => {
                     let w = direction.normalize_or_zero();
                     if w == Vec3::ZERO {
@@ -1080,12 +1088,17 @@ impl RenderScene {
                 let (uv0, uv1) = if mesh.uv0.len() == mesh.positions.len() {
                     let [i0, i1, i2] = mesh.indices[tri as usize].map(|i| i as usize);
                     let uv0 = mesh.uv0[i0] * w0 + mesh.uv0[i1] * w1 + mesh.uv0[i2] * w2;
-                    let uv1 = if mesh.uv1.len() == mesh.positions.len() { mesh.uv1[i0] * w0 + mesh.uv1[i1] * w1 + mesh.uv1[i2] * w2 } else { uv0 };
+                    let uv1 = if mesh.uv1.len() == mesh.positions.len() {
+                        mesh.uv1[i0] * w0 + mesh.uv1[i1] * w1 + mesh.uv1[i2] * w2
+                    } else {
+                        uv0
+                    };
                     (uv0, uv1)
                 } else {
                     (Vec2::ZERO, Vec2::ZERO)
                 };
-                let mut le = mat.emissive * self.texture(mat.emissive_texture, uv0, uv1).map_or(Vec3::ONE, |t| t.truncate());
+                let mut le =
+                    mat.emissive * self.texture(mat.emissive_texture, uv0, uv1).map_or(Vec3::ONE, |t| t.truncate());
                 // Cut-outs of the emitter itself: Mask removes, Blend emits with weight alpha
                 // (the expected value of stochastic opacity).
                 match self.alpha_tests[mesh.material_ids[tri as usize] as usize] {

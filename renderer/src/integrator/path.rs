@@ -110,7 +110,14 @@ impl PathTracer {
     /// Traces one camera ray that sees only what lies between `clip.0` and `clip.1` along it
     /// (clipping planes; beyond them the environment shows, as in Blender). Depth is still
     /// measured from `origin`.
-    pub fn trace_clipped(&self, scene: &RenderScene, origin: Vec3, dir: Vec3, clip: (f32, f32), sampler: &mut PixelSampler) -> PathSample {
+    pub fn trace_clipped(
+        &self,
+        scene: &RenderScene,
+        origin: Vec3,
+        dir: Vec3,
+        clip: (f32, f32),
+        sampler: &mut PixelSampler,
+    ) -> PathSample {
         let mut out = PathSample {
             radiance: Vec3::ZERO,
             alpha: 0.0,
@@ -130,8 +137,8 @@ impl PathTracer {
         let mut l = Vec3::ZERO;
         let mut beta = Vec3::ONE;
         let mut prev_pdf = 0.0f32; // BSDF pdf of the ray being traced (0 for the camera ray)
-        // Shading point (position, geometric normal on the side of the path) the ray being
-        // traced left from: light selection there depends on it, so MIS needs it.
+                                   // Shading point (position, geometric normal on the side of the path) the ray being
+                                   // traced left from: light selection there depends on it, so MIS needs it.
         let (mut prev_p, mut prev_n) = (Vec3::ZERO, Vec3::ZERO);
         let mut depth = 0u32;
         let nee = self.strategy != LightStrategy::BsdfOnly;
@@ -175,7 +182,8 @@ impl PathTracer {
                 let w = if depth == 0 {
                     1.0
                 } else {
-                    let light_pdf = scene.triangle_light_pdf(prev_p, prev_n, hit.triangle, d, hit.t, hit.geometric_normal);
+                    let light_pdf =
+                        scene.triangle_light_pdf(prev_p, prev_n, hit.triangle, d, hit.t, hit.geometric_normal);
                     match self.strategy {
                         LightStrategy::Mis => power_heuristic(prev_pdf, light_pdf),
                         LightStrategy::BsdfOnly => 1.0,

@@ -49,7 +49,13 @@ fn add_box(mesh: &mut Mesh, xf: Affine3A, size: Vec3, material: u32) {
         let c = n * h;
         let (du, dv) = (u * (u.abs().dot(h)), v * (v.abs().dot(h)));
         let corners = [c - du - dv, c + du - dv, c + du + dv, c - du + dv];
-        add_quad(mesh, xf, corners, [Vec2::new(0.0, 1.0), Vec2::new(1.0, 1.0), Vec2::new(1.0, 0.0), Vec2::new(0.0, 0.0)], material);
+        add_quad(
+            mesh,
+            xf,
+            corners,
+            [Vec2::new(0.0, 1.0), Vec2::new(1.0, 1.0), Vec2::new(1.0, 0.0), Vec2::new(0.0, 0.0)],
+            material,
+        );
     }
 }
 
@@ -125,28 +131,77 @@ pub fn demo_scene() -> (Scene, DemoShot) {
                 texels.push(c.extend(1.0));
             }
         }
-        Texture { name: "table".into(), width: n, height: n, texels, wrap_s: Wrap::Repeat, wrap_t: Wrap::Repeat, bilinear: true }
+        Texture {
+            name: "table".into(),
+            width: n,
+            height: n,
+            texels,
+            wrap_s: Wrap::Repeat,
+            wrap_t: Wrap::Repeat,
+            bilinear: true,
+        }
     };
     scene.textures.push(Arc::new(checker));
     let mut table = diffuse("table", Vec3::ONE, 0.6);
     table.base_color_texture = Some(TextureRef { index: 0, uv_set: 0 });
     scene.materials.push(table); // 0
     scene.materials.push(diffuse("street", Vec3::new(0.08, 0.08, 0.09), 0.9)); // 1
-    let house_colours = [Vec3::new(0.7, 0.62, 0.5), Vec3::new(0.55, 0.2, 0.15), Vec3::new(0.8, 0.78, 0.7), Vec3::new(0.3, 0.4, 0.55), Vec3::new(0.6, 0.5, 0.25)];
+    let house_colours = [
+        Vec3::new(0.7, 0.62, 0.5),
+        Vec3::new(0.55, 0.2, 0.15),
+        Vec3::new(0.8, 0.78, 0.7),
+        Vec3::new(0.3, 0.4, 0.55),
+        Vec3::new(0.6, 0.5, 0.25),
+    ];
     for (i, c) in house_colours.iter().enumerate() {
         scene.materials.push(diffuse(&format!("house{i}"), *c, 0.8)); // 2..=6
     }
-    let warm = Material { name: "lamp-warm".into(), emissive: Vec3::new(60.0, 38.0, 16.0), base_color: Vec4::new(1.0, 0.9, 0.7, 1.0), metallic: 0.0, ..Material::default() };
-    let cool = Material { name: "lamp-cool".into(), emissive: Vec3::new(25.0, 35.0, 60.0), base_color: Vec4::new(0.8, 0.9, 1.0, 1.0), metallic: 0.0, ..Material::default() };
+    let warm = Material {
+        name: "lamp-warm".into(),
+        emissive: Vec3::new(60.0, 38.0, 16.0),
+        base_color: Vec4::new(1.0, 0.9, 0.7, 1.0),
+        metallic: 0.0,
+        ..Material::default()
+    };
+    let cool = Material {
+        name: "lamp-cool".into(),
+        emissive: Vec3::new(25.0, 35.0, 60.0),
+        base_color: Vec4::new(0.8, 0.9, 1.0, 1.0),
+        metallic: 0.0,
+        ..Material::default()
+    };
     scene.materials.push(warm); // 7
     scene.materials.push(cool); // 8
     scene.materials.push(diffuse("post", Vec3::new(0.05, 0.05, 0.05), 0.4)); // 9
-    let window = Material { name: "window".into(), emissive: Vec3::new(4.0, 2.6, 1.0), base_color: Vec4::new(0.9, 0.8, 0.6, 1.0), metallic: 0.0, ..Material::default() };
+    let window = Material {
+        name: "window".into(),
+        emissive: Vec3::new(4.0, 2.6, 1.0),
+        base_color: Vec4::new(0.9, 0.8, 0.6, 1.0),
+        metallic: 0.0,
+        ..Material::default()
+    };
     scene.materials.push(window); // 10
     let mesh = &mut scene.mesh;
     // 2. Table top (y = 0) and the street running away from the camera along −z.
-    add_quad(mesh, Affine3A::IDENTITY, [Vec3::new(-2.0, 0.0, 1.0), Vec3::new(2.0, 0.0, 1.0), Vec3::new(2.0, 0.0, -4.0), Vec3::new(-2.0, 0.0, -4.0)], [Vec2::new(0.0, 10.0), Vec2::new(8.0, 10.0), Vec2::new(8.0, 0.0), Vec2::new(0.0, 0.0)], 0);
-    add_quad(mesh, Affine3A::IDENTITY, [Vec3::new(-0.06, 0.001, 0.4), Vec3::new(0.06, 0.001, 0.4), Vec3::new(0.06, 0.001, -3.0), Vec3::new(-0.06, 0.001, -3.0)], [Vec2::ZERO; 4], 1);
+    add_quad(
+        mesh,
+        Affine3A::IDENTITY,
+        [Vec3::new(-2.0, 0.0, 1.0), Vec3::new(2.0, 0.0, 1.0), Vec3::new(2.0, 0.0, -4.0), Vec3::new(-2.0, 0.0, -4.0)],
+        [Vec2::new(0.0, 10.0), Vec2::new(8.0, 10.0), Vec2::new(8.0, 0.0), Vec2::new(0.0, 0.0)],
+        0,
+    );
+    add_quad(
+        mesh,
+        Affine3A::IDENTITY,
+        [
+            Vec3::new(-0.06, 0.001, 0.4),
+            Vec3::new(0.06, 0.001, 0.4),
+            Vec3::new(0.06, 0.001, -3.0),
+            Vec3::new(-0.06, 0.001, -3.0),
+        ],
+        [Vec2::ZERO; 4],
+        1,
+    );
     // 3. Houses on both sides.
     let mut k = 0u32;
     for side in [-1.0f32, 1.0] {
@@ -166,9 +221,19 @@ pub fn demo_scene() -> (Scene, DemoShot) {
                 let s = 0.008;
                 let zc = z - w * 0.5;
                 let corners = if side < 0.0 {
-                    [Vec3::new(wx, wy - s, zc + s), Vec3::new(wx, wy - s, zc - s), Vec3::new(wx, wy + s, zc - s), Vec3::new(wx, wy + s, zc + s)]
+                    [
+                        Vec3::new(wx, wy - s, zc + s),
+                        Vec3::new(wx, wy - s, zc - s),
+                        Vec3::new(wx, wy + s, zc - s),
+                        Vec3::new(wx, wy + s, zc + s),
+                    ]
                 } else {
-                    [Vec3::new(wx, wy - s, zc - s), Vec3::new(wx, wy - s, zc + s), Vec3::new(wx, wy + s, zc + s), Vec3::new(wx, wy + s, zc - s)]
+                    [
+                        Vec3::new(wx, wy - s, zc - s),
+                        Vec3::new(wx, wy - s, zc + s),
+                        Vec3::new(wx, wy + s, zc + s),
+                        Vec3::new(wx, wy + s, zc - s),
+                    ]
                 };
                 add_quad(mesh, Affine3A::IDENTITY, corners, [Vec2::ZERO; 4], 10);
             }
@@ -194,12 +259,29 @@ pub fn demo_scene() -> (Scene, DemoShot) {
     }
     // 5. Dusk sky and a dim moon.
     scene.environment = Environment::Constant(Vec3::new(0.035, 0.045, 0.08));
-    scene.lights.push(Light::Directional { direction: Vec3::new(0.3, -1.0, -0.4).normalize(), irradiance: Vec3::new(0.25, 0.27, 0.35) });
+    scene.lights.push(Light::Directional {
+        direction: Vec3::new(0.3, -1.0, -0.4).normalize(),
+        irradiance: Vec3::new(0.25, 0.27, 0.35),
+    });
     // 6. The camera: low over the table, looking down the street.
     let eye = Vec3::new(0.0, 0.09, 0.55);
     let target = Vec3::new(0.0, 0.02, -0.4);
     let view = Affine3A::look_at_rh(eye, target, Vec3::Y);
-    scene.cameras.push(SceneCamera { name: "demo".into(), to_world: view.inverse(), yfov_rad: 0.45, aspect_ratio: Some(1.5), znear: 0.01, zfar: None });
-    let shot = DemoShot { lens: "double-gauss-50mm", f_number: 2.1, focus_distance_m: 0.55, tilt_x_deg: -6.0, blades: 7, blade_rotation_deg: 10.0 };
+    scene.cameras.push(SceneCamera {
+        name: "demo".into(),
+        to_world: view.inverse(),
+        yfov_rad: 0.45,
+        aspect_ratio: Some(1.5),
+        znear: 0.01,
+        zfar: None,
+    });
+    let shot = DemoShot {
+        lens: "double-gauss-50mm",
+        f_number: 2.1,
+        focus_distance_m: 0.55,
+        tilt_x_deg: -6.0,
+        blades: 7,
+        blade_rotation_deg: 10.0,
+    };
     (scene, shot)
 }

@@ -73,9 +73,7 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
 pub fn load_gltf_slice(bytes: &[u8], base_dir: Option<&Path>, file_name: &str) -> Result<Scene> {
     // Defence in depth: the loader checks every index and byte range itself, but the `gltf`
     // crate's accessors rely on its validation; a panic there becomes an error, not a crash.
-    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        Loader::load(bytes, base_dir, file_name)
-    }));
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| Loader::load(bytes, base_dir, file_name)));
     match result {
         Ok(r) => r,
         Err(payload) => {
@@ -147,8 +145,8 @@ impl<'a> Loader<'a> {
         if bytes.is_empty() {
             return Err(err("empty file".into()));
         }
-        let gltf::Gltf { document, blob } = gltf::Gltf::from_slice_without_validation(bytes)
-            .map_err(|e| err(format!("not a valid glTF file: {e}")))?;
+        let gltf::Gltf { document, blob } =
+            gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| err(format!("not a valid glTF file: {e}")))?;
         // KHR_mesh_quantization only widens the accessor types allowed for attributes, which
         // the accessor reader below handles; the gltf crate does not know the name.
         let mut json = document.into_json();
@@ -175,8 +173,8 @@ impl<'a> Loader<'a> {
             acc.min.get_or_insert_with(zero);
             acc.max.get_or_insert_with(zero);
         }
-        let doc = gltf::Document::from_json(json)
-            .map_err(|e| err(format!("invalid glTF: {}", describe_gltf_error(&e))))?;
+        let doc =
+            gltf::Document::from_json(json).map_err(|e| err(format!("invalid glTF: {}", describe_gltf_error(&e))))?;
         let version = &doc.as_json().asset.version;
         if !version.starts_with("2.") {
             return Err(err(format!("glTF version {version} is not supported (2.x only)")));
@@ -263,9 +261,9 @@ impl<'a> Loader<'a> {
         for b in buffers {
             let loc = named("buffer", b.index(), b.name());
             let mut data = match b.source() {
-                gltf::buffer::Source::Bin => blob
-                    .take()
-                    .ok_or_else(|| self.error(&loc, "refers to the GLB binary chunk, which is missing"))?,
+                gltf::buffer::Source::Bin => {
+                    blob.take().ok_or_else(|| self.error(&loc, "refers to the GLB binary chunk, which is missing"))?
+                }
                 gltf::buffer::Source::Uri(uri) => self.read_uri(uri).map_err(|m| self.error(&loc, m))?,
             };
             if data.len() < b.length() {
@@ -415,7 +413,8 @@ impl<'a> Loader<'a> {
             );
             let (normal_texture, normal_scale) = match m.normal_texture() {
                 Some(n) => {
-                    let r = self.texture_ref(&n.texture(), n.tex_coord(), TexKind::Normal, &format!("{loc} normalTexture"));
+                    let r =
+                        self.texture_ref(&n.texture(), n.tex_coord(), TexKind::Normal, &format!("{loc} normalTexture"));
                     let s = if n.scale().is_finite() { n.scale() } else { 1.0 };
                     (Some(r), s)
                 }
@@ -435,7 +434,10 @@ impl<'a> Loader<'a> {
                         || s.specular_color_texture().is_some()
                         || s.specular_color_factor() != [1.0, 1.0, 1.0]
                     {
-                        self.warn(&loc, "KHR_materials_specular: only specularFactor is used (colour and textures ignored)");
+                        self.warn(
+                            &loc,
+                            "KHR_materials_specular: only specularFactor is used (colour and textures ignored)",
+                        );
                     }
                     let f = s.specular_factor();
                     if f.is_finite() && f >= 0.0 {
@@ -559,8 +561,7 @@ impl<'a> Loader<'a> {
 
     /// Fails if a node is (indirectly) its own descendant.
     fn check_node_cycles(&self) -> Result<()> {
-        let children: Vec<Vec<usize>> =
-            self.doc.nodes().map(|n| n.children().map(|c| c.index()).collect()).collect();
+        let children: Vec<Vec<usize>> = self.doc.nodes().map(|n| n.children().map(|c| c.index()).collect()).collect();
         let n = children.len();
         // 0 = unvisited, 1 = on the current path, 2 = done.
         let mut state = vec![0u8; n];
@@ -649,15 +650,17 @@ impl<'a> Loader<'a> {
         let direction = dir.normalize_or_zero();
         let l = match light.kind() {
             gltf::khr_lights_punctual::Kind::Point => Light::Point { position, intensity: radiometric, range },
-            gltf::khr_lights_punctual::Kind::Directional => {
-                Light::Directional { direction, irradiance: radiometric }
-            }
+            gltf::khr_lights_punctual::Kind::Directional => Light::Directional { direction, irradiance: radiometric },
             gltf::khr_lights_punctual::Kind::Spot { inner_cone_angle, outer_cone_angle } => {
                 let mut outer = outer_cone_angle;
                 let mut inner = inner_cone_angle;
                 if !outer.is_finite() || outer <= 0.0 || outer > std::f32::consts::FRAC_PI_2 {
                     self.warn(&loc, format!("outerConeAngle {outer} is outside (0, π/2]; clamped"));
-                    outer = if outer.is_finite() { outer.clamp(1e-4, std::f32::consts::FRAC_PI_2) } else { std::f32::consts::FRAC_PI_4 };
+                    outer = if outer.is_finite() {
+                        outer.clamp(1e-4, std::f32::consts::FRAC_PI_2)
+                    } else {
+                        std::f32::consts::FRAC_PI_4
+                    };
                 }
                 if !inner.is_finite() || inner < 0.0 || inner >= outer {
                     self.warn(&loc, format!("innerConeAngle {inner} is outside [0, outerConeAngle); clamped"));
@@ -783,10 +786,7 @@ impl<'a> Loader<'a> {
                 let mut out = Vec::with_capacity(v.len());
                 for (k, &i) in v.iter().enumerate() {
                     if !(i >= 0.0 && (i as usize) < n) {
-                        return Err(self.error(
-                            loc,
-                            format!("{what}: index {k} is {i}, out of range for {n} vertices"),
-                        ));
+                        return Err(self.error(loc, format!("{what}: index {k} is {i}, out of range for {n} vertices")));
                     }
                     out.push(i as u32);
                 }
@@ -800,7 +800,10 @@ impl<'a> Loader<'a> {
             }
         };
         if !flat.len().is_multiple_of(3) {
-            self.warn(loc, format!("{} indices is not a multiple of 3; the last {} ignored", flat.len(), flat.len() % 3));
+            self.warn(
+                loc,
+                format!("{} indices is not a multiple of 3; the last {} ignored", flat.len(), flat.len() % 3),
+            );
             flat.truncate(flat.len() - flat.len() % 3);
         }
 
@@ -809,11 +812,9 @@ impl<'a> Loader<'a> {
         let det = lin.determinant();
         let sign = if det < 0.0 { -1.0 } else { 1.0 };
         // Cofactor matrix = det × inverse transpose: defined even for singular matrices.
-        let cof = Mat3::from_cols(
-            lin.y_axis.cross(lin.z_axis),
-            lin.z_axis.cross(lin.x_axis),
-            lin.x_axis.cross(lin.y_axis),
-        ) * sign;
+        let cof =
+            Mat3::from_cols(lin.y_axis.cross(lin.z_axis), lin.z_axis.cross(lin.x_axis), lin.x_axis.cross(lin.y_axis))
+                * sign;
         let pos: Vec<Vec3> =
             positions.chunks_exact(3).map(|p| world.transform_point3(Vec3::new(p[0], p[1], p[2]))).collect();
 
@@ -842,7 +843,11 @@ impl<'a> Loader<'a> {
                 v.chunks_exact(2)
                     .map(|c| {
                         let uv = Vec2::new(c[0], c[1]);
-                        if uv.is_finite() { uv } else { Vec2::ZERO }
+                        if uv.is_finite() {
+                            uv
+                        } else {
+                            Vec2::ZERO
+                        }
                     })
                     .collect()
             })
@@ -872,10 +877,8 @@ impl<'a> Loader<'a> {
         match normals {
             Some(nrm) => {
                 // Shared vertices; compact to the ones the kept triangles use.
-                let mut world_n: Vec<Vec3> = nrm
-                    .chunks_exact(3)
-                    .map(|c| (cof * Vec3::new(c[0], c[1], c[2])).normalize_or_zero())
-                    .collect();
+                let mut world_n: Vec<Vec3> =
+                    nrm.chunks_exact(3).map(|c| (cof * Vec3::new(c[0], c[1], c[2])).normalize_or_zero()).collect();
                 if world_n.iter().any(|v| *v == Vec3::ZERO || !v.is_finite()) {
                     // Replace unusable normals by area-weighted vertex normals.
                     let mut acc = vec![Vec3::ZERO; n];
@@ -952,7 +955,11 @@ fn image_texels(img: &image::DynamicImage, srgb: bool) -> Vec<Vec4> {
         let lut: Vec<f32> = (0..256)
             .map(|i| {
                 let c = i as f32 / 255.0;
-                if srgb { srgb_to_linear(c) } else { c }
+                if srgb {
+                    srgb_to_linear(c)
+                } else {
+                    c
+                }
             })
             .collect();
         img.to_rgba8()
@@ -1006,23 +1013,43 @@ fn read_component(bytes: &[u8], t: DataType, normalized: bool) -> f64 {
     match t {
         DataType::I8 => {
             let v = b(0) as i8 as f64;
-            if normalized { (v / 127.0).max(-1.0) } else { v }
+            if normalized {
+                (v / 127.0).max(-1.0)
+            } else {
+                v
+            }
         }
         DataType::U8 => {
             let v = b(0) as f64;
-            if normalized { v / 255.0 } else { v }
+            if normalized {
+                v / 255.0
+            } else {
+                v
+            }
         }
         DataType::I16 => {
             let v = i16::from_le_bytes([b(0), b(1)]) as f64;
-            if normalized { (v / 32767.0).max(-1.0) } else { v }
+            if normalized {
+                (v / 32767.0).max(-1.0)
+            } else {
+                v
+            }
         }
         DataType::U16 => {
             let v = u16::from_le_bytes([b(0), b(1)]) as f64;
-            if normalized { v / 65535.0 } else { v }
+            if normalized {
+                v / 65535.0
+            } else {
+                v
+            }
         }
         DataType::U32 => {
             let v = u32::from_le_bytes([b(0), b(1), b(2), b(3)]) as f64;
-            if normalized { v / 4294967295.0 } else { v }
+            if normalized {
+                v / 4294967295.0
+            } else {
+                v
+            }
         }
         DataType::F32 => f32::from_le_bytes([b(0), b(1), b(2), b(3)]) as f64,
     }
@@ -1126,12 +1153,12 @@ fn read_accessor_f64(loader: &Loader, acc: &gltf::Accessor) -> std::result::Resu
             gltf::accessor::sparse::IndexType::U32 => DataType::U32,
         };
         let layout = Layout { ncomp: 1, t: it, normalized: false, tight: true };
-        let indices = read_elements(loader, &idx.view(), idx.offset(), n, layout)
-            .map_err(|m| format!("sparse indices: {m}"))?;
+        let indices =
+            read_elements(loader, &idx.view(), idx.offset(), n, layout).map_err(|m| format!("sparse indices: {m}"))?;
         let vals = sparse.values();
         let layout = Layout { ncomp, t, normalized: acc.normalized(), tight: true };
-        let values = read_elements(loader, &vals.view(), vals.offset(), n, layout)
-            .map_err(|m| format!("sparse values: {m}"))?;
+        let values =
+            read_elements(loader, &vals.view(), vals.offset(), n, layout).map_err(|m| format!("sparse values: {m}"))?;
         for (k, &i) in indices.iter().enumerate() {
             let i = i as usize;
             if i >= count {

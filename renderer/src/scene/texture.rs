@@ -35,7 +35,15 @@ pub struct Texture {
 impl Texture {
     /// A 1×1 texture of one value (the visible fallback for a missing image is magenta).
     pub fn constant(name: &str, value: Vec4) -> Self {
-        Texture { name: name.into(), width: 1, height: 1, texels: vec![value], wrap_s: Wrap::Repeat, wrap_t: Wrap::Repeat, bilinear: false }
+        Texture {
+            name: name.into(),
+            width: 1,
+            height: 1,
+            texels: vec![value],
+            wrap_s: Wrap::Repeat,
+            wrap_t: Wrap::Repeat,
+            bilinear: false,
+        }
     }
 
     fn wrap(i: i64, n: u32, mode: Wrap) -> u32 {
@@ -45,7 +53,11 @@ impl Texture {
             Wrap::ClampToEdge => i.clamp(0, n - 1),
             Wrap::MirroredRepeat => {
                 let m = i.rem_euclid(2 * n);
-                if m < n { m } else { 2 * n - 1 - m }
+                if m < n {
+                    m
+                } else {
+                    2 * n - 1 - m
+                }
             }
         };
         i as u32

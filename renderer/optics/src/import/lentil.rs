@@ -51,7 +51,8 @@ const PLANE_RADIUS: f64 = 99999.0;
 /// Imports one entry of the lentil database. `file` names the file in errors; `id` is the
 /// entry's key, e.g. `"0001"`.
 pub fn import_lentil(text: &str, file: &str, id: &str) -> Result<(Prescription, SourceMap)> {
-    let root: Value = serde_json::from_str(text).map_err(|e| Error::lens_file(file, e.line(), "json", e.to_string()))?;
+    let root: Value =
+        serde_json::from_str(text).map_err(|e| Error::lens_file(file, e.line(), "json", e.to_string()))?;
     let Some(obj) = root.as_object() else {
         return Err(Error::lens_file(file, 1, "json", "expected a JSON object keyed by lens id"));
     };
@@ -71,7 +72,9 @@ pub fn import_lentil(text: &str, file: &str, id: &str) -> Result<(Prescription, 
         .get("optical-elements-patent")
         .ok_or_else(|| Error::lens_file(file, entry_line, &elements_field, "missing field"))?
         .as_array()
-        .ok_or_else(|| Error::lens_file(file, lines.elements.unwrap_or(entry_line), &elements_field, "must be a list of surfaces"))?;
+        .ok_or_else(|| {
+            Error::lens_file(file, lines.elements.unwrap_or(entry_line), &elements_field, "must be a list of surfaces")
+        })?;
     if elements.is_empty() {
         return Err(Error::lens_file(file, lines.elements.unwrap_or(entry_line), &elements_field, "no surfaces"));
     }
@@ -148,7 +151,12 @@ pub fn import_lentil(text: &str, file: &str, id: &str) -> Result<(Prescription, 
                         .collect::<Option<Vec<f64>>>()
                         .ok_or_else(|| err("aspherical-equation", "must be a list of numbers".into()))?,
                     None | Some(Value::Null) => Vec::new(),
-                    Some(v) => return Err(err("aspherical-equation", format!("must be a list, got {}", short(&v.to_string())))),
+                    Some(v) => {
+                        return Err(err(
+                            "aspherical-equation",
+                            format!("must be a list, got {}", short(&v.to_string())),
+                        ))
+                    }
                 };
                 let mut coeffs = coeffs;
                 while coeffs.last() == Some(&0.0) {
@@ -205,8 +213,14 @@ pub fn import_lentil(text: &str, file: &str, id: &str) -> Result<(Prescription, 
                         _ => MaterialSpec::default(),
                     },
                     Err(e) => {
-                        let spec = model(&e.to_string())
-                            .map_err(|_| Error::lens_file(file, line, field("material"), format!("{e}, and the entry gives no `ior` to model it")))?;
+                        let spec = model(&e.to_string()).map_err(|_| {
+                            Error::lens_file(
+                                file,
+                                line,
+                                field("material"),
+                                format!("{e}, and the entry gives no `ior` to model it"),
+                            )
+                        })?;
                         if let MaterialSpec::Model(g) = &spec {
                             notes.push(format!(
                                 "Surface {}: glass {} is not in our catalogue; modelled from the entry's nd = {}, vd = {}.",
@@ -261,7 +275,9 @@ pub fn import_lentil(text: &str, file: &str, id: &str) -> Result<(Prescription, 
     // Metadata.
     let s = |k: &str| entry.get(k).and_then(|v| v.as_str()).map(str::trim).filter(|v| !v.is_empty());
     let f = |k: &str| entry.get(k).and_then(|v| v.as_f64()).filter(|v| v.is_finite() && *v > 0.0);
-    let unscaled = |k: &str| entry.get(k).and_then(|v| v.get("unscaled")).and_then(|v| v.as_f64()).filter(|v| v.is_finite() && *v > 0.0);
+    let unscaled = |k: &str| {
+        entry.get(k).and_then(|v| v.get("unscaled")).and_then(|v| v.as_f64()).filter(|v| v.is_finite() && *v > 0.0)
+    };
     let year = entry.get("year").and_then(|v| v.as_i64());
     let company = s("company").filter(|c| !matches!(*c, "unknown" | "unsure" | "test"));
     let product = s("product-name").filter(|c| *c != "unknown");
@@ -420,7 +436,10 @@ fn scan_lines(text: &str, id: &str) -> EntryLines {
                 if c == '{' && depth == 1 && parent_key.as_deref() == Some(id) && out.entry.is_none() {
                     out.entry = Some(line);
                     entry_depth = Some(depth + 1);
-                } else if c == '[' && entry_depth == Some(depth) && parent_key.as_deref() == Some("optical-elements-patent") {
+                } else if c == '['
+                    && entry_depth == Some(depth)
+                    && parent_key.as_deref() == Some("optical-elements-patent")
+                {
                     out.elements = Some(line);
                     elements_depth = Some(depth + 1);
                 } else if c == '{' && elements_depth == Some(depth) {

@@ -36,8 +36,7 @@ pub fn read_prescription(path: &Path) -> Result<(Prescription, SourceMap)> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     match ext.as_str() {
         "toml" => {
-            let text = String::from_utf8(bytes)
-                .map_err(|_| Error::lens_file(&file, 0, "file", "not UTF-8 text"))?;
+            let text = String::from_utf8(bytes).map_err(|_| Error::lens_file(&file, 0, "file", "not UTF-8 text"))?;
             prescription::parse_toml(&text, &file)
         }
         "dat" => {

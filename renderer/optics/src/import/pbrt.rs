@@ -105,10 +105,7 @@ fn parse(text: &str, file: &str) -> Result<(Header, Vec<Row>)> {
                 file,
                 line,
                 COLUMNS[tokens.len()],
-                format!(
-                    "truncated row: expected 4 columns (radius thickness N aperture), got {}",
-                    tokens.len()
-                ),
+                format!("truncated row: expected 4 columns (radius thickness N aperture), got {}", tokens.len()),
             ));
         }
         if tokens.len() > 4 {
@@ -121,9 +118,9 @@ fn parse(text: &str, file: &str) -> Result<(Header, Vec<Row>)> {
         }
         let mut v = [0.0; 4];
         for (k, t) in tokens.iter().enumerate() {
-            let x: f64 = t.parse().map_err(|_| {
-                Error::lens_file(file, line, COLUMNS[k], format!("'{}' is not a number", short(t)))
-            })?;
+            let x: f64 = t
+                .parse()
+                .map_err(|_| Error::lens_file(file, line, COLUMNS[k], format!("'{}' is not a number", short(t))))?;
             if !x.is_finite() {
                 return Err(Error::lens_file(file, line, COLUMNS[k], format!("must be a finite number, got {t}")));
             }
@@ -138,7 +135,12 @@ fn parse(text: &str, file: &str) -> Result<(Header, Vec<Row>)> {
             v[k] = x;
         }
         if v[3] <= 0.0 {
-            return Err(Error::lens_file(file, line, "aperture", format!("aperture diameter must be positive, got {}", v[3])));
+            return Err(Error::lens_file(
+                file,
+                line,
+                "aperture",
+                format!("aperture diameter must be positive, got {}", v[3]),
+            ));
         }
         if !(v[2] == 0.0 || (1.0..=3.0).contains(&v[2])) {
             return Err(Error::lens_file(
@@ -159,7 +161,12 @@ fn parse(text: &str, file: &str) -> Result<(Header, Vec<Row>)> {
         rows.push(Row { line, radius: v[0], thickness: v[1], n: v[2], aperture: v[3] });
     }
     if rows.is_empty() {
-        return Err(Error::lens_file(file, 0, "file", "no lens rows (expected `radius thickness N aperture` per line)"));
+        return Err(Error::lens_file(
+            file,
+            0,
+            "file",
+            "no lens rows (expected `radius thickness N aperture` per line)",
+        ));
     }
     Ok((header, rows))
 }
@@ -191,7 +198,10 @@ fn build(
                 file,
                 rows[stops[0]].line,
                 "N",
-                format!("the aperture stop must sit in air, but the row before it (line {}) has glass N = {}", before.line, before.n),
+                format!(
+                    "the aperture stop must sit in air, but the row before it (line {}) has glass N = {}",
+                    before.line, before.n
+                ),
             ));
         }
     }
@@ -456,10 +466,7 @@ pub(crate) fn fit_semi_diameters(p: &mut Prescription) -> Vec<String> {
         } else {
             "element"
         };
-        let targets: Vec<usize> = [i, i + 1]
-            .into_iter()
-            .filter(|&j| p.surfaces[j].semi_diameter_mm <= r_max)
-            .collect();
+        let targets: Vec<usize> = [i, i + 1].into_iter().filter(|&j| p.surfaces[j].semi_diameter_mm <= r_max).collect();
         let old = r_max;
         for &j in &targets {
             p.surfaces[j].semi_diameter_mm = new;

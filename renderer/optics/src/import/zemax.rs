@@ -70,7 +70,9 @@ enum GlassRef {
 /// (lossy, so Latin-1 bytes become U+FFFD rather than an error).
 fn decode(bytes: &[u8]) -> String {
     let utf16 = |b: &[u8], le: bool| -> String {
-        let units = b.chunks_exact(2).map(|c| if le { u16::from_le_bytes([c[0], c[1]]) } else { u16::from_be_bytes([c[0], c[1]]) });
+        let units =
+            b.chunks_exact(2)
+                .map(|c| if le { u16::from_le_bytes([c[0], c[1]]) } else { u16::from_be_bytes([c[0], c[1]]) });
         char::decode_utf16(units).map(|r| r.unwrap_or(char::REPLACEMENT_CHARACTER)).collect()
     };
     match bytes {
@@ -96,9 +98,10 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
 
     let num = |tok: Option<&&str>, line: usize, field: &str| -> Result<f64> {
         let t = tok.ok_or_else(|| Error::lens_file(file, line, field, "missing value"))?;
-        let v: f64 = t.replace(',', ".").parse().map_err(|_| {
-            Error::lens_file(file, line, field, format!("'{}' is not a number", short(t)))
-        })?;
+        let v: f64 = t
+            .replace(',', ".")
+            .parse()
+            .map_err(|_| Error::lens_file(file, line, field, format!("'{}' is not a number", short(t))))?;
         if !v.is_finite() {
             return Err(Error::lens_file(file, line, field, format!("must be a finite number, got {t}")));
         }
@@ -107,7 +110,12 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
     let length = |v: f64, line: usize, field: &str, unit_mm: f64| -> Result<f64> {
         let mm = v * unit_mm;
         if !mm.is_finite() || mm.abs() > MAX_LENGTH_MM {
-            return Err(Error::lens_file(file, line, field, format!("{v} is implausibly large (limit {MAX_LENGTH_MM} mm)")));
+            return Err(Error::lens_file(
+                file,
+                line,
+                field,
+                format!("{v} is implausibly large (limit {MAX_LENGTH_MM} mm)"),
+            ));
         }
         Ok(mm)
     };
@@ -174,7 +182,12 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
             "SURF" => {
                 let n = num(tokens.get(1), line, "SURF")?;
                 if n < 0.0 || n.fract() != 0.0 {
-                    return Err(Error::lens_file(file, line, "SURF", format!("surface number must be a whole number, got {n}")));
+                    return Err(Error::lens_file(
+                        file,
+                        line,
+                        "SURF",
+                        format!("surface number must be a whole number, got {n}"),
+                    ));
                 }
                 surfs.push(ZSurf { line, number: n as usize, ..Default::default() });
             }
@@ -201,10 +214,21 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
                         if gname.is_empty() {
                             return Err(Error::lens_file(file, line, "GLAS", "missing glass name"));
                         }
-                        let nd = tokens.get(4).and_then(|t| t.replace(',', ".").parse::<f64>().ok()).filter(|v| v.is_finite());
-                        let vd = tokens.get(5).and_then(|t| t.replace(',', ".").parse::<f64>().ok()).filter(|v| v.is_finite());
+                        let nd = tokens
+                            .get(4)
+                            .and_then(|t| t.replace(',', ".").parse::<f64>().ok())
+                            .filter(|v| v.is_finite());
+                        let vd = tokens
+                            .get(5)
+                            .and_then(|t| t.replace(',', ".").parse::<f64>().ok())
+                            .filter(|v| v.is_finite());
                         let g = if gname.eq_ignore_ascii_case("MIRROR") {
-                            return Err(Error::lens_file(file, line, "GLAS", "mirrors are not supported (refracting lenses only)"));
+                            return Err(Error::lens_file(
+                                file,
+                                line,
+                                "GLAS",
+                                "mirrors are not supported (refracting lenses only)",
+                            ));
                         } else if gname.eq_ignore_ascii_case("MODEL") || gname.eq_ignore_ascii_case("___BLANK") {
                             let nd = num(tokens.get(4), line, "GLAS")?;
                             let vd = num(tokens.get(5), line, "GLAS")?;
@@ -257,10 +281,7 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
     let mut notes: Vec<String> = Vec::new();
 
     // Semi-diameters: CLAP max, else DIAM, else from the neighbours.
-    let given: Vec<Option<f64>> = lens_surfs
-        .iter()
-        .map(|s| s.clap.or(s.diam).filter(|&d| d > 0.0))
-        .collect();
+    let given: Vec<Option<f64>> = lens_surfs.iter().map(|s| s.clap.or(s.diam).filter(|&d| d > 0.0)).collect();
     if given.iter().all(|g| g.is_none()) {
         return Err(Error::lens_file(
             file,
@@ -292,7 +313,12 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
         return Err(Error::lens_file(file, surfs[0].line, "STOP", "the object surface cannot be the stop"));
     }
     if surfs[surfs.len() - 1].stop {
-        return Err(Error::lens_file(file, surfs[surfs.len() - 1].line, "STOP", "the image surface cannot be the stop"));
+        return Err(Error::lens_file(
+            file,
+            surfs[surfs.len() - 1].line,
+            "STOP",
+            "the image surface cannot be the stop",
+        ));
     }
     if stop_positions.len() > 1 {
         return Err(Error::lens_file(file, lens_surfs[stop_positions[1]].line, "STOP", "more than one STOP surface"));
@@ -361,7 +387,12 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
             spec.material = match g {
                 GlassRef::Model { nd, vd } => {
                     if !((1.0..=3.0).contains(nd) && *vd >= 0.0) {
-                        return Err(Error::lens_file(file, *gl, "GLAS", format!("model glass nd = {nd}, vd = {vd} out of range")));
+                        return Err(Error::lens_file(
+                            file,
+                            *gl,
+                            "GLAS",
+                            format!("model glass nd = {nd}, vd = {vd} out of range"),
+                        ));
                     }
                     MaterialSpec::Model(ModelGlass { nd: *nd, vd: *vd })
                 }
@@ -418,14 +449,15 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
     if !nm.is_empty() && wavelengths_nm.is_none() {
         notes.push(format!("The file's wavelengths {nm:?} nm are outside 380..780 nm; defaults used."));
     }
-    let primary_wavelength_nm = primary_wave
-        .and_then(|k| waves.iter().find(|(i, _)| *i == k))
-        .map(|(_, w)| w * 1000.0)
-        .filter(in_range);
+    let primary_wavelength_nm =
+        primary_wave.and_then(|k| waves.iter().find(|(i, _)| *i == k)).map(|(_, w)| w * 1000.0).filter(in_range);
 
     let stem = std::path::Path::new(file).file_stem().and_then(|s| s.to_str()).unwrap_or("lens").to_string();
     let title = if name.is_empty() { stem } else { name.clone() };
-    let mut source = format!("Zemax OpticStudio file {}", std::path::Path::new(file).file_name().and_then(|s| s.to_str()).unwrap_or(file));
+    let mut source = format!(
+        "Zemax OpticStudio file {}",
+        std::path::Path::new(file).file_name().and_then(|s| s.to_str()).unwrap_or(file)
+    );
     if !name.is_empty() {
         source.push_str(&format!(" ({name})"));
     }
@@ -447,4 +479,3 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
     };
     Ok((p, SourceMap::new(file, lines)))
 }
-
