@@ -10,7 +10,7 @@ import numpy as np
 
 from . import camera as camera_mod
 from . import native
-from . import scene as scene_mod
+from . import export as export_mod
 from . import viewport as viewport_mod
 from .notes import Notes
 
@@ -106,12 +106,12 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
 
         self.update_stats("", "Petzval | Translating scene")
         t_scene = time.perf_counter()
-        pz_scene, stats = scene_mod.build(pz, depsgraph, notes, stop=self._should_stop)
+        pz_scene, stats = export_mod.build(pz, depsgraph, notes, stop=self._should_stop)
         entry["seconds_scene"] = time.perf_counter() - t_scene
         if pz_scene is None:
             entry["cancelled_before_render"] = True
             return
-        scene_mod.add_world(pz_scene, scene.world, notes, None)
+        export_mod.add_world(pz_scene, scene.world, notes, None)
         if r.film_transparent:
             notes.warn("transparent film (the world is rendered)")
 
@@ -204,9 +204,9 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
         try:
             pz = native.get()
             notes = Notes()
-            pz_scene, _ = scene_mod.build(pz, depsgraph, notes)
+            pz_scene, _ = export_mod.build(pz, depsgraph, notes)
             if pz_scene is not None:
-                scene_mod.add_world(pz_scene, depsgraph.scene_eval.world, notes, None)
+                export_mod.add_world(pz_scene, depsgraph.scene_eval.world, notes, None)
             self._vp_scene = pz_scene
             self._vp_error = None
         except Exception as e:

@@ -763,7 +763,7 @@ def test_viewport_preview_renders_the_view_in_the_background(main_scene, report)
     H.configure_petzval(spp=16, camera="MainCam")
     vp = importlib.import_module(H.ADDON_MODULE + ".viewport")
     cam_mod = importlib.import_module(H.ADDON_MODULE + ".camera")
-    scene_mod = importlib.import_module(H.ADDON_MODULE + ".scene")
+    export_mod = importlib.import_module(H.ADDON_MODULE + ".export")
     notes_mod = importlib.import_module(H.ADDON_MODULE + ".notes")
     scene = bpy.context.scene
     cam_obj = bpy.data.objects["MainCam"]
@@ -771,8 +771,8 @@ def test_viewport_preview_renders_the_view_in_the_background(main_scene, report)
     try:
         depsgraph = bpy.context.evaluated_depsgraph_get()
         notes = notes_mod.Notes()
-        pz_scene, _ = scene_mod.build(petzval, depsgraph, notes)
-        scene_mod.add_world(pz_scene, scene.world, notes, None)
+        pz_scene, _ = export_mod.build(petzval, depsgraph, notes)
+        export_mod.add_world(pz_scene, scene.world, notes, None)
         render_kw = cam_mod.render_kwargs(scene, scene.frame_current)
         render_kw.pop("spp")
         w, h = 60, 40
