@@ -99,7 +99,9 @@ def decade_ticks(lo, hi):
 
 
 def print_table(lm, runs):
-    f = lambda v, fmt: "" if v is None else format(v, fmt)
+    def f(v, fmt):
+        return "" if v is None else format(v, fmt)
+
     print(f"Smallest time over {runs} runs (each run: best of 5).")
     print()
     print("| model | res | ns/ray | lookup alone ns | speed-up | ns/ray raster | speed-up raster | pos µm | dir mrad | mean px | max px | misclassified | exact fallback | MiB |")
@@ -142,6 +144,11 @@ def min_times(runs, lens):
     return list(rows.values())
 
 
+def _load_json(path):
+    with open(path) as fh:
+        return json.load(fh)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("render_models", help="JSON of `petzval bench render-models --json`")
@@ -150,8 +157,8 @@ def main():
     ap.add_argument("--lens", default="double-gauss-50mm")
     ap.add_argument("--table", action="store_true", help="also print the per-ray table (markdown) with the minimum times")
     a = ap.parse_args()
-    lm = min_times([json.load(open(f)) for f in a.lens_models], a.lens)
-    rm = json.load(open(a.render_models))
+    lm = min_times([_load_json(f) for f in a.lens_models], a.lens)
+    rm = _load_json(a.render_models)
     if not lm or not rm:
         sys.exit(f"no rows for {a.lens}")
     exact = next(r for r in lm if r["model"] == "exact")

@@ -18,7 +18,8 @@ if "bpy" in locals():  # script reload (F8 / Reload Scripts)
 
 import bpy
 
-from . import notes, native, properties, camera, export, engine, ui  # noqa: E402,F401
+# in dependency order, as the reload list above
+from . import notes, native, properties, camera, export, engine, ui  # noqa: F401  # isort: skip
 
 
 def register() -> None:

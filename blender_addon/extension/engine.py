@@ -9,8 +9,8 @@ import bpy
 import numpy as np
 
 from . import camera as camera_mod
-from . import native
 from . import export as export_mod
+from . import native
 from . import viewport as viewport_mod
 from .notes import Notes
 

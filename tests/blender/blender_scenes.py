@@ -92,7 +92,7 @@ _BOKEH_DIR = (0.0, 1.0, 0.5)
 BOKEH_CAM = CameraSpec(
     name="BokehCam",
     location=_BOKEH_LOC,
-    target=tuple(a + b for a, b in zip(_BOKEH_LOC, _BOKEH_DIR)),
+    target=tuple(a + b for a, b in zip(_BOKEH_LOC, _BOKEH_DIR, strict=True)),
     lens_mm=50.0,
     sensor_mm=9.0,
     fstop=2.8,
@@ -140,7 +140,7 @@ def _quiet(log: Path):
 
 
 def _import_bpy():
-    import bpy  # noqa: F401  (imported lazily so the module is importable without Blender)
+    import bpy  # imported lazily so the module is importable without Blender
 
     return bpy
 

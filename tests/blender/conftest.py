@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 import pytest
+
 from suite_report import SuiteReport
 
 HERE = Path(__file__).resolve().parent
@@ -122,6 +123,7 @@ def _cache_key(bpy) -> str:
 @pytest.fixture(scope="session")
 def blender_run(report) -> BlenderRun:
     import bpy  # the test module is skipped before this when bpy cannot be imported
+
     import blender_scenes as scenes
 
     try:

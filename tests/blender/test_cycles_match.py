@@ -27,13 +27,12 @@ from __future__ import annotations
 import json
 import math
 import struct
-import time
 
 import numpy as np
 import pytest
 
 try:
-    import bpy  # noqa: F401
+    import bpy
 except Exception as e:  # ImportError, or a broken install
     pytest.skip(
         f"Blender's Python module cannot be imported ({type(e).__name__}: {e}); the Cycles comparison "
@@ -41,8 +40,8 @@ except Exception as e:  # ImportError, or a broken install
         allow_module_level=True,
     )
 
-import blender_compare as B  # noqa: E402
-import blender_scenes as S  # noqa: E402
+import blender_compare as B
+import blender_scenes as S
 
 SPP = 256  # positive comparisons: both renderers, seeds 0 and 1
 SPP_CONTROL = 128  # negative controls and single-seed checks
@@ -218,7 +217,7 @@ def test_gltf_export_carries_the_scene(blender_run, report):
         assert p["aspectRatio"] == pytest.approx(w / h)
         # no depth of field in glTF: nothing but the projection is there
         assert set(cams[spec.name]) <= {"name", "type", "perspective"}
-    lights = {l["name"]: l for l in g["extensions"]["KHR_lights_punctual"]["lights"]}
+    lights = {lt["name"]: lt for lt in g["extensions"]["KHR_lights_punctual"]["lights"]}
     assert lights["Key"]["type"] == "point" and lights["Key"]["intensity"] == pytest.approx(60 / (4 * math.pi) * 683, rel=1e-5)
     assert lights["Spot"]["intensity"] == pytest.approx(100 / (4 * math.pi) * 683, rel=1e-5)
     assert lights["Spot"]["spot"]["outerConeAngle"] == pytest.approx(math.radians(25), rel=1e-5)
@@ -274,8 +273,8 @@ def test_bokeh_matches_cycles(bokeh_cycles, bokeh_petzval, report):
         pred = _bokeh_prediction(e, n_cyc)
         c, p = cyc_avg[e.name], pz_avg[e.name]
 
-        def spread(lst, attr, rel=True):
-            a, b = (getattr(m[e.name], attr) for m in lst)
+        def spread(lst, attr, rel=True, name=e.name):
+            a, b = (getattr(m[name], attr) for m in lst)
             d = B.angle_diff_mod(a, b, 60) if attr == "vertex_angle_deg" else a - b
             return abs(d) / 2 / (abs(a + b) / 2 if rel else 1.0)
 
@@ -389,7 +388,7 @@ def test_speed_against_cycles(blender_run, report):
     out = blender_run.petzval(S.petzval_cycles_args(S.MAIN_CAM), 3, SPP, "speed")
     t_cyc, cpu_cyc = blender_run.timings[c_name], blender_run.cpu_times[c_name]
     t_pz, cpu_pz = blender_run.timings[out.stem], blender_run.cpu_times[out.stem]
-    inner = [l for l in blender_run.stderr[out.stem].splitlines() if l.startswith("rendered ")]
+    inner = [ln for ln in blender_run.stderr[out.stem].splitlines() if ln.startswith("rendered ")]
     w, h = S.RESOLUTION
     report.line(
         f"speed, MainCam {w}x{h} at {SPP} spp, 2 threads each: wall Cycles {t_cyc:.1f} s, petzval {t_pz:.1f} s "

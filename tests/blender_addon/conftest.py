@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 
 import pytest
+
 from suite_report import SuiteReport
 
 HERE = Path(__file__).resolve().parent

@@ -26,14 +26,14 @@ import numpy as np
 import pytest
 
 try:
-    import bpy  # noqa: F401
+    import bpy
 except Exception as e:
     pytest.skip(f"Blender's Python module cannot be imported ({type(e).__name__}: {e}); the add-on suite needs bpy==5.0.1 "
                 "on Python 3.11 (tests/run installs it)", allow_module_level=True)
 
-import addon_helpers as H  # noqa: E402
-import blender_compare as B  # noqa: E402
-import blender_scenes as S  # noqa: E402
+import addon_helpers as H
+import blender_compare as B
+import blender_scenes as S
 
 OUT = H.OUT
 SEEDS = (0, 1)
@@ -208,7 +208,7 @@ def test_real_lens_round_trip_matches_gltf_path(main_scene, report):
     ratio = B.mean_ratio((addon_imgs[0] + addon_imgs[1]) / 2, (cli_imgs[0] + cli_imgs[1]) / 2)
     report.line(f"round trip, double-gauss-50mm exact, MainCam {SPP_ROUND_TRIP} spp x seeds {SEEDS}: add-on {secs:.1f} s per F12, "
                 f"CLI on the exported GLB {t_cli:.1f} s per render")
-    rel = max(float(np.max(np.abs(a - c))) for a, c in zip(addon_imgs, cli_imgs)) / float(np.mean(cli_imgs[0]))
+    rel = max(float(np.max(np.abs(a - c))) for a, c in zip(addon_imgs, cli_imgs, strict=True)) / float(np.mean(cli_imgs[0]))
     report.line(f"  blocks add-on vs glTF path: {_fmt(v)}; image mean ratio R,G,B {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f}; "
                 f"largest pixel difference at equal seeds {rel*100:.3g} % of the image mean")
     assert np.all(np.abs(ratio - 1) <= MEAN_TOL), f"image mean ratio {ratio}"
@@ -536,7 +536,7 @@ def test_border_crop_and_depth_pass(addon, report):
     _depth_scene()
     scene = bpy.context.scene
     H.configure_petzval(4, seed=0, camera="DepthCam")
-    full, _ = H.render_still(OUT / "border" / "full.exr")
+    _full, _ = H.render_still(OUT / "border" / "full.exr")
     img_full = B.read_exr(OUT / "border" / "full.exr")
     r = scene.render
     r.use_border = True
@@ -546,7 +546,7 @@ def test_border_crop_and_depth_pass(addon, report):
         _, e_crop = H.render_still(OUT / "border" / "crop.exr")
         crop = B.read_exr(OUT / "border" / "crop.exr")
         r.use_crop_to_border = False
-        _, e_win = H.render_still(OUT / "border" / "window.exr")
+        _, _e_win = H.render_still(OUT / "border" / "window.exr")
         win = B.read_exr(OUT / "border" / "window.exr")
     finally:
         r.use_border = False

@@ -206,7 +206,7 @@ def read_exr(path: Path) -> tuple[dict[str, str], dict[str, np.ndarray]]:
     for off in offsets:
         assert end_of_data <= off < len(data), f"chunk offset {off} outside the file ({len(data)} bytes)"
         y, size = struct.unpack_from("<ii", data, off)
-        assert 0 <= size and off + 8 + size <= len(data), "truncated chunk"
+        assert size >= 0 and off + 8 + size <= len(data), "truncated chunk"
         raw = data[off + 8 : off + 8 + size]
         y0 = y - ymin
         n_lines = min(lines, h - y0)
@@ -347,9 +347,9 @@ def test_auto_lens_model_is_reported_in_stderr_and_metadata(petzval, tmp_path):
 def test_lens_list(petzval, tmp_path):
     r = run(petzval, ["lens", "list"], tmp_path)
     assert r.returncode == 0, r.stderr
-    lines = [l for l in r.stdout.splitlines() if l.strip()]
+    lines = [ln for ln in r.stdout.splitlines() if ln.strip()]
     assert len(lines) >= 5
-    assert any(l.startswith("double-gauss-50mm") for l in lines), r.stdout
+    assert any(ln.startswith("double-gauss-50mm") for ln in lines), r.stdout
 
 
 def test_lens_info(petzval, tmp_path):

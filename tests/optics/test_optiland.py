@@ -62,9 +62,8 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-import pytest
-
 import optiland.backend as be
+import pytest
 from optiland.materials import IdealMaterial
 from optiland.optic import Optic
 from optiland.physical_apertures import RadialAperture
@@ -106,7 +105,7 @@ ALL_LENSES_UP_TO = 24
 # --------------------------------------------------------------------------------------------
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _export_cached(name: str, wavelength: float = D_NM) -> dict:
     return pz.lens_export(name, wavelength=wavelength)
 
@@ -635,7 +634,7 @@ def build_rays(exp: dict, info: dict, optic: Optic, angles: list[float], wl_um: 
             probes = edge_probes(optic, wl_um, d, c, e1, e2, z0, centre, 3.0 * sd0)
             if probes is not None:
                 inside, outside = probes
-                for k, (pi, po) in enumerate(zip(inside, outside)):
+                for k, (pi, po) in enumerate(zip(inside, outside, strict=False)):
                     all_rays.append(rays_through_points(np.vstack([pi, po]), d, z0))
                     labels += [f"{tag}/edge{k}-inside", f"{tag}/edge{k}-outside"]
     return np.vstack(all_rays), labels
@@ -752,12 +751,11 @@ def compare_rays(
             dist = float(np.linalg.norm(w - np.dot(w, d_in[j]) * d_in[j]))
             out.max_reverse_dir = max(out.max_reverse_dir, dd)
             out.max_reverse_pos_mm = max(out.max_reverse_pos_mm, dist)
-            if dd > REVERSE_TOL_DIR or dist > REVERSE_TOL_MM:
-                if len(out.reverse_failures) < 20:
-                    out.reverse_failures.append(
-                        f"reverse trace of ray {labels[i]} does not return on the incoming ray: "
-                        f"off by {dist:.3e} mm, direction by {dd:.3e}"
-                    )
+            if (dd > REVERSE_TOL_DIR or dist > REVERSE_TOL_MM) and len(out.reverse_failures) < 20:
+                out.reverse_failures.append(
+                    f"reverse trace of ray {labels[i]} does not return on the incoming ray: "
+                    f"off by {dist:.3e} mm, direction by {dd:.3e}"
+                )
         if n_absorbed > 10:
             out.reverse_failures.append(f"... {n_absorbed} of {len(idx)} reversed rays absorbed in all")
     return out
@@ -768,7 +766,7 @@ def compare_rays(
 # --------------------------------------------------------------------------------------------
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _lens_data(name: str):
     exp = pz.lens_export(name, wavelength=D_NM)
     info = pz.lens_info(name, wavelength=D_NM)
@@ -835,7 +833,7 @@ def test_paraxial_vs_optiland(petzval_bin, lens_name, deviation_log):
     assert not fails, f"{lens_name}: paraxial data disagree with optiland:\n  " + "\n  ".join(fails)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _library_ray_comparison(lens_name: str) -> tuple[RayComparison, bool]:
     """Traces the ray set once per lens (both ray tests read it)."""
     exp, info = _lens_data(lens_name)
@@ -933,7 +931,7 @@ def _set_primary(optic: Optic, wl_nm: float) -> None:
     optic.wavelengths.add(value=wl_nm / 1000.0, is_primary=True)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _zemax_file(sample: str, tmpdir: str) -> str:
     """Writes the sample as <tmpdir>/<sample>.zmx, with DIAM (semi-apertures from optiland's
     paraxial marginal + chief ray heights) so the importer has clear apertures."""
@@ -1043,8 +1041,8 @@ def test_zemax_sample_paraxial(petzval_bin, zemax_dir, sample, wavelength_nm, de
     glass_note = (
         ""
         if glass_same
-        else "\n  (glass indices differ by up to %.2e: petzval %s vs optiland %s, glasses %s)"
-        % (dn, n_ours.tolist(), n_ref.tolist(), _glass_names(ref_optic))
+        else f"\n  (glass indices differ by up to {dn:.2e}: petzval {n_ours.tolist()} vs optiland {n_ref.tolist()}, "
+        f"glasses {_glass_names(ref_optic)})"
     )
     assert not fails, f"{sample} @ {wavelength_nm} nm: imported lens disagrees with optiland:\n  " + "\n  ".join(fails) + glass_note
 
@@ -1085,7 +1083,8 @@ def test_zemax_files_use_known_glasses(petzval_bin, zemax_dir):
         try:
             pz.lens_export(path, wavelength=D_NM)
         except pz.PetzvalError as e:
-            glas = [ln.split()[1] for ln in open(path) if ln.strip().startswith("GLAS")]
+            with open(path) as fh:
+                glas = [ln.split()[1] for ln in fh if ln.strip().startswith("GLAS")]
             msg = next((ln for ln in str(e).splitlines() if ln.startswith("error")), str(e))
             problems.append(f"{sample} (glasses {glas}): {msg}")
     assert not problems, "importing optiland-written Zemax files failed:\n  " + "\n  ".join(problems)

@@ -4,6 +4,7 @@ checks against optiland."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import subprocess
 import threading
@@ -108,8 +109,8 @@ def test_progress_images_and_cancel(petzval):
     # every call reports the samples done so far; the finished image was shown
     assert seen and seen[-1][1] == 64, seen[-3:]
     assert (64, (120, 160, 4)) in [(n, shape) for _, n, shape in seen], seen
-    assert all(a[1] <= b[1] for a, b in zip(seen, seen[1:])), "samples done go backwards"
-    assert all(a[0] <= b[0] + 1e-6 for a, b in zip(seen, seen[1:])), "fraction goes backwards"
+    assert all(a[1] <= b[1] for a, b in itertools.pairwise(seen)), "samples done go backwards"
+    assert all(a[0] <= b[0] + 1e-6 for a, b in itertools.pairwise(seen)), "fraction goes backwards"
     # cancel before the first pass finishes: CancelledError
     with pytest.raises(petzval.CancelledError):
         petzval.render(s, camera(), 2048, 2048, spp=4, lens="double-gauss-50mm", lens_model="exact", progress=lambda f, n, img: False, progress_interval_s=0.01)

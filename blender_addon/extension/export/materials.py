@@ -166,7 +166,7 @@ class Materials:
         if alpha_src is not None and not textured_alpha:
             self.notes.warn(f"material '{name}': alpha from a {alpha_src[0].bl_label} node (its unlinked value used)")
         bc = list(kw["base_color"])
-        bc = (bc + [1.0])[:4] if len(bc) < 4 else bc
+        bc = [*bc, 1.0][:4] if len(bc) < 4 else bc
         bc[3] = alpha if not textured_alpha else 1.0
         kw["base_color"] = tuple(bc)
         kw["alpha_mode"] = "blend" if (alpha < 1.0 or textured_alpha) else "opaque"

@@ -14,7 +14,7 @@ import numpy as np
 class MeshData:
     """Per-corner buffers of one evaluated mesh (petzval conventions, object space)."""
 
-    __slots__ = ("positions", "triangles", "slot_index", "normals", "uvs")
+    __slots__ = ("normals", "positions", "slot_index", "triangles", "uvs")
 
     def __init__(self, positions, triangles, slot_index, normals, uvs):
         self.positions = positions
@@ -44,7 +44,7 @@ def mesh_data(mesh) -> MeshData | None:
     normals = np.empty(nl * 3, dtype=np.float32)
     mesh.corner_normals.foreach_get("vector", normals)
     uvs = None
-    layer = next((l for l in mesh.uv_layers if l.active_render), None)
+    layer = next((uv for uv in mesh.uv_layers if uv.active_render), None)
     if layer is not None:
         uvs = np.empty(nl * 2, dtype=np.float32)
         if hasattr(layer, "uv"):
