@@ -30,7 +30,12 @@ def _lens_items() -> list[tuple]:
     """Enum items for the lens: Blender's camera, pinhole, every library lens, a file. Numbers are
     stable across library versions (see native.stable_enum_number)."""
     items = [
-        (LENS_THIN, "Thin Lens (Blender Camera)", "Blender's own camera model: focal length, f-stop and focus from the camera settings", 0),
+        (
+            LENS_THIN,
+            "Thin Lens (Blender Camera)",
+            "Blender's own camera model: focal length, f-stop and focus from the camera settings",
+            0,
+        ),
         (LENS_PINHOLE, "Pinhole", "An ideal pinhole: no depth of field", 1),
     ]
     taken = {0, 1, 2}
@@ -61,7 +66,12 @@ class PetzvalCameraSettings(bpy.types.PropertyGroup):
     tilt_x: FloatProperty(
         name="Tilt X",
         description="Sensor tilt about the horizontal axis (Scheimpflug): positive tilts the plane of focus towards the ground",
-        subtype="ANGLE", default=0.0, min=-0.6, max=0.6, precision=2, step=10,
+        subtype="ANGLE",
+        default=0.0,
+        min=-0.6,
+        max=0.6,
+        precision=2,
+        step=10,
     )
     tilt_y: FloatProperty(
         name="Tilt Y",
@@ -78,14 +88,24 @@ class PetzvalCameraSettings(bpy.types.PropertyGroup):
 
 class PetzvalRenderSettings(bpy.types.PropertyGroup):
     samples: IntProperty(name="Samples", description="Samples per pixel", default=64, min=1, soft_max=4096)
-    viewport_samples: IntProperty(name="Viewport Samples", description="Samples per pixel of the viewport's Rendered shading", default=16, min=1, soft_max=1024)
+    viewport_samples: IntProperty(
+        name="Viewport Samples",
+        description="Samples per pixel of the viewport's Rendered shading",
+        default=16,
+        min=1,
+        soft_max=1024,
+    )
     viewport_divisor: IntProperty(
         name="Viewport Resolution Divisor",
         description="The viewport preview renders at the viewport's size divided by this",
         default=4, min=1, max=16,
     )
     seed: IntProperty(name="Seed", description="Seed of the sample pattern", default=0, min=0)
-    use_animated_seed: BoolProperty(name="Animated Seed", description="Add the frame number to the seed so the noise changes per frame", default=False)
+    use_animated_seed: BoolProperty(
+        name="Animated Seed",
+        description="Add the frame number to the seed so the noise changes per frame",
+        default=False,
+    )
     max_bounces: IntProperty(
         name="Max Bounces",
         description="Bounces after the first hit, as Cycles' Max Bounces (Petzval's depth is this + 1)",

@@ -457,7 +457,9 @@ class CyclesEquivalentLens:
     filter_width_px: float
 
 
-def cycles_equivalent(spec: CameraSpec, *, fstop_scale: float = 1.0, focus_m: float | None = None) -> CyclesEquivalentLens:
+def cycles_equivalent(
+    spec: CameraSpec, *, fstop_scale: float = 1.0, focus_m: float | None = None
+) -> CyclesEquivalentLens:
     """Cycles' camera model as petzval's thin lens: since petzval follows Blender's conventions
     (the film stays at the focal length F and the lens focuses by its power, f = F·s/(F + s), with
     aperture diameter F/N; blade rotation puts an edge middle at the angle; --filter-width is
@@ -512,8 +514,19 @@ if __name__ == "__main__":
     for spec in built.cameras.values():
         t = render_cycles(CyclesSettings(samples=64, seed=0), spec.name, out / f"cycles_{spec.name}.exr")
         print(f"cycles {spec.name}: {t:.2f} s")
-        print("petzval render", glb, "-o", out / f"petzval_{spec.name}.exr", " ".join(petzval_cycles_args(spec)),
-              "--environment", world_rgb_arg(), "--max-depth", PETZVAL_MAX_DEPTH, "--resolution", "x".join(map(str, RESOLUTION)))
+        print(
+            "petzval render",
+            glb,
+            "-o",
+            out / f"petzval_{spec.name}.exr",
+            " ".join(petzval_cycles_args(spec)),
+            "--environment",
+            world_rgb_arg(),
+            "--max-depth",
+            PETZVAL_MAX_DEPTH,
+            "--resolution",
+            "x".join(map(str, RESOLUTION)),
+        )
 
 
 def linear_exr_output(scene) -> None:

@@ -137,5 +137,7 @@ def blender_run(report) -> BlenderRun:
     cache_dir.mkdir(parents=True, exist_ok=True)
     built = scenes.build_scene(workdir)
     run = BlenderRun(bpy, scenes, workdir, cache_dir, binary)
-    report.line(f"Blender {built.blender_version} (bpy), Cycles CPU; petzval {binary}; cache {cache_dir.relative_to(REPO)}")
+    report.line(
+        f"Blender {built.blender_version} (bpy), Cycles CPU; petzval {binary}; cache {cache_dir.relative_to(REPO)}"
+    )
     return run

@@ -133,7 +133,11 @@ def test_corrupt_glb_with_valid_magic_fails_cleanly(petzval, tmp_path):
         pytest.param(["lens", "info", "no-such-lens"], ["no-such-lens"], id="info-unknown"),
         pytest.param(["lens", "info", "double-gauss-50mm", "--fstop", "0.5"], ["f/"], id="info-too-fast"),
         pytest.param(["lens", "draw", "no-such-lens", "-o", "x.svg"], ["no-such-lens"], id="draw-unknown"),
-        pytest.param(["lens", "draw", "double-gauss-50mm", "--focus", "0.01", "-o", "x.svg"], ["focus"], id="draw-impossible-focus"),
+        pytest.param(
+            ["lens", "draw", "double-gauss-50mm", "--focus", "0.01", "-o", "x.svg"],
+            ["focus"],
+            id="draw-impossible-focus",
+        ),
     ],
 )
 def test_lens_bad_input_fails_cleanly(petzval, tmp_path, args, words):
@@ -306,7 +310,26 @@ def test_thin_lens_natural_vignetting_off_keeps_exposure(petzval, tmp_path):
     the exposure must not change."""
     means = {}
     for v in ("on", "off"):
-        r = run(petzval, ["render", "--lens", "thin", "--fstop", "2", "--natural-vignetting", v, "--resolution", "48x32", "--spp", "16", "-o", f"{v}.exr", "--no-png"], tmp_path)
+        r = run(
+            petzval,
+            [
+                "render",
+                "--lens",
+                "thin",
+                "--fstop",
+                "2",
+                "--natural-vignetting",
+                v,
+                "--resolution",
+                "48x32",
+                "--spp",
+                "16",
+                "-o",
+                f"{v}.exr",
+                "--no-png",
+            ],
+            tmp_path,
+        )
         assert r.returncode == 0, r.stderr
         _, ch = read_exr(tmp_path / f"{v}.exr")
         # central 8×8 block: cos⁴ > 0.99 there for the demo's field of view
@@ -319,7 +342,24 @@ def test_thin_lens_natural_vignetting_off_keeps_exposure(petzval, tmp_path):
 def test_auto_lens_model_is_reported_in_stderr_and_metadata(petzval, tmp_path):
     """--lens-model auto (the default) prints its choice and why, and writes both into the EXR."""
     # A pinhole-sized thin-lens aperture: nothing to model but a pinhole.
-    r = run(petzval, ["render", "--lens", "thin", "--fstop", "5000", "--resolution", "48x32", "--spp", "2", "-o", "p.exr", "--no-png"], tmp_path)
+    r = run(
+        petzval,
+        [
+            "render",
+            "--lens",
+            "thin",
+            "--fstop",
+            "5000",
+            "--resolution",
+            "48x32",
+            "--spp",
+            "2",
+            "-o",
+            "p.exr",
+            "--no-png",
+        ],
+        tmp_path,
+    )
     assert r.returncode == 0, r.stderr
     assert "lens model: pinhole (auto" in r.stderr, r.stderr
     meta, _ = read_exr(tmp_path / "p.exr")

@@ -101,4 +101,6 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
         tr.section("optiland comparison: every measurement")
         w = [max(len(r[i]) for r in _DEVIATIONS) for i in range(1, 4)]
         for nodeid, group, lens, quantity, value in _DEVIATIONS:
-            tr.write_line(f"{group:<{w[0]}}  {lens:<{w[1]}}  {quantity:<{w[2]}}  {value}  [{_OUTCOMES.get(nodeid, '?')}]")
+            tr.write_line(
+                f"{group:<{w[0]}}  {lens:<{w[1]}}  {quantity:<{w[2]}}  {value}  [{_OUTCOMES.get(nodeid, '?')}]"
+            )

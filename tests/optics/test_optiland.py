@@ -181,7 +181,11 @@ def _with_known_failures(test_name: str, names: list[str]) -> list:
     out = []
     for n in names:
         reason = KNOWN_FAILURES.get((test_name, n))
-        out.append(pytest.param(n, id=n, marks=pytest.mark.xfail(strict=True, reason=reason)) if reason else pytest.param(n, id=n))
+        out.append(
+            pytest.param(n, id=n, marks=pytest.mark.xfail(strict=True, reason=reason))
+            if reason
+            else pytest.param(n, id=n)
+        )
     return out
 
 
@@ -394,7 +398,9 @@ def compare_values(ours: dict, ref: dict, rel: float, abs_mm: float, keys=None) 
             dev = diff / abs(b) if abs(b) > 1e-3 else diff
         devs[k] = dev
         if not ok:
-            fails.append(f"{k}: petzval {a!r} vs optiland {b!r} (diff {a - b:.3e}, tol {max(rel * abs(b), abs_mm):.1e})")
+            fails.append(
+                f"{k}: petzval {a!r} vs optiland {b!r} (diff {a - b:.3e}, tol {max(rel * abs(b), abs_mm):.1e})"
+            )
     return fails, devs
 
 
@@ -598,7 +604,9 @@ def build_rays(exp: dict, info: dict, optic: Optic, angles: list[float], wl_um: 
     z0 = start_plane_z(exp, z_ep)
     s0 = exp["surfaces"][0]
     sd0 = max(s["semi_diameter_mm"] for s in exp["surfaces"][:2])
-    z_c = s0["z_mm"] + 0.5 * (sag(s0, s0["semi_diameter_mm"]) if math.isfinite(sag(s0, s0["semi_diameter_mm"])) else 0.0)
+    z_c = s0["z_mm"] + 0.5 * (
+        sag(s0, s0["semi_diameter_mm"]) if math.isfinite(sag(s0, s0["semi_diameter_mm"])) else 0.0
+    )
     pattern = disc_grid()
     all_rays, labels = [], []
     fields = [(0.0, "y")] + [(a, ax) for a in angles if a > 0 for ax in ("x", "y")]
@@ -678,7 +686,13 @@ def edge_probes(optic, wl_um, d, c, e1, e2, z0, centre, reach):
 
 
 def compare_rays(
-    lens: str, exp: dict, optic: Optic, rays: np.ndarray, labels: list[str], wavelength_nm: float, open_stop: bool = False
+    lens: str,
+    exp: dict,
+    optic: Optic,
+    rays: np.ndarray,
+    labels: list[str],
+    wavelength_nm: float,
+    open_stop: bool = False,
 ) -> RayComparison:
     """Trace `rays` through both, compare intercepts, vignetting and reversibility."""
     out = RayComparison(n_rays=len(rays))
@@ -802,13 +816,17 @@ def test_paraxial_vs_optiland(petzval_bin, lens_name, deviation_log):
     check_export_consistency(exp)
     anamorphic = any(s.get("cylinder") for s in exp["surfaces"])
     if any(s.get("cylinder") and (s.get("conic") or any(s.get("aspheric") or [])) for s in exp["surfaces"]):
-        pytest.skip("cylinder with conic/asphere: modelled as a turned toroid, which optiland's paraxial model misreads")
+        pytest.skip(
+            "cylinder with conic/asphere: modelled as a turned toroid, which optiland's paraxial model misreads"
+        )
     optic = optiland_from_export(exp, clip=False)
     last_z = exp["surfaces"][-1]["z_mm"]
     ref = optiland_paraxial(optic, last_z, exp["image_distance_mm"])
     # x meridian: the same lens with the cylinder axes exchanged (rotationally symmetric: = efl)
     ref["efl_x_mm"] = (
-        optiland_paraxial(optiland_from_export(exp, clip=False, swap_xy=True), last_z, exp["image_distance_mm"])["efl_mm"]
+        optiland_paraxial(optiland_from_export(exp, clip=False, swap_xy=True), last_z, exp["image_distance_mm"])[
+            "efl_mm"
+        ]
         if anamorphic
         else ref["efl_mm"]
     )
@@ -1044,7 +1062,9 @@ def test_zemax_sample_paraxial(petzval_bin, zemax_dir, sample, wavelength_nm, de
         else f"\n  (glass indices differ by up to {dn:.2e}: petzval {n_ours.tolist()} vs optiland {n_ref.tolist()}, "
         f"glasses {_glass_names(ref_optic)})"
     )
-    assert not fails, f"{sample} @ {wavelength_nm} nm: imported lens disagrees with optiland:\n  " + "\n  ".join(fails) + glass_note
+    assert not fails, (
+        f"{sample} @ {wavelength_nm} nm: imported lens disagrees with optiland:\n  " + "\n  ".join(fails) + glass_note
+    )
 
 
 @pytest.mark.parametrize("wavelength_nm", [D_NM, F_NM], ids=["d", "F"])
@@ -1071,7 +1091,9 @@ def test_zemax_sample_real_rays(petzval_bin, zemax_dir, sample, wavelength_nm, d
     deviation_log.add(tag, sample, "reverse: max position off incoming ray (mm)", cmp.max_reverse_pos_mm)
     deviation_log.add(tag, sample, "reverse: max direction dev", cmp.max_reverse_dir)
     problems = cmp.failures + cmp.reverse_failures
-    assert not problems, f"{sample} @ {wavelength_nm} nm: {len(problems)} real-ray problems:\n  " + "\n  ".join(problems)
+    assert not problems, f"{sample} @ {wavelength_nm} nm: {len(problems)} real-ray problems:\n  " + "\n  ".join(
+        problems
+    )
     assert cmp.n_ok_both > 0, f"{sample}: no ray got through both tracers"
 
 

@@ -7,7 +7,16 @@ import numpy as np
 
 MISSING_TEXTURE = (1.0, 0.0, 1.0, 1.0)  # magenta: a missing image shows
 
-LINEAR_SPACES = {"Linear Rec.709", "Linear", "Non-Color", "Raw", "Linear CIE-XYZ E", "Linear Rec.2020", "ACEScg", "ACES2065-1"}
+LINEAR_SPACES = {
+    "Linear Rec.709",
+    "Linear",
+    "Non-Color",
+    "Raw",
+    "Linear CIE-XYZ E",
+    "Linear Rec.2020",
+    "ACEScg",
+    "ACES2065-1",
+}
 
 
 def srgb_to_linear(c: np.ndarray) -> np.ndarray:

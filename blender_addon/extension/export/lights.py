@@ -79,7 +79,9 @@ def area_light_geometry(light):
     sx = float(light.size)
     sy = float(light.size_y) if light.shape in ("RECTANGLE", "ELLIPSE") else sx
     if light.shape in ("SQUARE", "RECTANGLE"):
-        v = np.array([[-sx / 2, -sy / 2, 0], [sx / 2, -sy / 2, 0], [sx / 2, sy / 2, 0], [-sx / 2, sy / 2, 0]], dtype=np.float64)
+        v = np.array(
+            [[-sx / 2, -sy / 2, 0], [sx / 2, -sy / 2, 0], [sx / 2, sy / 2, 0], [-sx / 2, sy / 2, 0]], dtype=np.float64
+        )
         t = np.array([[0, 2, 1], [0, 3, 2]], dtype=np.uint32)
     else:
         k = 48
@@ -114,7 +116,9 @@ def add_area_light(pz, obj, m, colour, notes, materials) -> None:
     pz.add_mesh(v.astype(np.float32), t, material_ids=np.full(len(t), mat, dtype=np.uint32), normals=normals,
                 transform=m, name=obj.name)
     if not getattr(obj, "visible_camera", True):
-        notes.note("area lights are emissive surfaces here: seen by the camera (Cycles hides lights from camera rays by "
-                   "default) and casting shadows (Cycles' lights do not)")
+        notes.note(
+            "area lights are emissive surfaces here: seen by the camera (Cycles hides lights from camera rays by "
+            "default) and casting shadows (Cycles' lights do not)"
+        )
     else:
         notes.note("area lights are emissive surfaces here: they cast shadows (Cycles' lights do not)")

@@ -47,7 +47,9 @@ class Materials:
         if tex_node.extension == "CLIP":
             self.notes.note("image extension Clip rendered as Extend")
         if img.source in ("SEQUENCE", "MOVIE", "TILED"):
-            self.notes.warn(f"{what}: image '{img.name}' is a {img.source.lower()} image (its current frame/first tile used)")
+            self.notes.warn(
+                f"{what}: image '{img.name}' is a {img.source.lower()} image (its current frame/first tile used)"
+            )
         key = (img.name_full, tex_node.interpolation, tex_node.extension, keep_alpha)
         if key not in self.textures:
             px = image_pixels(img, self.notes, what)
@@ -85,15 +87,25 @@ class Materials:
     def _fallback(self, mat, why: str) -> int:
         self.notes.warn(f"material '{mat.name}': {why}, rendered with its viewport display colour")
         c = tuple(mat.diffuse_color)
-        return self.scene.add_material(mat.name, base_color=c, metallic=float(mat.metallic), roughness=float(mat.roughness),
-                                       alpha_mode="blend" if c[3] < 1.0 else "opaque")
+        return self.scene.add_material(
+            mat.name,
+            base_color=c,
+            metallic=float(mat.metallic),
+            roughness=float(mat.roughness),
+            alpha_mode="blend" if c[3] < 1.0 else "opaque",
+        )
 
     def _convert(self, mat) -> int:
         nt = node_tree_of(mat)
         if nt is None:
             c = tuple(mat.diffuse_color)
-            return self.scene.add_material(mat.name, base_color=c, metallic=float(mat.metallic), roughness=float(mat.roughness),
-                                           specular=2.0 * float(mat.specular_intensity))
+            return self.scene.add_material(
+                mat.name,
+                base_color=c,
+                metallic=float(mat.metallic),
+                roughness=float(mat.roughness),
+                specular=2.0 * float(mat.specular_intensity),
+            )
         node = surface_shader(nt)
         if node is None:
             # Cycles renders a material with nothing connected as black
@@ -115,7 +127,9 @@ class Materials:
                     kw["emission_texture"] = self.texture(src[0], f"material '{mat.name}' emission")
                     col = (1.0, 1.0, 1.0)
                 else:
-                    self.notes.warn(f"material '{mat.name}': emission colour from a {src[0].bl_label} node (its unlinked value used)")
+                    self.notes.warn(
+                        f"material '{mat.name}': emission colour from a {src[0].bl_label} node (its unlinked value used)"
+                    )
             return self.scene.add_material(mat.name, base_color=(0.0, 0.0, 0.0, 1.0), specular=0.0,
                                            emission=tuple(float(c) * strength for c in col[:3]), **kw)
         return self._fallback(mat, f"{node.bl_label} shader is not supported")
@@ -152,7 +166,9 @@ class Materials:
         if n.type in ("SEPARATE_COLOR", "SEPRGB", "SEPARATE_RGB"):
             inner = source(n.inputs[0])
             if inner is not None and inner[0].type == "TEX_IMAGE":
-                self.notes.warn(f"material '{mat.name}': {what} from a separated channel of an image (its red channel used)")
+                self.notes.warn(
+                    f"material '{mat.name}': {what} from a separated channel of an image (its red channel used)"
+                )
                 return None, inner[0]
         self.notes.warn(f"material '{mat.name}': {what} from a {n.bl_label} node (its unlinked value used)")
         return float(value(node, name, 0.0)), None
@@ -201,7 +217,9 @@ class Materials:
                 kw["emission_texture"] = tex
                 ecol = (1.0, 1.0, 1.0)
         elif esrc is not None:
-            self.notes.warn(f"material '{name}': emission colour from a {esrc[0].bl_label} node (its unlinked value used)")
+            self.notes.warn(
+                f"material '{name}': emission colour from a {esrc[0].bl_label} node (its unlinked value used)"
+            )
         if source(node.inputs.get("Emission Strength")) is not None:
             self.notes.warn(f"material '{name}': Emission Strength from a node (its unlinked value used)")
         kw["emission"] = tuple(float(c) * estr for c in ecol[:3])
@@ -218,15 +236,25 @@ class Materials:
                         kw["normal_texture"] = tex
                         kw["normal_scale"] = float(value(nn, "Strength", 1.0))
                     if nn.uv_map:
-                        self.notes.warn(f"material '{name}': normal map on UV map '{nn.uv_map}' (the active render UV map used)")
+                        self.notes.warn(
+                            f"material '{name}': normal map on UV map '{nn.uv_map}' (the active render UV map used)"
+                        )
                 else:
                     self.notes.warn(f"material '{name}': Normal Map node without an Image Texture")
             else:
-                self.notes.warn(f"material '{name}': normal from a {nn.bl_label} node{' (' + nn.space.lower() + ' space)' if nn.type == 'NORMAL_MAP' else ''}")
+                self.notes.warn(
+                    f"material '{name}': normal from a {nn.bl_label} node{' (' + nn.space.lower() + ' space)' if nn.type == 'NORMAL_MAP' else ''}"
+                )
 
         # lobes glTF/Petzval's BSDF does not have
-        for label, inp in (("Transmission", "Transmission Weight"), ("Coat", "Coat Weight"), ("Sheen", "Sheen Weight"),
-                           ("Subsurface", "Subsurface Weight"), ("Anisotropy", "Anisotropic"), ("Thin film", "Thin Film Thickness")):
+        for label, inp in (
+            ("Transmission", "Transmission Weight"),
+            ("Coat", "Coat Weight"),
+            ("Sheen", "Sheen Weight"),
+            ("Subsurface", "Subsurface Weight"),
+            ("Anisotropy", "Anisotropic"),
+            ("Thin film", "Thin Film Thickness"),
+        ):
             v = value(node, inp, 0.0)
             if (isinstance(v, float) and v > 0.0) or source(node.inputs.get(inp)) is not None:
                 self.notes.warn(f"material '{name}': {label}")

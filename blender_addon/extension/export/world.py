@@ -46,7 +46,12 @@ def add_world(pz, world, notes, materials) -> None:
                 # petzval's rotation_rad is a Texture-type Mapping Z rotation (the map turns by it);
                 # Point/Vector/Normal types rotate the lookup direction instead: the opposite turn
                 rotation = float(rot[2]) if mapping.vector_type == "TEXTURE" else -float(rot[2])
-                if abs(rot[0]) > 1e-6 or abs(rot[1]) > 1e-6 or any(abs(x) > 1e-6 for x in loc) or any(abs(s - 1) > 1e-6 for s in scl):
+                if (
+                    abs(rot[0]) > 1e-6
+                    or abs(rot[1]) > 1e-6
+                    or any(abs(x) > 1e-6 for x in loc)
+                    or any(abs(s - 1) > 1e-6 for s in scl)
+                ):
                     notes.warn(f"world '{world.name}': Mapping node other than a Z rotation (only its Z rotation used)")
             else:
                 notes.warn(f"world '{world.name}': environment coordinates from a {mapping.bl_label} node (ignored)")

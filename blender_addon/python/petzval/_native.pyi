@@ -71,7 +71,9 @@ class Scene:
     """A scene assembled from buffers. Build it, then pass it to :func:`render`."""
 
     def __init__(self) -> None: ...
-    def add_texture(self, pixels: NDArray[np.float32], name: str = "", interpolation: str = "linear", extension: str = "repeat") -> int:
+    def add_texture(
+        self, pixels: NDArray[np.float32], name: str = "", interpolation: str = "linear", extension: str = "repeat"
+    ) -> int:
         """Adds a texture from ``(H, W, 4)`` (or ``(H, W, 3)``) LINEAR values, row 0 at the
         top. ``interpolation``: ``"linear"`` or ``"closest"``; ``extension``: ``"repeat"``,
         ``"clip"`` (clamp to edge) or ``"mirror"``. Returns its index."""
@@ -137,7 +139,9 @@ class Scene:
         """A directional light travelling along ``direction``."""
     def set_environment_color(self, rgb: Sequence[float]) -> None:
         """A uniform environment radiance."""
-    def set_environment_map(self, pixels: NDArray[np.float32], strength: float = 1.0, rotation_rad: float = 0.0, name: str = "") -> None:
+    def set_environment_map(
+        self, pixels: NDArray[np.float32], strength: float = 1.0, rotation_rad: float = 0.0, name: str = ""
+    ) -> None:
         """An equirectangular environment ``(H, W, 3|4)``, row 0 at the top, mapped as
         Blender's Environment Texture node maps it (see the renderer's environment docs).
         ``rotation_rad`` turns the map about the world's up axis as a Blender Mapping node of
