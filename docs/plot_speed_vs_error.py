@@ -53,14 +53,17 @@ class Axes:
         o = self.out
         o.append(f'<rect x="{self.ox}" y="{self.oy}" width="{PANEL_W}" height="{PANEL_H}" fill="none" stroke="#444"/>')
         o.append(
-            f'<text x="{self.ox + PANEL_W / 2}" y="{self.oy - 22}" text-anchor="middle" font-size="14" font-weight="bold">{esc(title)}</text>'
+            f'<text x="{self.ox + PANEL_W / 2}" y="{self.oy - 22}" text-anchor="middle" font-size="14" '
+            f'font-weight="bold">{esc(title)}</text>'
         )
         o.append(
-            f'<text x="{self.ox + PANEL_W / 2}" y="{self.oy + PANEL_H + 38}" text-anchor="middle" font-size="12">{esc(xlabel)}</text>'
+            f'<text x="{self.ox + PANEL_W / 2}" y="{self.oy + PANEL_H + 38}" text-anchor="middle" '
+            f'font-size="12">{esc(xlabel)}</text>'
         )
         cx, cy = self.ox - 52, self.oy + PANEL_H / 2
         o.append(
-            f'<text x="{cx}" y="{cy}" text-anchor="middle" font-size="12" transform="rotate(-90 {cx} {cy})">{esc(ylabel)}</text>'
+            f'<text x="{cx}" y="{cy}" text-anchor="middle" font-size="12" transform="rotate(-90 {cx} '
+            f'{cy})">{esc(ylabel)}</text>'
         )
         for v in xticks:
             X = self.x(v)
@@ -74,16 +77,19 @@ class Axes:
     def hline(self, v, label, colour="#c51b7d"):
         Y = self.y(v)
         self.out.append(
-            f'<line x1="{self.ox}" y1="{Y:.1f}" x2="{self.ox + PANEL_W}" y2="{Y:.1f}" stroke="{colour}" stroke-dasharray="5,4"/>'
+            f'<line x1="{self.ox}" y1="{Y:.1f}" x2="{self.ox + PANEL_W}" y2="{Y:.1f}" stroke="{colour}" '
+            'stroke-dasharray="5,4"/>'
         )
         self.out.append(
-            f'<text x="{self.ox + PANEL_W - 4}" y="{Y - 5:.1f}" text-anchor="end" font-size="11" fill="{colour}">{esc(label)}</text>'
+            f'<text x="{self.ox + PANEL_W - 4}" y="{Y - 5:.1f}" text-anchor="end" font-size="11" '
+            f'fill="{colour}">{esc(label)}</text>'
         )
 
     def vline(self, v, label, colour="#c51b7d"):
         X = self.x(v)
         self.out.append(
-            f'<line x1="{X:.1f}" y1="{self.oy}" x2="{X:.1f}" y2="{self.oy + PANEL_H}" stroke="{colour}" stroke-dasharray="5,4"/>'
+            f'<line x1="{X:.1f}" y1="{self.oy}" x2="{X:.1f}" y2="{self.oy + PANEL_H}" stroke="{colour}" '
+            'stroke-dasharray="5,4"/>'
         )
         self.out.append(f'<text x="{X + 4:.1f}" y="{self.oy + 14}" font-size="11" fill="{colour}">{esc(label)}</text>')
 
@@ -92,7 +98,8 @@ class Axes:
         self.out.append(f'<circle cx="{X:.1f}" cy="{Y:.1f}" r="4" fill="{colour}"/>')
         if label:
             self.out.append(
-                f'<text x="{X + dx:.1f}" y="{Y + dy:.1f}" font-size="11" text-anchor="{anchor}" fill="{colour}">{esc(label)}</text>'
+                f'<text x="{X + dx:.1f}" y="{Y + dy:.1f}" font-size="11" text-anchor="{anchor}" '
+                f'fill="{colour}">{esc(label)}</text>'
             )
 
     def polyline(self, pts, colour):
@@ -119,18 +126,23 @@ def print_table(lm, runs):
     print(f"Smallest time over {runs} runs (each run: best of 5).")
     print()
     print(
-        "| model | res | ns/ray | lookup alone ns | speed-up | ns/ray raster | speed-up raster | pos µm | dir mrad | mean px | max px | misclassified | exact fallback | MiB |"
+        "| model | res | ns/ray | lookup alone ns | speed-up | ns/ray raster | speed-up raster | pos µm | dir mrad | "
+        "mean px | max px | misclassified | exact fallback | MiB |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in lm:
         mis = r.get("misclassified_fraction")
         unc = r.get("uncertain_fraction")
         print(
-            f"| {r['model']} | {f(r.get('resolution'), 'd')} | {r['ns_per_ray']:.0f} | {f(r.get('lookup_ns'), '.0f')} | "
-            f"{f(r.get('speedup_vs_exact'), '.1f')}{'×' if r.get('speedup_vs_exact') else ''} | {f(r.get('ns_per_ray_raster'), '.0f')} | "
+            f"| {r['model']} | {f(r.get('resolution'), 'd')} | {r['ns_per_ray']:.0f} | "
+            f"{f(r.get('lookup_ns'), '.0f')} | "
+            f"{f(r.get('speedup_vs_exact'), '.1f')}{'×' if r.get('speedup_vs_exact') else ''} | "
+            f"{f(r.get('ns_per_ray_raster'), '.0f')} | "
             f"{f(r.get('speedup_vs_exact_raster'), '.1f')}{'×' if r.get('speedup_vs_exact_raster') else ''} | "
-            f"{f(r.get('mean_position_error_um'), '.1f') or '–'} | {r['mean_direction_error_mrad']:.4f} | {r['mean_image_error_px']:.3f} | {r['max_image_error_px']:.2f} | "
-            f"{'–' if mis is None else f'{100 * mis:.3f} %'} | {'' if unc is None else f'{100 * unc:.1f} %'} | {f(r.get('table_mib'), '.1f')} |"
+            f"{f(r.get('mean_position_error_um'), '.1f') or '–'} | {r['mean_direction_error_mrad']:.4f} | "
+            f"{r['mean_image_error_px']:.3f} | {r['max_image_error_px']:.2f} | "
+            f"{'–' if mis is None else f'{100 * mis:.3f} %'} | {'' if unc is None else f'{100 * unc:.1f} %'} | "
+            f"{f(r.get('table_mib'), '.1f')} |"
         )
     print()
 
@@ -245,11 +257,14 @@ def main():
     if pts:
         right.polyline(pts, COLOURS["lrtf"])
     body = "\n".join(left.out + right.out)
-    svg = f'''<svg xmlns="http://www.w3.org/2000/svg" width="{W}" height="{H}" viewBox="0 0 {W} {H}" font-family="sans-serif">
+    svg = (
+        f'<svg xmlns="http://www.w3.org/2000/svg" width="{W}" height="{H}" viewBox="0 0 {W} {H}" '
+        f'''font-family="sans-serif">
 <rect width="{W}" height="{H}" fill="white"/>
 {body}
 </svg>
 '''
+    )
     with open(a.output, "w") as f:
         f.write(svg)
     print(f"wrote {a.output}")

@@ -127,7 +127,8 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
         if result.resolution_x != out_w or result.resolution_y != out_h:
             self.end_result(result, cancel=True)
             raise camera_mod.SettingsError(
-                f"render result is {result.resolution_x}x{result.resolution_y}, expected {out_w}x{out_h} (border {window})"
+                f"render result is {result.resolution_x}x{result.resolution_y}, "
+                f"expected {out_w}x{out_h} (border {window})"
             )
         layer = result.layers[0]
         spp = render_kw["spp"]

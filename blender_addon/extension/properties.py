@@ -41,7 +41,10 @@ def _lens_items() -> list[tuple]:
     taken = {0, 1, 2}
     for entry in native.library_lenses():
         name = entry["name"]
-        desc = f"{entry.get('description') or name}: f = {entry.get('focal_length_mm', 0):.1f} mm, f/{entry.get('f_number', 0):.2f}. {entry.get('source', '')}"
+        desc = (
+            f"{entry.get('description') or name}: f = {entry.get('focal_length_mm', 0):.1f} mm, "
+            f"f/{entry.get('f_number', 0):.2f}. {entry.get('source', '')}"
+        )
         items.append((name, name, desc, native.stable_enum_number(name, taken)))
     items.append((LENS_FILE, "Lens File…", "A lens file: our .toml, pbrt .dat, Zemax .zmx or lentil .json#ID", 2))
     return items
@@ -65,7 +68,8 @@ class PetzvalCameraSettings(bpy.types.PropertyGroup):
     )
     tilt_x: FloatProperty(
         name="Tilt X",
-        description="Sensor tilt about the horizontal axis (Scheimpflug): positive tilts the plane of focus towards the ground",
+        description="Sensor tilt about the horizontal axis (Scheimpflug): positive tilts the plane of "
+                    "focus towards the ground",
         subtype="ANGLE",
         default=0.0,
         min=-0.6,
@@ -118,12 +122,14 @@ class PetzvalRenderSettings(bpy.types.PropertyGroup):
     )
     natural_vignetting: BoolProperty(
         name="Natural Vignetting",
-        description="Include the cos^4 falloff for the thin lens and pinhole (Cycles has none; real lenses always have their own)",
+        description="Include the cos^4 falloff for the thin lens and pinhole (Cycles has none; "
+                    "real lenses always have their own)",
         default=False,
     )
     spectral: BoolProperty(
         name="Spectral",
-        description="Trace one wavelength per camera ray through lenses with dispersive glass (lateral and axial colour)",
+        description="Trace one wavelength per camera ray through lenses with dispersive glass "
+                    "(lateral and axial colour)",
         default=False,
     )
 

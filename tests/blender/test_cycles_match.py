@@ -254,14 +254,18 @@ def test_image_matches_cycles(blender_run, main_cycles, main_petzval, report):
         + " ".join(S.petzval_cycles_args(S.MAIN_CAM))
     )
     report.line(
-        f"  noise floor: median relative std of an 8x8 block mean (two-seed average): Cycles {v['rel_noise_c'] * 100:.2f} %, "
-        f"petzval {v['rel_noise_p'] * 100:.2f} %; image mean seed noise ≤ {max(noise_c.max(), noise_p.max()) * 100:.3f} %"
+        "  noise floor: median relative std of an 8x8 block mean (two-seed average): Cycles "
+        f"{v['rel_noise_c'] * 100:.2f} %, "
+        f"petzval {v['rel_noise_p'] * 100:.2f} %; image mean seed noise ≤ "
+        f"{max(noise_c.max(), noise_p.max()) * 100:.3f} %"
     )
     report.line(
-        f"  blocks: {_fmt_verdict(v)}; |ΔL|/L median {np.median(rel) * 100:.2f} %, 95th pct {np.percentile(rel, 95) * 100:.2f} %"
+        f"  blocks: {_fmt_verdict(v)}; |ΔL|/L median {np.median(rel) * 100:.2f} %, 95th pct "
+        f"{np.percentile(rel, 95) * 100:.2f} %"
     )
     report.line(
-        f"  image mean petzval/Cycles R,G,B: {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f} (tolerance ±{MEAN_TOL * 100:.0f} %)"
+        f"  image mean petzval/Cycles R,G,B: {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f} (tolerance "
+        f"±{MEAN_TOL * 100:.0f} %)"
     )
     assert np.all(np.abs(ratio - 1) <= MEAN_TOL), f"image mean ratio {ratio}"
     assert _passes(v), f"blocks differ beyond noise: {_fmt_verdict(v)}"
@@ -279,7 +283,8 @@ def test_bokeh_matches_cycles(bokeh_cycles, bokeh_petzval, report):
     cyc = [_measure_bokehs(im, n_cyc) for im in bokeh_cycles]
     pz = [_measure_bokehs(im, n_cyc) for im in bokeh_petzval]
     report.line(
-        f"BokehCam (50 mm on a 9 mm sensor, f/{n_cyc:g}, focus {S.BOKEH_CAM.focus_m} m, 6 blades at {S.BOKEH_CAM.rotation_deg}°), {SPP} spp x seeds {SEEDS}"
+        f"BokehCam (50 mm on a 9 mm sensor, f/{n_cyc:g}, focus {S.BOKEH_CAM.focus_m} m, 6 blades at "
+        f"{S.BOKEH_CAM.rotation_deg}°), {SPP} spp x seeds {SEEDS}"
     )
     failures = []
     for e in S.BOKEH_EMITTERS:
@@ -296,14 +301,16 @@ def test_bokeh_matches_cycles(bokeh_cycles, bokeh_petzval, report):
         d_ang = B.angle_diff_mod(p.vertex_angle_deg, c.vertex_angle_deg, 60)
         dx, dy = p.cx - c.cx, p.cy - c.cy
         report.line(
-            f"  {e.name} ({e.distance_m} m): CoC Cycles {_coc_from_rg(rg_c, pred):.2f} px, petzval {_coc_from_rg(rg_p, pred):.2f} px, "
+            f"  {e.name} ({e.distance_m} m): CoC Cycles {_coc_from_rg(rg_c, pred):.2f} px, petzval "
+            f"{_coc_from_rg(rg_p, pred):.2f} px, "
             f"thin-lens prediction {pred['coc_px']:.2f} px; r_g {rg_c:.3f} / {rg_p:.3f} px (ratio {rg_p / rg_c:.4f}, "
             f"seed noise ±{spread(cyc, 'r_gyration') * 100:.2f} % / ±{spread(pz, 'r_gyration') * 100:.2f} %, "
             f"predicted {pred['rg']:.3f}); flux ratio {fl_p / fl_c:.4f} (noise ±{spread(cyc, 'flux') * 100:.2f} % / "
-            f"±{spread(pz, 'flux') * 100:.2f} %); centroid Δ ({dx:+.3f}, {dy:+.3f}) px (noise ±{math.hypot(spread(cyc, 'cx', False), spread(cyc, 'cy', False)):.3f} / "
+            f"±{spread(pz, 'flux') * 100:.2f} %); centroid Δ ({dx:+.3f}, {dy:+.3f}) px (noise "
+            f"±{math.hypot(spread(cyc, 'cx', False), spread(cyc, 'cy', False)):.3f} / "
             f"±{math.hypot(spread(pz, 'cx', False), spread(pz, 'cy', False)):.3f} px); "
-            f"vertex angle Cycles {c.vertex_angle_deg:.1f}°, petzval {p.vertex_angle_deg:.1f}° (Δ {d_ang:+.1f}°, seed noise "
-            f"±{spread(cyc, 'vertex_angle_deg', False):.1f}° / ±{spread(pz, 'vertex_angle_deg', False):.1f}°)"
+            f"vertex angle Cycles {c.vertex_angle_deg:.1f}°, petzval {p.vertex_angle_deg:.1f}° (Δ {d_ang:+.1f}°, seed "
+            f"noise ±{spread(cyc, 'vertex_angle_deg', False):.1f}° / ±{spread(pz, 'vertex_angle_deg', False):.1f}°)"
         )
         if abs(rg_p / rg_c - 1) > BOKEH_RG_TOL:
             failures.append(f"{e.name}: r_g ratio {rg_p/rg_c:.4f}")
@@ -339,7 +346,8 @@ def test_negative_controls_fail_the_metric(blender_run, main_cycles, main_petzva
         ratio = B.mean_ratio(img, (main_cycles[0] + main_cycles[1]) / 2)
         lines.append((label, v, ratio))
         report.line(
-            f"  negative control, MainCam {label} ({SPP_CONTROL} spp): {_fmt_verdict(v)}; image mean ratio {ratio.mean():.4f}"
+            f"  negative control, MainCam {label} ({SPP_CONTROL} spp): {_fmt_verdict(v)}; image mean ratio "
+            f"{ratio.mean():.4f}"
         )
         # a valid control differs in depth of field only: its overall brightness still matches
         assert np.all(np.abs(ratio - 1) <= MEAN_TOL), (
@@ -355,7 +363,8 @@ def test_negative_controls_fail_the_metric(blender_run, main_cycles, main_petzva
         rg_c = np.mean([_measure_bokehs(im, n_cyc)[e.name].r_gyration for im in bokeh_cycles])
         r = wide[e.name].r_gyration / rg_c
         report.line(
-            f"  negative control, BokehCam f-stop halved: {e.name} r_g ratio {r:.3f} (tolerance ±{BOKEH_RG_TOL * 100:.0f} %)"
+            f"  negative control, BokehCam f-stop halved: {e.name} r_g ratio {r:.3f} (tolerance "
+            f"±{BOKEH_RG_TOL * 100:.0f} %)"
         )
         assert abs(r - 1) > BOKEH_RG_TOL
 
@@ -401,7 +410,8 @@ def test_direct_mapping_pixel_filter(blender_run, main_cycles, main_petzval, rep
     img = B.read_rgb(blender_run.petzval(args, 7, SPP_CONTROL, "filter_direct"))
     v = _block_verdict(_single_seed_comparison(main_cycles, main_petzval, img, SPP_CONTROL))
     report.line(
-        f"  direct mapping: --filter-width {args[i + 1]} (Cycles' filter_width as it is), MainCam {SPP_CONTROL} spp: {_fmt_verdict(v)}"
+        f"  direct mapping: --filter-width {args[i + 1]} (Cycles' filter_width as it is), MainCam {SPP_CONTROL} spp: "
+        f"{_fmt_verdict(v)}"
     )
     assert _passes(v), _fmt_verdict(v)
 
@@ -422,6 +432,7 @@ def test_speed_against_cycles(blender_run, report):
     w, h = S.RESOLUTION
     report.line(
         f"speed, MainCam {w}x{h} at {SPP} spp, 2 threads each: wall Cycles {t_cyc:.1f} s, petzval {t_pz:.1f} s "
-        f"(ratio {t_pz / t_cyc:.2f}); CPU Cycles {cpu_cyc:.1f} s, petzval {cpu_pz:.1f} s (ratio {cpu_pz / cpu_cyc:.2f}); "
+        f"(ratio {t_pz / t_cyc:.2f}); CPU Cycles {cpu_cyc:.1f} s, petzval {cpu_pz:.1f} s (ratio "
+        f"{cpu_pz / cpu_cyc:.2f}); "
         f"target ≤ 0.5. petzval: {inner[-1] if inner else '?'}"
     )

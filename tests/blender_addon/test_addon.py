@@ -64,7 +64,8 @@ def _verdict(cmp: B.BlockComparison) -> dict:
 def _fmt(v: dict) -> str:
     return (
         f"mean z² {v['mean_z2']:.3f} (≤ {MAX_MEAN_Z2}), max |z| {v['max_abs_z']:.2f} (≤ {MAX_ABS_Z}), "
-        f"|z|>4: {v['n_over_4']}/{v['n_blocks']} blocks; block noise {v['rel_noise_a'] * 100:.2f} % / {v['rel_noise_b'] * 100:.2f} %"
+        f"|z|>4: {v['n_over_4']}/{v['n_blocks']} blocks; block noise {v['rel_noise_a'] * 100:.2f} % / "
+        f"{v['rel_noise_b'] * 100:.2f} %"
     )
 
 
@@ -165,7 +166,8 @@ def test_registration(addon, report):
     assert hasattr(bpy.types, "PETZVAL_PT_camera_lens") and "PETZVAL" in bpy.types.DATA_PT_lens.COMPAT_ENGINES
     report.line(
         f"registration: engine PETZVAL, {len(library)} library lenses in the lens menu, "
-        f"{sum('PETZVAL' in getattr(getattr(bpy.types, n), 'COMPAT_ENGINES', ()) for n in dir(bpy.types))} panels list PETZVAL"
+        f"{sum('PETZVAL' in getattr(getattr(bpy.types, n), 'COMPAT_ENGINES', ()) for n in dir(bpy.types))} "
+        "panels list PETZVAL"
     )
 
 
@@ -193,7 +195,8 @@ def test_thin_lens_matches_cycles(main_scene, thin_renders, report):
     w, h = S.RESOLUTION
     report.line(
         f"thin lens vs Cycles, MainCam {w}x{h}: add-on {SPP_THIN} spp x seeds {SEEDS} "
-        f"({entries[0]['wall']:.1f} s per F12, render {entries[0]['seconds_render']:.1f} s, scene {entries[0]['seconds_scene'] * 1e3:.0f} ms, "
+        f"({entries[0]['wall']:.1f} s per F12, render {entries[0]['seconds_render']:.1f} s, scene "
+        f"{entries[0]['seconds_scene'] * 1e3:.0f} ms, "
         f"{entries[0]['triangles']} triangles), Cycles {SPP_CYCLES_REF} spp (cached)"
     )
     report.line(f"  blocks: {_fmt(v)}")
@@ -248,14 +251,15 @@ def test_real_lens_round_trip_matches_gltf_path(main_scene, report):
     v = _verdict(cmp)
     ratio = B.mean_ratio((addon_imgs[0] + addon_imgs[1]) / 2, (cli_imgs[0] + cli_imgs[1]) / 2)
     report.line(
-        f"round trip, double-gauss-50mm exact, MainCam {SPP_ROUND_TRIP} spp x seeds {SEEDS}: add-on {secs:.1f} s per F12, "
-        f"CLI on the exported GLB {t_cli:.1f} s per render"
+        f"round trip, double-gauss-50mm exact, MainCam {SPP_ROUND_TRIP} spp x seeds {SEEDS}: add-on {secs:.1f} s "
+        f"per F12, CLI on the exported GLB {t_cli:.1f} s per render"
     )
     rel = max(float(np.max(np.abs(a - c))) for a, c in zip(addon_imgs, cli_imgs, strict=True)) / float(
         np.mean(cli_imgs[0])
     )
     report.line(
-        f"  blocks add-on vs glTF path: {_fmt(v)}; image mean ratio R,G,B {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f}; "
+        f"  blocks add-on vs glTF path: {_fmt(v)}; image mean ratio R,G,B {ratio[0]:.4f} {ratio[1]:.4f} "
+        f"{ratio[2]:.4f}; "
         f"largest pixel difference at equal seeds {rel * 100:.3g} % of the image mean"
     )
     assert np.all(np.abs(ratio - 1) <= MEAN_TOL), f"image mean ratio {ratio}"
@@ -298,7 +302,8 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
                 (len(ys), float(ys.mean()) if len(ys) else float("nan"), float(xs.mean()) if len(xs) else float("nan"))
             )
         report.line(
-            f"  the sky's bright patch seen directly: Cycles {patch[0][0]} px centred at ({patch[0][2]:.2f}, {patch[0][1]:.2f}), "
+            f"  the sky's bright patch seen directly: Cycles {patch[0][0]} px centred at ({patch[0][2]:.2f}, "
+            f"{patch[0][1]:.2f}), "
             f"add-on {patch[1][0]} px at ({patch[1][2]:.2f}, {patch[1][1]:.2f})"
         )
         assert patch[0][0] > 50 and patch[1][0] > 0.8 * patch[0][0], patch
@@ -418,19 +423,21 @@ def test_tilt_shift_hinge_rule(addon, report):
     blurred = coc[rows] > 3.0
     ends = np.r_[np.arange(6, 6 + Hh // 8), np.arange(Hh - 6 - Hh // 8, Hh - 6)]
     report.line(
-        f"tilt-shift, double-gauss-50mm (EFL {efl:.2f} mm) f/2.1 at {focus:.2f} m, camera {H.TILT_HEIGHT_M} m up pitched "
-        f"{H.TILT_PITCH_DEG:.0f}° down, {W}x{Hh} {spp} spp: hinge-rule tilt {math.degrees(tilt):.3f}° "
+        f"tilt-shift, double-gauss-50mm (EFL {efl:.2f} mm) f/2.1 at {focus:.2f} m, camera {H.TILT_HEIGHT_M} m up "
+        f"pitched {H.TILT_PITCH_DEG:.0f}° down, {W}x{Hh} {spp} spp: hinge-rule tilt {math.degrees(tilt):.3f}° "
         f"(models {sorted(models)}, {np.mean(times):.1f} s per F12 on average)"
     )
     report.line(
-        f"  thick model, rows sharp (RMS gradient ≥ {SHARP} of f/22): untilted {sharp['untilted'] * 100:.0f} % (CoC < 1 px predicted "
-        f"on {band_pred * 100:.0f} %; sharpest band centred on row {peak_row:.0f}, predicted {pred_row}; median {np.median(thick['untilted'][rows][blurred]):.2f} "
+        f"  thick model, rows sharp (RMS gradient ≥ {SHARP} of f/22): untilted {sharp['untilted'] * 100:.0f} % "
+        f"(CoC < 1 px predicted on {band_pred * 100:.0f} %; sharpest band centred on row {peak_row:.0f}, "
+        f"predicted {pred_row}; median {np.median(thick['untilted'][rows][blurred]):.2f} "
         f"where CoC > 3 px), hinge-rule tilt {sharp['tilted'] * 100:.0f} % (min {thick['tilted'][rows].min():.2f}), "
         f"half tilt {sharp['half'] * 100:.0f} %, reverse tilt {sharp['reverse'] * 100:.0f} %"
     )
     report.line(
         f"  exact trace, frame ends (top and bottom {Hh // 8} rows): untilted {exact['untilted'][ends].mean():.2f}, "
-        f"tilted {exact['tilted'][ends].mean():.2f} (thick model: {thick['untilted'][ends].mean():.2f}, {thick['tilted'][ends].mean():.2f})"
+        f"tilted {exact['tilted'][ends].mean():.2f} (thick model: {thick['untilted'][ends].mean():.2f}, "
+        f"{thick['tilted'][ends].mean():.2f})"
     )
     assert abs(peak_row - pred_row) <= 0.05 * Hh, f"untilted sharpest row {peak_row}, predicted {pred_row}"
     assert sharp["untilted"] < 0.6, f"untilted lens sharp on {sharp['untilted']*100:.0f} % of rows"
@@ -529,8 +536,10 @@ def test_cancel_is_prompt(main_scene, report):
     latency = entry["returned"] - state["t_true"]
     latency_op = t_op - state["t_true"]
     report.line(
-        f"cancel: stop requested {state['t_true'] - t_start:.2f} s into F12; engine.render returned {latency * 1e3:.0f} ms later, "
-        f"bpy.ops.render.render {latency_op * 1e3:.0f} ms later; {entry.get('spp')} spp kept (complete={entry.get('complete')}), "
+        f"cancel: stop requested {state['t_true'] - t_start:.2f} s into F12; engine.render returned "
+        f"{latency * 1e3:.0f} ms later, "
+        f"bpy.ops.render.render {latency_op * 1e3:.0f} ms later; {entry.get('spp')} spp kept "
+        f"(complete={entry.get('complete')}), "
         f"{state['calls']} polls"
     )
     assert latency < CANCEL_LATENCY_S, f"render() returned {latency:.3f} s after the cancel"
@@ -649,14 +658,17 @@ def test_border_crop_and_depth_pass(addon, report):
     corner = float(z[0, 0])
     side = float(z[30, 10])  # the wall 34° off axis: Blender's Z pass (Cycles: 3.0) is the distance along the view axis
     report.line(
-        f"border: cropped 40x30 window = the same window of the uncropped border render; Depth pass: centre {centre:.4f} m, "
-        f"34° off axis {side:.4f} m (wall at 3 m along the axis; Cycles writes 3.0 at both), corner {corner:.4g} (background)"
+        "border: cropped 40x30 window = the same window of the uncropped border render; Depth pass: "
+        f"centre {centre:.4f} m, 34° off axis {side:.4f} m (wall at 3 m along the axis; Cycles writes 3.0 at both), "
+        f"corner {corner:.4g} (background)"
     )
     assert corner >= 1e9
     assert centre == pytest.approx(3.0, abs=2e-3)
     assert side == pytest.approx(3.0, abs=2e-3), (
-        f"Depth 34° off axis is {side:.4f}, expected 3.0 (Blender's Z: distance along the camera's -z). petzval.render()['depth'] "
-        f"looks like the ray length (3 / cos 33.6° = {3 / math.cos(math.atan(29.5 * 0.45 / 20)):.3f}), which contradicts _native.pyi"
+        f"Depth 34° off axis is {side:.4f}, expected 3.0 (Blender's Z: distance along the camera's -z). "
+        "petzval.render()['depth'] "
+        f"looks like the ray length (3 / cos 33.6° = {3 / math.cos(math.atan(29.5 * 0.45 / 20)):.3f}), which "
+        "contradicts _native.pyi"
     )
 
 

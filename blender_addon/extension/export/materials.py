@@ -128,7 +128,8 @@ class Materials:
                     col = (1.0, 1.0, 1.0)
                 else:
                     self.notes.warn(
-                        f"material '{mat.name}': emission colour from a {src[0].bl_label} node (its unlinked value used)"
+                        f"material '{mat.name}': emission colour from a {src[0].bl_label} node "
+                        "(its unlinked value used)"
                     )
             return self.scene.add_material(mat.name, base_color=(0.0, 0.0, 0.0, 1.0), specular=0.0,
                                            emission=tuple(float(c) * strength for c in col[:3]), **kw)
@@ -243,7 +244,8 @@ class Materials:
                     self.notes.warn(f"material '{name}': Normal Map node without an Image Texture")
             else:
                 self.notes.warn(
-                    f"material '{name}': normal from a {nn.bl_label} node{' (' + nn.space.lower() + ' space)' if nn.type == 'NORMAL_MAP' else ''}"
+                    f"material '{name}': normal from a {nn.bl_label} "
+                    f"node{' (' + nn.space.lower() + ' space)' if nn.type == 'NORMAL_MAP' else ''}"
                 )
 
         # lobes glTF/Petzval's BSDF does not have
