@@ -58,7 +58,9 @@ def find_maturin() -> list[str]:
     found = shutil.which("maturin")
     if found:
         return [found]
-    raise BuildError("maturin is not installed: `.venv/bin/python -m pip install 'maturin>=1.7,<2'` (tests/run does it)")
+    raise BuildError(
+        "maturin is not installed: `.venv/bin/python -m pip install 'maturin>=1.7,<2'` (tests/run does it)"
+    )
 
 
 def build_wheel(wheels_dir: Path = WHEELS) -> Path:
@@ -136,7 +138,13 @@ def stage(wheel: Path, out_dir: Path) -> tuple[Path, str]:
             shutil.copy2(path, staging / rel)
     (staging / "wheels").mkdir(exist_ok=True)
     shutil.copy2(wheel, staging / "wheels" / wheel.name)
-    write_manifest(EXTENSION / "blender_manifest.toml", staging / "blender_manifest.toml", bversion, f"./wheels/{wheel.name}", platform)
+    write_manifest(
+        EXTENSION / "blender_manifest.toml",
+        staging / "blender_manifest.toml",
+        bversion,
+        f"./wheels/{wheel.name}",
+        platform,
+    )
     return staging, bversion
 
 
@@ -180,8 +188,12 @@ def validate(zip_path: Path) -> str | None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--wheel", type=Path, help="pack this wheel instead of building one with maturin")
-    ap.add_argument("--out", type=Path, default=REPO / "target" / "blender", help="output directory (default target/blender)")
-    ap.add_argument("--wheels-dir", type=Path, default=WHEELS, help="where maturin writes the wheel (default target/wheels)")
+    ap.add_argument(
+        "--out", type=Path, default=REPO / "target" / "blender", help="output directory (default target/blender)"
+    )
+    ap.add_argument(
+        "--wheels-dir", type=Path, default=WHEELS, help="where maturin writes the wheel (default target/wheels)"
+    )
     args = ap.parse_args(argv)
     try:
         wheel = args.wheel.resolve() if args.wheel else build_wheel(args.wheels_dir.resolve())
@@ -192,7 +204,13 @@ def main(argv: list[str] | None = None) -> int:
         zip_path = (args.out / f"petzval-{version}.zip").resolve()
         pack(staging, zip_path)
         checked = validate(zip_path)
-        print(f"wheel {wheel.name}; " + ("validated by Blender's extension tool" if checked is not None else "not validated (no bpy module here)"), file=sys.stderr)
+        print(
+            f"wheel {wheel.name}; "
+            + (
+                "validated by Blender's extension tool" if checked is not None else "not validated (no bpy module here)"
+            ),
+            file=sys.stderr,
+        )
     except BuildError as e:
         print(f"build.py: error: {e}", file=sys.stderr)
         return 1

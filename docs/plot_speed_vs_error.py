@@ -52,10 +52,19 @@ class Axes:
     def frame(self, title, xlabel, ylabel, xticks, yticks):
         o = self.out
         o.append(f'<rect x="{self.ox}" y="{self.oy}" width="{PANEL_W}" height="{PANEL_H}" fill="none" stroke="#444"/>')
-        o.append(f'<text x="{self.ox + PANEL_W / 2}" y="{self.oy - 22}" text-anchor="middle" font-size="14" font-weight="bold">{esc(title)}</text>')
-        o.append(f'<text x="{self.ox + PANEL_W / 2}" y="{self.oy + PANEL_H + 38}" text-anchor="middle" font-size="12">{esc(xlabel)}</text>')
+        o.append(
+            f'<text x="{self.ox + PANEL_W / 2}" y="{self.oy - 22}" text-anchor="middle" font-size="14" '
+            f'font-weight="bold">{esc(title)}</text>'
+        )
+        o.append(
+            f'<text x="{self.ox + PANEL_W / 2}" y="{self.oy + PANEL_H + 38}" text-anchor="middle" '
+            f'font-size="12">{esc(xlabel)}</text>'
+        )
         cx, cy = self.ox - 52, self.oy + PANEL_H / 2
-        o.append(f'<text x="{cx}" y="{cy}" text-anchor="middle" font-size="12" transform="rotate(-90 {cx} {cy})">{esc(ylabel)}</text>')
+        o.append(
+            f'<text x="{cx}" y="{cy}" text-anchor="middle" font-size="12" transform="rotate(-90 {cx} '
+            f'{cy})">{esc(ylabel)}</text>'
+        )
         for v in xticks:
             X = self.x(v)
             o.append(f'<line x1="{X:.1f}" y1="{self.oy}" x2="{X:.1f}" y2="{self.oy + PANEL_H}" stroke="#ddd"/>')
@@ -67,19 +76,31 @@ class Axes:
 
     def hline(self, v, label, colour="#c51b7d"):
         Y = self.y(v)
-        self.out.append(f'<line x1="{self.ox}" y1="{Y:.1f}" x2="{self.ox + PANEL_W}" y2="{Y:.1f}" stroke="{colour}" stroke-dasharray="5,4"/>')
-        self.out.append(f'<text x="{self.ox + PANEL_W - 4}" y="{Y - 5:.1f}" text-anchor="end" font-size="11" fill="{colour}">{esc(label)}</text>')
+        self.out.append(
+            f'<line x1="{self.ox}" y1="{Y:.1f}" x2="{self.ox + PANEL_W}" y2="{Y:.1f}" stroke="{colour}" '
+            'stroke-dasharray="5,4"/>'
+        )
+        self.out.append(
+            f'<text x="{self.ox + PANEL_W - 4}" y="{Y - 5:.1f}" text-anchor="end" font-size="11" '
+            f'fill="{colour}">{esc(label)}</text>'
+        )
 
     def vline(self, v, label, colour="#c51b7d"):
         X = self.x(v)
-        self.out.append(f'<line x1="{X:.1f}" y1="{self.oy}" x2="{X:.1f}" y2="{self.oy + PANEL_H}" stroke="{colour}" stroke-dasharray="5,4"/>')
+        self.out.append(
+            f'<line x1="{X:.1f}" y1="{self.oy}" x2="{X:.1f}" y2="{self.oy + PANEL_H}" stroke="{colour}" '
+            'stroke-dasharray="5,4"/>'
+        )
         self.out.append(f'<text x="{X + 4:.1f}" y="{self.oy + 14}" font-size="11" fill="{colour}">{esc(label)}</text>')
 
     def point(self, x, y, colour, label, dx=6, dy=-6, anchor="start"):
         X, Y = self.x(x), self.y(y)
         self.out.append(f'<circle cx="{X:.1f}" cy="{Y:.1f}" r="4" fill="{colour}"/>')
         if label:
-            self.out.append(f'<text x="{X + dx:.1f}" y="{Y + dy:.1f}" font-size="11" text-anchor="{anchor}" fill="{colour}">{esc(label)}</text>')
+            self.out.append(
+                f'<text x="{X + dx:.1f}" y="{Y + dy:.1f}" font-size="11" text-anchor="{anchor}" '
+                f'fill="{colour}">{esc(label)}</text>'
+            )
 
     def polyline(self, pts, colour):
         d = " ".join(f"{self.x(a):.1f},{self.y(b):.1f}" for a, b in pts)
@@ -99,20 +120,29 @@ def decade_ticks(lo, hi):
 
 
 def print_table(lm, runs):
-    f = lambda v, fmt: "" if v is None else format(v, fmt)
+    def f(v, fmt):
+        return "" if v is None else format(v, fmt)
+
     print(f"Smallest time over {runs} runs (each run: best of 5).")
     print()
-    print("| model | res | ns/ray | lookup alone ns | speed-up | ns/ray raster | speed-up raster | pos µm | dir mrad | mean px | max px | misclassified | exact fallback | MiB |")
+    print(
+        "| model | res | ns/ray | lookup alone ns | speed-up | ns/ray raster | speed-up raster | pos µm | dir mrad | "
+        "mean px | max px | misclassified | exact fallback | MiB |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in lm:
         mis = r.get("misclassified_fraction")
         unc = r.get("uncertain_fraction")
         print(
-            f'| {r["model"]} | {f(r.get("resolution"), "d")} | {r["ns_per_ray"]:.0f} | {f(r.get("lookup_ns"), ".0f")} | '
-            f'{f(r.get("speedup_vs_exact"), ".1f")}{"×" if r.get("speedup_vs_exact") else ""} | {f(r.get("ns_per_ray_raster"), ".0f")} | '
-            f'{f(r.get("speedup_vs_exact_raster"), ".1f")}{"×" if r.get("speedup_vs_exact_raster") else ""} | '
-            f'{f(r.get("mean_position_error_um"), ".1f") or "–"} | {r["mean_direction_error_mrad"]:.4f} | {r["mean_image_error_px"]:.3f} | {r["max_image_error_px"]:.2f} | '
-            f'{"–" if mis is None else f"{100 * mis:.3f} %"} | {"" if unc is None else f"{100 * unc:.1f} %"} | {f(r.get("table_mib"), ".1f")} |'
+            f"| {r['model']} | {f(r.get('resolution'), 'd')} | {r['ns_per_ray']:.0f} | "
+            f"{f(r.get('lookup_ns'), '.0f')} | "
+            f"{f(r.get('speedup_vs_exact'), '.1f')}{'×' if r.get('speedup_vs_exact') else ''} | "
+            f"{f(r.get('ns_per_ray_raster'), '.0f')} | "
+            f"{f(r.get('speedup_vs_exact_raster'), '.1f')}{'×' if r.get('speedup_vs_exact_raster') else ''} | "
+            f"{f(r.get('mean_position_error_um'), '.1f') or '–'} | {r['mean_direction_error_mrad']:.4f} | "
+            f"{r['mean_image_error_px']:.3f} | {r['max_image_error_px']:.2f} | "
+            f"{'–' if mis is None else f'{100 * mis:.3f} %'} | {'' if unc is None else f'{100 * unc:.1f} %'} | "
+            f"{f(r.get('table_mib'), '.1f')} |"
         )
     print()
 
@@ -142,16 +172,23 @@ def min_times(runs, lens):
     return list(rows.values())
 
 
+def _load_json(path):
+    with open(path) as fh:
+        return json.load(fh)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("render_models", help="JSON of `petzval bench render-models --json`")
     ap.add_argument("lens_models", nargs="+", help="JSON of `petzval bench lens-models --json` (one or more runs)")
     ap.add_argument("-o", "--output", default="docs/speed-vs-error.svg")
     ap.add_argument("--lens", default="double-gauss-50mm")
-    ap.add_argument("--table", action="store_true", help="also print the per-ray table (markdown) with the minimum times")
+    ap.add_argument(
+        "--table", action="store_true", help="also print the per-ray table (markdown) with the minimum times"
+    )
     a = ap.parse_args()
-    lm = min_times([json.load(open(f)) for f in a.lens_models], a.lens)
-    rm = json.load(open(a.render_models))
+    lm = min_times([_load_json(f) for f in a.lens_models], a.lens)
+    rm = _load_json(a.render_models)
     if not lm or not rm:
         sys.exit(f"no rows for {a.lens}")
     exact = next(r for r in lm if r["model"] == "exact")
@@ -162,7 +199,13 @@ def main():
     ns = [r["ns_per_ray"] for r in lm] + [exact["ns_per_ray"] / 10]
     xr = (min(ns) * 0.7, max(ns) * 1.6)
     left = Axes(LEFT, xr, (floor_px * 0.7, 30), True, True)
-    left.frame(f"Per ray: {a.lens}", "ns per camera ray (1 thread, log)", "mean image error, px (log)", decade_ticks(*xr), [0.01, 0.1, 1, 10])
+    left.frame(
+        f"Per ray: {a.lens}",
+        "ns per camera ray (1 thread, log)",
+        "mean image error, px (log)",
+        decade_ticks(*xr),
+        [0.01, 0.1, 1, 10],
+    )
     left.hline(0.1, "target ≤ 0.1 px")
     left.vline(exact["ns_per_ray"] / 10, "target ≥ 10× exact")
     left.point(exact["ns_per_ray"], floor_px, COLOURS["exact"], "exact (error 0)", dx=-6, anchor="end")
@@ -172,7 +215,9 @@ def main():
         left.point(r["ns_per_ray"], r["mean_image_error_px"], COLOURS["lrtf"], f'LRTF {r["resolution"]}³')
     analytic = [r for r in lm if r["model"] in ("pinhole", "thin", "thick")]
     for i, r in enumerate(analytic):
-        left.point(r["ns_per_ray"], r["mean_image_error_px"], COLOURS[r["model"]], f'{r["model"]} (distortion)', dy=-6 - 13 * i)
+        left.point(
+            r["ns_per_ray"], r["mean_image_error_px"], COLOURS[r["model"]], f"{r['model']} (distortion)", dy=-6 - 13 * i
+        )
     # Right panel: mean FLIP against render seconds.
     secs = [r["seconds"] for r in rm]
     flips = [r["flip_mean"] for r in rm if r["flip_mean"] > 0]
@@ -180,7 +225,13 @@ def main():
     step = 10 ** math.floor(math.log10(max(secs) * 1.25 / 2))
     xt = [i * step for i in range(0, int(max(secs) * 1.25 / step) + 1)]
     first = rm[0]
-    right.frame(f'Demo render {first["width"]}x{first["height"]}, {first["spp"]} spp', "render seconds (2 threads)", "mean LDR-FLIP vs exact (log)", xt, decade_ticks(min(flips) * 0.5, 1.0))
+    right.frame(
+        f"Demo render {first['width']}x{first['height']}, {first['spp']} spp",
+        "render seconds (2 threads)",
+        "mean LDR-FLIP vs exact (log)",
+        xt,
+        decade_ticks(min(flips) * 0.5, 1.0),
+    )
     noise = next((r for r in rm if "noise" in r["model"]), None)
     if noise:
         right.hline(noise["flip_mean"], "noise floor (exact, other seed)", "#666")
@@ -191,18 +242,29 @@ def main():
         name = r["model"] + (f' {r["resolution"]}³' if r.get("resolution") else "")
         colour = COLOURS.get(r["model"], "#000")
         below = r["model"] == "thin"
-        right.point(r["seconds"], r["flip_mean"], colour, name, dx=-6 if below else 6, dy=16 if below else -6, anchor="end" if below else "start")
+        right.point(
+            r["seconds"],
+            r["flip_mean"],
+            colour,
+            name,
+            dx=-6 if below else 6,
+            dy=16 if below else -6,
+            anchor="end" if below else "start",
+        )
         if r["model"] == "lrtf":
             pts.append((r["seconds"], r["flip_mean"]))
     right.point(rm[0]["seconds"], min(flips) * 0.5, COLOURS["exact"], "exact (0)", dy=-6)
     if pts:
         right.polyline(pts, COLOURS["lrtf"])
     body = "\n".join(left.out + right.out)
-    svg = f'''<svg xmlns="http://www.w3.org/2000/svg" width="{W}" height="{H}" viewBox="0 0 {W} {H}" font-family="sans-serif">
+    svg = (
+        f'<svg xmlns="http://www.w3.org/2000/svg" width="{W}" height="{H}" viewBox="0 0 {W} {H}" '
+        f'''font-family="sans-serif">
 <rect width="{W}" height="{H}" fill="white"/>
 {body}
 </svg>
 '''
+    )
     with open(a.output, "w") as f:
         f.write(svg)
     print(f"wrote {a.output}")

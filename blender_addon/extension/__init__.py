@@ -11,12 +11,15 @@ from __future__ import annotations
 if "bpy" in locals():  # script reload (F8 / Reload Scripts)
     import importlib
 
-    for _m in (notes, native, properties, camera, scene, engine, ui):  # noqa: F821
+    # the export package's modules before the package itself, which imports from them
+    for _m in (notes, native, properties, camera, export.nodes, export.images, export.materials,  # noqa: F821
+               export.mesh, export.lights, export.world, export, engine, ui):  # noqa: F821
         importlib.reload(_m)
 
 import bpy
 
-from . import notes, native, properties, camera, scene, engine, ui  # noqa: E402,F401
+# in dependency order, as the reload list above
+from . import notes, native, properties, camera, export, engine, ui  # noqa: F401  # isort: skip
 
 
 def register() -> None:

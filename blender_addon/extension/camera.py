@@ -151,7 +151,9 @@ def camera_kwargs(scene, cam_obj, depsgraph, notes) -> dict:
         kw["fstop"] = float(dof.aperture_fstop) if dof.use_dof else None
         kw["focus_distance_m"] = focus_distance(cam_obj, depsgraph)
         if not dof.use_dof:
-            notes.note("depth of field is off: the real lens renders wide open, focused at the Depth of Field panel's distance")
+            notes.note(
+                "depth of field is off: the real lens renders wide open, focused at the Depth of Field panel's distance"
+            )
     if kw["focus_distance_m"] is not None and kw["focus_distance_m"] <= 0:
         kw["focus_distance_m"] = None  # Blender's 0 focus distance: infinity
     if p.aperture_image.strip():

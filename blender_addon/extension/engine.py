@@ -9,8 +9,8 @@ import bpy
 import numpy as np
 
 from . import camera as camera_mod
+from . import export as export_mod
 from . import native
-from . import scene as scene_mod
 from . import viewport as viewport_mod
 from .notes import Notes
 
@@ -106,17 +106,19 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
 
         self.update_stats("", "Petzval | Translating scene")
         t_scene = time.perf_counter()
-        pz_scene, stats = scene_mod.build(pz, depsgraph, notes, stop=self._should_stop)
+        pz_scene, stats = export_mod.build(pz, depsgraph, notes, stop=self._should_stop)
         entry["seconds_scene"] = time.perf_counter() - t_scene
         if pz_scene is None:
             entry["cancelled_before_render"] = True
             return
-        scene_mod.add_world(pz_scene, scene.world, notes, None)
+        export_mod.add_world(pz_scene, scene.world, notes, None)
         if r.film_transparent:
             notes.warn("transparent film (the world is rendered)")
 
         want_depth = bool(view_layer.use_pass_z)
-        entry["kwargs"] = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in {**cam_kw, **render_kw}.items()}
+        entry["kwargs"] = {
+            k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in {**cam_kw, **render_kw}.items()
+        }
         entry["kwargs"].update({"width": width, "height": height, "crop": crop})
         entry["triangles"] = pz_scene.triangle_count
         entry["stats"] = stats
@@ -125,7 +127,9 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
         if result.resolution_x != out_w or result.resolution_y != out_h:
             self.end_result(result, cancel=True)
             raise camera_mod.SettingsError(
-                f"render result is {result.resolution_x}x{result.resolution_y}, expected {out_w}x{out_h} (border {window})")
+                f"render result is {result.resolution_x}x{result.resolution_y}, "
+                f"expected {out_w}x{out_h} (border {window})"
+            )
         layer = result.layers[0]
         spp = render_kw["spp"]
         lens_label = cam_kw["lens"] if cam_kw["lens"] in ("thin", "pinhole") else cam_eval.data.petzval.lens
@@ -167,7 +171,9 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
                 entry[k] = out.get(k)
             rgba = out["rgba"]
             if rgba.shape[:2] != (out_h, out_w):
-                raise RuntimeError(f"petzval.render returned {rgba.shape[1]}x{rgba.shape[0]} pixels, expected {out_w}x{out_h}")
+                raise RuntimeError(
+                    f"petzval.render returned {rgba.shape[1]}x{rgba.shape[0]} pixels, expected {out_w}x{out_h}"
+                )
             self._write(layer, rgba, opaque=not r.film_transparent)
             if want_depth and "Depth" in layer.passes:
                 depth = np.where(np.isfinite(out["depth"]), out["depth"], BACKGROUND_DEPTH)
@@ -204,9 +210,9 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
         try:
             pz = native.get()
             notes = Notes()
-            pz_scene, _ = scene_mod.build(pz, depsgraph, notes)
+            pz_scene, _ = export_mod.build(pz, depsgraph, notes)
             if pz_scene is not None:
-                scene_mod.add_world(pz_scene, depsgraph.scene_eval.world, notes, None)
+                export_mod.add_world(pz_scene, depsgraph.scene_eval.world, notes, None)
             self._vp_scene = pz_scene
             self._vp_error = None
         except Exception as e:
@@ -222,7 +228,9 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
         if rv3d.view_perspective == "CAMERA" and scene.camera is not None and scene.camera.type == "CAMERA":
             return camera_mod.camera_kwargs(scene, scene.camera.evaluated_get(depsgraph), depsgraph, Notes())
         if not rv3d.is_perspective:
-            raise camera_mod.SettingsError("orthographic views are not previewed (Petzval renders perspective cameras only)")
+            raise camera_mod.SettingsError(
+                "orthographic views are not previewed (Petzval renders perspective cameras only)"
+            )
         space = context.space_data
         return viewport_mod.free_view_kwargs(rv3d.view_matrix.inverted(), space.lens, space.clip_start, space.clip_end)
 

@@ -30,7 +30,9 @@ class Notes:
         """One line listing everything (empty when there is nothing to say)."""
         parts = []
         if self.unsupported:
-            parts.append(f"not supported, ignored or replaced ({len(self.unsupported)}): " + "; ".join(self.unsupported))
+            parts.append(
+                f"not supported, ignored or replaced ({len(self.unsupported)}): " + "; ".join(self.unsupported)
+            )
         if self.info:
             parts.append("approximations: " + "; ".join(self.info))
         return " | ".join(parts)

@@ -30,13 +30,21 @@ def _lens_items() -> list[tuple]:
     """Enum items for the lens: Blender's camera, pinhole, every library lens, a file. Numbers are
     stable across library versions (see native.stable_enum_number)."""
     items = [
-        (LENS_THIN, "Thin Lens (Blender Camera)", "Blender's own camera model: focal length, f-stop and focus from the camera settings", 0),
+        (
+            LENS_THIN,
+            "Thin Lens (Blender Camera)",
+            "Blender's own camera model: focal length, f-stop and focus from the camera settings",
+            0,
+        ),
         (LENS_PINHOLE, "Pinhole", "An ideal pinhole: no depth of field", 1),
     ]
     taken = {0, 1, 2}
     for entry in native.library_lenses():
         name = entry["name"]
-        desc = f"{entry.get('description') or name}: f = {entry.get('focal_length_mm', 0):.1f} mm, f/{entry.get('f_number', 0):.2f}. {entry.get('source', '')}"
+        desc = (
+            f"{entry.get('description') or name}: f = {entry.get('focal_length_mm', 0):.1f} mm, "
+            f"f/{entry.get('f_number', 0):.2f}. {entry.get('source', '')}"
+        )
         items.append((name, name, desc, native.stable_enum_number(name, taken)))
     items.append((LENS_FILE, "Lens File…", "A lens file: our .toml, pbrt .dat, Zemax .zmx or lentil .json#ID", 2))
     return items
@@ -60,8 +68,14 @@ class PetzvalCameraSettings(bpy.types.PropertyGroup):
     )
     tilt_x: FloatProperty(
         name="Tilt X",
-        description="Sensor tilt about the horizontal axis (Scheimpflug): positive tilts the plane of focus towards the ground",
-        subtype="ANGLE", default=0.0, min=-0.6, max=0.6, precision=2, step=10,
+        description="Sensor tilt about the horizontal axis (Scheimpflug): positive tilts the plane of "
+                    "focus towards the ground",
+        subtype="ANGLE",
+        default=0.0,
+        min=-0.6,
+        max=0.6,
+        precision=2,
+        step=10,
     )
     tilt_y: FloatProperty(
         name="Tilt Y",
@@ -78,14 +92,24 @@ class PetzvalCameraSettings(bpy.types.PropertyGroup):
 
 class PetzvalRenderSettings(bpy.types.PropertyGroup):
     samples: IntProperty(name="Samples", description="Samples per pixel", default=64, min=1, soft_max=4096)
-    viewport_samples: IntProperty(name="Viewport Samples", description="Samples per pixel of the viewport's Rendered shading", default=16, min=1, soft_max=1024)
+    viewport_samples: IntProperty(
+        name="Viewport Samples",
+        description="Samples per pixel of the viewport's Rendered shading",
+        default=16,
+        min=1,
+        soft_max=1024,
+    )
     viewport_divisor: IntProperty(
         name="Viewport Resolution Divisor",
         description="The viewport preview renders at the viewport's size divided by this",
         default=4, min=1, max=16,
     )
     seed: IntProperty(name="Seed", description="Seed of the sample pattern", default=0, min=0)
-    use_animated_seed: BoolProperty(name="Animated Seed", description="Add the frame number to the seed so the noise changes per frame", default=False)
+    use_animated_seed: BoolProperty(
+        name="Animated Seed",
+        description="Add the frame number to the seed so the noise changes per frame",
+        default=False,
+    )
     max_bounces: IntProperty(
         name="Max Bounces",
         description="Bounces after the first hit, as Cycles' Max Bounces (Petzval's depth is this + 1)",
@@ -98,12 +122,14 @@ class PetzvalRenderSettings(bpy.types.PropertyGroup):
     )
     natural_vignetting: BoolProperty(
         name="Natural Vignetting",
-        description="Include the cos^4 falloff for the thin lens and pinhole (Cycles has none; real lenses always have their own)",
+        description="Include the cos^4 falloff for the thin lens and pinhole (Cycles has none; "
+                    "real lenses always have their own)",
         default=False,
     )
     spectral: BoolProperty(
         name="Spectral",
-        description="Trace one wavelength per camera ray through lenses with dispersive glass (lateral and axial colour)",
+        description="Trace one wavelength per camera ray through lenses with dispersive glass "
+                    "(lateral and axial colour)",
         default=False,
     )
 

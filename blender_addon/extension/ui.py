@@ -91,7 +91,10 @@ class PETZVAL_PT_camera_lens(CameraPanel, bpy.types.Panel):
         entry = native.library_lens(p.lens)
         if entry is not None:
             sub = col.column(align=True)
-            sub.label(text=f"f = {entry.get('focal_length_mm', 0):.1f} mm, widest f/{entry.get('f_number', 0):.2f}", icon="INFO")
+            sub.label(
+                text=f"f = {entry.get('focal_length_mm', 0):.1f} mm, widest f/{entry.get('f_number', 0):.2f}",
+                icon="INFO",
+            )
         if p.lens not in (properties.LENS_THIN, properties.LENS_PINHOLE):
             col.label(text="The lens brings its own focal length; F-Stop stops it down", icon="INFO")
             if not cam.dof.use_dof:

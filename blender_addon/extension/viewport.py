@@ -46,7 +46,9 @@ def view_key(kwargs: dict, width: int, height: int) -> tuple:
     items = []
     for k in sorted(kwargs):
         v = kwargs[k]
-        items.append((k, tuple(np.round(np.asarray(v, dtype=np.float64).ravel(), 9)) if isinstance(v, np.ndarray) else v))
+        items.append(
+            (k, tuple(np.round(np.asarray(v, dtype=np.float64).ravel(), 9)) if isinstance(v, np.ndarray) else v)
+        )
     return (width, height, tuple(items))
 
 

@@ -129,7 +129,9 @@ class Bokeh:
     cx: float  # centroid, pixels (x right from the left edge, y down from the top), pixel centres at +0.5
     cy: float
     r_gyration: float  # sqrt(E[r²]) about the centroid, pixels
-    vertex_angle_deg: float  # 6-fold (for N blades: N-fold) orientation: angle of a polygon vertex, CCW from +x, mod 360/N
+    vertex_angle_deg: (
+        float  # 6-fold (for N blades: N-fold) orientation: angle of a polygon vertex, CCW from +x, mod 360/N
+    )
     harmonic: float  # relative strength of the N-fold harmonic (0 for a circle)
 
 

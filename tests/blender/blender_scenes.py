@@ -92,7 +92,7 @@ _BOKEH_DIR = (0.0, 1.0, 0.5)
 BOKEH_CAM = CameraSpec(
     name="BokehCam",
     location=_BOKEH_LOC,
-    target=tuple(a + b for a, b in zip(_BOKEH_LOC, _BOKEH_DIR)),
+    target=tuple(a + b for a, b in zip(_BOKEH_LOC, _BOKEH_DIR, strict=True)),
     lens_mm=50.0,
     sensor_mm=9.0,
     fstop=2.8,
@@ -140,7 +140,7 @@ def _quiet(log: Path):
 
 
 def _import_bpy():
-    import bpy  # noqa: F401  (imported lazily so the module is importable without Blender)
+    import bpy  # imported lazily so the module is importable without Blender
 
     return bpy
 
@@ -457,7 +457,9 @@ class CyclesEquivalentLens:
     filter_width_px: float
 
 
-def cycles_equivalent(spec: CameraSpec, *, fstop_scale: float = 1.0, focus_m: float | None = None) -> CyclesEquivalentLens:
+def cycles_equivalent(
+    spec: CameraSpec, *, fstop_scale: float = 1.0, focus_m: float | None = None
+) -> CyclesEquivalentLens:
     """Cycles' camera model as petzval's thin lens: since petzval follows Blender's conventions
     (the film stays at the focal length F and the lens focuses by its power, f = F·s/(F + s), with
     aperture diameter F/N; blade rotation puts an edge middle at the angle; --filter-width is
@@ -512,8 +514,19 @@ if __name__ == "__main__":
     for spec in built.cameras.values():
         t = render_cycles(CyclesSettings(samples=64, seed=0), spec.name, out / f"cycles_{spec.name}.exr")
         print(f"cycles {spec.name}: {t:.2f} s")
-        print("petzval render", glb, "-o", out / f"petzval_{spec.name}.exr", " ".join(petzval_cycles_args(spec)),
-              "--environment", world_rgb_arg(), "--max-depth", PETZVAL_MAX_DEPTH, "--resolution", "x".join(map(str, RESOLUTION)))
+        print(
+            "petzval render",
+            glb,
+            "-o",
+            out / f"petzval_{spec.name}.exr",
+            " ".join(petzval_cycles_args(spec)),
+            "--environment",
+            world_rgb_arg(),
+            "--max-depth",
+            PETZVAL_MAX_DEPTH,
+            "--resolution",
+            "x".join(map(str, RESOLUTION)),
+        )
 
 
 def linear_exr_output(scene) -> None:

@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 import pytest
+
 from suite_report import SuiteReport
 
 HERE = Path(__file__).resolve().parent
@@ -122,6 +123,7 @@ def _cache_key(bpy) -> str:
 @pytest.fixture(scope="session")
 def blender_run(report) -> BlenderRun:
     import bpy  # the test module is skipped before this when bpy cannot be imported
+
     import blender_scenes as scenes
 
     try:
@@ -135,5 +137,7 @@ def blender_run(report) -> BlenderRun:
     cache_dir.mkdir(parents=True, exist_ok=True)
     built = scenes.build_scene(workdir)
     run = BlenderRun(bpy, scenes, workdir, cache_dir, binary)
-    report.line(f"Blender {built.blender_version} (bpy), Cycles CPU; petzval {binary}; cache {cache_dir.relative_to(REPO)}")
+    report.line(
+        f"Blender {built.blender_version} (bpy), Cycles CPU; petzval {binary}; cache {cache_dir.relative_to(REPO)}"
+    )
     return run

@@ -27,13 +27,12 @@ from __future__ import annotations
 import json
 import math
 import struct
-import time
 
 import numpy as np
 import pytest
 
 try:
-    import bpy  # noqa: F401
+    import bpy
 except Exception as e:  # ImportError, or a broken install
     pytest.skip(
         f"Blender's Python module cannot be imported ({type(e).__name__}: {e}); the Cycles comparison "
@@ -41,8 +40,8 @@ except Exception as e:  # ImportError, or a broken install
         allow_module_level=True,
     )
 
-import blender_compare as B  # noqa: E402
-import blender_scenes as S  # noqa: E402
+import blender_compare as B
+import blender_scenes as S
 
 SPP = 256  # positive comparisons: both renderers, seeds 0 and 1
 SPP_CONTROL = 128  # negative controls and single-seed checks
@@ -163,7 +162,9 @@ def _measure_bokehs(img: np.ndarray, fstop: float) -> dict:
     out = {}
     for e in S.BOKEH_EMITTERS:
         pred = _bokeh_prediction(e, fstop)
-        out[e.name] = B.measure_bokeh(img, (pred["x"], pred["y"]), radius=max(1.6 * pred["coc_px"] / 2 + 6, 12), blades=S.BOKEH_CAM.blades)
+        out[e.name] = B.measure_bokeh(
+            img, (pred["x"], pred["y"]), radius=max(1.6 * pred["coc_px"] / 2 + 6, 12), blades=S.BOKEH_CAM.blades
+        )
     return out
 
 
@@ -218,8 +219,10 @@ def test_gltf_export_carries_the_scene(blender_run, report):
         assert p["aspectRatio"] == pytest.approx(w / h)
         # no depth of field in glTF: nothing but the projection is there
         assert set(cams[spec.name]) <= {"name", "type", "perspective"}
-    lights = {l["name"]: l for l in g["extensions"]["KHR_lights_punctual"]["lights"]}
-    assert lights["Key"]["type"] == "point" and lights["Key"]["intensity"] == pytest.approx(60 / (4 * math.pi) * 683, rel=1e-5)
+    lights = {lt["name"]: lt for lt in g["extensions"]["KHR_lights_punctual"]["lights"]}
+    assert lights["Key"]["type"] == "point" and lights["Key"]["intensity"] == pytest.approx(
+        60 / (4 * math.pi) * 683, rel=1e-5
+    )
     assert lights["Spot"]["intensity"] == pytest.approx(100 / (4 * math.pi) * 683, rel=1e-5)
     assert lights["Spot"]["spot"]["outerConeAngle"] == pytest.approx(math.radians(25), rel=1e-5)
     assert lights["Sun"]["type"] == "directional" and lights["Sun"]["intensity"] == pytest.approx(0.8 * 683, rel=1e-5)
@@ -246,13 +249,24 @@ def test_image_matches_cycles(blender_run, main_cycles, main_petzval, report):
     noise_c = np.abs(c0.mean((0, 1)) - c1.mean((0, 1))) / 2 / c0.mean((0, 1))
     noise_p = np.abs(p0.mean((0, 1)) - p1.mean((0, 1))) / 2 / p0.mean((0, 1))
     rel = np.abs(cmp.diff) / np.abs(cmp.mean_c)
-    report.line(f"MainCam {S.RESOLUTION[0]}x{S.RESOLUTION[1]}, {SPP} spp x seeds {SEEDS}, petzval " + " ".join(S.petzval_cycles_args(S.MAIN_CAM)))
     report.line(
-        f"  noise floor: median relative std of an 8x8 block mean (two-seed average): Cycles {v['rel_noise_c']*100:.2f} %, "
-        f"petzval {v['rel_noise_p']*100:.2f} %; image mean seed noise ≤ {max(noise_c.max(), noise_p.max())*100:.3f} %"
+        f"MainCam {S.RESOLUTION[0]}x{S.RESOLUTION[1]}, {SPP} spp x seeds {SEEDS}, petzval "
+        + " ".join(S.petzval_cycles_args(S.MAIN_CAM))
     )
-    report.line(f"  blocks: {_fmt_verdict(v)}; |ΔL|/L median {np.median(rel)*100:.2f} %, 95th pct {np.percentile(rel, 95)*100:.2f} %")
-    report.line(f"  image mean petzval/Cycles R,G,B: {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f} (tolerance ±{MEAN_TOL*100:.0f} %)")
+    report.line(
+        "  noise floor: median relative std of an 8x8 block mean (two-seed average): Cycles "
+        f"{v['rel_noise_c'] * 100:.2f} %, "
+        f"petzval {v['rel_noise_p'] * 100:.2f} %; image mean seed noise ≤ "
+        f"{max(noise_c.max(), noise_p.max()) * 100:.3f} %"
+    )
+    report.line(
+        f"  blocks: {_fmt_verdict(v)}; |ΔL|/L median {np.median(rel) * 100:.2f} %, 95th pct "
+        f"{np.percentile(rel, 95) * 100:.2f} %"
+    )
+    report.line(
+        f"  image mean petzval/Cycles R,G,B: {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f} (tolerance "
+        f"±{MEAN_TOL * 100:.0f} %)"
+    )
     assert np.all(np.abs(ratio - 1) <= MEAN_TOL), f"image mean ratio {ratio}"
     assert _passes(v), f"blocks differ beyond noise: {_fmt_verdict(v)}"
 
@@ -268,14 +282,17 @@ def test_bokeh_matches_cycles(bokeh_cycles, bokeh_petzval, report):
     pz_avg = _measure_bokehs((bokeh_petzval[0] + bokeh_petzval[1]) / 2, n_cyc)
     cyc = [_measure_bokehs(im, n_cyc) for im in bokeh_cycles]
     pz = [_measure_bokehs(im, n_cyc) for im in bokeh_petzval]
-    report.line(f"BokehCam (50 mm on a 9 mm sensor, f/{n_cyc:g}, focus {S.BOKEH_CAM.focus_m} m, 6 blades at {S.BOKEH_CAM.rotation_deg}°), {SPP} spp x seeds {SEEDS}")
+    report.line(
+        f"BokehCam (50 mm on a 9 mm sensor, f/{n_cyc:g}, focus {S.BOKEH_CAM.focus_m} m, 6 blades at "
+        f"{S.BOKEH_CAM.rotation_deg}°), {SPP} spp x seeds {SEEDS}"
+    )
     failures = []
     for e in S.BOKEH_EMITTERS:
         pred = _bokeh_prediction(e, n_cyc)
         c, p = cyc_avg[e.name], pz_avg[e.name]
 
-        def spread(lst, attr, rel=True):
-            a, b = (getattr(m[e.name], attr) for m in lst)
+        def spread(lst, attr, rel=True, name=e.name):
+            a, b = (getattr(m[name], attr) for m in lst)
             d = B.angle_diff_mod(a, b, 60) if attr == "vertex_angle_deg" else a - b
             return abs(d) / 2 / (abs(a + b) / 2 if rel else 1.0)
 
@@ -284,14 +301,16 @@ def test_bokeh_matches_cycles(bokeh_cycles, bokeh_petzval, report):
         d_ang = B.angle_diff_mod(p.vertex_angle_deg, c.vertex_angle_deg, 60)
         dx, dy = p.cx - c.cx, p.cy - c.cy
         report.line(
-            f"  {e.name} ({e.distance_m} m): CoC Cycles {_coc_from_rg(rg_c, pred):.2f} px, petzval {_coc_from_rg(rg_p, pred):.2f} px, "
-            f"thin-lens prediction {pred['coc_px']:.2f} px; r_g {rg_c:.3f} / {rg_p:.3f} px (ratio {rg_p/rg_c:.4f}, "
-            f"seed noise ±{spread(cyc, 'r_gyration')*100:.2f} % / ±{spread(pz, 'r_gyration')*100:.2f} %, "
-            f"predicted {pred['rg']:.3f}); flux ratio {fl_p/fl_c:.4f} (noise ±{spread(cyc, 'flux')*100:.2f} % / "
-            f"±{spread(pz, 'flux')*100:.2f} %); centroid Δ ({dx:+.3f}, {dy:+.3f}) px (noise ±{math.hypot(spread(cyc, 'cx', False), spread(cyc, 'cy', False)):.3f} / "
+            f"  {e.name} ({e.distance_m} m): CoC Cycles {_coc_from_rg(rg_c, pred):.2f} px, petzval "
+            f"{_coc_from_rg(rg_p, pred):.2f} px, "
+            f"thin-lens prediction {pred['coc_px']:.2f} px; r_g {rg_c:.3f} / {rg_p:.3f} px (ratio {rg_p / rg_c:.4f}, "
+            f"seed noise ±{spread(cyc, 'r_gyration') * 100:.2f} % / ±{spread(pz, 'r_gyration') * 100:.2f} %, "
+            f"predicted {pred['rg']:.3f}); flux ratio {fl_p / fl_c:.4f} (noise ±{spread(cyc, 'flux') * 100:.2f} % / "
+            f"±{spread(pz, 'flux') * 100:.2f} %); centroid Δ ({dx:+.3f}, {dy:+.3f}) px (noise "
+            f"±{math.hypot(spread(cyc, 'cx', False), spread(cyc, 'cy', False)):.3f} / "
             f"±{math.hypot(spread(pz, 'cx', False), spread(pz, 'cy', False)):.3f} px); "
-            f"vertex angle Cycles {c.vertex_angle_deg:.1f}°, petzval {p.vertex_angle_deg:.1f}° (Δ {d_ang:+.1f}°, seed noise "
-            f"±{spread(cyc, 'vertex_angle_deg', False):.1f}° / ±{spread(pz, 'vertex_angle_deg', False):.1f}°)"
+            f"vertex angle Cycles {c.vertex_angle_deg:.1f}°, petzval {p.vertex_angle_deg:.1f}° (Δ {d_ang:+.1f}°, seed "
+            f"noise ±{spread(cyc, 'vertex_angle_deg', False):.1f}° / ±{spread(pz, 'vertex_angle_deg', False):.1f}°)"
         )
         if abs(rg_p / rg_c - 1) > BOKEH_RG_TOL:
             failures.append(f"{e.name}: r_g ratio {rg_p/rg_c:.4f}")
@@ -303,7 +322,9 @@ def test_bokeh_matches_cycles(bokeh_cycles, bokeh_petzval, report):
             failures.append(f"{e.name}: polygon orientation differs by {d_ang:.1f}°")
         # the measurement itself: Cycles against the thin-lens prediction
         if abs(rg_c / pred["rg"] - 1) > 0.03:
-            failures.append(f"{e.name}: Cycles r_g {rg_c:.3f} px is not the predicted {pred['rg']:.3f} px (measurement broken?)")
+            failures.append(
+                f"{e.name}: Cycles r_g {rg_c:.3f} px is not the predicted {pred['rg']:.3f} px (measurement broken?)"
+            )
     assert not failures, "; ".join(failures)
 
 
@@ -313,23 +334,38 @@ def test_negative_controls_fail_the_metric(blender_run, main_cycles, main_petzva
     very criteria the real comparison passes, although their image means still agree (so only
     the depth of field is wrong); the bokeh at f/1.4 must be ~2x as large."""
     lines = []
-    for label, kw in (("f-stop halved (f/1.4)", {"fstop_scale": 0.5}), ("focus 1.0 m instead of 1.5 m", {"focus_m": 1.0})):
+    for label, kw in (
+        ("f-stop halved (f/1.4)", {"fstop_scale": 0.5}),
+        ("focus 1.0 m instead of 1.5 m", {"focus_m": 1.0}),
+    ):
         args = S.petzval_cycles_args(S.MAIN_CAM, **kw)
-        img = B.read_rgb(blender_run.petzval(args, 7, SPP_CONTROL, "control_" + ("fstop" if "fstop_scale" in kw else "focus")))
+        img = B.read_rgb(
+            blender_run.petzval(args, 7, SPP_CONTROL, "control_" + ("fstop" if "fstop_scale" in kw else "focus"))
+        )
         v = _block_verdict(_single_seed_comparison(main_cycles, main_petzval, img, SPP_CONTROL))
         ratio = B.mean_ratio(img, (main_cycles[0] + main_cycles[1]) / 2)
         lines.append((label, v, ratio))
-        report.line(f"  negative control, MainCam {label} ({SPP_CONTROL} spp): {_fmt_verdict(v)}; image mean ratio {ratio.mean():.4f}")
+        report.line(
+            f"  negative control, MainCam {label} ({SPP_CONTROL} spp): {_fmt_verdict(v)}; image mean ratio "
+            f"{ratio.mean():.4f}"
+        )
         # a valid control differs in depth of field only: its overall brightness still matches
-        assert np.all(np.abs(ratio - 1) <= MEAN_TOL), f"control {label}: image mean ratio {ratio} (not a depth-of-field-only change)"
+        assert np.all(np.abs(ratio - 1) <= MEAN_TOL), (
+            f"control {label}: image mean ratio {ratio} (not a depth-of-field-only change)"
+        )
         assert not _passes(v), f"the metric did not notice: {label}: {_fmt_verdict(v)}"
     n_cyc = float(bpy.data.objects[S.BOKEH_CAM.name].data.dof.aperture_fstop)
-    img = B.read_rgb(blender_run.petzval(S.petzval_cycles_args(S.BOKEH_CAM, fstop_scale=0.5), 7, SPP_CONTROL, "control_bokeh_fstop"))
+    img = B.read_rgb(
+        blender_run.petzval(S.petzval_cycles_args(S.BOKEH_CAM, fstop_scale=0.5), 7, SPP_CONTROL, "control_bokeh_fstop")
+    )
     wide = _measure_bokehs(img, n_cyc / 2)
     for e in S.BOKEH_EMITTERS:
         rg_c = np.mean([_measure_bokehs(im, n_cyc)[e.name].r_gyration for im in bokeh_cycles])
         r = wide[e.name].r_gyration / rg_c
-        report.line(f"  negative control, BokehCam f-stop halved: {e.name} r_g ratio {r:.3f} (tolerance ±{BOKEH_RG_TOL*100:.0f} %)")
+        report.line(
+            f"  negative control, BokehCam f-stop halved: {e.name} r_g ratio {r:.3f} (tolerance "
+            f"±{BOKEH_RG_TOL * 100:.0f} %)"
+        )
         assert abs(r - 1) > BOKEH_RG_TOL
 
 
@@ -373,7 +409,10 @@ def test_direct_mapping_pixel_filter(blender_run, main_cycles, main_petzval, rep
     args[i + 1] = S._num(bpy.context.scene.cycles.filter_width)
     img = B.read_rgb(blender_run.petzval(args, 7, SPP_CONTROL, "filter_direct"))
     v = _block_verdict(_single_seed_comparison(main_cycles, main_petzval, img, SPP_CONTROL))
-    report.line(f"  direct mapping: --filter-width {args[i + 1]} (Cycles' filter_width as it is), MainCam {SPP_CONTROL} spp: {_fmt_verdict(v)}")
+    report.line(
+        f"  direct mapping: --filter-width {args[i + 1]} (Cycles' filter_width as it is), MainCam {SPP_CONTROL} spp: "
+        f"{_fmt_verdict(v)}"
+    )
     assert _passes(v), _fmt_verdict(v)
 
 
@@ -389,10 +428,11 @@ def test_speed_against_cycles(blender_run, report):
     out = blender_run.petzval(S.petzval_cycles_args(S.MAIN_CAM), 3, SPP, "speed")
     t_cyc, cpu_cyc = blender_run.timings[c_name], blender_run.cpu_times[c_name]
     t_pz, cpu_pz = blender_run.timings[out.stem], blender_run.cpu_times[out.stem]
-    inner = [l for l in blender_run.stderr[out.stem].splitlines() if l.startswith("rendered ")]
+    inner = [ln for ln in blender_run.stderr[out.stem].splitlines() if ln.startswith("rendered ")]
     w, h = S.RESOLUTION
     report.line(
         f"speed, MainCam {w}x{h} at {SPP} spp, 2 threads each: wall Cycles {t_cyc:.1f} s, petzval {t_pz:.1f} s "
-        f"(ratio {t_pz / t_cyc:.2f}); CPU Cycles {cpu_cyc:.1f} s, petzval {cpu_pz:.1f} s (ratio {cpu_pz / cpu_cyc:.2f}); "
+        f"(ratio {t_pz / t_cyc:.2f}); CPU Cycles {cpu_cyc:.1f} s, petzval {cpu_pz:.1f} s (ratio "
+        f"{cpu_pz / cpu_cyc:.2f}); "
         f"target ≤ 0.5. petzval: {inner[-1] if inner else '?'}"
     )

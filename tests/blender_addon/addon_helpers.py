@@ -13,7 +13,7 @@ from pathlib import Path
 
 import blender_compare as B  # noqa: F401  (re-exported for the tests)
 import blender_scenes as S
-from blender_scenes import _quiet as quiet  # noqa: F401
+from blender_scenes import _quiet as quiet
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[1]
@@ -221,7 +221,7 @@ def build_tilt_scene(resolution=(360, 240)):
     scene = b.context.scene
     set_world_colour((0.0, 0.0, 0.0))
     extent = 8.0
-    tiles = int(round(extent / TILT_TILE_M))
+    tiles = round(extent / TILT_TILE_M)
     mat = _emissive_checker_material("Ground", tiles=tiles, px_per_tile=4)
     b.ops.mesh.primitive_plane_add(size=extent, location=(0.0, extent / 2 - 0.5, 0.0))
     ground = b.context.active_object

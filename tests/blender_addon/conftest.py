@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 
 import pytest
+
 from suite_report import SuiteReport
 
 HERE = Path(__file__).resolve().parent
@@ -72,7 +73,9 @@ def _use_the_extensions_wheel(user: Path):
     wheel directory is moved to the front and the add-on is re-enabled with a fresh import."""
     import addon_utils
 
-    site = user / "extensions" / ".local" / "lib" / f"python{sys.version_info[0]}.{sys.version_info[1]}" / "site-packages"
+    site = (
+        user / "extensions" / ".local" / "lib" / f"python{sys.version_info[0]}.{sys.version_info[1]}" / "site-packages"
+    )
     assert (site / "petzval").is_dir(), f"the extension's wheel was not installed into {site}"
     import petzval
 
@@ -83,7 +86,12 @@ def _use_the_extensions_wheel(user: Path):
         sys.path.remove(str(site))
     sys.path.insert(0, str(site))
     for name in list(sys.modules):
-        if name == "petzval" or name.startswith("petzval.") or name == ADDON_MODULE or name.startswith(ADDON_MODULE + "."):
+        if (
+            name == "petzval"
+            or name.startswith("petzval.")
+            or name == ADDON_MODULE
+            or name.startswith(ADDON_MODULE + ".")
+        ):
             del sys.modules[name]
     if addon_utils.enable(ADDON_MODULE, default_set=True) is None:
         pytest.fail(f"re-enabling {ADDON_MODULE} with the extension's own wheel failed", pytrace=False)
@@ -108,7 +116,9 @@ def addon(addon_zip, report):
     try:
         bpy.ops.wm.read_factory_settings(use_empty=True)
         with H.quiet(OUT / "blender.log"):
-            result = bpy.ops.extensions.package_install_files(filepath=str(addon_zip), repo="user_default", enable_on_install=True)
+            result = bpy.ops.extensions.package_install_files(
+                filepath=str(addon_zip), repo="user_default", enable_on_install=True
+            )
         assert result == {"FINISHED"}, result
         enabled = [a.module for a in bpy.context.preferences.addons]
         assert ADDON_MODULE in enabled, f"{ADDON_MODULE} not enabled after installing {addon_zip.name}: {enabled}"

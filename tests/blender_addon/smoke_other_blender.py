@@ -22,7 +22,9 @@ import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
 print("Blender", bpy.app.version_string)
-assert bpy.ops.extensions.package_install_files(filepath=ZIP, repo="user_default", enable_on_install=True) == {"FINISHED"}
+assert bpy.ops.extensions.package_install_files(filepath=ZIP, repo="user_default", enable_on_install=True) == {
+    "FINISHED"
+}
 bpy.ops.wm.read_factory_settings(use_empty=True)
 bpy.ops.preferences.addon_enable(module="bl_ext.user_default.petzval")
 scene = bpy.context.scene

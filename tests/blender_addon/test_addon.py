@@ -26,14 +26,17 @@ import numpy as np
 import pytest
 
 try:
-    import bpy  # noqa: F401
+    import bpy
 except Exception as e:
-    pytest.skip(f"Blender's Python module cannot be imported ({type(e).__name__}: {e}); the add-on suite needs bpy==5.0.1 "
-                "on Python 3.11 (tests/run installs it)", allow_module_level=True)
+    pytest.skip(
+        f"Blender's Python module cannot be imported ({type(e).__name__}: {e}); the add-on suite needs bpy==5.0.1 "
+        "on Python 3.11 (tests/run installs it)",
+        allow_module_level=True,
+    )
 
-import addon_helpers as H  # noqa: E402
-import blender_compare as B  # noqa: E402
-import blender_scenes as S  # noqa: E402
+import addon_helpers as H
+import blender_compare as B
+import blender_scenes as S
 
 OUT = H.OUT
 SEEDS = (0, 1)
@@ -48,13 +51,22 @@ CANCEL_LATENCY_S = 0.5
 
 def _verdict(cmp: B.BlockComparison) -> dict:
     z = cmp.z
-    return {"mean_z2": float(np.mean(z**2)), "max_abs_z": float(np.max(np.abs(z))), "n_over_4": int(np.sum(np.abs(z) > 4)),
-            "n_blocks": int(z.size), "rel_noise_a": cmp.rel_noise_c, "rel_noise_b": cmp.rel_noise_p}
+    return {
+        "mean_z2": float(np.mean(z**2)),
+        "max_abs_z": float(np.max(np.abs(z))),
+        "n_over_4": int(np.sum(np.abs(z) > 4)),
+        "n_blocks": int(z.size),
+        "rel_noise_a": cmp.rel_noise_c,
+        "rel_noise_b": cmp.rel_noise_p,
+    }
 
 
 def _fmt(v: dict) -> str:
-    return (f"mean z² {v['mean_z2']:.3f} (≤ {MAX_MEAN_Z2}), max |z| {v['max_abs_z']:.2f} (≤ {MAX_ABS_Z}), "
-            f"|z|>4: {v['n_over_4']}/{v['n_blocks']} blocks; block noise {v['rel_noise_a']*100:.2f} % / {v['rel_noise_b']*100:.2f} %")
+    return (
+        f"mean z² {v['mean_z2']:.3f} (≤ {MAX_MEAN_Z2}), max |z| {v['max_abs_z']:.2f} (≤ {MAX_ABS_Z}), "
+        f"|z|>4: {v['n_over_4']}/{v['n_blocks']} blocks; block noise {v['rel_noise_a'] * 100:.2f} % / "
+        f"{v['rel_noise_b'] * 100:.2f} %"
+    )
 
 
 def _passes(v: dict) -> bool:
@@ -121,9 +133,20 @@ def test_registration(addon, report):
 
     for panel in ("PETZVAL_PT_camera_lens", "PETZVAL_PT_camera_tilt", "PETZVAL_PT_sampling", "PETZVAL_PT_passes"):
         assert hasattr(bpy.types, panel), panel
-    builtin = ("DATA_PT_lens", "DATA_PT_camera", "DATA_PT_camera_dof", "DATA_PT_camera_dof_aperture", "DATA_PT_EEVEE_light",
-               "DATA_PT_spot", "RENDER_PT_format", "RENDER_PT_output", "RENDER_PT_frame_range", "RENDER_PT_color_management",
-               "EEVEE_MATERIAL_PT_surface", "EEVEE_WORLD_PT_surface")
+    builtin = (
+        "DATA_PT_lens",
+        "DATA_PT_camera",
+        "DATA_PT_camera_dof",
+        "DATA_PT_camera_dof_aperture",
+        "DATA_PT_EEVEE_light",
+        "DATA_PT_spot",
+        "RENDER_PT_format",
+        "RENDER_PT_output",
+        "RENDER_PT_frame_range",
+        "RENDER_PT_color_management",
+        "EEVEE_MATERIAL_PT_surface",
+        "EEVEE_WORLD_PT_surface",
+    )
     missing = [p for p in builtin if "PETZVAL" not in getattr(bpy.types, p).COMPAT_ENGINES]
     assert not missing, f"built-in panels not shown for PETZVAL: {missing}"
 
@@ -141,8 +164,11 @@ def test_registration(addon, report):
     finally:
         H.ensure_enabled()
     assert hasattr(bpy.types, "PETZVAL_PT_camera_lens") and "PETZVAL" in bpy.types.DATA_PT_lens.COMPAT_ENGINES
-    report.line(f"registration: engine PETZVAL, {len(library)} library lenses in the lens menu, "
-                f"{sum('PETZVAL' in getattr(getattr(bpy.types, n), 'COMPAT_ENGINES', ()) for n in dir(bpy.types))} panels list PETZVAL")
+    report.line(
+        f"registration: engine PETZVAL, {len(library)} library lenses in the lens menu, "
+        f"{sum('PETZVAL' in getattr(getattr(bpy.types, n), 'COMPAT_ENGINES', ()) for n in dir(bpy.types))} "
+        "panels list PETZVAL"
+    )
 
 
 # ------------------------------------------------------------------------------------------
@@ -167,11 +193,16 @@ def test_thin_lens_matches_cycles(main_scene, thin_renders, report):
     v = _verdict(cmp)
     ratio = B.mean_ratio((pz[0] + pz[1]) / 2, (cyc[0] + cyc[1]) / 2)
     w, h = S.RESOLUTION
-    report.line(f"thin lens vs Cycles, MainCam {w}x{h}: add-on {SPP_THIN} spp x seeds {SEEDS} "
-                f"({entries[0]['wall']:.1f} s per F12, render {entries[0]['seconds_render']:.1f} s, scene {entries[0]['seconds_scene']*1e3:.0f} ms, "
-                f"{entries[0]['triangles']} triangles), Cycles {SPP_CYCLES_REF} spp (cached)")
+    report.line(
+        f"thin lens vs Cycles, MainCam {w}x{h}: add-on {SPP_THIN} spp x seeds {SEEDS} "
+        f"({entries[0]['wall']:.1f} s per F12, render {entries[0]['seconds_render']:.1f} s, scene "
+        f"{entries[0]['seconds_scene'] * 1e3:.0f} ms, "
+        f"{entries[0]['triangles']} triangles), Cycles {SPP_CYCLES_REF} spp (cached)"
+    )
     report.line(f"  blocks: {_fmt(v)}")
-    report.line(f"  image mean add-on/Cycles R,G,B: {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f} (±{MEAN_TOL*100:.0f} %)")
+    report.line(
+        f"  image mean add-on/Cycles R,G,B: {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f} (±{MEAN_TOL * 100:.0f} %)"
+    )
     assert np.all(np.abs(ratio - 1) <= MEAN_TOL), f"image mean ratio {ratio}"
     assert _passes(v), f"blocks differ beyond noise: {_fmt(v)}"
 
@@ -197,8 +228,21 @@ def test_real_lens_round_trip_matches_gltf_path(main_scene, report):
                 "--aperture", f"blades:{cam.dof.aperture_blades}:{S._num(math.degrees(cam.dof.aperture_rotation))}",
                 "--sensor-width", S._num(cam.sensor_width), "--natural-vignetting", "off", "--filter-width", "1.5"]
         t0 = time.perf_counter()
-        cli_imgs = [B.read_rgb(H.petzval_cli_render(glb, args, main_scene / f"cli_dg_seed{s}.exr", SPP_ROUND_TRIP, s,
-                                                    S.RESOLUTION, S.world_rgb_arg(), S.PETZVAL_MAX_DEPTH)) for s in SEEDS]
+        cli_imgs = [
+            B.read_rgb(
+                H.petzval_cli_render(
+                    glb,
+                    args,
+                    main_scene / f"cli_dg_seed{s}.exr",
+                    SPP_ROUND_TRIP,
+                    s,
+                    S.RESOLUTION,
+                    S.world_rgb_arg(),
+                    S.PETZVAL_MAX_DEPTH,
+                )
+            )
+            for s in SEEDS
+        ]
         t_cli = (time.perf_counter() - t0) / len(SEEDS)
     finally:
         cam.petzval.lens = "THIN"
@@ -206,11 +250,18 @@ def test_real_lens_round_trip_matches_gltf_path(main_scene, report):
     cmp = B.compare_blocks(cli_imgs[0], cli_imgs[1], addon_imgs[0], addon_imgs[1])
     v = _verdict(cmp)
     ratio = B.mean_ratio((addon_imgs[0] + addon_imgs[1]) / 2, (cli_imgs[0] + cli_imgs[1]) / 2)
-    report.line(f"round trip, double-gauss-50mm exact, MainCam {SPP_ROUND_TRIP} spp x seeds {SEEDS}: add-on {secs:.1f} s per F12, "
-                f"CLI on the exported GLB {t_cli:.1f} s per render")
-    rel = max(float(np.max(np.abs(a - c))) for a, c in zip(addon_imgs, cli_imgs)) / float(np.mean(cli_imgs[0]))
-    report.line(f"  blocks add-on vs glTF path: {_fmt(v)}; image mean ratio R,G,B {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f}; "
-                f"largest pixel difference at equal seeds {rel*100:.3g} % of the image mean")
+    report.line(
+        f"round trip, double-gauss-50mm exact, MainCam {SPP_ROUND_TRIP} spp x seeds {SEEDS}: add-on {secs:.1f} s "
+        f"per F12, CLI on the exported GLB {t_cli:.1f} s per render"
+    )
+    rel = max(float(np.max(np.abs(a - c))) for a, c in zip(addon_imgs, cli_imgs, strict=True)) / float(
+        np.mean(cli_imgs[0])
+    )
+    report.line(
+        f"  blocks add-on vs glTF path: {_fmt(v)}; image mean ratio R,G,B {ratio[0]:.4f} {ratio[1]:.4f} "
+        f"{ratio[2]:.4f}; "
+        f"largest pixel difference at equal seeds {rel * 100:.3g} % of the image mean"
+    )
     assert np.all(np.abs(ratio - 1) <= MEAN_TOL), f"image mean ratio {ratio}"
     assert _passes(v), f"the add-on and the glTF path differ beyond noise: {_fmt(v)}"
 
@@ -235,7 +286,11 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
     v = _verdict(cmp)
     ratio = B.mean_ratio((pz[0] + pz[1]) / 2, (cyc[0] + cyc[1]) / 2)
     w, h = H.LIGHTS_RESOLUTION
-    what = "area lights (rectangle, disc)" if variant == "area" else f"environment texture turned {H.LIGHTS_ENV_ROTATION_DEG:g}° by a Mapping node"
+    what = (
+        "area lights (rectangle, disc)"
+        if variant == "area"
+        else f"environment texture turned {H.LIGHTS_ENV_ROTATION_DEG:g}° by a Mapping node"
+    )
     report.line(f"{what} vs Cycles, {w}x{h} {SPP_LIGHTS} spp x seeds {SEEDS} ({secs:.1f} s per F12)")
     report.line(f"  blocks: {_fmt(v)}; image mean add-on/Cycles R,G,B {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f}")
     assert not entry["notes"]["unsupported"], entry["notes"]["unsupported"]
@@ -243,9 +298,14 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
         patch = []
         for img in ((cyc[0] + cyc[1]) / 2, (pz[0] + pz[1]) / 2):
             ys, xs = np.nonzero(B.luminance(img) > 5.0)
-            patch.append((len(ys), float(ys.mean()) if len(ys) else float("nan"), float(xs.mean()) if len(xs) else float("nan")))
-        report.line(f"  the sky's bright patch seen directly: Cycles {patch[0][0]} px centred at ({patch[0][2]:.2f}, {patch[0][1]:.2f}), "
-                    f"add-on {patch[1][0]} px at ({patch[1][2]:.2f}, {patch[1][1]:.2f})")
+            patch.append(
+                (len(ys), float(ys.mean()) if len(ys) else float("nan"), float(xs.mean()) if len(xs) else float("nan"))
+            )
+        report.line(
+            f"  the sky's bright patch seen directly: Cycles {patch[0][0]} px centred at ({patch[0][2]:.2f}, "
+            f"{patch[0][1]:.2f}), "
+            f"add-on {patch[1][0]} px at ({patch[1][2]:.2f}, {patch[1][1]:.2f})"
+        )
         assert patch[0][0] > 50 and patch[1][0] > 0.8 * patch[0][0], patch
         assert math.hypot(patch[0][1] - patch[1][1], patch[0][2] - patch[1][2]) < 0.5, patch
     assert np.all(np.abs(ratio - 1) <= MEAN_TOL), f"image mean ratio {ratio}"
@@ -343,7 +403,9 @@ def test_tilt_shift_hinge_rule(addon, report):
 
     tilts = {"untilted": 0.0, "tilted": tilt, "half": tilt / 2, "reverse": -tilt}
     refs = {k: _row_gradient_energy(shot(k, t, 22.0, "THICK")) for k, t in tilts.items()}
-    thick = {k: np.sqrt(np.maximum(_row_gradient_energy(shot(k, t, 2.1, "THICK")), 0.0) / refs[k]) for k, t in tilts.items()}
+    thick = {
+        k: np.sqrt(np.maximum(_row_gradient_energy(shot(k, t, 2.1, "THICK")), 0.0) / refs[k]) for k, t in tilts.items()
+    }
     exact = {}
     for k in ("untilted", "tilted"):
         pair = [shot(k, tilts[k], 2.1, "AUTO", seed) for seed in (0, 1)]
@@ -360,15 +422,23 @@ def test_tilt_shift_hinge_rule(addon, report):
     band_pred = float(np.mean(coc[rows] < 1.0))
     blurred = coc[rows] > 3.0
     ends = np.r_[np.arange(6, 6 + Hh // 8), np.arange(Hh - 6 - Hh // 8, Hh - 6)]
-    report.line(f"tilt-shift, double-gauss-50mm (EFL {efl:.2f} mm) f/2.1 at {focus:.2f} m, camera {H.TILT_HEIGHT_M} m up pitched "
-                f"{H.TILT_PITCH_DEG:.0f}° down, {W}x{Hh} {spp} spp: hinge-rule tilt {math.degrees(tilt):.3f}° "
-                f"(models {sorted(models)}, {np.mean(times):.1f} s per F12 on average)")
-    report.line(f"  thick model, rows sharp (RMS gradient ≥ {SHARP} of f/22): untilted {sharp['untilted']*100:.0f} % (CoC < 1 px predicted "
-                f"on {band_pred*100:.0f} %; sharpest band centred on row {peak_row:.0f}, predicted {pred_row}; median {np.median(thick['untilted'][rows][blurred]):.2f} "
-                f"where CoC > 3 px), hinge-rule tilt {sharp['tilted']*100:.0f} % (min {thick['tilted'][rows].min():.2f}), "
-                f"half tilt {sharp['half']*100:.0f} %, reverse tilt {sharp['reverse']*100:.0f} %")
-    report.line(f"  exact trace, frame ends (top and bottom {Hh // 8} rows): untilted {exact['untilted'][ends].mean():.2f}, "
-                f"tilted {exact['tilted'][ends].mean():.2f} (thick model: {thick['untilted'][ends].mean():.2f}, {thick['tilted'][ends].mean():.2f})")
+    report.line(
+        f"tilt-shift, double-gauss-50mm (EFL {efl:.2f} mm) f/2.1 at {focus:.2f} m, camera {H.TILT_HEIGHT_M} m up "
+        f"pitched {H.TILT_PITCH_DEG:.0f}° down, {W}x{Hh} {spp} spp: hinge-rule tilt {math.degrees(tilt):.3f}° "
+        f"(models {sorted(models)}, {np.mean(times):.1f} s per F12 on average)"
+    )
+    report.line(
+        f"  thick model, rows sharp (RMS gradient ≥ {SHARP} of f/22): untilted {sharp['untilted'] * 100:.0f} % "
+        f"(CoC < 1 px predicted on {band_pred * 100:.0f} %; sharpest band centred on row {peak_row:.0f}, "
+        f"predicted {pred_row}; median {np.median(thick['untilted'][rows][blurred]):.2f} "
+        f"where CoC > 3 px), hinge-rule tilt {sharp['tilted'] * 100:.0f} % (min {thick['tilted'][rows].min():.2f}), "
+        f"half tilt {sharp['half'] * 100:.0f} %, reverse tilt {sharp['reverse'] * 100:.0f} %"
+    )
+    report.line(
+        f"  exact trace, frame ends (top and bottom {Hh // 8} rows): untilted {exact['untilted'][ends].mean():.2f}, "
+        f"tilted {exact['tilted'][ends].mean():.2f} (thick model: {thick['untilted'][ends].mean():.2f}, "
+        f"{thick['tilted'][ends].mean():.2f})"
+    )
     assert abs(peak_row - pred_row) <= 0.05 * Hh, f"untilted sharpest row {peak_row}, predicted {pred_row}"
     assert sharp["untilted"] < 0.6, f"untilted lens sharp on {sharp['untilted']*100:.0f} % of rows"
     assert np.median(thick["untilted"][rows][blurred]) < 0.8
@@ -465,9 +535,13 @@ def test_cancel_is_prompt(main_scene, report):
     assert state["t_true"] is not None, "the engine never polled for cancel after 1.5 s"
     latency = entry["returned"] - state["t_true"]
     latency_op = t_op - state["t_true"]
-    report.line(f"cancel: stop requested {state['t_true'] - t_start:.2f} s into F12; engine.render returned {latency*1e3:.0f} ms later, "
-                f"bpy.ops.render.render {latency_op*1e3:.0f} ms later; {entry.get('spp')} spp kept (complete={entry.get('complete')}), "
-                f"{state['calls']} polls")
+    report.line(
+        f"cancel: stop requested {state['t_true'] - t_start:.2f} s into F12; engine.render returned "
+        f"{latency * 1e3:.0f} ms later, "
+        f"bpy.ops.render.render {latency_op * 1e3:.0f} ms later; {entry.get('spp')} spp kept "
+        f"(complete={entry.get('complete')}), "
+        f"{state['calls']} polls"
+    )
     assert latency < CANCEL_LATENCY_S, f"render() returned {latency:.3f} s after the cancel"
     assert entry.get("complete") is False or entry.get("cancelled")
 
@@ -536,7 +610,7 @@ def test_border_crop_and_depth_pass(addon, report):
     _depth_scene()
     scene = bpy.context.scene
     H.configure_petzval(4, seed=0, camera="DepthCam")
-    full, _ = H.render_still(OUT / "border" / "full.exr")
+    _full, _ = H.render_still(OUT / "border" / "full.exr")
     img_full = B.read_exr(OUT / "border" / "full.exr")
     r = scene.render
     r.use_border = True
@@ -546,7 +620,7 @@ def test_border_crop_and_depth_pass(addon, report):
         _, e_crop = H.render_still(OUT / "border" / "crop.exr")
         crop = B.read_exr(OUT / "border" / "crop.exr")
         r.use_crop_to_border = False
-        _, e_win = H.render_still(OUT / "border" / "window.exr")
+        _, _e_win = H.render_still(OUT / "border" / "window.exr")
         win = B.read_exr(OUT / "border" / "window.exr")
     finally:
         r.use_border = False
@@ -583,13 +657,19 @@ def test_border_crop_and_depth_pass(addon, report):
     centre = float(z[30, 40])
     corner = float(z[0, 0])
     side = float(z[30, 10])  # the wall 34° off axis: Blender's Z pass (Cycles: 3.0) is the distance along the view axis
-    report.line(f"border: cropped 40x30 window = the same window of the uncropped border render; Depth pass: centre {centre:.4f} m, "
-                f"34° off axis {side:.4f} m (wall at 3 m along the axis; Cycles writes 3.0 at both), corner {corner:.4g} (background)")
+    report.line(
+        "border: cropped 40x30 window = the same window of the uncropped border render; Depth pass: "
+        f"centre {centre:.4f} m, 34° off axis {side:.4f} m (wall at 3 m along the axis; Cycles writes 3.0 at both), "
+        f"corner {corner:.4g} (background)"
+    )
     assert corner >= 1e9
     assert centre == pytest.approx(3.0, abs=2e-3)
     assert side == pytest.approx(3.0, abs=2e-3), (
-        f"Depth 34° off axis is {side:.4f}, expected 3.0 (Blender's Z: distance along the camera's -z). petzval.render()['depth'] "
-        f"looks like the ray length (3 / cos 33.6° = {3 / math.cos(math.atan(29.5 * 0.45 / 20)):.3f}), which contradicts _native.pyi")
+        f"Depth 34° off axis is {side:.4f}, expected 3.0 (Blender's Z: distance along the camera's -z). "
+        "petzval.render()['depth'] "
+        f"looks like the ray length (3 / cos 33.6° = {3 / math.cos(math.atan(29.5 * 0.45 / 20)):.3f}), which "
+        "contradicts _native.pyi"
+    )
 
 
 def test_unsupported_features_listed_once(addon, report):
@@ -663,7 +743,9 @@ def test_camera_settings_mapping(addon):
     m = kw["camera_to_world"]
     np.testing.assert_allclose(m[:3, 3], [1.0, 3.0, -2.0], atol=1e-6)  # Blender (x, y, z) -> (x, z, -y)
     np.testing.assert_allclose(m[:3, :3].T @ m[:3, :3], np.eye(3), atol=1e-6)  # the object's scale dropped
-    np.testing.assert_allclose(m[:3, :3] @ [0, 0, -1.0], [0.0, 0.0, -1.0], atol=1e-6)  # looks along Blender +y = glTF -z
+    np.testing.assert_allclose(
+        m[:3, :3] @ [0, 0, -1.0], [0.0, 0.0, -1.0], atol=1e-6
+    )  # looks along Blender +y = glTF -z
 
     dof.use_dof = True
     dof.aperture_blades = 6
@@ -676,7 +758,11 @@ def test_camera_settings_mapping(addon):
     cam.petzval.lens = "double-gauss-50mm"
     dof.use_dof = False
     kw, notes = kwargs()
-    assert kw["lens"] == "double-gauss-50mm" and kw["fstop"] is None and kw["focus_distance_m"] == pytest.approx(2.5, abs=1e-5)
+    assert (
+        kw["lens"] == "double-gauss-50mm"
+        and kw["fstop"] is None
+        and kw["focus_distance_m"] == pytest.approx(2.5, abs=1e-5)
+    )
     assert any("wide open" in n for n in notes.info), notes.info
 
     cam.petzval.lens = "PINHOLE"
@@ -763,7 +849,7 @@ def test_viewport_preview_renders_the_view_in_the_background(main_scene, report)
     H.configure_petzval(spp=16, camera="MainCam")
     vp = importlib.import_module(H.ADDON_MODULE + ".viewport")
     cam_mod = importlib.import_module(H.ADDON_MODULE + ".camera")
-    scene_mod = importlib.import_module(H.ADDON_MODULE + ".scene")
+    export_mod = importlib.import_module(H.ADDON_MODULE + ".export")
     notes_mod = importlib.import_module(H.ADDON_MODULE + ".notes")
     scene = bpy.context.scene
     cam_obj = bpy.data.objects["MainCam"]
@@ -771,14 +857,16 @@ def test_viewport_preview_renders_the_view_in_the_background(main_scene, report)
     try:
         depsgraph = bpy.context.evaluated_depsgraph_get()
         notes = notes_mod.Notes()
-        pz_scene, _ = scene_mod.build(petzval, depsgraph, notes)
-        scene_mod.add_world(pz_scene, scene.world, notes, None)
+        pz_scene, _ = export_mod.build(petzval, depsgraph, notes)
+        export_mod.add_world(pz_scene, scene.world, notes, None)
         render_kw = cam_mod.render_kwargs(scene, scene.frame_current)
         render_kw.pop("spp")
         w, h = 60, 40
         # A free view with the camera's matrix and twice its focal length (Blender's viewport
         # sensor is 72 mm) sees exactly what the depth-of-field-free camera sees.
-        free = vp.free_view_kwargs(cam_obj.matrix_world, 2 * cam_obj.data.lens, cam_obj.data.clip_start, cam_obj.data.clip_end)
+        free = vp.free_view_kwargs(
+            cam_obj.matrix_world, 2 * cam_obj.data.lens, cam_obj.data.clip_start, cam_obj.data.clip_end
+        )
         t0 = time.perf_counter()
         preview = vp.PreviewRender(petzval, pz_scene, {**free, **render_kw}, w, h, 16)
         seen_passes = set()
@@ -807,7 +895,9 @@ def test_viewport_preview_renders_the_view_in_the_background(main_scene, report)
         slow.cancel(wait_s=2.0)
         cancel_s = time.perf_counter() - t1
         assert slow.finished and cancel_s < 0.5, f"cancel took {cancel_s:.3f} s"
-        report.line(f"viewport preview: free view = camera view (identical {w}x{h} image, passes seen {sorted(seen_passes)}), "
-                    f"restart cancels in {cancel_s * 1000:.0f} ms")
+        report.line(
+            f"viewport preview: free view = camera view (identical {w}x{h} image, passes seen {sorted(seen_passes)}), "
+            f"restart cancels in {cancel_s * 1000:.0f} ms"
+        )
     finally:
         cam_obj.data.dof.use_dof = True

@@ -133,7 +133,11 @@ def test_corrupt_glb_with_valid_magic_fails_cleanly(petzval, tmp_path):
         pytest.param(["lens", "info", "no-such-lens"], ["no-such-lens"], id="info-unknown"),
         pytest.param(["lens", "info", "double-gauss-50mm", "--fstop", "0.5"], ["f/"], id="info-too-fast"),
         pytest.param(["lens", "draw", "no-such-lens", "-o", "x.svg"], ["no-such-lens"], id="draw-unknown"),
-        pytest.param(["lens", "draw", "double-gauss-50mm", "--focus", "0.01", "-o", "x.svg"], ["focus"], id="draw-impossible-focus"),
+        pytest.param(
+            ["lens", "draw", "double-gauss-50mm", "--focus", "0.01", "-o", "x.svg"],
+            ["focus"],
+            id="draw-impossible-focus",
+        ),
     ],
 )
 def test_lens_bad_input_fails_cleanly(petzval, tmp_path, args, words):
@@ -206,7 +210,7 @@ def read_exr(path: Path) -> tuple[dict[str, str], dict[str, np.ndarray]]:
     for off in offsets:
         assert end_of_data <= off < len(data), f"chunk offset {off} outside the file ({len(data)} bytes)"
         y, size = struct.unpack_from("<ii", data, off)
-        assert 0 <= size and off + 8 + size <= len(data), "truncated chunk"
+        assert size >= 0 and off + 8 + size <= len(data), "truncated chunk"
         raw = data[off + 8 : off + 8 + size]
         y0 = y - ymin
         n_lines = min(lines, h - y0)
@@ -306,7 +310,26 @@ def test_thin_lens_natural_vignetting_off_keeps_exposure(petzval, tmp_path):
     the exposure must not change."""
     means = {}
     for v in ("on", "off"):
-        r = run(petzval, ["render", "--lens", "thin", "--fstop", "2", "--natural-vignetting", v, "--resolution", "48x32", "--spp", "16", "-o", f"{v}.exr", "--no-png"], tmp_path)
+        r = run(
+            petzval,
+            [
+                "render",
+                "--lens",
+                "thin",
+                "--fstop",
+                "2",
+                "--natural-vignetting",
+                v,
+                "--resolution",
+                "48x32",
+                "--spp",
+                "16",
+                "-o",
+                f"{v}.exr",
+                "--no-png",
+            ],
+            tmp_path,
+        )
         assert r.returncode == 0, r.stderr
         _, ch = read_exr(tmp_path / f"{v}.exr")
         # central 8×8 block: cos⁴ > 0.99 there for the demo's field of view
@@ -319,7 +342,24 @@ def test_thin_lens_natural_vignetting_off_keeps_exposure(petzval, tmp_path):
 def test_auto_lens_model_is_reported_in_stderr_and_metadata(petzval, tmp_path):
     """--lens-model auto (the default) prints its choice and why, and writes both into the EXR."""
     # A pinhole-sized thin-lens aperture: nothing to model but a pinhole.
-    r = run(petzval, ["render", "--lens", "thin", "--fstop", "5000", "--resolution", "48x32", "--spp", "2", "-o", "p.exr", "--no-png"], tmp_path)
+    r = run(
+        petzval,
+        [
+            "render",
+            "--lens",
+            "thin",
+            "--fstop",
+            "5000",
+            "--resolution",
+            "48x32",
+            "--spp",
+            "2",
+            "-o",
+            "p.exr",
+            "--no-png",
+        ],
+        tmp_path,
+    )
     assert r.returncode == 0, r.stderr
     assert "lens model: pinhole (auto" in r.stderr, r.stderr
     meta, _ = read_exr(tmp_path / "p.exr")
@@ -347,9 +387,9 @@ def test_auto_lens_model_is_reported_in_stderr_and_metadata(petzval, tmp_path):
 def test_lens_list(petzval, tmp_path):
     r = run(petzval, ["lens", "list"], tmp_path)
     assert r.returncode == 0, r.stderr
-    lines = [l for l in r.stdout.splitlines() if l.strip()]
+    lines = [ln for ln in r.stdout.splitlines() if ln.strip()]
     assert len(lines) >= 5
-    assert any(l.startswith("double-gauss-50mm") for l in lines), r.stdout
+    assert any(ln.startswith("double-gauss-50mm") for ln in lines), r.stdout
 
 
 def test_lens_info(petzval, tmp_path):

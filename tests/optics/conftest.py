@@ -17,7 +17,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import petzval_cli  # noqa: E402
+import petzval_cli
 
 _DEVIATIONS: list[tuple[str, str, str, str, str]] = []  # (nodeid, group, lens, quantity, value)
 _OUTCOMES: dict[str, str] = {}  # nodeid -> passed / failed / xfailed / ...
@@ -39,10 +39,7 @@ class DeviationLog:
         self.nodeid = nodeid
 
     def add(self, group: str, lens: str, quantity: str, value) -> None:
-        if isinstance(value, float):
-            text = f"{value:.3e}"
-        else:
-            text = str(value)
+        text = f"{value:.3e}" if isinstance(value, float) else str(value)
         _DEVIATIONS.append((self.nodeid, group, lens, quantity, text))
 
 
@@ -74,7 +71,7 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
         if "/" in text and all(p.strip().isdigit() for p in text.split("/")):
             nums = [int(p) for p in text.split("/")]
             cur = agg.get(key)
-            agg[key] = ["sum", [a + b for a, b in zip(cur[1], nums)] if cur else nums, ""]
+            agg[key] = ["sum", [a + b for a, b in zip(cur[1], nums, strict=False)] if cur else nums, ""]
             continue
         try:
             v = float(text)
@@ -104,4 +101,6 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
         tr.section("optiland comparison: every measurement")
         w = [max(len(r[i]) for r in _DEVIATIONS) for i in range(1, 4)]
         for nodeid, group, lens, quantity, value in _DEVIATIONS:
-            tr.write_line(f"{group:<{w[0]}}  {lens:<{w[1]}}  {quantity:<{w[2]}}  {value}  [{_OUTCOMES.get(nodeid, '?')}]")
+            tr.write_line(
+                f"{group:<{w[0]}}  {lens:<{w[1]}}  {quantity:<{w[2]}}  {value}  [{_OUTCOMES.get(nodeid, '?')}]"
+            )

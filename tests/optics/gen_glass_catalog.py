@@ -39,7 +39,7 @@ OUT = REPO / "renderer" / "optics" / "data" / "glass_catalog.tsv"
 
 
 def database_root() -> Path:
-    import optiland.database  # noqa: PLC0415  (only needed to locate the data files)
+    import optiland.database  # imported here: only needed to locate the data files
 
     return Path(os.path.dirname(optiland.database.__file__)) / "data-nk"
 
@@ -212,7 +212,7 @@ def index(formula: str, coefs: list[float], wl_um: float) -> float:
     l2 = wl_um * wl_um
     if formula == "sellmeier":
         n2 = 1.0
-        for b, c in zip(coefs[0::2], coefs[1::2]):
+        for b, c in zip(coefs[0::2], coefs[1::2], strict=False):
             n2 += b * l2 / (l2 - c)
     else:
         a = coefs
@@ -290,7 +290,7 @@ def build() -> tuple[str, list[str]]:
         lines.append("\t".join([name, cat, formula, *coef_tokens]))
         report.append(f"{name:12s} {cat:8s} {formula:9s} {lo:g}-{hi:g} {why} {'; '.join(notes)}")
     try:
-        from importlib.metadata import version  # noqa: PLC0415
+        from importlib.metadata import version
 
         opt = f"optiland {version('optiland')}"
     except Exception:  # pragma: no cover

@@ -19,8 +19,8 @@ import functools
 import json
 import os
 import subprocess
+from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Iterable, Sequence
 
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_BIN = REPO / "target" / "release" / "petzval"
@@ -91,7 +91,7 @@ def _opts(fstop=None, focus=None, wavelength=None) -> list[str]:
     return out
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def lens_list() -> tuple[str, ...]:
     """Library lens names (first whitespace-separated column of `petzval lens list`)."""
     names = []

@@ -21,9 +21,8 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-import pytest
-
 import optiland.database
+import pytest
 from optiland.materials import Material, MaterialFile
 from optiland.materials.material_spec import MatchPolicy
 
@@ -70,7 +69,7 @@ def index(formula: str, coefs: list[float], wavelength_nm: float) -> float:
     if formula == "sellmeier":
         assert len(coefs) % 2 == 0
         n2 = 1.0
-        for b, c in zip(coefs[0::2], coefs[1::2]):
+        for b, c in zip(coefs[0::2], coefs[1::2], strict=True):
             n2 += b * l2 / (l2 - c)
         return math.sqrt(n2)
     if formula == "schott":

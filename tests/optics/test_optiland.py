@@ -62,9 +62,8 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-import pytest
-
 import optiland.backend as be
+import pytest
 from optiland.materials import IdealMaterial
 from optiland.optic import Optic
 from optiland.physical_apertures import RadialAperture
@@ -106,7 +105,7 @@ ALL_LENSES_UP_TO = 24
 # --------------------------------------------------------------------------------------------
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _export_cached(name: str, wavelength: float = D_NM) -> dict:
     return pz.lens_export(name, wavelength=wavelength)
 
@@ -182,7 +181,11 @@ def _with_known_failures(test_name: str, names: list[str]) -> list:
     out = []
     for n in names:
         reason = KNOWN_FAILURES.get((test_name, n))
-        out.append(pytest.param(n, id=n, marks=pytest.mark.xfail(strict=True, reason=reason)) if reason else pytest.param(n, id=n))
+        out.append(
+            pytest.param(n, id=n, marks=pytest.mark.xfail(strict=True, reason=reason))
+            if reason
+            else pytest.param(n, id=n)
+        )
     return out
 
 
@@ -395,7 +398,9 @@ def compare_values(ours: dict, ref: dict, rel: float, abs_mm: float, keys=None) 
             dev = diff / abs(b) if abs(b) > 1e-3 else diff
         devs[k] = dev
         if not ok:
-            fails.append(f"{k}: petzval {a!r} vs optiland {b!r} (diff {a - b:.3e}, tol {max(rel * abs(b), abs_mm):.1e})")
+            fails.append(
+                f"{k}: petzval {a!r} vs optiland {b!r} (diff {a - b:.3e}, tol {max(rel * abs(b), abs_mm):.1e})"
+            )
     return fails, devs
 
 
@@ -599,7 +604,9 @@ def build_rays(exp: dict, info: dict, optic: Optic, angles: list[float], wl_um: 
     z0 = start_plane_z(exp, z_ep)
     s0 = exp["surfaces"][0]
     sd0 = max(s["semi_diameter_mm"] for s in exp["surfaces"][:2])
-    z_c = s0["z_mm"] + 0.5 * (sag(s0, s0["semi_diameter_mm"]) if math.isfinite(sag(s0, s0["semi_diameter_mm"])) else 0.0)
+    z_c = s0["z_mm"] + 0.5 * (
+        sag(s0, s0["semi_diameter_mm"]) if math.isfinite(sag(s0, s0["semi_diameter_mm"])) else 0.0
+    )
     pattern = disc_grid()
     all_rays, labels = [], []
     fields = [(0.0, "y")] + [(a, ax) for a in angles if a > 0 for ax in ("x", "y")]
@@ -635,7 +642,7 @@ def build_rays(exp: dict, info: dict, optic: Optic, angles: list[float], wl_um: 
             probes = edge_probes(optic, wl_um, d, c, e1, e2, z0, centre, 3.0 * sd0)
             if probes is not None:
                 inside, outside = probes
-                for k, (pi, po) in enumerate(zip(inside, outside)):
+                for k, (pi, po) in enumerate(zip(inside, outside, strict=False)):
                     all_rays.append(rays_through_points(np.vstack([pi, po]), d, z0))
                     labels += [f"{tag}/edge{k}-inside", f"{tag}/edge{k}-outside"]
     return np.vstack(all_rays), labels
@@ -679,7 +686,13 @@ def edge_probes(optic, wl_um, d, c, e1, e2, z0, centre, reach):
 
 
 def compare_rays(
-    lens: str, exp: dict, optic: Optic, rays: np.ndarray, labels: list[str], wavelength_nm: float, open_stop: bool = False
+    lens: str,
+    exp: dict,
+    optic: Optic,
+    rays: np.ndarray,
+    labels: list[str],
+    wavelength_nm: float,
+    open_stop: bool = False,
 ) -> RayComparison:
     """Trace `rays` through both, compare intercepts, vignetting and reversibility."""
     out = RayComparison(n_rays=len(rays))
@@ -752,12 +765,11 @@ def compare_rays(
             dist = float(np.linalg.norm(w - np.dot(w, d_in[j]) * d_in[j]))
             out.max_reverse_dir = max(out.max_reverse_dir, dd)
             out.max_reverse_pos_mm = max(out.max_reverse_pos_mm, dist)
-            if dd > REVERSE_TOL_DIR or dist > REVERSE_TOL_MM:
-                if len(out.reverse_failures) < 20:
-                    out.reverse_failures.append(
-                        f"reverse trace of ray {labels[i]} does not return on the incoming ray: "
-                        f"off by {dist:.3e} mm, direction by {dd:.3e}"
-                    )
+            if (dd > REVERSE_TOL_DIR or dist > REVERSE_TOL_MM) and len(out.reverse_failures) < 20:
+                out.reverse_failures.append(
+                    f"reverse trace of ray {labels[i]} does not return on the incoming ray: "
+                    f"off by {dist:.3e} mm, direction by {dd:.3e}"
+                )
         if n_absorbed > 10:
             out.reverse_failures.append(f"... {n_absorbed} of {len(idx)} reversed rays absorbed in all")
     return out
@@ -768,7 +780,7 @@ def compare_rays(
 # --------------------------------------------------------------------------------------------
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _lens_data(name: str):
     exp = pz.lens_export(name, wavelength=D_NM)
     info = pz.lens_info(name, wavelength=D_NM)
@@ -804,13 +816,17 @@ def test_paraxial_vs_optiland(petzval_bin, lens_name, deviation_log):
     check_export_consistency(exp)
     anamorphic = any(s.get("cylinder") for s in exp["surfaces"])
     if any(s.get("cylinder") and (s.get("conic") or any(s.get("aspheric") or [])) for s in exp["surfaces"]):
-        pytest.skip("cylinder with conic/asphere: modelled as a turned toroid, which optiland's paraxial model misreads")
+        pytest.skip(
+            "cylinder with conic/asphere: modelled as a turned toroid, which optiland's paraxial model misreads"
+        )
     optic = optiland_from_export(exp, clip=False)
     last_z = exp["surfaces"][-1]["z_mm"]
     ref = optiland_paraxial(optic, last_z, exp["image_distance_mm"])
     # x meridian: the same lens with the cylinder axes exchanged (rotationally symmetric: = efl)
     ref["efl_x_mm"] = (
-        optiland_paraxial(optiland_from_export(exp, clip=False, swap_xy=True), last_z, exp["image_distance_mm"])["efl_mm"]
+        optiland_paraxial(optiland_from_export(exp, clip=False, swap_xy=True), last_z, exp["image_distance_mm"])[
+            "efl_mm"
+        ]
         if anamorphic
         else ref["efl_mm"]
     )
@@ -835,7 +851,7 @@ def test_paraxial_vs_optiland(petzval_bin, lens_name, deviation_log):
     assert not fails, f"{lens_name}: paraxial data disagree with optiland:\n  " + "\n  ".join(fails)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _library_ray_comparison(lens_name: str) -> tuple[RayComparison, bool]:
     """Traces the ray set once per lens (both ray tests read it)."""
     exp, info = _lens_data(lens_name)
@@ -933,7 +949,7 @@ def _set_primary(optic: Optic, wl_nm: float) -> None:
     optic.wavelengths.add(value=wl_nm / 1000.0, is_primary=True)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _zemax_file(sample: str, tmpdir: str) -> str:
     """Writes the sample as <tmpdir>/<sample>.zmx, with DIAM (semi-apertures from optiland's
     paraxial marginal + chief ray heights) so the importer has clear apertures."""
@@ -1043,10 +1059,12 @@ def test_zemax_sample_paraxial(petzval_bin, zemax_dir, sample, wavelength_nm, de
     glass_note = (
         ""
         if glass_same
-        else "\n  (glass indices differ by up to %.2e: petzval %s vs optiland %s, glasses %s)"
-        % (dn, n_ours.tolist(), n_ref.tolist(), _glass_names(ref_optic))
+        else f"\n  (glass indices differ by up to {dn:.2e}: petzval {n_ours.tolist()} vs optiland {n_ref.tolist()}, "
+        f"glasses {_glass_names(ref_optic)})"
     )
-    assert not fails, f"{sample} @ {wavelength_nm} nm: imported lens disagrees with optiland:\n  " + "\n  ".join(fails) + glass_note
+    assert not fails, (
+        f"{sample} @ {wavelength_nm} nm: imported lens disagrees with optiland:\n  " + "\n  ".join(fails) + glass_note
+    )
 
 
 @pytest.mark.parametrize("wavelength_nm", [D_NM, F_NM], ids=["d", "F"])
@@ -1073,7 +1091,9 @@ def test_zemax_sample_real_rays(petzval_bin, zemax_dir, sample, wavelength_nm, d
     deviation_log.add(tag, sample, "reverse: max position off incoming ray (mm)", cmp.max_reverse_pos_mm)
     deviation_log.add(tag, sample, "reverse: max direction dev", cmp.max_reverse_dir)
     problems = cmp.failures + cmp.reverse_failures
-    assert not problems, f"{sample} @ {wavelength_nm} nm: {len(problems)} real-ray problems:\n  " + "\n  ".join(problems)
+    assert not problems, f"{sample} @ {wavelength_nm} nm: {len(problems)} real-ray problems:\n  " + "\n  ".join(
+        problems
+    )
     assert cmp.n_ok_both > 0, f"{sample}: no ray got through both tracers"
 
 
@@ -1085,7 +1105,8 @@ def test_zemax_files_use_known_glasses(petzval_bin, zemax_dir):
         try:
             pz.lens_export(path, wavelength=D_NM)
         except pz.PetzvalError as e:
-            glas = [ln.split()[1] for ln in open(path) if ln.strip().startswith("GLAS")]
+            with open(path) as fh:
+                glas = [ln.split()[1] for ln in fh if ln.strip().startswith("GLAS")]
             msg = next((ln for ln in str(e).splitlines() if ln.startswith("error")), str(e))
             problems.append(f"{sample} (glasses {glas}): {msg}")
     assert not problems, "importing optiland-written Zemax files failed:\n  " + "\n  ".join(problems)

@@ -26,6 +26,7 @@ from optiland.fileio import save_zemax_file
 from optiland.samples.objectives import CookeTriplet, DoubleGauss, PetzvalLens, TessarLens
 from optiland.samples.simple import AsphericSinglet
 
+
 def aspheric_singlet_a4():
     """AsphericSinglet with its r^2 coefficient zeroed (A4, A6 remain) and a plane stop in air
     2 mm in front of it."""

@@ -4,6 +4,7 @@ checks against optiland."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import subprocess
 import threading
@@ -44,7 +45,14 @@ def test_library_and_lens_info(petzval):
     lens = petzval.Lens("double-gauss-50mm")
     assert abs(lens.focal_length_mm - 50.358) < 0.01
     info = lens.info()
-    cli = json.loads(subprocess.run([str(petzval_cli.ensure_binary()), "lens", "info", "double-gauss-50mm", "--json"], capture_output=True, text=True, check=True).stdout)
+    cli = json.loads(
+        subprocess.run(
+            [str(petzval_cli.ensure_binary()), "lens", "info", "double-gauss-50mm", "--json"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout
+    )
     assert info == cli
 
 
@@ -64,7 +72,13 @@ def test_trace_matches_the_cli_and_reverses(petzval):
     assert np.isnan(o[~ok]).all() and np.isfinite(o[ok]).all()
     # the CLI's `lens trace` (JSON lines) gives the same rays
     lines = "\n".join(json.dumps([*film[i], *d[i]]) for i in range(n))
-    out = subprocess.run([str(petzval_cli.ensure_binary()), "lens", "trace", "double-gauss-50mm", "--direction", "film-to-scene"], input=lines, capture_output=True, text=True, check=True).stdout.splitlines()
+    out = subprocess.run(
+        [str(petzval_cli.ensure_binary()), "lens", "trace", "double-gauss-50mm", "--direction", "film-to-scene"],
+        input=lines,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.splitlines()
     for i, line in enumerate(out):
         r = json.loads(line)
         assert r["ok"] == bool(ok[i])
@@ -86,7 +100,9 @@ def test_render_thin_lens_exposure_depth_and_determinism(petzval):
     assert r1["lens_model"] == "pinhole" and "pinhole" in r1["lens_model_reason"]
     assert r1["rgba"].shape == (48, 64, 4) and r1["rgba"].dtype == np.float32
     assert r1["depth"].shape == (48, 64)
-    assert np.array_equal(r1["rgba"], r2["rgba"]) and np.array_equal(r1["depth"], r2["depth"]), "thread count changed the image"
+    assert np.array_equal(r1["rgba"], r2["rgba"]) and np.array_equal(r1["depth"], r2["depth"]), (
+        "thread count changed the image"
+    )
     # the wall (white-lit Lambertian grey, half the sky visible: 0.5 * 0.5 = 0.25 at the top
     # rows; depth along the view axis = 3 m in every pixel that sees it
     top = r1["depth"][:8]
@@ -108,11 +124,21 @@ def test_progress_images_and_cancel(petzval):
     # every call reports the samples done so far; the finished image was shown
     assert seen and seen[-1][1] == 64, seen[-3:]
     assert (64, (120, 160, 4)) in [(n, shape) for _, n, shape in seen], seen
-    assert all(a[1] <= b[1] for a, b in zip(seen, seen[1:])), "samples done go backwards"
-    assert all(a[0] <= b[0] + 1e-6 for a, b in zip(seen, seen[1:])), "fraction goes backwards"
+    assert all(a[1] <= b[1] for a, b in itertools.pairwise(seen)), "samples done go backwards"
+    assert all(a[0] <= b[0] + 1e-6 for a, b in itertools.pairwise(seen)), "fraction goes backwards"
     # cancel before the first pass finishes: CancelledError
     with pytest.raises(petzval.CancelledError):
-        petzval.render(s, camera(), 2048, 2048, spp=4, lens="double-gauss-50mm", lens_model="exact", progress=lambda f, n, img: False, progress_interval_s=0.01)
+        petzval.render(
+            s,
+            camera(),
+            2048,
+            2048,
+            spp=4,
+            lens="double-gauss-50mm",
+            lens_model="exact",
+            progress=lambda f, n, img: False,
+            progress_interval_s=0.01,
+        )
     # cancel later: what converged comes back, promptly
     t = {}
 
@@ -155,19 +181,51 @@ def test_render_releases_the_gil(petzval):
     "call, exc, words",
     [
         (lambda pz: pz.Lens("/nonexistent/lens.toml"), FileNotFoundError, ["lens.toml"]),
-        (lambda pz: pz.Scene().add_mesh(np.zeros((3, 3)), np.array([[0, 1, 5]]), name="Cube"), "InvalidSceneError", ["Cube", "triangles", "5"]),
-        (lambda pz: pz.Scene().add_mesh(np.full((3, 3), np.nan), np.array([[0, 1, 2]]), name="Nan"), "InvalidSceneError", ["Nan", "positions"]),
+        (
+            lambda pz: pz.Scene().add_mesh(np.zeros((3, 3)), np.array([[0, 1, 5]]), name="Cube"),
+            "InvalidSceneError",
+            ["Cube", "triangles", "5"],
+        ),
+        (
+            lambda pz: pz.Scene().add_mesh(np.full((3, 3), np.nan), np.array([[0, 1, 2]]), name="Nan"),
+            "InvalidSceneError",
+            ["Nan", "positions"],
+        ),
         (lambda pz: pz.Scene().add_material("m", base_color=(1, 2)), "InvalidSceneError", ["'m'", "base_color"]),
-        (lambda pz: pz.Scene().add_material("m", base_color_texture=3), "InvalidSceneError", ["base_color_texture", "3"]),
+        (
+            lambda pz: pz.Scene().add_material("m", base_color_texture=3),
+            "InvalidSceneError",
+            ["base_color_texture", "3"],
+        ),
         (lambda pz: pz.render(pz.Scene(), np.eye(4), 0, 10), "InvalidSettingsError", ["resolution"]),
         (lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, tilt_x_deg=80), "InvalidSettingsError", ["tilt_x_deg"]),
-        (lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, lens_model="fast"), "InvalidSettingsError", ["lens_model"]),
+        (
+            lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, lens_model="fast"),
+            "InvalidSettingsError",
+            ["lens_model"],
+        ),
         (lambda pz: pz.render(pz.Scene(), np.zeros((4, 4)), 10, 10), "InvalidSettingsError", ["camera_to_world"]),
         (lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, crop=(5, 5, 20, 20)), "InvalidSettingsError", ["crop"]),
-        (lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, fstop=2.0, focus_distance_m=float("nan")), "InvalidSettingsError", ["focus_distance_m"]),
-        (lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, aperture_blades=6, aperture_rotation_rad=float("nan")), "InvalidSettingsError", ["aperture_rotation_rad"]),
-        (lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, lens="double-gauss-50mm", fstop=0.5), "InvalidLensError", ["f/0.5"]),
-        (lambda pz: pz.Lens("double-gauss-50mm").trace(np.zeros((2, 2)), np.zeros((2, 2))), "InvalidSettingsError", ["(N, 3)"]),
+        (
+            lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, fstop=2.0, focus_distance_m=float("nan")),
+            "InvalidSettingsError",
+            ["focus_distance_m"],
+        ),
+        (
+            lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, aperture_blades=6, aperture_rotation_rad=float("nan")),
+            "InvalidSettingsError",
+            ["aperture_rotation_rad"],
+        ),
+        (
+            lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, lens="double-gauss-50mm", fstop=0.5),
+            "InvalidLensError",
+            ["f/0.5"],
+        ),
+        (
+            lambda pz: pz.Lens("double-gauss-50mm").trace(np.zeros((2, 2)), np.zeros((2, 2))),
+            "InvalidSettingsError",
+            ["(N, 3)"],
+        ),
     ],
 )
 def test_errors_map_to_python_exceptions(petzval, call, exc, words):
@@ -183,7 +241,9 @@ def test_errors_map_to_python_exceptions(petzval, call, exc, words):
 
 def test_broken_lens_file_names_file_and_line(petzval, tmp_path):
     p = tmp_path / "broken.toml"
-    p.write_text('[lens]\nname = "x"\nsource = "test"\n\n[[surface]]\nradius_mm = "a"\nthickness_mm = 1\nsemi_diameter_mm = 5\n')
+    p.write_text(
+        '[lens]\nname = "x"\nsource = "test"\n\n[[surface]]\nradius_mm = "a"\nthickness_mm = 1\nsemi_diameter_mm = 5\n'
+    )
     with pytest.raises(petzval.InvalidLensError) as info:
         petzval.Lens(str(p))
     msg = str(info.value)

@@ -54,7 +54,7 @@ class Builder:
 
     def floats(self, rows, type_, minmax=False):
         n = len(rows[0])
-        blob = b"".join(struct.pack("<%df" % n, *r) for r in rows)
+        blob = b"".join(struct.pack(f"<{n}f", *r) for r in rows)
         acc = {"bufferView": self.view(blob, ARRAY_BUFFER), "componentType": FLOAT, "count": len(rows), "type": type_}
         if minmax:
             finite = [r for r in rows if all(math.isfinite(x) for x in r)]
@@ -64,7 +64,7 @@ class Builder:
         return len(self.accessors) - 1
 
     def indices(self, idx, ctype=USHORT):
-        fmt = "<%dH" % len(idx) if ctype == USHORT else "<%dI" % len(idx)
+        fmt = f"<{len(idx)}H" if ctype == USHORT else f"<{len(idx)}I"
         acc = {"bufferView": self.view(struct.pack(fmt, *idx), ELEMENT_ARRAY_BUFFER), "componentType": ctype,
                "count": len(idx), "type": "SCALAR"}
         self.accessors.append(acc)
@@ -83,7 +83,7 @@ class Builder:
 
 
 def data_uri(blob, mime="application/octet-stream"):
-    return "data:%s;base64,%s" % (mime, base64.b64encode(bytes(blob)).decode())
+    return f"data:{mime};base64,{base64.b64encode(bytes(blob)).decode()}"
 
 
 def write_json(name, doc):

@@ -4,7 +4,7 @@ The native module (Rust) does the work; this package re-exports it. See ``_nativ
 the API and its conventions.
 """
 
-from ._native import (  # noqa: F401
+from ._native import (
     CancelledError,
     InvalidLensError,
     InvalidSceneError,

@@ -17,7 +17,7 @@ Conventions
   ``PetzvalError`` with the message).
 """
 
-from typing import Callable, Optional, Sequence, Tuple
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -62,7 +62,7 @@ class Lens:
         directions: NDArray[np.float64],
         wavelength_nm: float = 587.5618,
         direction: str = "film_to_scene",
-    ) -> Tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
         """Traces N rays (``(N, 3)`` arrays, lens coordinates in mm as ``petzval lens trace``)
         through every surface. ``direction`` is ``"film_to_scene"`` or ``"scene_to_film"``.
         Returns (origins, unit directions, passed); rows that did not pass are NaN."""
@@ -71,7 +71,9 @@ class Scene:
     """A scene assembled from buffers. Build it, then pass it to :func:`render`."""
 
     def __init__(self) -> None: ...
-    def add_texture(self, pixels: NDArray[np.float32], name: str = "", interpolation: str = "linear", extension: str = "repeat") -> int:
+    def add_texture(
+        self, pixels: NDArray[np.float32], name: str = "", interpolation: str = "linear", extension: str = "repeat"
+    ) -> int:
         """Adds a texture from ``(H, W, 4)`` (or ``(H, W, 3)``) LINEAR values, row 0 at the
         top. ``interpolation``: ``"linear"`` or ``"closest"``; ``extension``: ``"repeat"``,
         ``"clip"`` (clamp to edge) or ``"mirror"``. Returns its index."""
@@ -86,11 +88,11 @@ class Scene:
         emission: Sequence[float] = (0.0, 0.0, 0.0),
         alpha_mode: str = "opaque",
         alpha_cutoff: float = 0.5,
-        base_color_texture: Optional[int] = None,
-        metallic_roughness_texture: Optional[int] = None,
-        normal_texture: Optional[int] = None,
+        base_color_texture: int | None = None,
+        metallic_roughness_texture: int | None = None,
+        normal_texture: int | None = None,
         normal_scale: float = 1.0,
-        emission_texture: Optional[int] = None,
+        emission_texture: int | None = None,
         double_sided: bool = True,
     ) -> int:
         """Adds a glTF metallic-roughness material and returns its index.
@@ -105,11 +107,11 @@ class Scene:
         self,
         positions: NDArray[np.float32],
         triangles: NDArray[np.uint32],
-        material_ids: Optional[NDArray[np.uint32]] = None,
-        normals: Optional[NDArray[np.float32]] = None,
-        uvs: Optional[NDArray[np.float32]] = None,
-        tangents: Optional[NDArray[np.float32]] = None,
-        transform: Optional[NDArray[np.float64]] = None,
+        material_ids: NDArray[np.uint32] | None = None,
+        normals: NDArray[np.float32] | None = None,
+        uvs: NDArray[np.float32] | None = None,
+        tangents: NDArray[np.float32] | None = None,
+        transform: NDArray[np.float64] | None = None,
         name: str = "",
     ) -> None:
         """Adds a triangle mesh: ``positions (N, 3)``, ``triangles (M, 3)`` vertex indices,
@@ -137,7 +139,9 @@ class Scene:
         """A directional light travelling along ``direction``."""
     def set_environment_color(self, rgb: Sequence[float]) -> None:
         """A uniform environment radiance."""
-    def set_environment_map(self, pixels: NDArray[np.float32], strength: float = 1.0, rotation_rad: float = 0.0, name: str = "") -> None:
+    def set_environment_map(
+        self, pixels: NDArray[np.float32], strength: float = 1.0, rotation_rad: float = 0.0, name: str = ""
+    ) -> None:
         """An equirectangular environment ``(H, W, 3|4)``, row 0 at the top, mapped as
         Blender's Environment Texture node maps it (see the renderer's environment docs).
         ``rotation_rad`` turns the map about the world's up axis as a Blender Mapping node of
@@ -148,7 +152,7 @@ class Scene:
     @property
     def warnings(self) -> list[str]: ...
 
-ProgressCallback = Callable[[float, int, Optional[NDArray[np.float32]]], bool]
+ProgressCallback = Callable[[float, int, NDArray[np.float32] | None], bool]
 
 def render(
     scene: Scene,
@@ -167,15 +171,15 @@ def render(
     shift_y: float = 0.0,
     tilt_x_deg: float = 0.0,
     tilt_y_deg: float = 0.0,
-    fstop: Optional[float] = None,
-    focus_distance_m: Optional[float] = None,
+    fstop: float | None = None,
+    focus_distance_m: float | None = None,
     aperture_blades: int = 0,
     aperture_rotation_rad: float = 0.0,
     aperture_ratio: float = 1.0,
-    aperture_image: Optional[str] = None,
+    aperture_image: str | None = None,
     clip_start_m: float = 0.0,
     clip_end_m: float = float("inf"),
-    crop: Optional[Tuple[int, int, int, int]] = None,
+    crop: tuple[int, int, int, int] | None = None,
     spp: int = 64,
     seed: int = 0,
     max_depth: int = 8,
@@ -183,7 +187,7 @@ def render(
     natural_vignetting: bool = False,
     spectral: bool = False,
     threads: int = 0,
-    progress: Optional[ProgressCallback] = None,
+    progress: ProgressCallback | None = None,
     progress_interval_s: float = 0.1,
 ) -> dict:
     """Renders ``scene`` and returns ``{"rgba": (H, W, 4) float32, "depth": (H, W) float32,

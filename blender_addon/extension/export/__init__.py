@@ -1,0 +1,81 @@
+"""The evaluated depsgraph as a ``petzval.Scene``: meshes, materials, textures, lights, world.
+
+Everything is passed in memory (numpy buffers), in petzval's conventions (see ``_native.pyi``):
+glTF axes (Blender (x, y, z) -> (x, z, -y), applied through each object's transform), UVs
+(u, 1 - v), image rows top first, linear colour.
+
+One module per concern: ``mesh`` (evaluated meshes as per-corner buffers), ``materials``
+(shaders and their Image Texture nodes), ``images`` (image pixels), ``lights``, ``world``, and
+``nodes`` (node-tree helpers); :func:`build` here walks the depsgraph's object instances, and
+the engine adds the world with :func:`add_world`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..camera import to_gltf
+from .lights import add_light
+from .materials import Materials
+from .mesh import mesh_data
+from .world import add_world
+
+__all__ = ["GEOMETRY_TYPES", "UNSUPPORTED_TYPES", "add_world", "build"]
+
+GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
+UNSUPPORTED_TYPES = {"CURVES": "hair curves", "POINTCLOUD": "point clouds", "VOLUME": "volumes",
+                     "GREASEPENCIL": "Grease Pencil", "GPENCIL": "Grease Pencil"}
+
+
+def build(petzval, depsgraph, notes, stop=None):
+    """A ``petzval.Scene`` from the evaluated depsgraph. `stop()` (optional) is polled between
+    objects; returns None when it asks to stop. Also returns counts for the status line."""
+    pz = petzval.Scene()
+    materials = Materials(pz, notes)
+    meshes: dict = {}
+    stats = {"objects": 0, "instances": 0, "lights": 0, "meshes_converted": 0}
+    for i, inst in enumerate(depsgraph.object_instances):
+        if stop is not None and i % 64 == 0 and stop():
+            return None, stats
+        obj = inst.object
+        t = obj.type
+        if t == "LIGHT":
+            if inst.show_self:
+                add_light(pz, obj, inst.matrix_world, notes, materials)
+                stats["lights"] += 1
+            continue
+        if t in UNSUPPORTED_TYPES:
+            notes.warn(f"{UNSUPPORTED_TYPES[t]} ('{obj.name}')")
+            continue
+        if t not in GEOMETRY_TYPES or not inst.show_self:
+            continue
+        if not getattr(obj, "visible_camera", True) or not getattr(obj, "visible_shadow", True):
+            notes.warn(f"object '{obj.name}': ray visibility settings (rendered fully visible)")
+        data = obj.data
+        key = data.as_pointer() if data is not None else ("object", obj.name_full)
+        md = meshes.get(key, False)
+        if md is False:
+            try:
+                mesh = obj.to_mesh()
+            except RuntimeError:
+                mesh = None
+            md = None
+            if mesh is not None:
+                try:
+                    md = mesh_data(mesh)
+                finally:
+                    obj.to_mesh_clear()
+            meshes[key] = md
+            stats["meshes_converted"] += 1
+        if md is None:
+            continue
+        slots = obj.material_slots
+        if len(slots) == 0:
+            table = np.array([materials.default()], dtype=np.uint32)
+        else:
+            table = np.array([materials.index(s.material) for s in slots], dtype=np.uint32)
+        mat_ids = table[np.minimum(md.slot_index, len(table) - 1)]
+        pz.add_mesh(md.positions, md.triangles, material_ids=mat_ids, normals=md.normals, uvs=md.uvs,
+                    transform=to_gltf(inst.matrix_world), name=obj.name)
+        stats["objects" if not inst.is_instance else "instances"] += 1
+    return pz, stats

@@ -1,0 +1,293 @@
+"""Blender materials as petzval materials.
+
+Materials: the Principled BSDF (base colour, metallic, roughness, IOR, Specular IOR Level,
+alpha, emission, normal map) with Image Texture nodes where glTF can take them; Diffuse BSDF and
+Emission shaders. Anything else falls back to the material's viewport display colour and is
+listed (once) in the render's warning report.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .images import MISSING_TEXTURE, image_pixels
+from .nodes import node_tree_of, source, surface_shader, value
+
+DEFAULT_COLOUR = (0.8, 0.8, 0.8, 1.0)
+
+INTERPOLATION = {"Closest": "closest", "Linear": "linear", "Cubic": "linear", "Smart": "linear"}
+EXTENSION = {"REPEAT": "repeat", "EXTEND": "clip", "CLIP": "clip", "MIRROR": "mirror"}
+
+
+class Materials:
+    """Blender materials as petzval materials (each converted once)."""
+
+    def __init__(self, pz_scene, notes):
+        self.scene = pz_scene
+        self.notes = notes
+        self.index_of: dict = {}
+        self.textures: dict = {}
+        self._default = None
+
+    # -- textures
+
+    def texture(self, tex_node, what: str, keep_alpha: bool = True):
+        """Texture index for an Image Texture node, or None (missing image: warned)."""
+        img = tex_node.image
+        if img is None:
+            self.notes.warn(f"{what}: Image Texture node without an image")
+            return None
+        if tex_node.projection != "FLAT":
+            self.notes.warn(f"{what}: image projection {tex_node.projection} (UV used)")
+        vec = source(tex_node.inputs.get("Vector"))
+        if vec is not None and not (vec[0].type == "UVMAP" or (vec[0].type == "TEX_COORD" and vec[1].name == "UV")):
+            self.notes.warn(f"{what}: texture coordinates from a {vec[0].bl_label} node (the active UV map used)")
+        if tex_node.interpolation in ("Cubic", "Smart"):
+            self.notes.note(f"{tex_node.interpolation} texture interpolation rendered as Linear")
+        if tex_node.extension == "CLIP":
+            self.notes.note("image extension Clip rendered as Extend")
+        if img.source in ("SEQUENCE", "MOVIE", "TILED"):
+            self.notes.warn(
+                f"{what}: image '{img.name}' is a {img.source.lower()} image (its current frame/first tile used)"
+            )
+        key = (img.name_full, tex_node.interpolation, tex_node.extension, keep_alpha)
+        if key not in self.textures:
+            px = image_pixels(img, self.notes, what)
+            if px is None:
+                self.textures[key] = None
+            else:
+                if not keep_alpha:
+                    px[..., 3] = 1.0
+                self.textures[key] = self.scene.add_texture(
+                    px, name=img.name, interpolation=INTERPOLATION.get(tex_node.interpolation, "linear"),
+                    extension=EXTENSION.get(tex_node.extension, "repeat"))
+        return self.textures[key]
+
+    def _data_texture(self, key, make):
+        if key not in self.textures:
+            px = make()
+            self.textures[key] = None if px is None else self.scene.add_texture(px, name=key[0])
+        return self.textures[key]
+
+    # -- materials
+
+    def default(self) -> int:
+        if self._default is None:
+            self._default = self.scene.add_material("Default", base_color=DEFAULT_COLOUR, roughness=0.5, specular=1.0)
+        return self._default
+
+    def index(self, mat) -> int:
+        if mat is None:
+            return self.default()
+        key = mat.name_full
+        if key not in self.index_of:
+            self.index_of[key] = self._convert(mat)
+        return self.index_of[key]
+
+    def _fallback(self, mat, why: str) -> int:
+        self.notes.warn(f"material '{mat.name}': {why}, rendered with its viewport display colour")
+        c = tuple(mat.diffuse_color)
+        return self.scene.add_material(
+            mat.name,
+            base_color=c,
+            metallic=float(mat.metallic),
+            roughness=float(mat.roughness),
+            alpha_mode="blend" if c[3] < 1.0 else "opaque",
+        )
+
+    def _convert(self, mat) -> int:
+        nt = node_tree_of(mat)
+        if nt is None:
+            c = tuple(mat.diffuse_color)
+            return self.scene.add_material(
+                mat.name,
+                base_color=c,
+                metallic=float(mat.metallic),
+                roughness=float(mat.roughness),
+                specular=2.0 * float(mat.specular_intensity),
+            )
+        node = surface_shader(nt)
+        if node is None:
+            # Cycles renders a material with nothing connected as black
+            return self.scene.add_material(mat.name, base_color=(0.0, 0.0, 0.0, 1.0), specular=0.0)
+        if node.type == "BSDF_PRINCIPLED":
+            return self._principled(mat, node)
+        if node.type == "BSDF_DIFFUSE":
+            kw = self._base_colour(mat, node, "Color")
+            if source(node.inputs.get("Normal")) is not None:
+                self.notes.warn(f"material '{mat.name}': Diffuse BSDF normal input ignored")
+            return self.scene.add_material(mat.name, roughness=1.0, specular=0.0, **kw)
+        if node.type == "EMISSION":
+            col = value(node, "Color", (1.0, 1.0, 1.0, 1.0))
+            strength = value(node, "Strength", 1.0)
+            kw = {}
+            src = source(node.inputs.get("Color"))
+            if src is not None:
+                if src[0].type == "TEX_IMAGE":
+                    kw["emission_texture"] = self.texture(src[0], f"material '{mat.name}' emission")
+                    col = (1.0, 1.0, 1.0)
+                else:
+                    self.notes.warn(
+                        f"material '{mat.name}': emission colour from a {src[0].bl_label} node "
+                        "(its unlinked value used)"
+                    )
+            return self.scene.add_material(mat.name, base_color=(0.0, 0.0, 0.0, 1.0), specular=0.0,
+                                           emission=tuple(float(c) * strength for c in col[:3]), **kw)
+        return self._fallback(mat, f"{node.bl_label} shader is not supported")
+
+    def _base_colour(self, mat, node, name) -> dict:
+        """base_color (+ texture) from a colour input."""
+        col = value(node, name, DEFAULT_COLOUR)
+        src = source(node.inputs.get(name))
+        if src is None:
+            return {"base_color": tuple(col)}
+        n, out = src
+        if n.type == "TEX_IMAGE" and out.name == "Color":
+            alpha_src = source(node.inputs.get("Alpha"))
+            keep_alpha = alpha_src is not None and alpha_src[0] == n and alpha_src[1].name == "Alpha"
+            tex = self.texture(n, f"material '{mat.name}' base colour", keep_alpha=keep_alpha)
+            if tex is None:
+                return {"base_color": MISSING_TEXTURE}
+            return {"base_color": (1.0, 1.0, 1.0, 1.0), "base_color_texture": tex}
+        if n.type == "RGB":
+            return {"base_color": tuple(out.default_value)}
+        self.notes.warn(f"material '{mat.name}': base colour from a {n.bl_label} node, viewport display colour used")
+        return {"base_color": tuple(mat.diffuse_color)}
+
+    def _scalar_image(self, mat, node, name, what):
+        """(constant or None, Image Texture node or None) of a scalar input."""
+        src = source(node.inputs.get(name))
+        if src is None:
+            return float(value(node, name, 0.0)), None
+        n, out = src
+        if n.type == "TEX_IMAGE":
+            return None, n
+        if n.type == "VALUE":
+            return float(out.default_value), None
+        if n.type in ("SEPARATE_COLOR", "SEPRGB", "SEPARATE_RGB"):
+            inner = source(n.inputs[0])
+            if inner is not None and inner[0].type == "TEX_IMAGE":
+                self.notes.warn(
+                    f"material '{mat.name}': {what} from a separated channel of an image (its red channel used)"
+                )
+                return None, inner[0]
+        self.notes.warn(f"material '{mat.name}': {what} from a {n.bl_label} node (its unlinked value used)")
+        return float(value(node, name, 0.0)), None
+
+    def _principled(self, mat, node) -> int:
+        name = mat.name
+        kw = self._base_colour(mat, node, "Base Color")
+        alpha = float(value(node, "Alpha", 1.0))
+        alpha_src = source(node.inputs.get("Alpha"))
+        textured_alpha = "base_color_texture" in kw and alpha_src is not None and alpha_src[0].type == "TEX_IMAGE"
+        if alpha_src is not None and not textured_alpha:
+            self.notes.warn(f"material '{name}': alpha from a {alpha_src[0].bl_label} node (its unlinked value used)")
+        bc = list(kw["base_color"])
+        bc = [*bc, 1.0][:4] if len(bc) < 4 else bc
+        bc[3] = alpha if not textured_alpha else 1.0
+        kw["base_color"] = tuple(bc)
+        kw["alpha_mode"] = "blend" if (alpha < 1.0 or textured_alpha) else "opaque"
+
+        metallic, metallic_img = self._scalar_image(mat, node, "Metallic", "metallic")
+        roughness, roughness_img = self._scalar_image(mat, node, "Roughness", "roughness")
+        kw["metallic"] = 1.0 if metallic_img is not None else metallic
+        kw["roughness"] = 1.0 if roughness_img is not None else roughness
+        if metallic_img is not None or roughness_img is not None:
+            tex = self._metallic_roughness(mat, metallic_img, roughness_img, metallic, roughness)
+            if tex is not None:
+                kw["metallic_roughness_texture"] = tex
+            else:
+                kw["metallic"] = metallic if metallic is not None else 0.0
+                kw["roughness"] = roughness if roughness is not None else 0.5
+
+        kw["ior"] = float(value(node, "IOR", 1.5))
+        kw["specular"] = 2.0 * float(value(node, "Specular IOR Level", 0.5))
+        if source(node.inputs.get("Specular IOR Level")) is not None:
+            self.notes.warn(f"material '{name}': Specular IOR Level from a node (its unlinked value used)")
+        tint = value(node, "Specular Tint", (1.0, 1.0, 1.0, 1.0))
+        if isinstance(tint, tuple) and any(abs(t - 1.0) > 1e-6 for t in tint[:3]):
+            self.notes.warn(f"material '{name}': Specular Tint")
+
+        # emission
+        ecol = value(node, "Emission Color", (0.0, 0.0, 0.0, 1.0))
+        estr = float(value(node, "Emission Strength", 0.0))
+        esrc = source(node.inputs.get("Emission Color"))
+        if esrc is not None and esrc[0].type == "TEX_IMAGE":
+            tex = self.texture(esrc[0], f"material '{name}' emission")
+            if tex is not None:
+                kw["emission_texture"] = tex
+                ecol = (1.0, 1.0, 1.0)
+        elif esrc is not None:
+            self.notes.warn(
+                f"material '{name}': emission colour from a {esrc[0].bl_label} node (its unlinked value used)"
+            )
+        if source(node.inputs.get("Emission Strength")) is not None:
+            self.notes.warn(f"material '{name}': Emission Strength from a node (its unlinked value used)")
+        kw["emission"] = tuple(float(c) * estr for c in ecol[:3])
+
+        # normal map
+        nsrc = source(node.inputs.get("Normal"))
+        if nsrc is not None:
+            nn = nsrc[0]
+            if nn.type == "NORMAL_MAP" and nn.space == "TANGENT":
+                csrc = source(nn.inputs.get("Color"))
+                if csrc is not None and csrc[0].type == "TEX_IMAGE":
+                    tex = self.texture(csrc[0], f"material '{name}' normal map")
+                    if tex is not None:
+                        kw["normal_texture"] = tex
+                        kw["normal_scale"] = float(value(nn, "Strength", 1.0))
+                    if nn.uv_map:
+                        self.notes.warn(
+                            f"material '{name}': normal map on UV map '{nn.uv_map}' (the active render UV map used)"
+                        )
+                else:
+                    self.notes.warn(f"material '{name}': Normal Map node without an Image Texture")
+            else:
+                self.notes.warn(
+                    f"material '{name}': normal from a {nn.bl_label} "
+                    f"node{' (' + nn.space.lower() + ' space)' if nn.type == 'NORMAL_MAP' else ''}"
+                )
+
+        # lobes glTF/Petzval's BSDF does not have
+        for label, inp in (
+            ("Transmission", "Transmission Weight"),
+            ("Coat", "Coat Weight"),
+            ("Sheen", "Sheen Weight"),
+            ("Subsurface", "Subsurface Weight"),
+            ("Anisotropy", "Anisotropic"),
+            ("Thin film", "Thin Film Thickness"),
+        ):
+            v = value(node, inp, 0.0)
+            if (isinstance(v, float) and v > 0.0) or source(node.inputs.get(inp)) is not None:
+                self.notes.warn(f"material '{name}': {label}")
+        return self.scene.add_material(name, **kw)
+
+    def _metallic_roughness(self, mat, m_node, r_node, m_const, r_const):
+        """glTF's metallicRoughness texture (G roughness, B metallic) from one or two greyscale
+        images (red channel), constants filling the other."""
+        what = f"material '{mat.name}' metallic/roughness"
+        key = (f"{mat.name_full}:metallic_roughness", None)
+
+        def make():
+            imgs = {}
+            for role, n in (("m", m_node), ("r", r_node)):
+                if n is not None:
+                    if n.image is None:
+                        self.notes.warn(f"{what}: Image Texture node without an image")
+                        return None
+                    px = image_pixels(n.image, self.notes, what)
+                    if px is None:
+                        return None
+                    imgs[role] = px
+            shapes = {p.shape for p in imgs.values()}
+            if len(shapes) > 1:
+                self.notes.warn(f"{what}: metallic and roughness images of different sizes (constants used)")
+                return None
+            h, w = next(iter(shapes))[:2]
+            out = np.ones((h, w, 4), dtype=np.float32)
+            out[..., 0] = 0.0
+            out[..., 1] = imgs["r"][..., 0] if "r" in imgs else r_const
+            out[..., 2] = imgs["m"][..., 0] if "m" in imgs else m_const
+            return out
+
+        return self._data_texture(key, make)
