@@ -21,6 +21,10 @@
 //! | `render(..., filter_width_px)` | f32, Cycles' filter_width | px | 1.5 |
 //! | `render(..., progress_interval_s)` | f64 | s | 0.1 |
 
+// `!(x > 0.0)` is our NaN-rejecting validation: unlike `x <= 0.0` it is also true for NaN, which
+// is exactly what every such check wants (a NaN setting or sample must be refused).
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use glam::{DAffine3, DMat3, DMat4, DVec2, DVec3, DVec4, Vec2, Vec3, Vec4};
 use numpy::ndarray::{Array2, Array3};
 use numpy::{AllowTypeChange, IntoPyArray, PyArrayLike1, PyArrayLike2, PyArrayLike3};

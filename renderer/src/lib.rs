@@ -1,6 +1,10 @@
 //! Petzval core library: lens optics (prescriptions, exact tracing, paraxial analysis, apertures),
 //! cameras and sensors. Data flows one way: lens file → [`Lens`] → [`Camera`].
 
+// `!(x > 0.0)` is our NaN-rejecting validation: unlike `x <= 0.0` it is also true for NaN, which
+// is exactly what every such check wants (a NaN setting or sample must be refused).
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 mod error;
 pub mod film;
 pub mod integrator;

@@ -216,8 +216,8 @@ fn render_furnace_white_sphere_pinhole() {
     let mut sum = [0.0f64; 3];
     let mut diff2 = 0.0f64;
     for i in 0..n {
-        for k in 0..3 {
-            sum[k] += 0.5 * (a.rgba[i][k] + b.rgba[i][k]) as f64;
+        for (k, s) in sum.iter_mut().enumerate() {
+            *s += 0.5 * (a.rgba[i][k] + b.rgba[i][k]) as f64;
             let d = (a.rgba[i][k] - b.rgba[i][k]) as f64;
             diff2 += d * d;
         }
@@ -781,8 +781,8 @@ fn measured_sharp_row(ratio: &[Option<f64>]) -> (f64, f64) {
     // normal equations for r = c0 + c1·t + c2·t², t = y − best
     let mut m = [[0.0f64; 3]; 3];
     let mut rhs = [0.0f64; 3];
-    for y in best.saturating_sub(3)..(best + 4).min(n) {
-        let Some(r) = ratio[y] else { continue };
+    for (y, r) in ratio.iter().enumerate().take((best + 4).min(n)).skip(best.saturating_sub(3)) {
+        let Some(r) = *r else { continue };
         let t = y as f64 - best as f64;
         let basis = [1.0, t, t * t];
         for i in 0..3 {

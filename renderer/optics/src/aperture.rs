@@ -189,6 +189,51 @@ fn inside_blades(u: f64, v: f64, count: u32, curvature: f64, rotation: f64) -> b
     (along - d).powi(2) + across * across <= rho * rho
 }
 
+impl Aperture {
+    /// Samples a point of the opening for circumradius 1 from `u` in [0,1)²: returns the point
+    /// and its density per unit area. The caller multiplies by [`Aperture::transmission`], which
+    /// is 1 for straight blades and circles sampled here and carries curved blades and masks.
+    pub fn sample_unit(&self, u: glam::DVec2) -> (glam::DVec2, f64) {
+        use glam::DVec2;
+        let (p, pdf) = match &self.shape {
+            ApertureShape::Circle => (concentric_disk(u), 1.0 / std::f64::consts::PI),
+            ApertureShape::Blades { count, curvature } if *curvature == 0.0 => {
+                // uniform over the polygon: choose a triangle, then a point in it
+                let n = *count as f64;
+                let k = (u.x * n).floor().min(n - 1.0);
+                let ux = u.x * n - k;
+                // vertices halfway between edge middles (which sit at the rotation)
+                let a0 = self.rotation_rad + std::f64::consts::PI / n + 2.0 * std::f64::consts::PI * k / n;
+                let a1 = a0 + 2.0 * std::f64::consts::PI / n;
+                let (v0, v1) = (DVec2::new(a0.cos(), a0.sin()), DVec2::new(a1.cos(), a1.sin()));
+                let su = ux.sqrt();
+                let p = v0 * (su * (1.0 - u.y)) + v1 * (su * u.y);
+                let area = 0.5 * n * (2.0 * std::f64::consts::PI / n).sin();
+                (p, 1.0 / area)
+            }
+            ApertureShape::Blades { .. } => (concentric_disk(u), 1.0 / std::f64::consts::PI),
+            ApertureShape::Mask(_) => (DVec2::new(2.0 * u.x - 1.0, 2.0 * u.y - 1.0), 0.25),
+        };
+        // anamorphic squeeze: x is divided by the ratio, density scales by it
+        (DVec2::new(p.x / self.anamorphic_ratio, p.y), pdf * self.anamorphic_ratio)
+    }
+}
+
+/// Shirley–Chiu concentric mapping of [0,1)² to the unit disc.
+pub fn concentric_disk(u: glam::DVec2) -> glam::DVec2 {
+    let a = 2.0 * u.x - 1.0;
+    let b = 2.0 * u.y - 1.0;
+    if a == 0.0 && b == 0.0 {
+        return glam::DVec2::ZERO;
+    }
+    let (r, theta) = if a.abs() > b.abs() {
+        (a, std::f64::consts::FRAC_PI_4 * (b / a))
+    } else {
+        (b, std::f64::consts::FRAC_PI_2 - std::f64::consts::FRAC_PI_4 * (a / b))
+    };
+    glam::DVec2::new(r * theta.cos(), r * theta.sin())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -235,49 +280,4 @@ mod tests {
         assert_eq!(ap.transmission(0.6, 0.0, 1.0), 0.0);
         assert_eq!(ap.transmission(0.0, 0.9, 1.0), 1.0);
     }
-}
-
-impl Aperture {
-    /// Samples a point of the opening for circumradius 1 from `u` in [0,1)²: returns the point
-    /// and its density per unit area. The caller multiplies by [`Aperture::transmission`], which
-    /// is 1 for straight blades and circles sampled here and carries curved blades and masks.
-    pub fn sample_unit(&self, u: glam::DVec2) -> (glam::DVec2, f64) {
-        use glam::DVec2;
-        let (p, pdf) = match &self.shape {
-            ApertureShape::Circle => (concentric_disk(u), 1.0 / std::f64::consts::PI),
-            ApertureShape::Blades { count, curvature } if *curvature == 0.0 => {
-                // uniform over the polygon: choose a triangle, then a point in it
-                let n = *count as f64;
-                let k = (u.x * n).floor().min(n - 1.0);
-                let ux = u.x * n - k;
-                // vertices halfway between edge middles (which sit at the rotation)
-                let a0 = self.rotation_rad + std::f64::consts::PI / n + 2.0 * std::f64::consts::PI * k / n;
-                let a1 = a0 + 2.0 * std::f64::consts::PI / n;
-                let (v0, v1) = (DVec2::new(a0.cos(), a0.sin()), DVec2::new(a1.cos(), a1.sin()));
-                let su = ux.sqrt();
-                let p = v0 * (su * (1.0 - u.y)) + v1 * (su * u.y);
-                let area = 0.5 * n * (2.0 * std::f64::consts::PI / n).sin();
-                (p, 1.0 / area)
-            }
-            ApertureShape::Blades { .. } => (concentric_disk(u), 1.0 / std::f64::consts::PI),
-            ApertureShape::Mask(_) => (DVec2::new(2.0 * u.x - 1.0, 2.0 * u.y - 1.0), 0.25),
-        };
-        // anamorphic squeeze: x is divided by the ratio, density scales by it
-        (DVec2::new(p.x / self.anamorphic_ratio, p.y), pdf * self.anamorphic_ratio)
-    }
-}
-
-/// Shirley–Chiu concentric mapping of [0,1)² to the unit disc.
-pub fn concentric_disk(u: glam::DVec2) -> glam::DVec2 {
-    let a = 2.0 * u.x - 1.0;
-    let b = 2.0 * u.y - 1.0;
-    if a == 0.0 && b == 0.0 {
-        return glam::DVec2::ZERO;
-    }
-    let (r, theta) = if a.abs() > b.abs() {
-        (a, std::f64::consts::FRAC_PI_4 * (b / a))
-    } else {
-        (b, std::f64::consts::FRAC_PI_2 - std::f64::consts::FRAC_PI_4 * (a / b))
-    };
-    glam::DVec2::new(r * theta.cos(), r * theta.sin())
 }

@@ -195,7 +195,7 @@ fn parse_catalog(text: &str) -> Vec<CatalogGlass> {
         }
         let nums: Vec<f64> = cols[3..].iter().filter_map(|s| s.trim().parse().ok()).collect();
         let dispersion = match cols[2] {
-            "sellmeier" if nums.len() % 2 == 0 => Dispersion::Sellmeier {
+            "sellmeier" if nums.len().is_multiple_of(2) => Dispersion::Sellmeier {
                 b: nums.iter().step_by(2).copied().collect(),
                 c: nums.iter().skip(1).step_by(2).copied().collect(),
             },

@@ -5,6 +5,10 @@
 //!
 //! Data flows one way: lens file → [`Prescription`] → [`Lens`] → (traced rays, [`lrtf`] tables).
 
+// `!(x > 0.0)` is our NaN-rejecting validation: unlike `x <= 0.0` it is also true for NaN, which
+// is exactly what every such check wants (a NaN setting or sample must be refused).
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 mod error;
 mod io;
 

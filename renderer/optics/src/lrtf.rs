@@ -634,7 +634,7 @@ impl LrtfTable {
         let (iu, ix, iy) = ((fu as i32).min(k.last_cell), (fx as i32).min(k.last_cell), (fy as i32).min(k.last_cell_y));
         let (tu, tx, ty) = (fu - iu as f32, fx - ix as f32, fy - iy as f32);
         let base = wi * k.stride_w + iu as usize * k.stride_u + ix as usize * k.stride_x + iy as usize;
-        if (base + k.stride_u + k.stride_x + 1) / 2 >= self.lines.len() {
+        if (base + k.stride_u + k.stride_x + 1).div_ceil(2) >= self.lines.len() {
             return LrtfLookup::Miss;
         }
         let at = |i: usize| &self.lines[i / 2].0[i % 2];

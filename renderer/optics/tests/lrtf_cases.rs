@@ -181,7 +181,7 @@ fn fisheye_tables_match_the_exact_trace() {
         let rays = rays_from_film(&lens, 0.0, film_radius_mm, 1.0, 60_000, 5);
         let wl = lens.primary_wavelength_nm();
         // rays travel towards −z: the angle off the axis is acos(−d.z)
-        let cos_limit = -(reaches_deg as f64).to_radians().cos();
+        let cos_limit = -f64::to_radians(reaches_deg).cos();
         let far =
             rays.iter().filter_map(|r| exact_trace(&lens, r, wl)).filter(|(o, _)| o.direction.z > cos_limit).count();
         let (mean, mis, both) = compare(&table, &lens, &rays);

@@ -159,7 +159,7 @@ pub(crate) enum SpecLens {
     /// An ideal thin lens (None f-number = pinhole).
     Ideal,
     /// A real lens, stopped down and with the spec's aperture.
-    Real(Lens),
+    Real(Box<Lens>),
 }
 
 impl CameraSpec {
@@ -198,7 +198,7 @@ impl CameraSpec {
         if let Some(a) = &self.aperture {
             lens = lens.with_aperture(a.clone());
         }
-        Ok(SpecLens::Real(lens))
+        Ok(SpecLens::Real(Box::new(lens)))
     }
 
     /// Builds the camera; `shot` (resolution, samples, scene depth range) informs `auto`.
@@ -290,7 +290,7 @@ impl CameraSpec {
             },
             SpecLens::Real(lens) => match model {
                 LensModel::Exact | LensModel::Auto => {
-                    Ok(Camera::Realistic(RealisticCamera::new(sensor, lens.clone(), focus)?))
+                    Ok(Camera::Realistic(RealisticCamera::new(sensor, (**lens).clone(), focus)?))
                 }
                 LensModel::Lrtf { resolution } => {
                     let table = match &self.lrtf_file {
@@ -299,7 +299,7 @@ impl CameraSpec {
                     };
                     let exact = match exact {
                         Some(e) => e.clone(),
-                        None => RealisticCamera::new(sensor, lens.clone(), focus)?,
+                        None => RealisticCamera::new(sensor, (**lens).clone(), focus)?,
                     };
                     Ok(Camera::Lrtf(LrtfCamera::with_exact(exact, table)?))
                 }

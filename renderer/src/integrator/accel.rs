@@ -345,7 +345,7 @@ impl RenderScene {
         }
 
         let alpha_tests: Vec<AlphaTest> = scene.materials.iter().map(alpha_test_of).collect();
-        let any_stochastic = alpha_tests.iter().any(|a| *a == AlphaTest::Stochastic);
+        let any_stochastic = alpha_tests.contains(&AlphaTest::Stochastic);
 
         // Valid triangles.
         let mut valid: Vec<u32> = Vec::with_capacity(nt);
