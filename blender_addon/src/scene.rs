@@ -1,0 +1,488 @@
+//! `petzval.Scene`: a scene built from numpy buffers (meshes, materials, textures, lights,
+//! environment), validated with errors naming the object and field.
+
+use glam::{DAffine3, DMat3, DMat4, DVec3, DVec4, Vec2, Vec3, Vec4};
+use numpy::{AllowTypeChange, PyArrayLike1, PyArrayLike2, PyArrayLike3};
+use petzval_renderer::scene::environment::EnvironmentMap;
+use petzval_renderer::scene::texture::Wrap;
+use petzval_renderer::scene::{AlphaMode, Environment, Light, Material, Mesh, Texture, TextureRef};
+use pyo3::prelude::*;
+use std::sync::Arc;
+
+use crate::errors::*;
+
+pub(crate) fn vec3_arg(name: &str, field: &str, v: &[f64]) -> PyResult<Vec3> {
+    match v {
+        [a, b, c] if a.is_finite() && b.is_finite() && c.is_finite() => Ok(Vec3::new(*a as f32, *b as f32, *c as f32)),
+        _ => Err(scene_err(name, field, format!("expected 3 finite numbers, got {v:?}"))),
+    }
+}
+
+pub(crate) fn non_negative_rgb(name: &str, field: &str, v: &[f64]) -> PyResult<Vec3> {
+    let c = vec3_arg(name, field, v)?;
+    if c.min_element() < 0.0 {
+        return Err(scene_err(name, field, format!("must be non-negative, got {v:?}")));
+    }
+    Ok(c)
+}
+
+/// A 4×4 object-to-world matrix (rows as Blender prints them, column vectors) as an affine map.
+pub(crate) fn affine_from_rows(name: &str, field: &str, m: &numpy::ndarray::ArrayView2<'_, f64>) -> PyResult<DAffine3> {
+    if m.shape() != [4, 4] {
+        return Err(scene_err(name, field, format!("expected a (4, 4) matrix, got {:?}", m.shape())));
+    }
+    if m.iter().any(|v| !v.is_finite()) {
+        return Err(scene_err(name, field, "has non-finite entries".into()));
+    }
+    let col = |c: usize| DVec4::new(m[[0, c]], m[[1, c]], m[[2, c]], m[[3, c]]);
+    let mat = DMat4::from_cols(col(0), col(1), col(2), col(3));
+    if (mat.row(3) - DVec4::new(0.0, 0.0, 0.0, 1.0)).abs().max_element() > 1e-9 {
+        return Err(scene_err(name, field, "is projective (last row is not 0 0 0 1)".into()));
+    }
+    let a = DAffine3::from_mat4(mat);
+    if !(a.matrix3.determinant().abs() > 1e-18) {
+        return Err(scene_err(name, field, "is singular".into()));
+    }
+    Ok(a)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Lenses
+
+/// A scene assembled from buffers.
+#[pyclass(name = "Scene", module = "petzval._native")]
+/// A scene under construction from Python.
+pub(crate) struct PyScene {
+    pub(crate) scene: petzval_renderer::scene::Scene,
+    /// Every mesh so far came with tangents (else tangents are derived from UVs for all).
+    pub(crate) all_tangents: bool,
+}
+
+pub(crate) fn parse_alpha_mode(mode: &str, cutoff: f64) -> PyResult<AlphaMode> {
+    Ok(match mode {
+        "opaque" => AlphaMode::Opaque,
+        "blend" => AlphaMode::Blend,
+        "mask" => AlphaMode::Mask(cutoff as f32),
+        m => {
+            return Err(InvalidSceneError::new_err(format!(
+                "alpha_mode: expected 'opaque', 'blend' or 'mask', got '{m}'"
+            )))
+        }
+    })
+}
+
+impl PyScene {
+    fn texture_ref(&self, name: &str, field: &str, index: Option<usize>) -> PyResult<Option<TextureRef>> {
+        match index {
+            None => Ok(None),
+            Some(i) if i < self.scene.textures.len() => Ok(Some(TextureRef { index: i, uv_set: 0 })),
+            Some(i) => Err(scene_err(
+                name,
+                field,
+                format!("texture {i} does not exist ({} textures)", self.scene.textures.len()),
+            )),
+        }
+    }
+}
+
+#[pymethods]
+impl PyScene {
+    #[new]
+    fn new() -> Self {
+        PyScene { scene: petzval_renderer::scene::Scene::default(), all_tangents: true }
+    }
+
+    /// Adds a texture from (H, W, 4|3) linear values, row 0 at the top.
+    #[pyo3(signature = (pixels, name = "", interpolation = "linear", extension = "repeat"))]
+    fn add_texture(
+        &mut self,
+        pixels: PyArrayLike3<'_, f32, AllowTypeChange>,
+        name: &str,
+        interpolation: &str,
+        extension: &str,
+    ) -> PyResult<usize> {
+        guard(|| {
+            let a = pixels.as_array();
+            let (h, w, c) = a.dim();
+            if h == 0 || w == 0 || !(c == 3 || c == 4) {
+                return Err(scene_err(name, "pixels", format!("expected an (H, W, 3|4) image, got {:?}", a.shape())));
+            }
+            let bilinear = match interpolation {
+                "linear" | "cubic" | "smart" => true,
+                "closest" => false,
+                i => {
+                    return Err(scene_err(name, "interpolation", format!("expected 'linear' or 'closest', got '{i}'")))
+                }
+            };
+            let wrap = match extension {
+                "repeat" => Wrap::Repeat,
+                "clip" | "extend" => Wrap::ClampToEdge,
+                "mirror" => Wrap::MirroredRepeat,
+                e => {
+                    return Err(scene_err(
+                        name,
+                        "extension",
+                        format!("expected 'repeat', 'clip' or 'mirror', got '{e}'"),
+                    ))
+                }
+            };
+            let mut texels = Vec::with_capacity(h * w);
+            for y in 0..h {
+                for x in 0..w {
+                    let g = |k: usize| {
+                        let v = a[[y, x, k]];
+                        if v.is_finite() {
+                            v
+                        } else {
+                            0.0
+                        }
+                    };
+                    texels.push(Vec4::new(g(0), g(1), g(2), if c == 4 { g(3) } else { 1.0 }));
+                }
+            }
+            self.scene.textures.push(Arc::new(Texture {
+                name: name.to_string(),
+                width: w as u32,
+                height: h as u32,
+                texels,
+                wrap_s: wrap,
+                wrap_t: wrap,
+                bilinear,
+            }));
+            Ok(self.scene.textures.len() - 1)
+        })
+    }
+
+    /// Adds a glTF metallic-roughness material; returns its index.
+    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true))]
+    #[allow(clippy::too_many_arguments)]
+    fn add_material(
+        &mut self,
+        name: &str,
+        base_color: Vec<f64>,
+        metallic: f64,
+        roughness: f64,
+        ior: f64,
+        specular: f64,
+        emission: Vec<f64>,
+        alpha_mode: &str,
+        alpha_cutoff: f64,
+        base_color_texture: Option<usize>,
+        metallic_roughness_texture: Option<usize>,
+        normal_texture: Option<usize>,
+        normal_scale: f64,
+        emission_texture: Option<usize>,
+        double_sided: bool,
+    ) -> PyResult<usize> {
+        guard(|| {
+            let bc = match base_color.as_slice() {
+                [r, g, b] => Vec4::new(*r as f32, *g as f32, *b as f32, 1.0),
+                [r, g, b, a] => Vec4::new(*r as f32, *g as f32, *b as f32, *a as f32),
+                v => return Err(scene_err(name, "base_color", format!("expected 3 or 4 numbers, got {v:?}"))),
+            };
+            if !bc.is_finite() || bc.min_element() < 0.0 {
+                return Err(scene_err(
+                    name,
+                    "base_color",
+                    format!("must be finite and non-negative, got {base_color:?}"),
+                ));
+            }
+            for (field, v, lo, hi) in [
+                ("metallic", metallic, 0.0, 1.0),
+                ("roughness", roughness, 0.0, 1.0),
+                ("ior", ior, 1.0, 10.0),
+                ("specular", specular, 0.0, 100.0),
+                ("normal_scale", normal_scale, -100.0, 100.0),
+                ("alpha_cutoff", alpha_cutoff, 0.0, 1.0),
+            ] {
+                if !(v.is_finite() && v >= lo && v <= hi) {
+                    return Err(scene_err(name, field, format!("{v} is outside [{lo}, {hi}]")));
+                }
+            }
+            let m = Material {
+                name: name.to_string(),
+                base_color: bc,
+                base_color_texture: self.texture_ref(name, "base_color_texture", base_color_texture)?,
+                metallic: metallic as f32,
+                roughness: roughness as f32,
+                metallic_roughness_texture: self.texture_ref(
+                    name,
+                    "metallic_roughness_texture",
+                    metallic_roughness_texture,
+                )?,
+                normal_texture: self.texture_ref(name, "normal_texture", normal_texture)?,
+                normal_scale: normal_scale as f32,
+                emissive: non_negative_rgb(name, "emission", &emission)?,
+                emissive_texture: self.texture_ref(name, "emission_texture", emission_texture)?,
+                specular: specular as f32,
+                ior: ior as f32,
+                alpha_mode: parse_alpha_mode(alpha_mode, alpha_cutoff)
+                    .map_err(|e| scene_err(name, "", e.to_string()))?,
+                double_sided,
+            };
+            self.scene.materials.push(m);
+            Ok(self.scene.materials.len() - 1)
+        })
+    }
+
+    /// Adds a triangle mesh (see the stub).
+    #[pyo3(signature = (positions, triangles, material_ids = None, normals = None, uvs = None, tangents = None, transform = None, name = ""))]
+    #[allow(clippy::too_many_arguments)]
+    fn add_mesh(
+        &mut self,
+        positions: PyArrayLike2<'_, f32, AllowTypeChange>,
+        triangles: PyArrayLike2<'_, i64, AllowTypeChange>,
+        material_ids: Option<PyArrayLike1<'_, i64, AllowTypeChange>>,
+        normals: Option<PyArrayLike2<'_, f32, AllowTypeChange>>,
+        uvs: Option<PyArrayLike2<'_, f32, AllowTypeChange>>,
+        tangents: Option<PyArrayLike2<'_, f32, AllowTypeChange>>,
+        transform: Option<PyArrayLike2<'_, f64, AllowTypeChange>>,
+        name: &str,
+    ) -> PyResult<()> {
+        guard(|| {
+            // 1. Shapes and values.
+            let p = positions.as_array();
+            let t = triangles.as_array();
+            if p.ncols() != 3 {
+                return Err(scene_err(name, "positions", format!("expected (N, 3), got {:?}", p.shape())));
+            }
+            if t.ncols() != 3 {
+                return Err(scene_err(name, "triangles", format!("expected (M, 3), got {:?}", t.shape())));
+            }
+            let (nv, nt) = (p.nrows(), t.nrows());
+            if p.iter().any(|v| !v.is_finite()) {
+                return Err(scene_err(name, "positions", "contain non-finite values".into()));
+            }
+            if let Some(bad) = t.iter().find(|&&i| i < 0 || i as usize >= nv) {
+                return Err(scene_err(name, "triangles", format!("index {bad} is outside 0..{nv}")));
+            }
+            let xf = match &transform {
+                Some(m) => affine_from_rows(name, "transform", &m.as_array())?,
+                None => DAffine3::IDENTITY,
+            };
+            let normal_xf: DMat3 = xf.matrix3.inverse().transpose();
+            let flip = xf.matrix3.determinant() < 0.0;
+            // 2. World-space attributes.
+            let mut mesh = Mesh::default();
+            mesh.positions = (0..nv)
+                .map(|i| {
+                    xf.transform_point3(DVec3::new(p[[i, 0]] as f64, p[[i, 1]] as f64, p[[i, 2]] as f64)).as_vec3()
+                })
+                .collect();
+            mesh.indices = (0..nt)
+                .map(|i| {
+                    let tri = [t[[i, 0]] as u32, t[[i, 1]] as u32, t[[i, 2]] as u32];
+                    // A mirroring transform turns the winding; keep faces facing outwards.
+                    if flip {
+                        [tri[0], tri[2], tri[1]]
+                    } else {
+                        tri
+                    }
+                })
+                .collect();
+            mesh.material_ids = match &material_ids {
+                Some(m) => {
+                    let m = m.as_array();
+                    if m.len() != nt {
+                        return Err(scene_err(name, "material_ids", format!("{} ids for {nt} triangles", m.len())));
+                    }
+                    if let Some(bad) = m.iter().find(|&&i| i < 0 || i as usize >= self.scene.materials.len().max(1)) {
+                        return Err(scene_err(
+                            name,
+                            "material_ids",
+                            format!("material {bad} does not exist ({} materials)", self.scene.materials.len()),
+                        ));
+                    }
+                    m.iter().map(|&i| i as u32).collect()
+                }
+                None => vec![0; nt],
+            };
+            mesh.normals = match &normals {
+                Some(n) => {
+                    let n = n.as_array();
+                    if n.shape() != [nv, 3] {
+                        return Err(scene_err(name, "normals", format!("expected ({nv}, 3), got {:?}", n.shape())));
+                    }
+                    (0..nv)
+                        .map(|i| {
+                            let v = normal_xf * DVec3::new(n[[i, 0]] as f64, n[[i, 1]] as f64, n[[i, 2]] as f64);
+                            v.normalize_or_zero().as_vec3()
+                        })
+                        .collect()
+                }
+                None => face_normals(&mesh.positions, &mesh.indices),
+            };
+            if mesh.normals.iter().any(|n| !n.is_finite()) {
+                return Err(scene_err(name, "normals", "contain non-finite values".into()));
+            }
+            mesh.uv0 = match &uvs {
+                Some(u) => {
+                    let u = u.as_array();
+                    if u.shape() != [nv, 2] {
+                        return Err(scene_err(name, "uvs", format!("expected ({nv}, 2), got {:?}", u.shape())));
+                    }
+                    (0..nv)
+                        .map(|i| Vec2::new(u[[i, 0]], u[[i, 1]]))
+                        .map(|v| if v.is_finite() { v } else { Vec2::ZERO })
+                        .collect()
+                }
+                None => vec![Vec2::ZERO; nv],
+            };
+            match &tangents {
+                Some(tg) => {
+                    let tg = tg.as_array();
+                    if tg.shape() != [nv, 4] {
+                        return Err(scene_err(name, "tangents", format!("expected ({nv}, 4), got {:?}", tg.shape())));
+                    }
+                    mesh.tangents = (0..nv)
+                        .map(|i| {
+                            let v = (xf.matrix3 * DVec3::new(tg[[i, 0]] as f64, tg[[i, 1]] as f64, tg[[i, 2]] as f64))
+                                .normalize_or_zero()
+                                .as_vec3();
+                            let w = if flip { -tg[[i, 3]] } else { tg[[i, 3]] };
+                            Vec4::new(v.x, v.y, v.z, if w < 0.0 { -1.0 } else { 1.0 })
+                        })
+                        .collect();
+                }
+                None => {
+                    self.all_tangents = false;
+                    mesh.tangents = vec![Vec4::ZERO; nv];
+                }
+            }
+            self.scene.mesh.append(&mesh, 0);
+            Ok(())
+        })
+    }
+
+    /// A point light (W/sr per channel).
+    #[pyo3(signature = (position, intensity_w_sr, name = ""))]
+    fn add_point_light(&mut self, position: Vec<f64>, intensity_w_sr: Vec<f64>, name: &str) -> PyResult<()> {
+        guard(|| {
+            let light = Light::Point {
+                position: vec3_arg(name, "position", &position)?,
+                intensity: non_negative_rgb(name, "intensity_w_sr", &intensity_w_sr)?,
+                range: None,
+            };
+            self.scene.lights.push(light);
+            Ok(())
+        })
+    }
+
+    /// A spot light.
+    #[pyo3(signature = (position, direction, intensity_w_sr, inner_cone_rad, outer_cone_rad, name = ""))]
+    fn add_spot_light(
+        &mut self,
+        position: Vec<f64>,
+        direction: Vec<f64>,
+        intensity_w_sr: Vec<f64>,
+        inner_cone_rad: f64,
+        outer_cone_rad: f64,
+        name: &str,
+    ) -> PyResult<()> {
+        guard(|| {
+            let d = vec3_arg(name, "direction", &direction)?.normalize_or_zero();
+            if d == Vec3::ZERO {
+                return Err(scene_err(name, "direction", "must not be zero".into()));
+            }
+            if !(outer_cone_rad > 0.0
+                && outer_cone_rad <= std::f64::consts::PI
+                && inner_cone_rad >= 0.0
+                && inner_cone_rad <= outer_cone_rad)
+            {
+                return Err(scene_err(
+                    name,
+                    "cone",
+                    format!("need 0 ≤ inner ({inner_cone_rad}) ≤ outer ({outer_cone_rad}) ≤ π"),
+                ));
+            }
+            self.scene.lights.push(Light::Spot {
+                position: vec3_arg(name, "position", &position)?,
+                direction: d,
+                intensity: non_negative_rgb(name, "intensity_w_sr", &intensity_w_sr)?,
+                inner_cone_rad: inner_cone_rad as f32,
+                outer_cone_rad: outer_cone_rad as f32,
+                range: None,
+            });
+            Ok(())
+        })
+    }
+
+    /// A directional light.
+    #[pyo3(signature = (direction, irradiance_w_m2, name = ""))]
+    fn add_sun_light(&mut self, direction: Vec<f64>, irradiance_w_m2: Vec<f64>, name: &str) -> PyResult<()> {
+        guard(|| {
+            let d = vec3_arg(name, "direction", &direction)?.normalize_or_zero();
+            if d == Vec3::ZERO {
+                return Err(scene_err(name, "direction", "must not be zero".into()));
+            }
+            self.scene.lights.push(Light::Directional {
+                direction: d,
+                irradiance: non_negative_rgb(name, "irradiance_w_m2", &irradiance_w_m2)?,
+            });
+            Ok(())
+        })
+    }
+
+    /// A uniform environment.
+    fn set_environment_color(&mut self, rgb: Vec<f64>) -> PyResult<()> {
+        guard(|| {
+            let c = non_negative_rgb("world", "rgb", &rgb)?;
+            self.scene.environment = if c == Vec3::ZERO { Environment::Black } else { Environment::Constant(c) };
+            Ok(())
+        })
+    }
+
+    /// An equirectangular environment, row 0 at the top.
+    #[pyo3(signature = (pixels, strength = 1.0, rotation_rad = 0.0, name = ""))]
+    fn set_environment_map(
+        &mut self,
+        pixels: PyArrayLike3<'_, f32, AllowTypeChange>,
+        strength: f64,
+        rotation_rad: f64,
+        name: &str,
+    ) -> PyResult<()> {
+        guard(|| {
+            let a = pixels.as_array();
+            let (h, w, c) = a.dim();
+            if h == 0 || w == 0 || c < 3 {
+                return Err(scene_err(name, "pixels", format!("expected an (H, W, 3|4) image, got {:?}", a.shape())));
+            }
+            let texels: Vec<Vec3> = (0..h)
+                .flat_map(|y| (0..w).map(move |x| (y, x)))
+                .map(|(y, x)| Vec3::new(a[[y, x, 0]], a[[y, x, 1]], a[[y, x, 2]]))
+                .collect();
+            let label = if name.is_empty() { "environment" } else { name };
+            let map = EnvironmentMap::new(label, w, h, texels, strength as f32, rotation_rad as f32).map_err(py_err)?;
+            self.scene.environment = Environment::Map(map);
+            Ok(())
+        })
+    }
+
+    /// Triangles so far.
+    #[getter]
+    fn triangle_count(&self) -> usize {
+        self.scene.mesh.triangle_count()
+    }
+
+    /// Warnings so far.
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        self.scene.warnings.clone()
+    }
+}
+
+/// Area-weighted vertex normals (unit; +z where a vertex has no area around it).
+pub(crate) fn face_normals(positions: &[Vec3], indices: &[[u32; 3]]) -> Vec<Vec3> {
+    let mut n = vec![Vec3::ZERO; positions.len()];
+    for t in indices {
+        let (a, b, c) = (positions[t[0] as usize], positions[t[1] as usize], positions[t[2] as usize]);
+        let f = (b - a).cross(c - a);
+        for &i in t {
+            n[i as usize] += f;
+        }
+    }
+    n.into_iter().map(|v| v.try_normalize().unwrap_or(Vec3::Z)).collect()
+}
+
+// ---------------------------------------------------------------------------------------------
+// Rendering
