@@ -10,7 +10,7 @@ use serde_json::{json, Value};
 /// (None = infinity) for a `sensor` (width, height in mm), as `petzval lens info --json` prints.
 pub fn lens_info(lens: &Lens, focus_m: Option<f64>, wavelength: Option<f64>, sensor: (f64, f64)) -> Result<Value> {
     let wl = wavelength.unwrap_or(lens.primary_wavelength_nm());
-    let p = paraxial::analyse(lens, wl)?;
+    let p = paraxial::analyse(lens, wl);
     let image_distance = lens.focus_image_distance_mm(focus_m.map(|m| m * 1e3))?;
     let film_z = lens.last_vertex_z_mm() + image_distance;
     let object_z = focus_m.map(|m| p.entrance_pupil_z_mm - m * 1e3);

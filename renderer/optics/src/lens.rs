@@ -111,7 +111,9 @@ pub struct Lens {
     wavelengths_nm: Vec<f64>,
     /// Index after each surface at the primary wavelength.
     primary_index_after: Vec<f64>,
-    paraxial: Option<ParaxialData>,
+    /// First-order data at the primary wavelength, for the current stop opening: set by
+    /// [`Lens::analysed`], which every constructor and every copy-with-change ends with.
+    paraxial: ParaxialData,
     rotationally_symmetric: bool,
 }
 
@@ -169,7 +171,7 @@ impl Lens {
         let primary_index_after = surfaces.iter().map(|s| s.material_after.index(primary)).collect();
         let rotationally_symmetric = surfaces.iter().all(|s| s.shape.is_rotationally_symmetric());
         let stop_open = p.lens.stop_semi_diameter_mm.unwrap_or(surfaces[stop_index].semi_diameter_mm);
-        let mut lens = Lens {
+        let lens = Lens {
             prescription: p,
             source_label: map.file.clone(),
             surfaces,
@@ -179,14 +181,19 @@ impl Lens {
             primary_wavelength_nm: primary,
             wavelengths_nm: wavelengths,
             primary_index_after,
-            paraxial: None,
+            paraxial: ParaxialData::default(),
             rotationally_symmetric,
         };
         // 4. Precompute first-order data.
-        lens.paraxial = Some(
-            paraxial::analyse(&lens, primary).map_err(|e| Error::lens_file(&map.file, 0, "surface", e.to_string()))?,
-        );
-        Ok(lens)
+        Ok(lens.analysed())
+    }
+
+    /// This lens with its first-order data computed for its current surfaces and stop: the
+    /// last step of every constructor and copy-with-change, so no `Lens` carries stale
+    /// paraxial data.
+    fn analysed(mut self) -> Lens {
+        self.paraxial = paraxial::analyse(&self, self.primary_wavelength_nm);
+        self
     }
 
     /// The same lens seen from the other side: surfaces in reverse order, mirrored in z
@@ -288,7 +295,7 @@ impl Lens {
     }
     /// First-order data at the primary wavelength and current stop.
     pub fn paraxial(&self) -> &ParaxialData {
-        self.paraxial.as_ref().expect("paraxial data is computed in Lens::new")
+        &self.paraxial
     }
     /// Whether every surface is rotationally symmetric (no cylinders).
     pub fn is_rotationally_symmetric(&self) -> bool {
@@ -348,8 +355,7 @@ impl Lens {
         }
         let mut lens = self.clone();
         lens.stop_semi_diameter_mm = semi_diameter_mm.min(max);
-        lens.paraxial = Some(paraxial::analyse(&lens, lens.primary_wavelength_nm)?);
-        Ok(lens)
+        Ok(lens.analysed())
     }
 
     /// A copy whose stop is the circle containing the current opening (for conservative
@@ -358,7 +364,8 @@ impl Lens {
         let mut lens = self.clone();
         lens.stop_semi_diameter_mm = self.stop_semi_diameter_mm * self.aperture.bounding_radius_factor();
         lens.aperture = Aperture::default();
-        lens
+        // The pupils grow with the stop (the paraxial data was the smaller opening's).
+        lens.analysed()
     }
 
     /// A copy stopped to f-number `f_number` (object at infinity). Errors when the lens cannot

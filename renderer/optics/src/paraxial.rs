@@ -88,7 +88,7 @@ pub fn matrix(lens: &Lens, from: usize, to: usize, wavelength_nm: f64, m: Meridi
 }
 
 /// First-order properties of a lens (y–z meridian, one wavelength), as `petzval lens info` prints.
-#[derive(Debug, Clone, Serialize, PartialEq)]
+#[derive(Debug, Clone, Default, Serialize, PartialEq)]
 pub struct ParaxialData {
     /// Wavelength of the analysis.
     pub wavelength_nm: f64,
@@ -128,7 +128,7 @@ pub struct ParaxialData {
 }
 
 /// Computes the first-order properties at `wavelength_nm`.
-pub fn analyse(lens: &Lens, wavelength_nm: f64) -> Result<ParaxialData> {
+pub fn analyse(lens: &Lens, wavelength_nm: f64) -> ParaxialData {
     let n = lens.surfaces().len();
     let last_z = lens.surfaces()[n - 1].z_mm;
     let sys = matrix(lens, 0, n, wavelength_nm, Meridian::Y, false);
@@ -158,7 +158,7 @@ pub fn analyse(lens: &Lens, wavelength_nm: f64) -> Result<ParaxialData> {
         let n2 = lens.index_after(i, wavelength_nm);
         petzval += lens.surfaces()[i].shape.paraxial_curvature_per_mm() * (n2 - n1) / (n1 * n2);
     }
-    Ok(ParaxialData {
+    ParaxialData {
         wavelength_nm,
         efl_mm: efl,
         efl_x_mm: efl_x,
@@ -176,7 +176,7 @@ pub fn analyse(lens: &Lens, wavelength_nm: f64) -> Result<ParaxialData> {
         exit_pupil_diameter_mm: xp_d,
         f_number: efl / ep_d,
         petzval_sum_per_mm: petzval,
-    })
+    }
 }
 
 /// The stop semi-diameter that gives f-number `f_number` (paraxially, object at infinity).
