@@ -15,7 +15,7 @@ use super::paraxial::{self, ParaxialData};
 use super::prescription::{self, ApertureShapeSpec, Prescription, SourceMap, DEFAULT_WAVELENGTHS_NM};
 use super::surface::{refract, Shape};
 use crate::error::{Error, Result};
-use glam::{DVec2, DVec3};
+use glam::{DMat3, DVec2, DVec3};
 use std::path::Path;
 use std::sync::Arc;
 
@@ -94,6 +94,54 @@ pub struct LensSurface {
     pub is_stop: bool,
     /// Mechanical radius (stop housing; equals the semi-diameter otherwise).
     pub housing_semi_diameter_mm: f64,
+    /// Rigid misplacement of the element this surface belongs to (None: on the axis).
+    pub placement: Option<Placement>,
+}
+
+/// Where a misaligned element sits: a point `p` of the aligned element is at
+/// `pivot + offset + rotation · (p − pivot)` in the lens frame. Shared by every surface of the
+/// element.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Placement {
+    /// The pivot: the element's front vertex on the axis (lens frame).
+    pub pivot: DVec3,
+    /// Displacement of the pivot (decentre x, y; z in reversed lenses).
+    pub offset: DVec3,
+    /// Rotation about the pivot (aligned element → lens frame).
+    pub rotation: DMat3,
+}
+
+impl Placement {
+    /// The placement of an element with front vertex at `vertex_z_mm`, decentred by
+    /// (`dx`, `dy`) mm and tilted by `tilt_x_deg` then `tilt_y_deg` (right-handed rotations).
+    pub fn from_misalignment(vertex_z_mm: f64, dx: f64, dy: f64, tilt_x_deg: f64, tilt_y_deg: f64) -> Placement {
+        let rotation =
+            DMat3::from_rotation_y(tilt_y_deg.to_radians()) * DMat3::from_rotation_x(tilt_x_deg.to_radians());
+        Placement { pivot: DVec3::new(0.0, 0.0, vertex_z_mm), offset: DVec3::new(dx, dy, 0.0), rotation }
+    }
+
+    /// A lens-frame point in the aligned element's frame.
+    #[inline]
+    fn point_to_element(&self, p: DVec3) -> DVec3 {
+        self.rotation.transpose() * (p - self.pivot - self.offset) + self.pivot
+    }
+
+    /// An aligned-element point in the lens frame.
+    #[inline]
+    fn point_to_lens(&self, p: DVec3) -> DVec3 {
+        self.rotation * (p - self.pivot) + self.pivot + self.offset
+    }
+
+    /// The same placement in the lens mirrored about z (`z → length − z`), as [`Lens::reversed`]
+    /// sees it; its pivot stays the same physical point.
+    fn mirrored(&self, length_mm: f64) -> Placement {
+        let m = DMat3::from_diagonal(DVec3::new(1.0, 1.0, -1.0));
+        Placement {
+            pivot: DVec3::new(self.pivot.x, self.pivot.y, length_mm - self.pivot.z),
+            offset: m * self.offset,
+            rotation: m * self.rotation * m,
+        }
+    }
 }
 
 /// A lens system ready to trace. Immutable; [`Lens::with_stop_semi_diameter`] and
@@ -143,8 +191,29 @@ impl Lens {
                 material_after: r.material_after.clone(),
                 is_stop: s.stop,
                 housing_semi_diameter_mm: s.housing_semi_diameter_mm.unwrap_or(s.semi_diameter_mm),
+                placement: None,
             });
             z += s.thickness_mm;
+        }
+        // Misaligned elements: the placement of the element's first surface moves every surface
+        // up to the one followed by air (checked in `resolve`: it starts an element).
+        for (i, r) in resolved.iter().enumerate() {
+            let s = &r.spec;
+            if s.is_misaligned() {
+                let placement = Placement::from_misalignment(
+                    surfaces[i].z_mm,
+                    s.decenter_x_mm,
+                    s.decenter_y_mm,
+                    s.tilt_x_deg,
+                    s.tilt_y_deg,
+                );
+                for surface in surfaces[i..].iter_mut() {
+                    surface.placement = Some(placement);
+                    if surface.material_after == Material::Air {
+                        break;
+                    }
+                }
+            }
         }
         check_geometry(&surfaces, map)?;
         let stop_index = surfaces.iter().position(|s| s.is_stop).unwrap_or(0);
@@ -169,7 +238,8 @@ impl Lens {
         let primary = p.lens.primary_wavelength_nm.unwrap_or(WAVELENGTH_D_NM);
         let wavelengths = p.lens.wavelengths_nm.clone().unwrap_or_else(|| DEFAULT_WAVELENGTHS_NM.to_vec());
         let primary_index_after = surfaces.iter().map(|s| s.material_after.index(primary)).collect();
-        let rotationally_symmetric = surfaces.iter().all(|s| s.shape.is_rotationally_symmetric());
+        let rotationally_symmetric =
+            surfaces.iter().all(|s| s.shape.is_rotationally_symmetric() && s.placement.is_none());
         let stop_open = p.lens.stop_semi_diameter_mm.unwrap_or(surfaces[stop_index].semi_diameter_mm);
         let lens = Lens {
             prescription: p,
@@ -222,6 +292,8 @@ impl Lens {
                 s.aspheric = old.aspheric.iter().map(|a| -a).collect();
                 s.material = if i + 1 < n { p.surfaces[n - 2 - i].material.clone() } else { air.clone() };
                 s.thickness_mm = if i + 1 < n { p.surfaces[n - 2 - i].thickness_mm } else { 0.0 };
+                // placements are mirrored onto the built surfaces below
+                (s.decenter_x_mm, s.decenter_y_mm, s.tilt_x_deg, s.tilt_y_deg) = (0.0, 0.0, 0.0, 0.0);
                 s
             })
             .collect();
@@ -234,6 +306,14 @@ impl Lens {
                 last.thickness_mm = bfl;
             }
             lens = Lens::new(q, &map, None)?;
+        }
+        // Misaligned elements: the same physical placement, seen from the other side.
+        let length = self.last_vertex_z_mm();
+        if self.surfaces.iter().any(|s| s.placement.is_some()) {
+            for (i, surface) in lens.surfaces.iter_mut().enumerate() {
+                surface.placement = self.surfaces[n - 1 - i].placement.map(|pl| pl.mirrored(length));
+            }
+            lens.rotationally_symmetric = false;
         }
         lens = lens.with_aperture(self.aperture.clone());
         lens.with_stop_semi_diameter(self.stop_semi_diameter_mm.min(lens.max_stop_semi_diameter_mm()))
@@ -440,11 +520,16 @@ impl Lens {
                 TraceDirection::FilmToScene => n - 1 - step,
             };
             let s = &self.surfaces[i];
-            // 1. Intersect in the surface's local frame.
+            // 1. Into a misaligned element's own frame, then intersect in the surface's frame.
+            if let Some(pl) = &s.placement {
+                o = pl.point_to_element(o);
+                d = pl.rotation.transpose() * d;
+            }
             let local = DVec3::new(o.x, o.y, o.z - s.z_mm);
             let t = s.shape.intersect(local, d).ok_or(Absorbed::Missed(i))?;
             let p = local + t * d;
-            visit(DVec3::new(p.x, p.y, p.z + s.z_mm));
+            let hit = DVec3::new(p.x, p.y, p.z + s.z_mm);
+            visit(s.placement.as_ref().map_or(hit, |pl| pl.point_to_lens(hit)));
             let r2 = p.x * p.x + p.y * p.y;
             // 2. Clip by the housing / clear aperture.
             if s.is_stop {
@@ -475,7 +560,12 @@ impl Lens {
                 let normal = s.shape.normal(p).ok_or(Absorbed::Missed(i))?;
                 d = refract(d, normal, n1, n2).ok_or(Absorbed::TotalInternalReflection(i))?;
             }
-            o = DVec3::new(p.x, p.y, p.z + s.z_mm);
+            // 4. Back to the lens frame.
+            o = hit;
+            if let Some(pl) = &s.placement {
+                o = pl.point_to_lens(o);
+                d = pl.rotation * d;
+            }
         }
         if !(o.is_finite() && d.is_finite()) {
             return Err(Absorbed::Missed(n));

@@ -363,7 +363,7 @@ impl LrtfTable {
     pub fn bake(lens: &Lens, options: &BakeOptions, progress: &(dyn Fn(f64) + Sync)) -> Result<LrtfTable> {
         if !lens.is_rotationally_symmetric() {
             return Err(Error::Optics(format!(
-                "lens '{}' has cylindrical surfaces: its ray transfer is not rotationally symmetric, so a 3-D LRTF cannot represent it (use the exact model)",
+                "lens '{}' has cylindrical surfaces or misaligned elements: its ray transfer is not rotationally symmetric, so a 3-D LRTF cannot represent it (use the exact model)",
                 lens.name()
             )));
         }

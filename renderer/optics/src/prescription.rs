@@ -29,6 +29,15 @@
 //! | `cylinder` | `"x"` or `"y"`: the surface is curved only along this axis (anamorphic) | — | none |
 //! | `stop` | bool: this surface is the aperture stop (usually a plane in air; a curved or glass surface may be the stop, as in Zemax) | — | false |
 //! | `housing_semi_diameter_mm` | f64: mechanical radius around the stop opening | mm | stop `semi_diameter_mm` |
+//! | `decenter_x_mm`, `decenter_y_mm` | f64: shift of the element that starts at this surface (x right, y up, looking from the camera towards the scene) | mm | 0 |
+//! | `tilt_x_deg`, `tilt_y_deg` | f64 in [−45, 45]: rotation of that element about its front vertex, about the x then the y axis (right-handed: +x tilt turns the element's axis from +z towards −y) | degrees | 0 |
+//!
+//! Misalignment (`decenter_*`, `tilt_*`) belongs on an element's first surface (air before it,
+//! glass after it) and moves every surface of the element, through cemented surfaces, up to the
+//! one followed by air again: the element moves as a rigid body (decentre, then tilt about its
+//! displaced front vertex). A misaligned lens is no longer rotationally symmetric, so it has no
+//! 3-D LRTF table (`auto` renders it exactly); paraxial data (`lens info`, focusing) are those of
+//! the aligned design.
 //!
 //! `[aperture]` table (shape of the stop opening):
 //!
@@ -122,6 +131,25 @@ pub struct SurfaceSpec {
     /// Mechanical housing radius around the stop.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub housing_semi_diameter_mm: Option<f64>,
+    /// Decentre along x of the element starting here.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub decenter_x_mm: f64,
+    /// Decentre along y of the element starting here.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub decenter_y_mm: f64,
+    /// Tilt about x of the element starting here.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub tilt_x_deg: f64,
+    /// Tilt about y of the element starting here.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub tilt_y_deg: f64,
+}
+
+impl SurfaceSpec {
+    /// Whether this surface carries a decentre or tilt.
+    pub fn is_misaligned(&self) -> bool {
+        self.decenter_x_mm != 0.0 || self.decenter_y_mm != 0.0 || self.tilt_x_deg != 0.0 || self.tilt_y_deg != 0.0
+    }
 }
 
 /// Axis along which a cylindrical surface is curved.
@@ -163,7 +191,10 @@ impl Default for MaterialSpec {
 
 impl MaterialSpec {
     fn is_air(&self) -> bool {
-        matches!(self, MaterialSpec::Name(n) if n.eq_ignore_ascii_case("air"))
+        match self {
+            MaterialSpec::Name(n) => n.eq_ignore_ascii_case("air"),
+            MaterialSpec::Model(m) => m.nd == 1.0,
+        }
     }
 }
 
@@ -344,6 +375,57 @@ pub(crate) struct ResolvedSurface {
     pub material_after: Material,
 }
 
+/// Checks the misalignment fields of surface `i`: finite, in range, and on an element's first
+/// surface (air before it, glass after it).
+fn check_misalignment(p: &Prescription, i: usize, map: &SourceMap) -> Result<()> {
+    let s = &p.surfaces[i];
+    for (field, v, limit) in [
+        ("decenter_x_mm", s.decenter_x_mm, s.semi_diameter_mm),
+        ("decenter_y_mm", s.decenter_y_mm, s.semi_diameter_mm),
+        ("tilt_x_deg", s.tilt_x_deg, 45.0),
+        ("tilt_y_deg", s.tilt_y_deg, 45.0),
+    ] {
+        if !v.is_finite() {
+            return Err(map.surface_error(i, field, format!("must be a finite number, got {v}")));
+        }
+        if v.abs() > limit {
+            let unit = if field.ends_with("_deg") { "°" } else { " mm (the surface's semi-diameter)" };
+            return Err(map.surface_error(i, field, format!("{v} is outside ±{limit}{unit}")));
+        }
+    }
+    if !s.is_misaligned() {
+        return Ok(());
+    }
+    let air_before = i == 0 || p.surfaces[i - 1].material.is_air();
+    let field = if s.decenter_x_mm != 0.0 {
+        "decenter_x_mm"
+    } else if s.decenter_y_mm != 0.0 {
+        "decenter_y_mm"
+    } else if s.tilt_x_deg != 0.0 {
+        "tilt_x_deg"
+    } else {
+        "tilt_y_deg"
+    };
+    if s.stop || !air_before || s.material.is_air() {
+        return Err(map.surface_error(
+            i,
+            field,
+            format!(
+                "misalignment belongs on an element's first surface (air before it, glass after it); surface {} is {}",
+                i + 1,
+                if s.stop {
+                    "the stop"
+                } else if !air_before {
+                    "inside an element"
+                } else {
+                    "followed by air"
+                }
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// Checks every field and resolves materials. Geometry checks (intersecting elements) happen
 /// in [`super::lens::Lens::new`], where surface shapes exist.
 pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedSurface>> {
@@ -439,6 +521,7 @@ pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedS
         } else if s.housing_semi_diameter_mm.is_some() {
             return Err(map.surface_error(i, "housing_semi_diameter_mm", "only the stop has a housing radius"));
         }
+        check_misalignment(p, i, map)?;
         let material_after = match &s.material {
             MaterialSpec::Name(n) => {
                 Material::from_catalog(n).map_err(|e| map.surface_error(i, "material", e.to_string()))?
