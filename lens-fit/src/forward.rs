@@ -1,0 +1,280 @@
+//! The forward model: the image of a point source through the lens on the sensor, traced
+//! exactly (scene → film) with a fixed sample pattern, each ray's light integrated over the
+//! pixels its footprint covers.
+//!
+//! | name | type | unit | default |
+//! |---|---|---|---|
+//! | `rays` | rays per wavelength per capture | — | 16 384 |
+//! | `footprint_px` | width of each ray's square footprint on the sensor | px | 1 |
+//! | `aim` | the sampling disc on the entrance-pupil plane: centre and radius | mm | found from the start lens, then fixed |
+//!
+//! Frames: the lens frame of `petzval-optics` (mm, z from the first vertex towards the film,
+//! x right and y up looking from the camera towards the scene). A source at `source_m`
+//! (x right, y up, z forward) is at `(1000 x, 1000 y, z_origin − 1000 z)`, where `z_origin` is
+//! the sensor plane or the entrance pupil. The sensor plane passes through the axis point
+//! `film_z_mm` with the renderer's tilt convention (`R = R_y(−tilt_y) · R_x(tilt_x)`); a
+//! sensor point `(qx, qy)` (sensor frame) is on the upright image at column
+//! `columns / 2 − qx / pitch`, row `rows / 2 + qy / pitch` (the image is inverted on the
+//! sensor, and the camera writes it upright).
+//!
+//! Smoothness: the pattern of pupil points is fixed for a fit, and a ray's footprint is a
+//! small square whose overlap with each pixel is integrated exactly, so the model image is a
+//! continuous function of every parameter (no ray jumps between pixels).
+
+use crate::manifest::{DistancesFrom, SensorSpec};
+use crate::params::CameraParams;
+use glam::{DMat3, DVec2, DVec3};
+use petzval_optics::{Lens, Ray, TraceDirection};
+use rayon::prelude::*;
+
+/// Rays per wavelength of one capture, by default.
+pub const DEFAULT_RAYS: usize = 16_384;
+
+/// Where a capture's source is and how the lens is set, in the lens's terms.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Geometry {
+    /// The source (lens frame, mm).
+    pub source_mm: DVec3,
+    /// Where the sensor plane meets the axis (lens frame z, mm).
+    pub film_z_mm: f64,
+}
+
+impl Geometry {
+    /// Puts the source and the sensor for a capture: the lens focused at `focus_m` (scaled by
+    /// the camera's `focus_scale`; from the sensor or the entrance pupil), the sensor moved by
+    /// `sensor_offset_mm`, the source at `source_m` from the same origin.
+    pub fn new(
+        lens: &Lens,
+        camera: &CameraParams,
+        source_m: [f64; 3],
+        focus_m: f64,
+        from: DistancesFrom,
+    ) -> petzval_optics::Result<Geometry> {
+        let ep_z = lens.paraxial().entrance_pupil_z_mm;
+        let last = lens.last_vertex_z_mm();
+        let focus_mm = focus_m * camera.focus_scale * 1e3;
+        // 1. The focus distance from the entrance pupil (a distance from the sensor includes
+        //    the lens-to-sensor length, which itself depends on the focus: fixed point).
+        let d_ep = match from {
+            DistancesFrom::EntrancePupil => focus_mm,
+            DistancesFrom::Sensor => {
+                let mut d = focus_mm - (last + lens.paraxial().bfl_mm - ep_z);
+                for _ in 0..50 {
+                    let film = last + lens.focus_image_distance_mm(Some(d.max(1e-3)))?;
+                    let next = focus_mm - (film - ep_z);
+                    if (next - d).abs() < 1e-9 {
+                        break;
+                    }
+                    d = next;
+                }
+                d
+            }
+        };
+        // 2. The sensor where the focus setting puts it, displaced by the offset.
+        let film_z_mm = last + lens.focus_image_distance_mm(Some(d_ep))? + camera.sensor_offset_mm;
+        // 3. The source from the same origin (the actual sensor plane, or the entrance pupil).
+        let z_origin = match from {
+            DistancesFrom::Sensor => film_z_mm,
+            DistancesFrom::EntrancePupil => ep_z,
+        };
+        let source_mm = DVec3::new(source_m[0] * 1e3, source_m[1] * 1e3, z_origin - source_m[2] * 1e3);
+        Ok(Geometry { source_mm, film_z_mm })
+    }
+}
+
+/// The disc on the entrance-pupil plane that rays are aimed at (fixed during a fit).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Aim {
+    /// Plane z (lens frame).
+    pub z_mm: f64,
+    /// Disc centre (x, y).
+    pub centre_mm: DVec2,
+    /// Disc radius.
+    pub radius_mm: f64,
+}
+
+impl Aim {
+    /// The smallest disc (with a 25 % margin) holding every ray from the source that passes
+    /// the lens, found on a 64 × 64 grid over the front element.
+    pub fn find(lens: &Lens, source_mm: DVec3, wavelength_nm: f64) -> Option<Aim> {
+        let z = lens.paraxial().entrance_pupil_z_mm;
+        let front = lens.surfaces()[0].semi_diameter_mm;
+        // the front aperture seen from the source, projected onto the pupil plane
+        let s = source_mm;
+        let scale = (z - s.z) / (0.0 - s.z);
+        let reach = front * scale.abs() * 1.5 + front;
+        let centre0 = DVec2::new(s.x, s.y) * (1.0 - scale);
+        let n = 64;
+        let mut passed = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                let u = DVec2::new((i as f64 + 0.5) / n as f64 * 2.0 - 1.0, (j as f64 + 0.5) / n as f64 * 2.0 - 1.0);
+                let p = centre0 + u * reach;
+                let target = DVec3::new(p.x, p.y, z);
+                let ray = Ray::new(s, target - s);
+                if lens.trace(&ray, wavelength_nm, TraceDirection::SceneToFilm).is_some() {
+                    passed.push(p);
+                }
+            }
+        }
+        if passed.is_empty() {
+            return None;
+        }
+        let centre = passed.iter().copied().sum::<DVec2>() / passed.len() as f64;
+        let r = passed.iter().map(|p| (*p - centre).length()).fold(0.0, f64::max);
+        let cell = 2.0 * reach / n as f64;
+        Some(Aim { z_mm: z, centre_mm: centre, radius_mm: (r + cell) * 1.25 })
+    }
+}
+
+/// Points of the fixed pattern on the unit disc (a golden-angle spiral: even density, no
+/// clumps, the same every time).
+pub fn disc_pattern(count: usize) -> Vec<DVec2> {
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    (0..count)
+        .map(|k| {
+            let r = ((k as f64 + 0.5) / count as f64).sqrt();
+            let phi = k as f64 * golden;
+            DVec2::new(r * phi.cos(), r * phi.sin())
+        })
+        .collect()
+}
+
+/// Where a capture's pixels are on the full sensor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Frame {
+    /// The full sensor.
+    pub sensor: SensorSpec,
+    /// Top-left pixel of the image on the full sensor.
+    pub crop_origin_px: [i64; 2],
+    /// Image width in pixels.
+    pub width: usize,
+    /// Image height in pixels.
+    pub height: usize,
+}
+
+/// Where rays land on the image (continuous pixel coordinates, x right, y down, pixel (i, j)
+/// covering [i, i+1] × [j, j+1]) with their light, before any sub-pixel shift.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Landing {
+    /// Pixel position of each ray that reached the sensor.
+    pub positions_px: Vec<DVec2>,
+    /// Its light (solid angle of its pupil cell × stop transmission; the scale is fitted).
+    pub weights: Vec<f64>,
+}
+
+/// Traces the fixed pattern from the source through the lens onto the (tilted) sensor.
+pub fn land(
+    lens: &Lens,
+    camera: &CameraParams,
+    geometry: &Geometry,
+    aim: &Aim,
+    pattern: &[DVec2],
+    wavelength_nm: f64,
+    frame: &Frame,
+) -> Landing {
+    let rotation = DMat3::from_rotation_y(-camera.sensor_tilt_y_deg.to_radians())
+        * DMat3::from_rotation_x(camera.sensor_tilt_x_deg.to_radians());
+    let normal = rotation * DVec3::Z;
+    let pivot = DVec3::new(0.0, 0.0, geometry.film_z_mm);
+    let (pitch_x, pitch_y) = frame.sensor.pitch_mm();
+    let cell_area = std::f64::consts::PI * aim.radius_mm * aim.radius_mm / pattern.len() as f64;
+    let s = geometry.source_mm;
+    let results: Vec<Option<(DVec2, f64)>> = pattern
+        .par_iter()
+        .map(|u| {
+            // 1. A ray from the source to its pupil point; light ∝ the cell's solid angle.
+            let target =
+                DVec3::new(aim.centre_mm.x + u.x * aim.radius_mm, aim.centre_mm.y + u.y * aim.radius_mm, aim.z_mm);
+            let to = target - s;
+            let r2 = to.length_squared();
+            let cos = to.z / r2.sqrt();
+            let ray = Ray::new(s, to);
+            // 2. Through the lens.
+            let out = lens.trace(&ray, wavelength_nm, TraceDirection::SceneToFilm)?;
+            // 3. Onto the sensor plane.
+            let d = out.ray.direction;
+            let denom = d.dot(normal);
+            if !(denom > 1e-12) {
+                return None;
+            }
+            let t = (pivot - out.ray.origin).dot(normal) / denom;
+            let hit = out.ray.origin + d * t;
+            let q = rotation.transpose() * (hit - pivot);
+            // 4. Sensor point → upright image pixel (the image is inverted on the sensor).
+            let col = frame.sensor.pixels[0] as f64 / 2.0 - q.x / pitch_x - frame.crop_origin_px[0] as f64;
+            let row = frame.sensor.pixels[1] as f64 / 2.0 + q.y / pitch_y - frame.crop_origin_px[1] as f64;
+            let w = cell_area * cos / r2 * out.transmission;
+            (col.is_finite() && row.is_finite() && w.is_finite()).then_some((DVec2::new(col, row), w))
+        })
+        .collect();
+    let mut landing = Landing::default();
+    for (p, w) in results.into_iter().flatten() {
+        landing.positions_px.push(p);
+        landing.weights.push(w);
+    }
+    landing
+}
+
+/// The overlap of [x − h, x + h] with each pixel [i, i + 1], divided by 2h: (first pixel, up to
+/// three weights). Continuous in x.
+fn overlaps(x: f64, h: f64) -> (i64, [f64; 3]) {
+    let lo = x - h;
+    let first = lo.floor();
+    let mut w = [0.0; 3];
+    for (k, wk) in w.iter_mut().enumerate() {
+        let a = first + k as f64;
+        let overlap = ((a + 1.0).min(x + h) - a.max(lo)).max(0.0);
+        *wk = overlap / (2.0 * h);
+    }
+    (first as i64, w)
+}
+
+/// The model image (row-major, top row first) of a landing shifted by `shift_px`: each ray's
+/// square footprint of `footprint_px` integrated over the pixels it covers.
+pub fn splat(landing: &Landing, shift_px: DVec2, footprint_px: f64, width: usize, height: usize) -> Vec<f64> {
+    let h = 0.5 * footprint_px.clamp(1e-3, 1.0);
+    let mut img = vec![0.0; width * height];
+    for (p, &w) in landing.positions_px.iter().zip(&landing.weights) {
+        let p = *p + shift_px;
+        let (x0, wx) = overlaps(p.x, h);
+        let (y0, wy) = overlaps(p.y, h);
+        for (j, wyj) in wy.iter().enumerate() {
+            let y = y0 + j as i64;
+            if *wyj == 0.0 || y < 0 || y >= height as i64 {
+                continue;
+            }
+            for (i, wxi) in wx.iter().enumerate() {
+                let x = x0 + i as i64;
+                if *wxi == 0.0 || x < 0 || x >= width as i64 {
+                    continue;
+                }
+                img[y as usize * width + x as usize] += w * wxi * wyj;
+            }
+        }
+    }
+    img
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn overlaps_sum_to_one_and_are_continuous() {
+        for &h in &[0.5, 0.3, 0.05] {
+            let mut prev = overlaps(3.0, h);
+            for k in 1..2000 {
+                let x = 3.0 + k as f64 * 1e-3;
+                let (first, w) = overlaps(x, h);
+                assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+                // continuity: the weight on every pixel changes by at most dx / 2h
+                for px in first.min(prev.0)..=(first.max(prev.0) + 2) {
+                    let get = |(f, w): (i64, [f64; 3])| if px >= f && px < f + 3 { w[(px - f) as usize] } else { 0.0 };
+                    assert!((get((first, w)) - get(prev)).abs() <= 1e-3 / (2.0 * h) + 1e-12);
+                }
+                prev = (first, w);
+            }
+        }
+    }
+}

@@ -1,0 +1,3 @@
+//! Integration tests of lens-fit (one binary; modules per area).
+
+mod manifest;

@@ -1,0 +1,151 @@
+//! The capture manifest and the forward model: errors name the capture and field; a point
+//! source images where and how the lens says.
+
+use glam::DVec2;
+use petzval_fit::forward::{disc_pattern, land, splat, Aim, Frame, Geometry};
+use petzval_fit::manifest::DistancesFrom;
+use petzval_fit::{CameraParams, Manifest, Model, Param, SensorSpec};
+use std::path::Path;
+
+const GOOD: &str = r#"
+[lens]
+start = "double-gauss-50mm"
+
+[sensor]
+width_mm = 36.0
+height_mm = 24.0
+pixels = [6000, 4000]
+
+[[free]]
+param = "surface.3.radius_mm"
+min = 20.5
+max = 22.5
+
+[[free]]
+param = "sensor.tilt_x_deg"
+min = -1.0
+max = 1.0
+
+[[capture]]
+image = "captures/c01.exr"
+transfer = "linear"
+crop_origin_px = [2936, 1936]
+source_m = [0.0, 0.0, 3.0]
+focus_m = 2.0
+distances_from = "sensor"
+f_number = 2.8
+wavelength_nm = 550
+exposure = 1.0
+dark_frame = "captures/dark.exr"
+mask = "captures/c01_mask.png"
+
+[[capture]]
+image = "captures/c02.exr"
+crop_origin_px = [0, 0]
+source_m = [0.5, 0.2, 3.0]
+focus_m = 2.0
+f_number = "open"
+wavelength_nm = "rgb"
+"#;
+
+#[test]
+fn the_issue_example_parses() {
+    let m = Manifest::parse(GOOD, Path::new("/shots/manifest.toml")).unwrap();
+    assert_eq!(m.start_lens, "double-gauss-50mm");
+    assert_eq!(m.free.len(), 2);
+    assert_eq!(m.free[0].param, Param::Surface { index: 3, field: petzval_fit::params::SurfaceField::RadiusMm });
+    assert_eq!(m.captures[0].image, Path::new("/shots/captures/c01.exr"));
+    assert_eq!(m.captures[1].f_number, petzval_fit::manifest::FNumber::Open);
+    assert_eq!(m.captures[1].wavelength, petzval_fit::manifest::Wavelength::Rgb);
+    assert_eq!(m.captures[1].distances_from, DistancesFrom::Sensor);
+    assert_eq!(m.captures[1].exposure, 1.0);
+    let (px, py) = m.sensor.pitch_mm();
+    assert!((px - 0.006).abs() < 1e-12 && (py - 0.006).abs() < 1e-12);
+}
+
+#[test]
+fn bad_manifests_name_the_capture_and_field() {
+    for (from, to, wanted) in [
+        ("f_number = 2.8", "f_number = -2.8", "capture[1] (captures/c01.exr).f_number"),
+        ("f_number = 2.8", "f_number = \"wide\"", "capture[1] (captures/c01.exr).f_number"),
+        ("wavelength_nm = 550", "wavelength_nm = 1550", "capture[1] (captures/c01.exr).wavelength_nm"),
+        ("source_m = [0.0, 0.0, 3.0]", "source_m = [0.0, 0.0, -3.0]", "capture[1] (captures/c01.exr).source_m"),
+        ("focus_m = 2.0\ndistances_from", "focus_m = nan\ndistances_from", "capture[1] (captures/c01.exr).focus_m"),
+        ("pixels = [6000, 4000]", "pixels = [6000, 3000]", "sensor.pixels"),
+        ("param = \"surface.3.radius_mm\"", "param = \"surface.3.radius\"", "free[1].param"),
+        ("param = \"surface.3.radius_mm\"", "param = \"surface.0.radius_mm\"", "free[1].param"),
+        ("min = 20.5\nmax = 22.5", "min = 22.5\nmax = 20.5", "free[1].min"),
+        ("exposure = 1.0", "exposure = 1.0\nexposure_time = 2", "manifest"),
+    ] {
+        assert!(GOOD.contains(from), "{from}");
+        let text = GOOD.replacen(from, to, 1);
+        let err = Manifest::parse(&text, Path::new("m.toml")).unwrap_err().to_string();
+        assert!(err.contains(wanted), "{to}: {err} should name {wanted}");
+        assert!(err.starts_with("m.toml"), "{err} should name the file");
+    }
+}
+
+#[test]
+fn parameters_read_and_write_the_prescription() {
+    let lens = petzval_optics::library_lens("double-gauss-50mm").unwrap();
+    let mut model = Model { prescription: lens.prescription().clone(), camera: CameraParams::default() };
+    for name in ["surface.3.radius_mm", "surface.1.nd", "surface.4.tilt_y_deg", "stop.position_mm", "focus.scale"] {
+        let p: Param = name.parse().unwrap();
+        assert_eq!(p.to_string(), name);
+        let v = model.get(&p).unwrap();
+        model.set(&p, v + 0.01).unwrap();
+        assert!((model.get(&p).unwrap() - (v + 0.01)).abs() < 1e-12, "{name}");
+    }
+    // the stop moves, the lens keeps its length
+    let total: f64 = model.prescription.surfaces.iter().map(|s| s.thickness_mm).sum();
+    let total0: f64 = lens.prescription().surfaces.iter().map(|s| s.thickness_mm).sum();
+    assert!((total - total0).abs() < 1e-9);
+    assert!(model.get(&"surface.99.radius_mm".parse().unwrap()).is_err());
+}
+
+/// The image of a point source: upright (right and up of the centre for a source right of and
+/// above the axis), sharp at the focus distance and blurred away from it, with the light of the
+/// pupil area (f/4 gathers four times f/8's on the axis).
+#[test]
+fn a_point_source_images_where_the_lens_says() {
+    let sensor = SensorSpec { width_mm: 36.0, height_mm: 24.0, pixels: [6000, 4000] };
+    let frame = Frame { sensor, crop_origin_px: [2936, 1936], width: 128, height: 128 };
+    let camera = CameraParams::default();
+    let open = petzval_optics::library_lens("double-gauss-50mm").unwrap();
+    let pattern = disc_pattern(8192);
+    let image = |lens: &petzval_optics::Lens, source: [f64; 3], focus: f64| {
+        let g = Geometry::new(lens, &camera, source, focus, DistancesFrom::Sensor).unwrap();
+        let aim = Aim::find(lens, g.source_mm, 550.0).unwrap();
+        let landing = land(lens, &camera, &g, &aim, &pattern, 550.0, &frame);
+        splat(&landing, DVec2::ZERO, 1.0, frame.width, frame.height)
+    };
+    let stats = |img: &[f64]| {
+        let total: f64 = img.iter().sum();
+        let (mut cx, mut cy) = (0.0, 0.0);
+        for (k, v) in img.iter().enumerate() {
+            cx += v * ((k % 128) as f64 + 0.5);
+            cy += v * ((k / 128) as f64 + 0.5);
+        }
+        let (cx, cy) = (cx / total, cy / total);
+        let mut r2 = 0.0;
+        for (k, v) in img.iter().enumerate() {
+            r2 += v * (((k % 128) as f64 + 0.5 - cx).powi(2) + ((k / 128) as f64 + 0.5 - cy).powi(2));
+        }
+        (total, cx, cy, (r2 / total).sqrt())
+    };
+    let f8 = open.stopped_down(8.0).unwrap();
+    let f4 = open.stopped_down(4.0).unwrap();
+    // on the axis, in focus: the image centre of the full sensor (3000, 2000) is (64, 64) here
+    let (t8, cx, cy, r) = stats(&image(&f8, [0.0, 0.0, 2.0], 2.0));
+    assert!((cx - 64.0).abs() < 0.05 && (cy - 64.0).abs() < 0.05, "centroid ({cx}, {cy})");
+    assert!(r < 1.0, "in focus the spot is under a pixel (rms {r} px)");
+    // out of focus: a disc
+    let (_, _, _, r_blur) = stats(&image(&f8, [0.0, 0.0, 1.0], 2.0));
+    assert!(r_blur > 4.0 * r.max(0.5), "defocused rms {r_blur} px vs focused {r}");
+    // upright: right of and above the axis shows right of and above the centre
+    let (_, cx, cy, _) = stats(&image(&f8, [0.01, 0.006, 2.0], 2.0));
+    assert!(cx > 64.0 + 5.0 && cy < 64.0 - 3.0, "({cx}, {cy})");
+    // twice the aperture diameter, four times the light
+    let (t4, ..) = stats(&image(&f4, [0.0, 0.0, 2.0], 2.0));
+    assert!((t4 / t8 / 4.0 - 1.0).abs() < 0.03, "f/4 over f/8 light: {}", t4 / t8);
+}
