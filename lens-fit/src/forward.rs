@@ -5,7 +5,7 @@
 //! | name | type | unit | default |
 //! |---|---|---|---|
 //! | `rays` | rays per wavelength per capture | — | 16 384 |
-//! | `footprint_px` | width of each ray's square footprint on the sensor | px | 1 |
+//! | `footprint_px` | width of each ray's square footprint on the sensor; 0 = from the ray density ([`auto_footprint_px`]) | px | 0 |
 //! | `aim` | the sampling disc on the entrance-pupil plane: centre and radius | mm | found from the start lens, then fixed |
 //!
 //! Frames: the lens frame of `petzval-optics` (mm, z from the first vertex towards the film,
@@ -216,12 +216,28 @@ pub fn land(
     landing
 }
 
+/// A footprint of one and a half ray spacings: `1.5 √(A / N)` for N rays spread over the area A of
+/// a disc of twice their rms radius, within [0.25, 2] px (a sharp spot keeps its detail, a
+/// wide defocus disc is covered without gaps). It varies smoothly with the landing.
+pub fn auto_footprint_px(landing: &Landing) -> f64 {
+    let w: f64 = landing.weights.iter().sum();
+    if !(w > 0.0) || landing.positions_px.len() < 2 {
+        return 1.0;
+    }
+    let c = landing.positions_px.iter().zip(&landing.weights).fold(DVec2::ZERO, |a, (p, wt)| a + *p * *wt) / w;
+    let r2 =
+        landing.positions_px.iter().zip(&landing.weights).map(|(p, wt)| (*p - c).length_squared() * wt).sum::<f64>()
+            / w;
+    let area = std::f64::consts::PI * 4.0 * r2;
+    (1.5 * (area / landing.positions_px.len() as f64).sqrt()).clamp(0.25, 2.0)
+}
+
 /// The overlap of [x − h, x + h] with each pixel [i, i + 1], divided by 2h: (first pixel, up to
-/// three weights). Continuous in x.
-fn overlaps(x: f64, h: f64) -> (i64, [f64; 3]) {
+/// five weights, h ≤ 1). Continuous in x.
+fn overlaps(x: f64, h: f64) -> (i64, [f64; 5]) {
     let lo = x - h;
     let first = lo.floor();
-    let mut w = [0.0; 3];
+    let mut w = [0.0; 5];
     for (k, wk) in w.iter_mut().enumerate() {
         let a = first + k as f64;
         let overlap = ((a + 1.0).min(x + h) - a.max(lo)).max(0.0);
@@ -231,9 +247,11 @@ fn overlaps(x: f64, h: f64) -> (i64, [f64; 3]) {
 }
 
 /// The model image (row-major, top row first) of a landing shifted by `shift_px`: each ray's
-/// square footprint of `footprint_px` integrated over the pixels it covers.
+/// square footprint of `footprint_px` (0: [`auto_footprint_px`]) integrated over the pixels it
+/// covers.
 pub fn splat(landing: &Landing, shift_px: DVec2, footprint_px: f64, width: usize, height: usize) -> Vec<f64> {
-    let h = 0.5 * footprint_px.clamp(1e-3, 1.0);
+    let footprint = if footprint_px > 0.0 { footprint_px } else { auto_footprint_px(landing) };
+    let h = 0.5 * footprint.clamp(1e-3, 2.0);
     let mut img = vec![0.0; width * height];
     for (p, &w) in landing.positions_px.iter().zip(&landing.weights) {
         let p = *p + shift_px;
@@ -262,15 +280,15 @@ mod tests {
 
     #[test]
     fn overlaps_sum_to_one_and_are_continuous() {
-        for &h in &[0.5, 0.3, 0.05] {
+        for &h in &[1.0, 0.5, 0.3, 0.05] {
             let mut prev = overlaps(3.0, h);
             for k in 1..2000 {
                 let x = 3.0 + k as f64 * 1e-3;
                 let (first, w) = overlaps(x, h);
                 assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
                 // continuity: the weight on every pixel changes by at most dx / 2h
-                for px in first.min(prev.0)..=(first.max(prev.0) + 2) {
-                    let get = |(f, w): (i64, [f64; 3])| if px >= f && px < f + 3 { w[(px - f) as usize] } else { 0.0 };
+                for px in first.min(prev.0)..=(first.max(prev.0) + 4) {
+                    let get = |(f, w): (i64, [f64; 5])| if px >= f && px < f + 5 { w[(px - f) as usize] } else { 0.0 };
                     assert!((get((first, w)) - get(prev)).abs() <= 1e-3 / (2.0 * h) + 1e-12);
                 }
                 prev = (first, w);

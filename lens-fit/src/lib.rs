@@ -5,17 +5,23 @@
 //! trace through [`petzval_optics::Lens`]) → fit → lens file. The crate depends on
 //! `petzval-optics` only: it knows no scene, camera or renderer.
 //!
-//! Status: the manifest, the parameter names and the forward model are here; the optimiser
-//! and the report are not yet (`petzval-fit MANIFEST --check` validates a manifest).
+//! Stages: [`manifest`] (parse, validate) → [`captures`] (load, mask) → [`forward`] (exact
+//! trace of a fixed pupil pattern onto the sensor) → [`fit`] (the residuals) → [`solve`]
+//! (NLopt CRS2, BOBYQA, Levenberg–Marquardt, uncertainties) → [`report`] (lens file, fit.json,
+//! images). Not built yet: the LRTF correction mode.
 
 // `!(x > 0.0)` is our NaN-rejecting validation: unlike `x <= 0.0` it is also true for NaN, which
 // is exactly what every such check wants (a NaN setting or sample must be refused).
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod captures;
 mod error;
+pub mod fit;
 pub mod forward;
 pub mod manifest;
 pub mod params;
+pub mod report;
+pub mod solve;
 
 pub use error::{Error, Result};
 pub use manifest::{Capture, FreeParam, Manifest, SensorSpec};

@@ -1,7 +1,14 @@
 //! `petzval-fit`: fit a lens to photographs of point light sources (see `docs/lens-fit.md`).
+//!
+//! ```text
+//! petzval-fit MANIFEST -o FITTED.toml [--lrtf FITTED.lrtf] --report DIR [--time-limit S]
+//! petzval-fit MANIFEST --evaluate DIR --report DIR2
+//! petzval-fit MANIFEST --check
+//! ```
 
 use clap::Parser;
-use petzval_fit::{Manifest, Model};
+use petzval_fit::fit::{FitOptions, Problem};
+use petzval_fit::{report, solve, Error, Manifest};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -11,6 +18,25 @@ use std::process::ExitCode;
 struct Args {
     /// The capture manifest (TOML).
     manifest: PathBuf,
+    /// The fitted lens (our TOML lens format).
+    #[arg(short = 'o', long = "output")]
+    output: Option<PathBuf>,
+    /// Also bake the fitted lens's LRTF table (film → scene) to this file.
+    #[arg(long)]
+    lrtf: Option<PathBuf>,
+    /// The report folder (fit.json, a PNG per capture, convergence.svg).
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// Wall-clock budget of the fit in seconds.
+    #[arg(long, default_value_t = 60.0)]
+    time_limit: f64,
+    /// Rays per wavelength per capture.
+    #[arg(long, default_value_t = petzval_fit::forward::DEFAULT_RAYS)]
+    rays: usize,
+    /// Fit nothing but each capture's position, scale and background, through the lens and
+    /// camera of an earlier fit's report folder.
+    #[arg(long)]
+    evaluate: Option<PathBuf>,
     /// Only validate the manifest against its lens and print what would be fitted.
     #[arg(long)]
     check: bool,
@@ -29,23 +55,122 @@ fn main() -> ExitCode {
 
 fn run(args: &Args) -> petzval_fit::Result<()> {
     let manifest = Manifest::load(&args.manifest)?;
-    let lens = petzval_optics::load_lens(&manifest.start_lens)?;
-    let model = Model { prescription: lens.prescription().clone(), camera: Default::default() };
     let file = manifest.file.display().to_string();
-    println!("start lens: {} ({} surfaces)", lens.name(), lens.surfaces().len());
-    for (i, f) in manifest.free.iter().enumerate() {
-        let v = model
-            .get(&f.param)
-            .map_err(|m| petzval_fit::Error::manifest(&file, format!("free[{}].param", i + 1), m))?;
-        println!("free {:<28} start {:>12.6} in [{}, {}]", f.name, f.start.unwrap_or(v), f.min, f.max);
+    let usage = |m: &str| Error::manifest(&file, "(command line)", m);
+    if !(args.time_limit.is_finite() && args.time_limit > 0.0 && args.time_limit <= 86_400.0) {
+        return Err(usage("--time-limit must be a number of seconds in (0, 86400]"));
     }
-    println!("{} captures", manifest.captures.len());
-    if !args.check {
-        return Err(petzval_fit::Error::manifest(
-            &file,
-            "(command)",
-            "fitting is not implemented yet: only --check (manifest validation) works in this version",
-        ));
+    if !(64..=1 << 22).contains(&args.rays) {
+        return Err(usage("--rays must be in 64..=4194304"));
+    }
+    let mut options = FitOptions { time_limit_s: args.time_limit, rays: args.rays, ..Default::default() };
+    let mut manifest = manifest;
+    if let Some(earlier) = &args.evaluate {
+        // The earlier fit's values become the start, and nothing but the nuisance is fitted.
+        let path = earlier.join("fit.json");
+        let text = std::fs::read_to_string(&path).map_err(|e| Error::Io { path: path.clone(), source: e })?;
+        let v: serde_json::Value = serde_json::from_str(&text)
+            .map_err(|e| Error::manifest(path.display().to_string(), "fit.json", e.to_string()))?;
+        for (i, f) in manifest.free.iter_mut().enumerate() {
+            let value = v["params"][&f.name]["value"].as_f64().ok_or_else(|| {
+                Error::manifest(
+                    &file,
+                    format!("free[{}].param", i + 1),
+                    format!("'{}' is not in {}", f.name, path.display()),
+                )
+            })?;
+            f.start = Some(value.clamp(f.min, f.max));
+        }
+        options.global_share = 0.0;
+    }
+    let problem = Problem::new(&manifest, &options)?;
+    println!(
+        "{}: {} captures, {} free parameters, start lens {}",
+        file,
+        problem.captures.len(),
+        problem.free.len(),
+        problem.source_label
+    );
+    for (c, p) in problem.captures.iter().enumerate() {
+        if p.image.clipped + p.image.hot > 0 {
+            println!(
+                "capture {} ({}): {} clipped and {} hot pixels masked",
+                c + 1,
+                p.capture.image.display(),
+                p.image.clipped,
+                p.image.hot
+            );
+        }
+    }
+    if args.check {
+        for f in &problem.free {
+            println!(
+                "free {:<28} start {:>12.6} in [{}, {}]",
+                f.name,
+                problem.start.get(&f.param).unwrap_or(f64::NAN),
+                f.min,
+                f.max
+            );
+        }
+        return Ok(());
+    }
+    let (report_dir, evaluate) = match (&args.report, &args.evaluate) {
+        (Some(r), e) => (r.clone(), e.is_some()),
+        (None, _) => return Err(usage("--report DIR is required (where fit.json and the images go)")),
+    };
+    if !evaluate && args.output.is_none() {
+        return Err(usage("-o FITTED.toml is required (the fitted lens)"));
+    }
+    let fit_problem = if evaluate {
+        let mut p = problem.clone();
+        p.start = p
+            .model_at(&manifest.free.iter().map(|f| f.start.unwrap_or(f.min)).collect::<Vec<_>>())
+            .map_err(|m| usage(&m))?;
+        p.free.clear();
+        p
+    } else {
+        problem.clone()
+    };
+    let result = solve::run(&fit_problem, &options);
+    let values: Vec<f64> = result.params.iter().map(|p| p.value).collect();
+    let model = fit_problem.model_at(&values).map_err(|m| usage(&m))?;
+    let mut result = result;
+    if evaluate {
+        // report the earlier fit's parameters as they were
+        result.params = manifest
+            .free
+            .iter()
+            .map(|f| solve::ParamResult {
+                name: f.name.clone(),
+                value: f.start.unwrap_or(f.min),
+                sigma: None,
+                start: f.start.unwrap_or(f.min),
+            })
+            .collect();
+    }
+    report::write_report(&report_dir, &fit_problem, &result, &model)?;
+    for p in &result.params {
+        match p.sigma {
+            Some(s) => println!("{:<28} {:>14.6} ± {:.2e}   (start {:.6})", p.name, p.value, s, p.start),
+            None => {
+                println!("{:<28} {:>14.6}   not determined by these captures (start {:.6})", p.name, p.value, p.start)
+            }
+        }
+    }
+    for (c, r) in result.residuals.iter().enumerate() {
+        println!("capture {:>2}: residual {:.4}", c + 1, r);
+    }
+    println!("{:.1} s; report in {}", result.seconds, report_dir.display());
+    if let Some(out) = &args.output {
+        report::write_lens(out, &model, &file)?;
+        println!("wrote {}", out.display());
+        if let Some(lrtf) = &args.lrtf {
+            let lens = fit_problem.build_lens(&model)?;
+            let options = petzval_optics::lrtf::BakeOptions::default();
+            let table = petzval_optics::lrtf::LrtfTable::bake(&lens, &options, &|_| {})?;
+            table.save(lrtf)?;
+            println!("wrote {}", lrtf.display());
+        }
     }
     Ok(())
 }

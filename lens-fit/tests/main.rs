@@ -1,3 +1,4 @@
 //! Integration tests of lens-fit (one binary; modules per area).
 
 mod manifest;
+mod recovery;

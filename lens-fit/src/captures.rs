@@ -1,0 +1,239 @@
+//! Capture images as the fit sees them: linear, dark frame subtracted, one plane per channel
+//! (one for a single wavelength, three for `rgb`), with a mask of the pixels that count.
+//!
+//! | step | what |
+//! |---|---|
+//! | read | EXR (`R`,`G`,`B` or `Y` channels, first layer), 16-bit PNG or TIFF (values 0…65535), 8-bit PNG (0…255) |
+//! | clip | pixels at or above `saturation` in any channel are masked (default: the integer format's maximum; none for EXR) |
+//! | decode | `transfer = "srgb"`: the sRGB curve is undone on value / maximum |
+//! | dark | the dark frame (same size) is subtracted |
+//! | hot pixels | a pixel over 8 noise σ above the largest of its 8 neighbours, which are themselves near the background, is masked |
+//! | mask | the manifest's mask (same size): zero = masked |
+//! | mono | a single-wavelength capture of an RGB file uses the channels' mean |
+
+use crate::error::{Error, Result};
+use crate::manifest::{Capture, Transfer, Wavelength};
+use std::path::Path;
+
+/// A loaded capture image.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CaptureImage {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// One plane per channel (row-major, top row first), linear.
+    pub channels: Vec<Vec<f64>>,
+    /// Pixels that count.
+    pub mask: Vec<bool>,
+    /// Pixels masked as clipped.
+    pub clipped: usize,
+    /// Pixels masked as hot.
+    pub hot: usize,
+}
+
+/// Raw planes of an image file with the format's clipping level.
+struct Raw {
+    width: usize,
+    height: usize,
+    planes: Vec<Vec<f64>>,
+    max_value: Option<f64>,
+}
+
+fn image_err(path: &Path, message: impl Into<String>) -> Error {
+    Error::Image { path: path.to_path_buf(), message: message.into() }
+}
+
+fn read_raw(path: &Path) -> Result<Raw> {
+    if !path.exists() {
+        return Err(image_err(path, "no such file"));
+    }
+    let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    if ext == "exr" {
+        let img = exr::prelude::read_first_flat_layer_from_file(path).map_err(|e| image_err(path, e.to_string()))?;
+        let layer = img.layer_data;
+        let (width, height) = (layer.size.width(), layer.size.height());
+        let find = |name: &str| {
+            layer
+                .channel_data
+                .list
+                .iter()
+                .find(|c| c.name.to_string().eq_ignore_ascii_case(name))
+                .map(|c| c.sample_data.values_as_f32().map(|v| v as f64).collect::<Vec<f64>>())
+        };
+        let planes = match (find("R"), find("G"), find("B"), find("Y")) {
+            (Some(r), Some(g), Some(b), _) => vec![r, g, b],
+            (_, _, _, Some(y)) => vec![y],
+            _ => return Err(image_err(path, "has neither R, G, B nor Y channels")),
+        };
+        return Ok(Raw { width, height, planes, max_value: None });
+    }
+    let img = image::open(path).map_err(|e| image_err(path, e.to_string()))?;
+    let (width, height) = (img.width() as usize, img.height() as usize);
+    let (planes, max_value) = match img {
+        image::DynamicImage::ImageLuma8(b) => (vec![b.pixels().map(|p| p.0[0] as f64).collect()], 255.0),
+        image::DynamicImage::ImageLuma16(b) => (vec![b.pixels().map(|p| p.0[0] as f64).collect()], 65535.0),
+        image::DynamicImage::ImageRgb8(b) => {
+            ((0..3).map(|c| b.pixels().map(|p| p.0[c] as f64).collect()).collect(), 255.0)
+        }
+        image::DynamicImage::ImageRgb16(b) => {
+            ((0..3).map(|c| b.pixels().map(|p| p.0[c] as f64).collect()).collect(), 65535.0)
+        }
+        other => {
+            let b = other.to_rgb16();
+            ((0..3).map(|c| b.pixels().map(|p| p.0[c] as f64).collect()).collect(), 65535.0)
+        }
+    };
+    Ok(Raw { width, height, planes, max_value: Some(max_value) })
+}
+
+fn srgb_to_linear(v: f64) -> f64 {
+    if v <= 0.04045 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// Loads a capture's image, dark frame and mask (see the module's table).
+pub fn load(capture: &Capture) -> Result<CaptureImage> {
+    let path = &capture.image;
+    let raw = read_raw(path)?;
+    let (width, height) = (raw.width, raw.height);
+    let n = width * height;
+    if n == 0 {
+        return Err(image_err(path, "is empty"));
+    }
+    // 1. Clipped pixels (before any decoding), in any channel.
+    let saturation = capture.saturation.or(raw.max_value);
+    let mut mask = vec![true; n];
+    let mut clipped = 0;
+    if let Some(s) = saturation {
+        for (k, m) in mask.iter_mut().enumerate() {
+            if raw.planes.iter().any(|p| p[k] >= s) {
+                *m = false;
+                clipped += 1;
+            }
+        }
+    }
+    // 2. Linear values.
+    let mut planes = raw.planes;
+    if capture.transfer == Transfer::Srgb {
+        let max = raw.max_value.unwrap_or(1.0);
+        for p in &mut planes {
+            for v in p.iter_mut() {
+                *v = srgb_to_linear(*v / max) * max;
+            }
+        }
+    }
+    // 3. Dark frame.
+    if let Some(dark_path) = &capture.dark_frame {
+        let dark = read_raw(dark_path)?;
+        if (dark.width, dark.height) != (width, height) {
+            return Err(image_err(
+                dark_path,
+                format!("dark frame is {}×{}, the capture {}×{}", dark.width, dark.height, width, height),
+            ));
+        }
+        for (c, p) in planes.iter_mut().enumerate() {
+            let d = &dark.planes[c.min(dark.planes.len() - 1)];
+            for (v, dv) in p.iter_mut().zip(d) {
+                *v -= dv;
+            }
+        }
+    }
+    // 4. The manifest's mask.
+    if let Some(mask_path) = &capture.mask {
+        let m = read_raw(mask_path)?;
+        if (m.width, m.height) != (width, height) {
+            return Err(image_err(
+                mask_path,
+                format!("mask is {}×{}, the capture {}×{}", m.width, m.height, width, height),
+            ));
+        }
+        for (k, v) in mask.iter_mut().enumerate() {
+            *v &= m.planes.iter().any(|p| p[k] != 0.0);
+        }
+    }
+    // 5. Channels the fit uses.
+    let channels = match (capture.wavelength, planes.len()) {
+        (Wavelength::Rgb, 3) => planes,
+        (Wavelength::Rgb, _) => {
+            return Err(image_err(
+                path,
+                "wavelength_nm = \"rgb\" needs a colour image (R, G, B), this one has one channel",
+            ))
+        }
+        (Wavelength::Mono(_), 1) => planes,
+        (Wavelength::Mono(_), _) => {
+            vec![(0..n).map(|k| planes.iter().map(|p| p[k]).sum::<f64>() / planes.len() as f64).collect()]
+        }
+    };
+    for (c, p) in channels.iter().enumerate() {
+        if let Some(k) = p.iter().position(|v| !v.is_finite()) {
+            return Err(image_err(path, format!("pixel ({}, {}) of channel {c} is not finite", k % width, k / width)));
+        }
+    }
+    // 6. Hot pixels.
+    let hot = reject_hot_pixels(&channels, width, height, &mut mask);
+    Ok(CaptureImage { width, height, channels, mask, clipped, hot })
+}
+
+/// Masks isolated hot pixels: far above all 8 neighbours while those are at the background,
+/// away from the source's image (the brightest 3×3 patch and 3 px around it are kept, since a
+/// sharply focused point may fill one pixel). Returns how many were masked.
+fn reject_hot_pixels(channels: &[Vec<f64>], width: usize, height: usize, mask: &mut [bool]) -> usize {
+    let mut count = 0;
+    // where the source is: the brightest 3×3 sum over all channels
+    let mut core = (0usize, 0usize);
+    let mut best = f64::NEG_INFINITY;
+    for y in 1..height.saturating_sub(1) {
+        for x in 1..width.saturating_sub(1) {
+            let mut sum = 0.0;
+            for p in channels {
+                for yy in y - 1..=y + 1 {
+                    for xx in x - 1..=x + 1 {
+                        sum += p[yy * width + xx];
+                    }
+                }
+            }
+            if sum > best {
+                best = sum;
+                core = (x, y);
+            }
+        }
+    }
+    let near_core = |x: usize, y: usize| x.abs_diff(core.0) <= 4 && y.abs_diff(core.1) <= 4;
+    for p in channels {
+        // background level and noise from the image's lower half of values
+        let mut sorted: Vec<f64> = p.clone();
+        sorted.sort_by(|a, b| a.total_cmp(b));
+        let median = sorted[sorted.len() / 2];
+        let mad = {
+            let mut dev: Vec<f64> = sorted.iter().map(|v| (v - median).abs()).collect();
+            dev.sort_by(|a, b| a.total_cmp(b));
+            dev[dev.len() / 2] * 1.4826
+        };
+        let sigma = mad.max(1e-12 * median.abs()).max(f64::MIN_POSITIVE);
+        for y in 1..height.saturating_sub(1) {
+            for x in 1..width.saturating_sub(1) {
+                let k = y * width + x;
+                let v = p[k];
+                let mut neighbour_max = f64::NEG_INFINITY;
+                for (dx, dy) in [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)] {
+                    let kk = (y as i64 + dy) as usize * width + (x as i64 + dx) as usize;
+                    neighbour_max = neighbour_max.max(p[kk]);
+                }
+                if v - neighbour_max > 8.0 * sigma
+                    && neighbour_max - median < 5.0 * sigma
+                    && mask[k]
+                    && !near_core(x, y)
+                {
+                    mask[k] = false;
+                    count += 1;
+                }
+            }
+        }
+    }
+    count
+}

@@ -1,0 +1,398 @@
+//! The fit: the free parameters (scaled to [0, 1] within their bounds) and each capture's
+//! sub-pixel position, found by a global NLopt stage (CRS2), a local one (BOBYQA) and a
+//! Levenberg–Marquardt refinement of the residual vector; each capture's intensity scale and
+//! background are solved in closed form at every evaluation (linear least squares).
+//!
+//! | name | type | unit | default |
+//! |---|---|---|---|
+//! | `time_limit_s` | f64: the whole fit | s | 60 |
+//! | `rays` | rays per wavelength per capture | — | 16 384 |
+//! | `footprint_px` | ray footprint on the sensor (0: from the ray density) | px | 0 |
+//! | `global_share` | share of the time for the global stage (0 skips it) | — | 0.35 |
+//!
+//! Residuals: for every unmasked pixel k of capture c and channel, `(d_k − a·m_k − b) / ‖d − b‖`
+//! with the capture's fitted scale a and background b, so each capture weighs the same. During
+//! the global and local stages each capture's shift is the one that puts the model's centroid
+//! on the measured one; Levenberg–Marquardt then fits the shifts with the parameters.
+
+use crate::captures::{self, CaptureImage};
+use crate::error::{Error, Result};
+use crate::forward::{disc_pattern, land, splat, Aim, Frame, Geometry, Landing};
+use crate::manifest::{Capture, FNumber, FreeParam, Manifest, Wavelength};
+use crate::params::Model;
+use glam::DVec2;
+use petzval_optics::prescription::SourceMap;
+use petzval_optics::Lens;
+use std::time::Instant;
+
+/// Fit settings (see the module's table).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FitOptions {
+    /// Wall-clock budget of the whole fit.
+    pub time_limit_s: f64,
+    /// Rays per wavelength per capture.
+    pub rays: usize,
+    /// Ray footprint on the sensor.
+    pub footprint_px: f64,
+    /// Share of the time for the global stage.
+    pub global_share: f64,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        FitOptions { time_limit_s: 60.0, rays: crate::forward::DEFAULT_RAYS, footprint_px: 0.0, global_share: 0.35 }
+    }
+}
+
+/// One capture ready to fit.
+#[derive(Debug, Clone)]
+pub struct Prepared {
+    /// From the manifest.
+    pub capture: Capture,
+    /// The image.
+    pub image: CaptureImage,
+    /// Where it sits on the sensor.
+    pub frame: Frame,
+    /// Wavelength of each channel.
+    pub wavelengths_nm: Vec<f64>,
+    /// Sampling disc of each channel (fixed for the fit).
+    pub aims: Vec<Aim>,
+    /// ‖d − median‖ over the mask, per channel (the residual's normaliser).
+    pub norms: Vec<f64>,
+    /// Measured centroid (pixels).
+    pub centroid_px: DVec2,
+}
+
+/// The fitting problem: the captures, the start model and the free parameters.
+#[derive(Debug, Clone)]
+pub struct Problem {
+    /// The manifest's name (for messages).
+    pub file: String,
+    /// The start model.
+    pub start: Model,
+    /// Where the start lens came from (for rebuilding).
+    pub source_label: String,
+    /// Free parameters.
+    pub free: Vec<FreeParam>,
+    /// Captures.
+    pub captures: Vec<Prepared>,
+    /// The fixed pupil pattern.
+    pub pattern: Vec<DVec2>,
+    /// Ray footprint.
+    pub footprint_px: f64,
+}
+
+/// What one evaluation gives for one capture.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CaptureFit {
+    /// Model images per channel, with the fitted scale and background applied.
+    pub model: Vec<Vec<f64>>,
+    /// Fitted scale per channel.
+    pub scale: Vec<f64>,
+    /// Fitted background per channel.
+    pub background: Vec<f64>,
+    /// ‖d − model‖ / ‖d − background‖ over the unmasked pixels (all channels).
+    pub residual: f64,
+}
+
+/// Model parameters from the scaled vector (values in [0, 1] → bounds; integers rounded).
+pub fn unscale(free: &[FreeParam], x: &[f64]) -> Vec<f64> {
+    free.iter()
+        .zip(x)
+        .map(|(f, u)| {
+            let v = f.min + u.clamp(0.0, 1.0) * (f.max - f.min);
+            if f.param.is_integer() {
+                v.round()
+            } else {
+                v
+            }
+        })
+        .collect()
+}
+
+impl Problem {
+    /// Loads every capture of a manifest and prepares the fit from its start lens.
+    pub fn new(manifest: &Manifest, options: &FitOptions) -> Result<Problem> {
+        let file = manifest.file.display().to_string();
+        let lens = petzval_optics::load_lens(&manifest.start_lens)?;
+        let mut start = Model { prescription: lens.prescription().clone(), camera: Default::default() };
+        for (i, f) in manifest.free.iter().enumerate() {
+            let field = format!("free[{}].param", i + 1);
+            let v = start.get(&f.param).map_err(|m| Error::manifest(&file, &field, m))?;
+            let v = f.start.unwrap_or(v);
+            start.set(&f.param, v).map_err(|m| Error::manifest(&file, &field, m))?;
+        }
+        let mut problem = Problem {
+            file: file.clone(),
+            start,
+            source_label: lens.source_label().to_string(),
+            free: manifest.free.clone(),
+            captures: Vec::new(),
+            pattern: disc_pattern(options.rays),
+            footprint_px: options.footprint_px,
+        };
+        let start_lens = problem.build_lens(&problem.start)?;
+        for (i, c) in manifest.captures.iter().enumerate() {
+            let field = |k: &str| format!("capture[{}] ({}).{k}", i + 1, c.image.display());
+            let image = captures::load(c)?;
+            let (w, h) = (image.width as i64, image.height as i64);
+            let [ox, oy] = c.crop_origin_px;
+            let [sw, sh] = manifest.sensor.pixels.map(|p| p as i64);
+            if ox < 0 || oy < 0 || ox + w > sw || oy + h > sh {
+                return Err(Error::manifest(
+                    &file,
+                    field("crop_origin_px"),
+                    format!("a {w}×{h} image at ({ox}, {oy}) does not fit on the {sw}×{sh} sensor"),
+                ));
+            }
+            let frame = Frame {
+                sensor: manifest.sensor,
+                crop_origin_px: c.crop_origin_px,
+                width: image.width,
+                height: image.height,
+            };
+            let wavelengths_nm = match c.wavelength {
+                Wavelength::Mono(w) => vec![w],
+                Wavelength::Rgb => rgb_wavelengths(&start_lens),
+            };
+            let lens =
+                capture_lens(&start_lens, c).map_err(|e| Error::manifest(&file, field("f_number"), e.to_string()))?;
+            let g = Geometry::new(&lens, &problem.start.camera, c.source_m, c.focus_m, c.distances_from)
+                .map_err(|e| Error::manifest(&file, field("focus_m"), e.to_string()))?;
+            let mut aims = Vec::new();
+            for &wl in &wavelengths_nm {
+                let aim = Aim::find(&lens, g.source_mm, wl).ok_or_else(|| {
+                    Error::manifest(
+                        &file,
+                        field("source_m"),
+                        format!(
+                            "no light from {:?} m passes '{}': the source is outside the lens's field",
+                            c.source_m,
+                            lens.name()
+                        ),
+                    )
+                })?;
+                aims.push(aim);
+            }
+            let norms = image
+                .channels
+                .iter()
+                .map(|p| {
+                    let mut v: Vec<f64> = p.iter().zip(&image.mask).filter(|(_, m)| **m).map(|(v, _)| *v).collect();
+                    v.sort_by(|a, b| a.total_cmp(b));
+                    let median = v.get(v.len() / 2).copied().unwrap_or(0.0);
+                    v.iter().map(|x| (x - median).powi(2)).sum::<f64>().sqrt()
+                })
+                .collect::<Vec<f64>>();
+            if norms.iter().any(|n| !(*n > 0.0)) || image.mask.iter().all(|m| !m) {
+                return Err(Error::manifest(&file, field("image"), "the image has no signal in its unmasked pixels"));
+            }
+            let centroid_px = centroid(&image.channels, &image.mask, image.width);
+            problem.captures.push(Prepared {
+                capture: c.clone(),
+                image,
+                frame,
+                wavelengths_nm,
+                aims,
+                norms,
+                centroid_px,
+            });
+        }
+        Ok(problem)
+    }
+
+    /// The model at parameter values `values` (in the free parameters' order).
+    pub fn model_at(&self, values: &[f64]) -> std::result::Result<Model, String> {
+        let mut m = self.start.clone();
+        for (f, v) in self.free.iter().zip(values) {
+            m.set(&f.param, *v)?;
+        }
+        Ok(m)
+    }
+
+    /// Builds the lens of a model.
+    pub fn build_lens(&self, model: &Model) -> petzval_optics::Result<Lens> {
+        Lens::new(model.prescription.clone(), &SourceMap::new(self.source_label.clone(), vec![]), None)
+    }
+
+    /// Where each capture's rays land (per channel) for a model; `None` where the lens cannot
+    /// be built or set as the capture asks.
+    pub fn landings(&self, model: &Model) -> Option<Vec<Vec<Landing>>> {
+        let lens = self.build_lens(model).ok()?;
+        self.captures
+            .iter()
+            .map(|p| {
+                let lens = capture_lens(&lens, &p.capture).ok()?;
+                let g = Geometry::new(
+                    &lens,
+                    &model.camera,
+                    p.capture.source_m,
+                    p.capture.focus_m,
+                    p.capture.distances_from,
+                )
+                .ok()?;
+                Some(
+                    p.wavelengths_nm
+                        .iter()
+                        .zip(&p.aims)
+                        .map(|(wl, aim)| land(&lens, &model.camera, &g, aim, &self.pattern, *wl, &p.frame))
+                        .collect(),
+                )
+            })
+            .collect()
+    }
+
+    /// The centroid-matching shift of each capture (model centroid onto the measured one).
+    pub fn centroid_shifts(&self, landings: &[Vec<Landing>]) -> Vec<DVec2> {
+        landings
+            .iter()
+            .zip(&self.captures)
+            .map(|(l, p)| {
+                let (mut s, mut w) = (DVec2::ZERO, 0.0);
+                for ch in l {
+                    for (q, wt) in ch.positions_px.iter().zip(&ch.weights) {
+                        s += *q * *wt;
+                        w += wt;
+                    }
+                }
+                if w > 0.0 {
+                    p.centroid_px - s / w
+                } else {
+                    DVec2::ZERO
+                }
+            })
+            .collect()
+    }
+
+    /// One capture's model, fitted scale and background, and residual.
+    pub fn fit_capture(&self, index: usize, landing: &[Landing], shift: DVec2) -> CaptureFit {
+        let p = &self.captures[index];
+        let (w, h) = (p.image.width, p.image.height);
+        let mut out = CaptureFit { model: Vec::new(), scale: Vec::new(), background: Vec::new(), residual: 0.0 };
+        let (mut num, mut den) = (0.0, 0.0);
+        for (c, l) in landing.iter().enumerate() {
+            let m = splat(l, shift, self.footprint_px, w, h);
+            let d = &p.image.channels[c];
+            // d ≈ a·m + b over the mask: 2×2 normal equations
+            let (mut n, mut sm, mut sd, mut smm, mut smd) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            for k in 0..w * h {
+                if p.image.mask[k] {
+                    n += 1.0;
+                    sm += m[k];
+                    sd += d[k];
+                    smm += m[k] * m[k];
+                    smd += m[k] * d[k];
+                }
+            }
+            let det = n * smm - sm * sm;
+            let (a, b) = if det.abs() > 1e-300 {
+                ((n * smd - sm * sd) / det, (smm * sd - sm * smd) / det)
+            } else {
+                (0.0, sd / n)
+            };
+            let model: Vec<f64> = m.iter().map(|v| a * v + b).collect();
+            for k in 0..w * h {
+                if p.image.mask[k] {
+                    num += (d[k] - model[k]).powi(2);
+                    den += (d[k] - b).powi(2);
+                }
+            }
+            out.model.push(model);
+            out.scale.push(a);
+            out.background.push(b);
+        }
+        out.residual = if den > 0.0 { (num / den).sqrt() } else { f64::INFINITY };
+        out
+    }
+
+    /// The residual vector (see the module docs) for landings and shifts; a capture whose
+    /// landing is missing counts as a model showing nothing.
+    pub fn residual_vector(&self, landings: Option<&[Vec<Landing>]>, shifts: &[DVec2]) -> Vec<f64> {
+        let mut r = Vec::new();
+        for (i, p) in self.captures.iter().enumerate() {
+            let n = p.image.width * p.image.height;
+            match landings {
+                Some(l) => {
+                    let f = self.fit_capture(i, &l[i], shifts[i]);
+                    for (c, model) in f.model.iter().enumerate() {
+                        let d = &p.image.channels[c];
+                        for k in 0..n {
+                            if p.image.mask[k] {
+                                r.push((d[k] - model[k]) / p.norms[c]);
+                            }
+                        }
+                    }
+                }
+                None => {
+                    for (c, d) in p.image.channels.iter().enumerate() {
+                        let mean = d.iter().zip(&p.image.mask).filter(|(_, m)| **m).map(|(v, _)| *v).sum::<f64>()
+                            / p.image.mask.iter().filter(|m| **m).count() as f64;
+                        for (dk, _) in d.iter().zip(&p.image.mask).filter(|(_, m)| **m) {
+                            r.push((dk - mean) / p.norms[c]);
+                        }
+                    }
+                }
+            }
+        }
+        r
+    }
+
+    /// The objective of the global and local stages: Σ r² with centroid-matched shifts.
+    pub fn objective(&self, scaled: &[f64]) -> f64 {
+        let values = unscale(&self.free, scaled);
+        let Ok(model) = self.model_at(&values) else { return self.captures.len() as f64 * 4.0 };
+        match self.landings(&model) {
+            Some(l) => {
+                let shifts = self.centroid_shifts(&l);
+                self.residual_vector(Some(&l), &shifts).iter().map(|v| v * v).sum()
+            }
+            None => self.captures.len() as f64 * 4.0,
+        }
+    }
+}
+
+/// The lens as a capture sets it: stopped to its f-number, or fully open.
+fn capture_lens(lens: &Lens, capture: &Capture) -> petzval_optics::Result<Lens> {
+    match capture.f_number {
+        FNumber::Stopped(n) => lens.stopped_down(n),
+        FNumber::Open => lens.with_stop_semi_diameter(lens.max_stop_semi_diameter_mm()),
+    }
+}
+
+/// R, G, B wavelengths: the lens's design wavelengths, longest first (C, d, F by default).
+fn rgb_wavelengths(lens: &Lens) -> Vec<f64> {
+    let mut w = lens.wavelengths_nm().to_vec();
+    w.sort_by(|a, b| b.total_cmp(a));
+    if w.len() >= 3 {
+        vec![w[0], w[w.len() / 2], w[w.len() - 1]]
+    } else {
+        vec![656.2725, 587.5618, 486.1327]
+    }
+}
+
+/// Light-weighted centroid of the unmasked pixels above the median (pixels, x right, y down).
+fn centroid(channels: &[Vec<f64>], mask: &[bool], width: usize) -> DVec2 {
+    let (mut s, mut w) = (DVec2::ZERO, 0.0);
+    for p in channels {
+        let mut v: Vec<f64> = p.iter().zip(mask).filter(|(_, m)| **m).map(|(v, _)| *v).collect();
+        v.sort_by(|a, b| a.total_cmp(b));
+        let median = v.get(v.len() / 2).copied().unwrap_or(0.0);
+        for (k, val) in p.iter().enumerate() {
+            if mask[k] && *val > median {
+                let q = DVec2::new((k % width) as f64 + 0.5, (k / width) as f64 + 0.5);
+                s += q * (val - median);
+                w += val - median;
+            }
+        }
+    }
+    if w > 0.0 {
+        s / w
+    } else {
+        DVec2::ZERO
+    }
+}
+
+/// Wall-clock since `start`, in seconds.
+pub fn elapsed_s(start: Instant) -> f64 {
+    start.elapsed().as_secs_f64()
+}
