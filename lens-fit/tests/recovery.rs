@@ -130,3 +130,69 @@ fn recovers_a_radius_a_sensor_tilt_and_offset() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The command line's contract: `-o`, `--report` (fit.json with `params`, `captures`,
+/// `seconds`), the fitted lens loads, and `--evaluate` fits only the nuisance of other captures
+/// through the earlier fit.
+#[test]
+fn the_command_line_fits_reports_and_evaluates() {
+    let dir = std::env::temp_dir().join(format!("petzval-fit-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let nominal = petzval_optics::library_lens("double-gauss-50mm").unwrap();
+    let mut truth = Model { prescription: nominal.prescription().clone(), camera: CameraParams::default() };
+    truth.camera.sensor_offset_mm = 0.04;
+    let free = "[[free]]\nparam = \"sensor.offset_mm\"\nmin = -0.2\nmax = 0.2\n\n[[free]]\nparam = \"surface.9.tilt_y_deg\"\nmin = -0.5\nmax = 0.5\n\n";
+    let fit_dir = dir.join("fit");
+    std::fs::create_dir_all(&fit_dir).unwrap();
+    let shots = [
+        Shot { source_m: [0.0, 0.0, 2.0], focus_m: 2.0, f_number: 2.8 },
+        Shot { source_m: [0.1, 0.05, 1.6], focus_m: 2.0, f_number: 2.8 },
+    ];
+    let manifest = write_captures(&fit_dir, &truth, &shots, free, 40);
+    let other_dir = dir.join("other");
+    std::fs::create_dir_all(&other_dir).unwrap();
+    let other = write_captures(
+        &other_dir,
+        &truth,
+        &[Shot { source_m: [-0.1, 0.0, 2.5], focus_m: 2.0, f_number: 4.0 }],
+        free,
+        40,
+    );
+    let bin = env!("CARGO_BIN_EXE_petzval-fit");
+    let lens_out = dir.join("fitted.toml");
+    let report = dir.join("report");
+    let out = std::process::Command::new(bin)
+        .args([manifest.to_str().unwrap(), "-o", lens_out.to_str().unwrap(), "--report", report.to_str().unwrap()])
+        .args(["--time-limit", "6", "--rays", "8192"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    let fit: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(report.join("fit.json")).unwrap()).unwrap();
+    let offset = fit["params"]["sensor.offset_mm"]["value"].as_f64().unwrap();
+    assert!((offset - 0.04).abs() < 0.01, "offset {offset}");
+    assert!(fit["params"]["sensor.offset_mm"]["sigma"].as_f64().is_some());
+    assert_eq!(fit["captures"].as_array().unwrap().len(), 2);
+    assert!(fit["captures"][0]["residual"].as_f64().unwrap() < 0.05);
+    assert!(fit["seconds"].as_f64().unwrap() > 0.0);
+    assert!(report.join("01-c01.png").is_file() && report.join("convergence.svg").is_file());
+    // the fitted lens is our format and loads
+    let fitted = petzval_optics::load_lens_file(&lens_out).unwrap();
+    assert_eq!(fitted.surfaces().len(), nominal.surfaces().len());
+    // other captures through the earlier fit
+    let report2 = dir.join("report2");
+    let out = std::process::Command::new(bin)
+        .args([other.to_str().unwrap(), "--evaluate", report.to_str().unwrap(), "--report", report2.to_str().unwrap()])
+        .args(["--time-limit", "4", "--rays", "8192"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let eval: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(report2.join("fit.json")).unwrap()).unwrap();
+    assert_eq!(eval["params"]["sensor.offset_mm"]["value"].as_f64().unwrap(), offset.clamp(-0.2, 0.2));
+    let r = eval["captures"][0]["residual"].as_f64().unwrap();
+    assert!(r < 0.05, "held-out capture residual {r}");
+    println!("fit: offset {offset}; held-out residual {r}\n{stdout}");
+    std::fs::remove_dir_all(&dir).ok();
+}
