@@ -1,7 +1,7 @@
 //! Cameras: radiometry (cos⁴), sensor tilt and the plane of sharp focus.
 
 use glam::{DVec2, DVec3};
-use petzval_renderer::{library_lens, Aperture, Camera, PinholeCamera, RealisticCamera, Sensor, ThinLensCamera};
+use petzval_renderer::{library_lens, Aperture, Camera, ExactCamera, PinholeCamera, Sensor, ThinCamera};
 
 const WL: f64 = 587.5618;
 
@@ -28,7 +28,7 @@ fn irradiance_n(cam: &Camera, film: DVec2, n: usize) -> f64 {
 fn pinhole_and_thin_lens_show_cos4_falloff() {
     let sensor = Sensor::default();
     let pin = Camera::Pinhole(PinholeCamera::new(sensor, 50.0).unwrap());
-    let thin = Camera::ThinLens(ThinLensCamera::new(sensor, 50.0, 16.0, None, Aperture::default()).unwrap());
+    let thin = Camera::Thin(ThinCamera::new(sensor, 50.0, 16.0, None, Aperture::default()).unwrap());
     for (u, v) in [(0.5, 0.5), (1.0, 0.5), (1.0, 1.0), (0.75, 0.2)] {
         let sx = (u - 0.5) * 36.0;
         let sy = (0.5 - v) * 24.0;
@@ -45,7 +45,7 @@ fn pinhole_and_thin_lens_show_cos4_falloff() {
 #[test]
 fn realistic_centre_is_normalised_and_corners_fall_off() {
     let lens = library_lens("double-gauss-50mm").unwrap().stopped_down(8.0).unwrap();
-    let cam = Camera::Realistic(RealisticCamera::new(Sensor::default(), lens, None).unwrap());
+    let cam = Camera::Exact(ExactCamera::new(Sensor::default(), lens, None).unwrap());
     // the exposure constant is a 256² stratified integral; an independent 400² estimate agrees
     let centre = irradiance_n(&cam, DVec2::new(0.5, 0.5), 400);
     assert!((centre - 1.0).abs() < 2e-3, "{centre}");
@@ -59,7 +59,7 @@ fn realistic_centre_is_normalised_and_corners_fall_off() {
 #[test]
 fn tilted_sensor_focus_plane_thin_lens_is_exact() {
     let sensor = Sensor { tilt_x_deg: 10.0, ..Sensor::default() };
-    let cam = Camera::ThinLens(ThinLensCamera::new(sensor, 50.0, 2.0, Some(3.0), Aperture::default()).unwrap());
+    let cam = Camera::Thin(ThinCamera::new(sensor, 50.0, 2.0, Some(3.0), Aperture::default()).unwrap());
     let plane = cam.focus_plane().unwrap();
     // hinge rule: J = f / sin(tilt), with f the lens's focal length as focused (Blender's thin
     // lens keeps the film at F = 50 mm and focuses by its power: f = F·s/(F + s))
@@ -85,7 +85,7 @@ fn tilted_sensor_focus_plane_thin_lens_is_exact() {
 fn sensor_tilted_30_degrees_realistic_focus_plane_verified_by_tracing() {
     let lens = library_lens("double-gauss-50mm").unwrap().stopped_down(4.0).unwrap();
     let sensor = Sensor { tilt_x_deg: 30.0, width_mm: 24.0, height_mm: 16.0, ..Sensor::default() };
-    let cam = Camera::Realistic(RealisticCamera::new(sensor, lens, Some(2.0)).unwrap());
+    let cam = Camera::Exact(ExactCamera::new(sensor, lens, Some(2.0)).unwrap());
     let plane = cam.focus_plane().unwrap();
     assert!(plane.hinge_distance_m.is_some());
     let mut checked = 0;
@@ -134,7 +134,7 @@ fn sensor_tilted_30_degrees_realistic_focus_plane_verified_by_tracing() {
 fn dispersive_lens_separates_wavelengths() {
     let lens = library_lens("zeiss-biotar-100mm").unwrap();
     assert!(lens.has_dispersion());
-    let cam = Camera::Realistic(RealisticCamera::new(Sensor::default(), lens, None).unwrap());
+    let cam = Camera::Exact(ExactCamera::new(Sensor::default(), lens, None).unwrap());
     let u = DVec2::new(0.5, 0.5);
     let (mut centre, mut corner) = (0.0f64, 0.0f64);
     for (film, out) in [(DVec2::new(0.5, 0.5), &mut centre), (DVec2::new(0.95, 0.9), &mut corner)] {
@@ -146,7 +146,7 @@ fn dispersive_lens_separates_wavelengths() {
     assert!(corner > 5.0 * centre, "it grows off axis: centre {centre}, corner {corner}");
     let plain = library_lens("double-gauss-50mm").unwrap();
     assert!(!plain.has_dispersion());
-    let cam = Camera::Realistic(RealisticCamera::new(Sensor::default(), plain, None).unwrap());
+    let cam = Camera::Exact(ExactCamera::new(Sensor::default(), plain, None).unwrap());
     let b = cam.generate_ray(DVec2::new(0.9, 0.9), u, 450.0).unwrap();
     let r = cam.generate_ray(DVec2::new(0.9, 0.9), u, 650.0).unwrap();
     assert_eq!(b.direction, r.direction);
