@@ -1122,3 +1122,35 @@ fn render_time_limit_stops_early() {
     assert_finite(&r.image);
     check_furnace_image(&r.image);
 }
+
+/// Samples are keyed by absolute pixel, so a crop window renders exactly the full frame's
+/// pixels there (the Blender border test relies on it): a thin lens with depth of field, a
+/// Blackman–Harris filter and a lit sphere over a sky.
+#[test]
+fn crop_window_equals_the_full_frame() {
+    let rs = scene_of(
+        &[icosphere(Vec3::new(0.3, -0.2, -4.0), 1.0, 3, 0)],
+        vec![diffuse(Vec3::splat(0.6))],
+        Environment::Constant(Vec3::ONE),
+    );
+    let cam = thin(Sensor::default(), 50.0, 2.0, 3.0, Aperture::default(), true);
+    let filter = PixelFilter::BlackmanHarris { width_px: 3.0 };
+    let (w, h) = (48, 32);
+    let full = shoot(&rs, cam.clone(), DAffine3::IDENTITY, &settings(w, h, 8, 5, filter)).image;
+    let [x0, y0, x1, y1] = [10u32, 4, 37, 21];
+    let crop_settings = RenderSettings { crop: Some([x0, y0, x1, y1]), ..settings(w, h, 8, 5, filter) };
+    let crop = shoot(&rs, cam, DAffine3::IDENTITY, &crop_settings).image;
+    assert_eq!((crop.width, crop.height), (x1 - x0, y1 - y0));
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let c = ((y - y0) * (x1 - x0) + (x - x0)) as usize;
+            let f = (y * w + x) as usize;
+            for k in 0..4 {
+                let (a, b) = (crop.rgba[c][k], full.rgba[f][k]);
+                assert!((a - b).abs() <= 1e-6 * b.abs().max(1.0), "pixel ({x}, {y}) channel {k}: crop {a} vs full {b}");
+            }
+            let (a, b) = (crop.depth[c], full.depth[f]);
+            assert!(a == b || (a - b).abs() <= 1e-6 * b.abs(), "depth at ({x}, {y}): crop {a} vs full {b}");
+        }
+    }
+}

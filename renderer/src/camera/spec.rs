@@ -48,9 +48,11 @@ pub enum LensModel {
 impl FromStr for LensModel {
     type Err = Error;
     fn from_str(s: &str) -> Result<Self> {
-        let bad = || Error::Camera {
-            field: "lens_model".into(),
-            message: format!("expected auto, exact, lrtf[:RESOLUTION], thick, thin or pinhole, got '{s}'"),
+        let bad = || {
+            Error::camera(
+                "lens_model",
+                format!("expected auto, exact, lrtf[:RESOLUTION], thick, thin or pinhole, got '{s}'"),
+            )
         };
         Ok(match s {
             "auto" => LensModel::Auto,
@@ -63,10 +65,10 @@ impl FromStr for LensModel {
                 Some(r) => {
                     let resolution: u32 = r.parse().map_err(|_| bad())?;
                     if !(8..=256).contains(&resolution) {
-                        return Err(Error::Camera {
-                            field: "lens_model".into(),
-                            message: format!("LRTF resolution {resolution} is outside 8..=256"),
-                        });
+                        return Err(Error::camera(
+                            "lens_model",
+                            format!("LRTF resolution {resolution} is outside 8..=256"),
+                        ));
                     }
                     LensModel::Lrtf { resolution }
                 }
