@@ -55,17 +55,17 @@ pub(crate) struct PyCamera {
 #[pymethods]
 impl PyCamera {
     #[new]
-    #[pyo3(signature = (camera_to_world, *, lens = "thin".to_string(), lens_model = "auto".to_string(), tolerance_px = 0.25, focal_length_mm = 50.0, sensor_width_mm = 36.0, sensor_height_mm = 24.0, sensor_fit = "auto".to_string(), shift_x = 0.0, shift_y = 0.0, tilt_x_deg = 0.0, tilt_y_deg = 0.0, fstop = None, focus_distance_m = None, aperture_blades = 0, aperture_rotation_rad = 0.0, aperture_ratio = 1.0, aperture_image = None, clip_start_m = 0.0, clip_end_m = f64::INFINITY, natural_vignetting = false))]
+    #[pyo3(signature = (camera_to_world, *, lens = "thin", lens_model = "auto", tolerance_px = 0.25, focal_length_mm = 50.0, sensor_width_mm = 36.0, sensor_height_mm = 24.0, sensor_fit = "auto", shift_x = 0.0, shift_y = 0.0, tilt_x_deg = 0.0, tilt_y_deg = 0.0, fstop = None, focus_distance_m = None, aperture_blades = 0, aperture_rotation_rad = 0.0, aperture_ratio = 1.0, aperture_image = None, clip_start_m = 0.0, clip_end_m = f64::INFINITY, natural_vignetting = false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         camera_to_world: PyArrayLike2<'_, f64, AllowTypeChange>,
-        lens: String,
-        lens_model: String,
+        lens: &str,
+        lens_model: &str,
         tolerance_px: f64,
         focal_length_mm: f64,
         sensor_width_mm: f64,
         sensor_height_mm: f64,
-        sensor_fit: String,
+        sensor_fit: &str,
         shift_x: f64,
         shift_y: f64,
         tilt_x_deg: f64,
@@ -100,7 +100,7 @@ impl PyCamera {
             .map_err(py_err)?;
             // 2. Construct and validate every field that does not depend on the frame.
             let host = HostCamera {
-                lens,
+                lens: lens.to_string(),
                 lens_model,
                 tolerance_px,
                 focal_length_mm,

@@ -18,6 +18,7 @@ Conventions
 """
 
 from collections.abc import Callable, Sequence
+from typing import final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,11 +44,12 @@ def library_lenses() -> list[dict]:
     """The built-in lens library: ``[{"name", "description", "focal_length_mm", "f_number",
     "source"}]`` sorted by name."""
 
+@final
 class Lens:
     """A lens: a library name (``"double-gauss-50mm"``) or a path to a lens file
     (``.toml``, pbrt ``.dat``, Zemax ``.zmx``, lentil ``.json``)."""
 
-    def __init__(self, name_or_path: str) -> None: ...
+    def __new__(cls, name_or_path: str) -> Lens: ...
     @property
     def name(self) -> str: ...
     @property
@@ -67,6 +69,7 @@ class Lens:
         through every surface. ``direction`` is ``"film_to_scene"`` or ``"scene_to_film"``.
         Returns (origins, unit directions, passed); rows that did not pass are NaN."""
 
+@final
 class Scene:
     """A scene assembled from buffers. Build it, then pass it to :func:`render`."""
 
@@ -152,8 +155,9 @@ class Scene:
     @property
     def warnings(self) -> list[str]: ...
 
-ProgressCallback = Callable[[float, int, NDArray[np.float32] | None], bool]
+_ProgressCallback = Callable[[float, int, NDArray[np.float32] | None], bool]
 
+@final
 class Camera:
     """One camera description for :func:`render`, with Blender's camera data semantics.
     Validated when constructed: an invalid value raises InvalidSettingsError naming the
@@ -221,7 +225,7 @@ def render(
     filter_width_px: float = 1.5,
     spectral: bool = False,
     threads: int = 0,
-    progress: ProgressCallback | None = None,
+    progress: _ProgressCallback | None = None,
     progress_interval_s: float = 0.1,
 ) -> dict:
     """Renders ``scene`` through ``camera`` and returns ``{"rgba": (H, W, 4) float32,
