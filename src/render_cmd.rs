@@ -1,13 +1,15 @@
 //! `petzval render`: scene file (or the built-in demo) → camera → integrator → film → EXR/PNG.
 
 use clap::Args;
-use glam::{DAffine3, DVec2, DVec3};
+use glam::{DAffine3, DVec2};
 use indicatif::{ProgressBar, ProgressStyle};
+use petzval_renderer::camera::host::{self, FilmBack, HostCamera, SensorFit, Shift};
 use petzval_renderer::film::{write_exr, write_png, ExrLayers, Metadata, PixelFilter, ToneMap};
 use petzval_renderer::integrator::RenderScene;
 use petzval_renderer::render::{render, CameraRig, RenderSettings};
 use petzval_renderer::scene::{demo, gltf_load, Environment, Scene, SceneCamera};
-use petzval_renderer::{Aperture, ApertureMask, ApertureShape, Camera, CameraSpec, Error, LensModel, Sensor};
+use petzval_renderer::shot;
+use petzval_renderer::{Aperture, ApertureShape, Camera, Error, LensModel};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -116,45 +118,18 @@ pub struct RenderArgs {
     pub filter_width: f32,
 }
 
+fn settings_err(field: &str, message: String) -> Error {
+    Error::settings(field, message)
+}
+
 fn camera_err(field: &str, message: String) -> Error {
-    Error::Camera { field: field.into(), message }
+    Error::camera(field, message)
 }
 
 fn parse_resolution(s: &str) -> Result<(u32, u32), Error> {
-    let bad = || camera_err("resolution", format!("expected WxH such as 1920x1080, got '{s}'"));
+    let bad = || settings_err("resolution", format!("expected WxH such as 1920x1080, got '{s}'"));
     let (w, h) = s.split_once('x').ok_or_else(bad)?;
     Ok((w.trim().parse().map_err(|_| bad())?, h.trim().parse().map_err(|_| bad())?))
-}
-
-/// Parses `--aperture`.
-pub fn parse_aperture(s: &str) -> Result<Aperture, Error> {
-    let bad = |m: &str| {
-        camera_err("aperture", format!("{m} (got '{s}'; expected circle, blades:N[:ROTATION_DEG] or image:PATH)"))
-    };
-    if s == "circle" {
-        return Ok(Aperture::default());
-    }
-    if let Some(rest) = s.strip_prefix("blades:") {
-        let mut it = rest.split(':');
-        let n: u32 = it.next().and_then(|v| v.parse().ok()).ok_or_else(|| bad("blade count must be a whole number"))?;
-        if n < 3 {
-            return Err(bad("at least 3 blades"));
-        }
-        let rot: f64 = match it.next() {
-            Some(r) => r.parse().map_err(|_| bad("rotation must be a number of degrees"))?,
-            None => 0.0,
-        };
-        return Ok(Aperture {
-            shape: ApertureShape::Blades { count: n, curvature: 0.0 },
-            rotation_rad: rot.to_radians(),
-            anamorphic_ratio: 1.0,
-        });
-    }
-    if let Some(path) = s.strip_prefix("image:") {
-        let mask = ApertureMask::load(std::path::Path::new(path))?;
-        return Ok(Aperture { shape: ApertureShape::Mask(Arc::new(mask)), rotation_rad: 0.0, anamorphic_ratio: 1.0 });
-    }
-    Err(bad("unknown aperture"))
 }
 
 fn parse_environment(s: &str, strength: f32) -> Result<Environment, Error> {
@@ -165,14 +140,14 @@ fn parse_environment(s: &str, strength: f32) -> Result<Environment, Error> {
         .split(',')
         .map(|c| c.trim().parse::<f32>())
         .collect::<Result<_, _>>()
-        .map_err(|_| camera_err("environment", format!("expected R,G,B or FILE.exr, got '{s}'")))?;
+        .map_err(|_| settings_err("environment", format!("expected R,G,B or FILE.exr, got '{s}'")))?;
     let c = match v.as_slice() {
         [g] => glam::Vec3::splat(*g),
         [r, g, b] => glam::Vec3::new(*r, *g, *b),
-        _ => return Err(camera_err("environment", format!("expected R,G,B or FILE.exr, got '{s}'"))),
+        _ => return Err(settings_err("environment", format!("expected R,G,B or FILE.exr, got '{s}'"))),
     };
     if !c.is_finite() || c.min_element() < 0.0 {
-        return Err(camera_err("environment", format!("must be finite and non-negative, got '{s}'")));
+        return Err(settings_err("environment", format!("must be finite and non-negative, got '{s}'")));
     }
     Ok(Environment::Constant(c * strength))
 }
@@ -181,7 +156,7 @@ fn parse_environment(s: &str, strength: f32) -> Result<Environment, Error> {
 pub fn run(args: RenderArgs) -> Result<(), Error> {
     if let Some(t) = args.threads {
         if t == 0 {
-            return Err(camera_err("threads", "must be at least 1".into()));
+            return Err(settings_err("threads", "must be at least 1".into()));
         }
         let _ = rayon::ThreadPoolBuilder::new().num_threads(t).build_global();
     }
@@ -218,26 +193,21 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     let t0 = std::time::Instant::now();
     let render_scene = RenderScene::new(scene)?;
     eprintln!("scene: {} triangles, BVH built in {:.2} s", render_scene.triangle_count(), t0.elapsed().as_secs_f64());
-    // 2. Sensor: the width spans the larger image dimension (Blender's automatic fit).
-    let aspect = width as f64 / height as f64;
-    let (sw, sh) = if width >= height {
-        (args.sensor_width, args.sensor_width / aspect)
-    } else {
-        (args.sensor_width * aspect, args.sensor_width)
-    };
+    // 2. The camera as the host conventions describe it: the sensor width spans the larger
+    //    image dimension (Blender's automatic fit), shift in mm.
     let tilt_x = if args.tilt_x == 0.0 { demo_shot.as_ref().map(|d| d.tilt_x_deg).unwrap_or(0.0) } else { args.tilt_x };
-    let sensor = Sensor {
-        width_mm: sw,
-        height_mm: sh,
-        shift_mm: DVec2::new(args.shift_x, args.shift_y),
-        tilt_x_deg: tilt_x,
-        tilt_y_deg: args.tilt_y,
+    let film_back = FilmBack {
+        width_mm: args.sensor_width,
+        height_mm: args.sensor_width,
+        fit: SensorFit::Auto,
+        shift: Shift::Mm(DVec2::new(args.shift_x, args.shift_y)),
     };
-    sensor.validate()?;
+    let tilt_deg = DVec2::new(tilt_x, args.tilt_y);
+    let sensor = film_back.sensor(width, height, tilt_deg)?;
     let lens_name =
         args.lens.clone().or_else(|| demo_shot.as_ref().map(|d| d.lens.to_string())).unwrap_or_else(|| "thin".into());
     let aperture = match (&args.aperture, &demo_shot) {
-        (Some(a), _) => Some(parse_aperture(a)?),
+        (Some(a), _) => Some(host::parse_aperture(a)?),
         (None, Some(d)) => Some(Aperture {
             shape: ApertureShape::Blades { count: d.blades, curvature: 0.0 },
             rotation_rad: d.blade_rotation_deg.to_radians(),
@@ -248,13 +218,12 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     // The demo's f-number belongs to its lens; another lens opens to its own.
     let fstop = args.fstop.or_else(|| demo_shot.as_ref().filter(|_| args.lens.is_none()).map(|d| d.f_number));
     // 3. Focus: given, the demo's, or autofocus on what the image centre sees.
-    let focus_m = match (args.focus, &demo_shot) {
+    let focus_m = match (host::focus_distance_m(args.focus)?, &demo_shot) {
         (Some(f), _) => Some(f),
+        (None, _) if args.focus.is_some() => None,
         (None, Some(d)) => Some(d.focus_distance_m),
         (None, None) => {
-            let o = to_world.translation.as_vec3();
-            let d = to_world.transform_vector3(DVec3::NEG_Z).normalize().as_vec3();
-            let f = render_scene.intersect(o, d, f32::INFINITY).map(|h| h.t as f64);
+            let f = shot::autofocus_m(&render_scene, &to_world);
             match f {
                 Some(f) => eprintln!("autofocus: {f:.3} m (the surface at the image centre)"),
                 None => eprintln!("autofocus: nothing at the image centre, focusing at infinity"),
@@ -262,20 +231,7 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
             f
         }
     };
-    let vignetting = match args.natural_vignetting.as_str() {
-        "on" => true,
-        "off" => false,
-        v => return Err(camera_err("natural_vignetting", format!("expected on or off, got '{v}'"))),
-    };
-    // Focal length for thin/pinhole from the scene camera's field of view.
-    let fov_focal = || {
-        let tan_half_y = (scene_cam.yfov_rad as f64 * 0.5).tan();
-        if width >= height {
-            0.5 * sw / (tan_half_y * aspect)
-        } else {
-            0.5 * sh / tan_half_y
-        }
-    };
+    let vignetting = host::parse_on_off("natural_vignetting", &args.natural_vignetting)?;
     let ideal = lens_name == "thin" || lens_name == "pinhole";
     if !ideal && args.focal_length.is_some() {
         eprintln!("note: --focal-length is ignored for a real lens; '{lens_name}' brings its own focal length");
@@ -284,22 +240,29 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     if args.lrtf_file.is_some() && model == LensModel::Auto {
         model = LensModel::Lrtf { resolution: petzval_renderer::camera::DEFAULT_LRTF_RESOLUTION };
     }
-    let spec = CameraSpec {
+    // Focal length for thin/pinhole: given, else from the scene camera's field of view.
+    let focal_length_mm = match args.focal_length {
+        Some(f) => f,
+        None => host::focal_length_from_yfov_mm(scene_cam.yfov_rad as f64, width, height, &sensor)?,
+    };
+    let host_camera = HostCamera {
         lens: lens_name.clone(),
-        model,
+        lens_model: model,
         tolerance_px: args.tolerance,
-        focal_length_mm: args.focal_length.unwrap_or_else(fov_focal),
+        focal_length_mm,
+        film_back,
+        tilt_deg,
         f_number: if lens_name == "thin" { Some(fstop.unwrap_or(2.8)) } else { fstop },
         focus_distance_m: focus_m,
         aperture: aperture.clone(),
-        sensor,
+        clip_m: (0.0, f64::INFINITY),
         natural_vignetting: vignetting,
         lrtf_file: args.lrtf_file.clone(),
     };
-    spec.validate()?;
+    let spec = host_camera.camera_spec(width, height)?;
     // 4. The camera: auto picks the cheapest model within the error budget for this shot.
     let t0 = std::time::Instant::now();
-    let built = spec.build_for_scene(&render_scene, &to_world, width, height, args.spp, args.spectral)?;
+    let built = shot::build_for_scene(&spec, &render_scene, &to_world, width, height, args.spp, args.spectral)?;
     if model == LensModel::Auto {
         eprintln!(
             "lens model: {} (auto, {:.2} s to decide) — {}",
@@ -340,7 +303,7 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     if args.spectral && !dispersive {
         eprintln!(
             "note: --spectral ignored: the {} has no dispersion, so RGB transport is exact here",
-            if matches!(&rig.camera, Camera::Realistic(_)) { "lens" } else { "camera model" }
+            if matches!(&rig.camera, Camera::Exact(_)) { "lens" } else { "camera model" }
         );
     }
     let settings = RenderSettings {
@@ -430,7 +393,7 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         let tone = match args.tonemap.as_str() {
             "srgb" => ToneMap::Srgb,
             "filmic" => ToneMap::Filmic,
-            t => return Err(camera_err("tonemap", format!("expected srgb or filmic, got '{t}'"))),
+            t => return Err(settings_err("tonemap", format!("expected srgb or filmic, got '{t}'"))),
         };
         write_png(&png, &result.image, args.exposure, tone)?;
         eprintln!("wrote {}", png.display());

@@ -1,4 +1,4 @@
-"""Blender's camera and render settings as arguments of ``petzval.render``.
+"""Blender's camera and render settings as arguments of ``petzval.Camera`` and ``petzval.render``.
 
 What maps how (documented for users in the Camera panel's tooltips and the README):
 
@@ -112,8 +112,8 @@ def lens_choice(cam) -> tuple[str, bool]:
 
 
 def camera_kwargs(scene, cam_obj, depsgraph, notes) -> dict:
-    """Keyword arguments of ``petzval.render`` for the camera (everything but the image size,
-    crop, samples and the scene)."""
+    """Keyword arguments of ``petzval.Camera`` for the camera (its Blender data, the Petzval
+    lens settings and the scene's natural-vignetting switch)."""
     import bpy
 
     cam = cam_obj.data
@@ -140,6 +140,7 @@ def camera_kwargs(scene, cam_obj, depsgraph, notes) -> dict:
         "aperture_blades": int(dof.aperture_blades) if dof.aperture_blades >= 3 else 0,
         "aperture_rotation_rad": float(dof.aperture_rotation),
         "aperture_ratio": float(dof.aperture_ratio),
+        "natural_vignetting": bool(scene.petzval.natural_vignetting),
     }
     if lens == "pinhole":
         kw["fstop"] = None
@@ -164,7 +165,8 @@ def camera_kwargs(scene, cam_obj, depsgraph, notes) -> dict:
 
 
 def render_kwargs(scene, frame: int) -> dict:
-    """Sampling settings from Scene.petzval and the render settings."""
+    """Keyword arguments of ``petzval.render``: sampling settings from Scene.petzval and the
+    render settings."""
     s = scene.petzval
     r = scene.render
     seed = int(s.seed) + (int(frame) if s.use_animated_seed else 0)
@@ -173,7 +175,6 @@ def render_kwargs(scene, frame: int) -> dict:
         "seed": seed,
         "max_depth": int(s.max_bounces) + 1,
         "filter_width_px": float(s.filter_width),
-        "natural_vignetting": bool(s.natural_vignetting),
         "spectral": bool(s.spectral),
         "threads": int(r.threads) if r.threads_mode == "FIXED" else 0,
     }

@@ -99,7 +99,8 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
         out_w, out_h = (window[2] - window[0], window[3] - window[1]) if window else (width, height)
 
         cam_kw = camera_mod.camera_kwargs(scene, cam_eval, depsgraph, notes)
-        # a bad lens fails here, before the scene is translated
+        # a bad camera setting or lens fails here, before the scene is translated
+        pz_camera = pz.Camera(**cam_kw)
         if cam_kw["lens"] not in ("thin", "pinhole"):
             pz.Lens(cam_kw["lens"])
         render_kw = camera_mod.render_kwargs(scene, scene.frame_current)
@@ -156,8 +157,8 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
         try:
             t_render = time.perf_counter()
             try:
-                out = pz.render(pz_scene, cam_kw.pop("camera_to_world"), width, height, crop=crop,
-                                progress=progress, progress_interval_s=0.1, **cam_kw, **render_kw)
+                out = pz.render(pz_scene, pz_camera, width, height, crop=crop,
+                                progress=progress, progress_interval_s=0.1, **render_kw)
             except pz.CancelledError:
                 entry["cancelled"] = True
                 entry["seconds_render"] = time.perf_counter() - t_render
@@ -232,7 +233,13 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
                 "orthographic views are not previewed (Petzval renders perspective cameras only)"
             )
         space = context.space_data
-        return viewport_mod.free_view_kwargs(rv3d.view_matrix.inverted(), space.lens, space.clip_start, space.clip_end)
+        return viewport_mod.free_view_kwargs(
+            rv3d.view_matrix.inverted(),
+            space.lens,
+            space.clip_start,
+            space.clip_end,
+            natural_vignetting=bool(scene.petzval.natural_vignetting),
+        )
 
     def view_draw(self, context, depsgraph):
         """Draws the newest pass of the preview, (re)starting it when the view changed."""
@@ -257,7 +264,7 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
                     if preview is not None:
                         preview.cancel(wait_s=0.5)
                     preview = self._preview = viewport_mod.PreviewRender(
-                        native.get(), self._vp_scene, {**kw, **render_kw}, w, h, int(settings.viewport_samples))
+                        native.get(), self._vp_scene, kw, render_kw, w, h, int(settings.viewport_samples))
                     self._vp_key = key
         except Exception as e:
             self._vp_error = _error_message(e)

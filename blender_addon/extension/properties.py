@@ -16,10 +16,12 @@ LENS_FILE = "FILE"
 # Blender 5 wants path properties that accept "//" (relative to the .blend) to say so
 PATH_OPTIONS = {"PATH_SUPPORTS_BLEND_RELATIVE"} if bpy.app.version >= (5, 0, 0) else set()
 
+# Identifiers, lowercased, are the one name of each model everywhere (`--lens-model`, petzval.Camera
+# lens_model, the EXR `lensModel` metadata, Rust `LensModel`/`Camera` variants).
 LENS_MODELS = (
     ("AUTO", "Automatic", "The cheapest model within the tolerance (pinhole, thin, thick, lens table, exact)", 0),
     ("EXACT", "Exact", "Trace every ray through every surface of the lens", 1),
-    ("LRTF", "Lens Table", "A precomputed ray transfer table (LRTF), exact near vignetting boundaries", 2),
+    ("LRTF", "LRTF", "A precomputed lens ray transfer table (LRTF, a lens table), exact near vignetting boundaries", 2),
     ("THICK", "Thick Lens", "The lens's thick-lens approximation (focal length, principal planes, pupils)", 3),
     ("THIN", "Thin Lens", "The lens's thin-lens approximation", 4),
     ("PINHOLE", "Pinhole", "No lens: everything in focus", 5),

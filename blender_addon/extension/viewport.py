@@ -24,8 +24,10 @@ from . import camera as camera_mod
 VIEWPORT_SENSOR_MM = 72.0
 
 
-def free_view_kwargs(view_matrix_inverted, lens_mm: float, clip_start: float, clip_end: float) -> dict:
-    """``petzval.render`` camera arguments for a free (non-camera) perspective 3D view."""
+def free_view_kwargs(
+    view_matrix_inverted, lens_mm: float, clip_start: float, clip_end: float, natural_vignetting: bool = False
+) -> dict:
+    """``petzval.Camera`` arguments for a free (non-camera) perspective 3D view."""
     return {
         "camera_to_world": camera_mod.camera_to_world(view_matrix_inverted),
         "lens": "thin",
@@ -38,6 +40,7 @@ def free_view_kwargs(view_matrix_inverted, lens_mm: float, clip_start: float, cl
         "focus_distance_m": None,
         "clip_start_m": float(clip_start),
         "clip_end_m": float(clip_end),
+        "natural_vignetting": bool(natural_vignetting),
     }
 
 
@@ -55,7 +58,7 @@ def view_key(kwargs: dict, width: int, height: int) -> tuple:
 class PreviewRender:
     """One progressive render on a background thread; ``latest()`` gives its newest pass."""
 
-    def __init__(self, petzval, scene, kwargs: dict, width: int, height: int, spp: int):
+    def __init__(self, petzval, scene, camera_kwargs: dict, render_kwargs: dict, width: int, height: int, spp: int):
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self._rgba = None
@@ -63,14 +66,15 @@ class PreviewRender:
         self.spp = spp
         self.error: str | None = None
         self.finished = False
-        kw = dict(kwargs)
-        cam = kw.pop("camera_to_world")
         self._thread = threading.Thread(
-            target=self._run, args=(petzval, scene, cam, width, height, spp, kw), name="petzval-viewport", daemon=True
+            target=self._run,
+            args=(petzval, scene, dict(camera_kwargs), width, height, spp, dict(render_kwargs)),
+            name="petzval-viewport",
+            daemon=True,
         )
         self._thread.start()
 
-    def _run(self, petzval, scene, cam, width, height, spp, kw):
+    def _run(self, petzval, scene, camera_kw, width, height, spp, render_kw):
         def progress(fraction, spp_done, rgba):
             if rgba is not None:
                 with self._lock:
@@ -79,7 +83,10 @@ class PreviewRender:
             return not self._stop.is_set()
 
         try:
-            out = petzval.render(scene, cam, width, height, spp=spp, progress=progress, progress_interval_s=0.05, **kw)
+            cam = petzval.Camera(**camera_kw)
+            out = petzval.render(
+                scene, cam, width, height, spp=spp, progress=progress, progress_interval_s=0.05, **render_kw
+            )
             with self._lock:
                 self._rgba = out["rgba"]
                 self.spp_done = out["spp"]

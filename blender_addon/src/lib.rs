@@ -8,23 +8,19 @@
 //!
 //! | name | type | unit | default |
 //! |---|---|---|---|
-//! | `render(..., lens)` | `"thin"`, `"pinhole"`, library name or lens file | — | `"thin"` |
-//! | `render(..., lens_model)` | auto, exact, lrtf[:RES], thick, thin, pinhole | — | auto |
-//! | `render(..., tolerance_px)` | f64 | px | 0.25 |
-//! | `render(..., focal_length_mm)` | f64 (thin, pinhole) | mm | 50 |
-//! | `render(..., sensor_width_mm, sensor_height_mm)` | f64 | mm | 36, 24 |
-//! | `render(..., shift_x, shift_y)` | f64, Blender's (fraction of the fitted sensor side) | — | 0 |
-//! | `render(..., tilt_x_deg, tilt_y_deg)` | f64 | degrees | 0 |
-//! | `render(..., fstop)` | optional f64 (None: pinhole for thin, wide open for real) | — | None |
-//! | `render(..., focus_distance_m)` | optional f64 (None = infinity) | m | None |
+//! | `render(scene, camera, width, height)` | a `Scene`, a `Camera` (see `camera.rs`), pixels | px | — |
+//! | `render(..., crop)` | optional (x0, y0, x1, y1), row 0 at the top | px | None |
 //! | `render(..., spp, seed, max_depth)` | u32 | — | 64, 0, 8 |
 //! | `render(..., filter_width_px)` | f32, Cycles' filter_width | px | 1.5 |
+//! | `render(..., spectral)` | bool | — | false |
+//! | `render(..., threads)` | 0 = every core | — | 0 |
 //! | `render(..., progress_interval_s)` | f64 | s | 0.1 |
 
 // `!(x > 0.0)` is our NaN-rejecting validation: unlike `x <= 0.0` it is also true for NaN, which
 // is exactly what every such check wants (a NaN setting or sample must be refused).
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+mod camera;
 mod errors;
 mod lens;
 mod render;
@@ -47,6 +43,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("InvalidSettingsError", py.get_type::<InvalidSettingsError>())?;
     m.add("CancelledError", py.get_type::<CancelledError>())?;
     m.add_class::<PyLens>()?;
+    m.add_class::<camera::PyCamera>()?;
     m.add_class::<PyScene>()?;
     m.add_function(wrap_pyfunction!(library_lenses, m)?)?;
     m.add_function(wrap_pyfunction!(render::render, m)?)?;

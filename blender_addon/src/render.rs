@@ -1,13 +1,12 @@
-//! `petzval.render`: Blender camera semantics, a worker thread with the GIL released, and the
-//! progress callback on the caller's thread.
+//! `petzval.render`: a [`PyCamera`] and render settings → an image, on a worker thread with
+//! the GIL released, and the progress callback on the caller's thread.
 
-use glam::{DAffine3, DMat3, DVec2, DVec3};
 use numpy::ndarray::{Array2, Array3};
-use numpy::{AllowTypeChange, IntoPyArray, PyArrayLike2};
+use numpy::IntoPyArray;
 use petzval_renderer::film::{Image, PixelFilter};
 use petzval_renderer::integrator::RenderScene;
 use petzval_renderer::render::{render_observed, CameraRig, RenderResult, RenderSettings};
-use petzval_renderer::{Aperture, ApertureMask, ApertureShape, CameraSpec, Error, LensModel, Sensor};
+use petzval_renderer::{shot, Error};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -15,50 +14,9 @@ use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use crate::camera::PyCamera;
 use crate::errors::*;
-use crate::scene::{affine_from_rows, PyScene};
-
-/// Sensor of the frame from Blender's sensor size and fit; shift in mm from Blender's shift.
-pub(crate) fn blender_sensor(
-    width: u32,
-    height: u32,
-    sensor_width_mm: f64,
-    sensor_height_mm: f64,
-    fit: &str,
-    shift: DVec2,
-    tilt: DVec2,
-) -> PyResult<Sensor> {
-    let aspect = width as f64 / height as f64;
-    let horizontal = match fit {
-        "auto" | "AUTO" => width >= height,
-        "horizontal" | "HORIZONTAL" => true,
-        "vertical" | "VERTICAL" => false,
-        f => return Err(settings_err("sensor_fit", format!("expected 'auto', 'horizontal' or 'vertical', got '{f}'"))),
-    };
-    // Blender: with AUTO the sensor width spans the larger side; shifts are fractions of the
-    // fitted side.
-    let (sw, sh, fitted) = match (fit, horizontal) {
-        ("auto" | "AUTO", true) => (sensor_width_mm, sensor_width_mm / aspect, sensor_width_mm),
-        ("auto" | "AUTO", false) => (sensor_width_mm * aspect, sensor_width_mm, sensor_width_mm),
-        (_, true) => (sensor_width_mm, sensor_width_mm / aspect, sensor_width_mm),
-        (_, false) => (sensor_height_mm * aspect, sensor_height_mm, sensor_height_mm),
-    };
-    let s = Sensor { width_mm: sw, height_mm: sh, shift_mm: shift * fitted, tilt_x_deg: tilt.x, tilt_y_deg: tilt.y };
-    s.validate().map_err(py_err)?;
-    Ok(s)
-}
-
-/// Rigid camera-to-world transform (scale removed, axes re-orthonormalised).
-pub(crate) fn rigid(m: DAffine3) -> PyResult<DAffine3> {
-    let x = m.matrix3.x_axis.normalize_or_zero();
-    let y0 = m.matrix3.y_axis;
-    let y = (y0 - x * x.dot(y0)).normalize_or_zero();
-    let z = x.cross(y);
-    if x == DVec3::ZERO || y == DVec3::ZERO || z.dot(m.matrix3.z_axis) <= 0.0 {
-        return Err(settings_err("camera_to_world", "is degenerate or mirrored".into()));
-    }
-    Ok(DAffine3 { matrix3: DMat3::from_cols(x, y, z), translation: m.translation })
-}
+use crate::scene::PyScene;
 
 pub(crate) struct Shared {
     fraction: AtomicU32,
@@ -75,41 +33,21 @@ pub(crate) fn image_arrays(py: Python<'_>, img: &Image) -> (Py<PyAny>, Py<PyAny>
     (rgba.into_pyarray(py).into_any().unbind(), depth.into_pyarray(py).into_any().unbind())
 }
 
-/// Renders a scene (see the stub for every argument).
+/// Renders a scene through a camera (see the stub for every argument).
 #[pyfunction]
-#[pyo3(signature = (scene, camera_to_world, width, height, *, lens = "thin".to_string(), lens_model = "auto".to_string(), tolerance_px = 0.25, focal_length_mm = 50.0, sensor_width_mm = 36.0, sensor_height_mm = 24.0, sensor_fit = "auto".to_string(), shift_x = 0.0, shift_y = 0.0, tilt_x_deg = 0.0, tilt_y_deg = 0.0, fstop = None, focus_distance_m = None, aperture_blades = 0, aperture_rotation_rad = 0.0, aperture_ratio = 1.0, aperture_image = None, clip_start_m = 0.0, clip_end_m = f64::INFINITY, crop = None, spp = 64, seed = 0, max_depth = 8, filter_width_px = 1.5, natural_vignetting = false, spectral = false, threads = 0, progress = None, progress_interval_s = 0.1))]
+#[pyo3(signature = (scene, camera, width, height, *, crop = None, spp = 64, seed = 0, max_depth = 8, filter_width_px = 1.5, spectral = false, threads = 0, progress = None, progress_interval_s = 0.1))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn render(
     py: Python<'_>,
     scene: &PyScene,
-    camera_to_world: PyArrayLike2<'_, f64, AllowTypeChange>,
+    camera: &PyCamera,
     width: u32,
     height: u32,
-    lens: String,
-    lens_model: String,
-    tolerance_px: f64,
-    focal_length_mm: f64,
-    sensor_width_mm: f64,
-    sensor_height_mm: f64,
-    sensor_fit: String,
-    shift_x: f64,
-    shift_y: f64,
-    tilt_x_deg: f64,
-    tilt_y_deg: f64,
-    fstop: Option<f64>,
-    focus_distance_m: Option<f64>,
-    aperture_blades: u32,
-    aperture_rotation_rad: f64,
-    aperture_ratio: f64,
-    aperture_image: Option<String>,
-    clip_start_m: f64,
-    clip_end_m: f64,
     crop: Option<(u32, u32, u32, u32)>,
     spp: u32,
     seed: u32,
     max_depth: u32,
     filter_width_px: f64,
-    natural_vignetting: bool,
     spectral: bool,
     threads: usize,
     progress: Option<Py<PyAny>>,
@@ -117,6 +55,10 @@ pub(crate) fn render(
 ) -> PyResult<Py<PyDict>> {
     guard(|| {
         // 1. Settings, checked before any work.
+        if !(filter_width_px.is_finite() && filter_width_px >= 0.0) {
+            return Err(settings_err("filter_width_px", format!("must be ≥ 0, got {filter_width_px}")));
+        }
+        let (clip_start_m, clip_end_m) = camera.host.clip_m;
         let settings = RenderSettings {
             width,
             height,
@@ -135,67 +77,14 @@ pub(crate) fn render(
             crop: crop.map(|(x0, y0, x1, y1)| [x0, y0, x1, y1]),
         };
         settings.validate().map_err(py_err)?;
-        if !(filter_width_px.is_finite() && filter_width_px >= 0.0) {
-            return Err(settings_err("filter_width_px", format!("must be ≥ 0, got {filter_width_px}")));
-        }
         if !(progress_interval_s.is_finite() && progress_interval_s > 0.0) {
             return Err(settings_err("progress_interval_s", format!("must be positive, got {progress_interval_s}")));
-        }
-        let to_world = rigid(
-            affine_from_rows("camera", "camera_to_world", &camera_to_world.as_array())
-                .map_err(|e| settings_err("camera_to_world", e.to_string()))?,
-        )?;
-        let sensor = blender_sensor(
-            width,
-            height,
-            sensor_width_mm,
-            sensor_height_mm,
-            &sensor_fit,
-            DVec2::new(shift_x, shift_y),
-            DVec2::new(tilt_x_deg, tilt_y_deg),
-        )?;
-        if !aperture_rotation_rad.is_finite() {
-            return Err(settings_err("aperture_rotation_rad", format!("must be finite, got {aperture_rotation_rad}")));
         }
         if threads > 1024 {
             return Err(settings_err("threads", format!("{threads} is more than 1024 (0 uses every core)")));
         }
-        if focus_distance_m.is_some_and(|d| d.is_nan()) {
-            return Err(settings_err("focus_distance_m", "is NaN (None or inf focuses at infinity)".into()));
-        }
-        if !(aperture_ratio.is_finite() && aperture_ratio > 0.0) {
-            return Err(settings_err("aperture_ratio", format!("must be positive, got {aperture_ratio}")));
-        }
-        let aperture = match (&aperture_image, aperture_blades) {
-            (Some(path), _) => Some(Aperture {
-                shape: ApertureShape::Mask(Arc::new(ApertureMask::load(std::path::Path::new(path)).map_err(py_err)?)),
-                rotation_rad: aperture_rotation_rad,
-                anamorphic_ratio: aperture_ratio,
-            }),
-            (None, n) if n >= 3 => Some(Aperture {
-                shape: ApertureShape::Blades { count: n, curvature: 0.0 },
-                rotation_rad: aperture_rotation_rad,
-                anamorphic_ratio: aperture_ratio,
-            }),
-            (None, _) if aperture_ratio != 1.0 => {
-                Some(Aperture { shape: ApertureShape::Circle, rotation_rad: 0.0, anamorphic_ratio: aperture_ratio })
-            }
-            _ => None,
-        };
-        let model: LensModel = lens_model.parse().map_err(py_err)?;
-        let spec = CameraSpec {
-            lens: lens.clone(),
-            model,
-            tolerance_px,
-            focal_length_mm,
-            f_number: fstop,
-            focus_distance_m: focus_distance_m.filter(|d| *d != f64::INFINITY),
-            aperture,
-            sensor,
-            natural_vignetting,
-            lrtf_file: None,
-        };
-        spec.validate().map_err(py_err)?;
+        let to_world = camera.to_world;
+        let spec = camera.host.camera_spec(width, height).map_err(py_err)?;
         let mut scene_data = scene.scene.clone();
         if !scene.all_tangents {
             scene_data.mesh.tangents.clear();
@@ -225,7 +114,7 @@ pub(crate) fn render(
                 let run = || -> Outcome {
                     let render_scene = RenderScene::new(scene_data)?;
                     let warnings = render_scene.scene().warnings.clone();
-                    let built = spec.build_for_scene(&render_scene, &to_world, width, height, spp, spectral)?;
+                    let built = shot::build_for_scene(&spec, &render_scene, &to_world, width, height, spp, spectral)?;
                     let rig = CameraRig { camera: built.camera, to_world };
                     let settings = RenderSettings {
                         spectral: settings.spectral && rig.camera.is_dispersive(),

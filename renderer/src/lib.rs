@@ -1,5 +1,6 @@
 //! Petzval core library: lens optics (prescriptions, exact tracing, paraxial analysis, apertures),
-//! cameras and sensors. Data flows one way: lens file → [`Lens`] → [`Camera`].
+//! cameras and sensors. Data flows one way: lens file → [`Lens`] → [`Camera`]; [`shot`] joins a
+//! camera spec with the scene (depth probe, autofocus), above both the camera and the integrator.
 
 // `!(x > 0.0)` is our NaN-rejecting validation: unlike `x <= 0.0` it is also true for NaN, which
 // is exactly what every such check wants (a NaN setting or sample must be refused).
@@ -11,6 +12,7 @@ pub mod integrator;
 pub mod render;
 pub mod sampler;
 pub mod scene;
+pub mod shot;
 pub mod spectral;
 
 pub use error::{Error, Result};
@@ -26,7 +28,7 @@ pub use petzval_optics as optics;
 pub use petzval_optics::write_atomic;
 pub mod camera;
 pub use camera::{
-    BuiltCamera, Camera, CameraRay, CameraSpec, FocusPlane, LensModel, LrtfCamera, ModelChoice, PinholeCamera,
-    RealisticCamera, Sensor, ShotContext, ThickLensCamera, ThinLensCamera,
+    BuiltCamera, Camera, CameraRay, CameraSpec, ExactCamera, FocusPlane, LensModel, LrtfCamera, ModelChoice,
+    PinholeCamera, Sensor, ShotContext, ThickCamera, ThinCamera,
 };
 pub use integrator::{PathSample, PathTracer, RenderScene, SurfaceHit};

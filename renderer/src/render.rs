@@ -82,7 +82,7 @@ impl Default for RenderSettings {
 impl RenderSettings {
     /// Checks the settings.
     pub fn validate(&self) -> Result<()> {
-        let bad = |f: &str, m: String| Err(Error::Camera { field: f.into(), message: m });
+        let bad = |f: &str, m: String| Err(Error::settings(f, m));
         if self.width == 0 || self.height == 0 || self.width > 16384 || self.height > 16384 {
             return bad("resolution", format!("{}x{} is outside 1..16384 per side", self.width, self.height));
         }
@@ -172,11 +172,8 @@ pub fn render_observed(
     let cancelled = AtomicBool::new(false);
     let camera_rays = AtomicU64::new(0);
     let dropped = AtomicU64::new(0);
-    let wavelength_primary = match &rig.camera {
-        Camera::Realistic(c) => c.lens.primary_wavelength_nm(),
-        Camera::Lrtf(c) => c.exact.lens.primary_wavelength_nm(),
-        _ => crate::optics::glass::WAVELENGTH_D_NM,
-    };
+    let wavelength_primary =
+        rig.camera.real_lens().map_or(crate::optics::glass::WAVELENGTH_D_NM, |l| l.primary_wavelength_nm());
     // 1. Progressive passes: 1, 1, 2, 4, ... samples, at most 16 spp per pass.
     let mut done = 0u32;
     let mut pass_spp = 1u32;
@@ -268,41 +265,4 @@ pub fn render_observed(
         camera_rays: camera_rays.load(Ordering::Relaxed),
         dropped_samples: dropped.load(Ordering::Relaxed),
     })
-}
-
-/// Nearest and farthest distance (m) at which the scene is seen through a pinhole of focal
-/// length `focal_length_mm` on `sensor` (a 32 × 24 grid of rays from the camera origin); the far
-/// end is infinite when some ray escapes. `None` when no ray hits anything. Used to size the
-/// depth of field that `--lens-model auto` must honour.
-pub fn scene_depth_range_m(
-    scene: &RenderScene,
-    to_world: &DAffine3,
-    sensor: &crate::camera::Sensor,
-    focal_length_mm: f64,
-) -> Option<(f64, f64)> {
-    let pinhole = crate::camera::PinholeCamera::new(*sensor, focal_length_mm).ok()?;
-    let camera = Camera::Pinhole(pinhole);
-    let (mut near, mut far, mut any) = (f64::INFINITY, 0.0f64, false);
-    let (nx, ny) = (32, 24);
-    for j in 0..ny {
-        for i in 0..nx {
-            let film = DVec2::new((i as f64 + 0.5) / nx as f64, (j as f64 + 0.5) / ny as f64);
-            let Some(ray) = camera.generate_ray(film, DVec2::splat(0.5), crate::optics::glass::WAVELENGTH_D_NM) else {
-                continue;
-            };
-            let o = to_world.transform_point3(ray.origin).as_vec3();
-            let d = to_world.transform_vector3(ray.direction).normalize().as_vec3();
-            match scene.intersect(o, d, f32::INFINITY) {
-                Some(hit) => {
-                    // distance along the view axis (the depth a lens focuses by)
-                    let z = hit.t as f64 * (-ray.direction.z);
-                    near = near.min(z);
-                    far = far.max(z);
-                    any = true;
-                }
-                None => far = f64::INFINITY,
-            }
-        }
-    }
-    any.then_some((near, far))
 }

@@ -1,7 +1,7 @@
 //! Cameras: radiometry (cos⁴), sensor tilt and the plane of sharp focus.
 
 use glam::{DVec2, DVec3};
-use petzval_renderer::{library_lens, Aperture, Camera, PinholeCamera, RealisticCamera, Sensor, ThinLensCamera};
+use petzval_renderer::{library_lens, Aperture, Camera, ExactCamera, PinholeCamera, Sensor, ThinCamera};
 
 const WL: f64 = 587.5618;
 
@@ -28,7 +28,7 @@ fn irradiance_n(cam: &Camera, film: DVec2, n: usize) -> f64 {
 fn pinhole_and_thin_lens_show_cos4_falloff() {
     let sensor = Sensor::default();
     let pin = Camera::Pinhole(PinholeCamera::new(sensor, 50.0).unwrap());
-    let thin = Camera::ThinLens(ThinLensCamera::new(sensor, 50.0, 16.0, None, Aperture::default()).unwrap());
+    let thin = Camera::Thin(ThinCamera::new(sensor, 50.0, 16.0, None, Aperture::default()).unwrap());
     for (u, v) in [(0.5, 0.5), (1.0, 0.5), (1.0, 1.0), (0.75, 0.2)] {
         let sx = (u - 0.5) * 36.0;
         let sy = (0.5 - v) * 24.0;
@@ -45,7 +45,7 @@ fn pinhole_and_thin_lens_show_cos4_falloff() {
 #[test]
 fn realistic_centre_is_normalised_and_corners_fall_off() {
     let lens = library_lens("double-gauss-50mm").unwrap().stopped_down(8.0).unwrap();
-    let cam = Camera::Realistic(RealisticCamera::new(Sensor::default(), lens, None).unwrap());
+    let cam = Camera::Exact(ExactCamera::new(Sensor::default(), lens, None).unwrap());
     // the exposure constant is a 256² stratified integral; an independent 400² estimate agrees
     let centre = irradiance_n(&cam, DVec2::new(0.5, 0.5), 400);
     assert!((centre - 1.0).abs() < 2e-3, "{centre}");
@@ -59,7 +59,7 @@ fn realistic_centre_is_normalised_and_corners_fall_off() {
 #[test]
 fn tilted_sensor_focus_plane_thin_lens_is_exact() {
     let sensor = Sensor { tilt_x_deg: 10.0, ..Sensor::default() };
-    let cam = Camera::ThinLens(ThinLensCamera::new(sensor, 50.0, 2.0, Some(3.0), Aperture::default()).unwrap());
+    let cam = Camera::Thin(ThinCamera::new(sensor, 50.0, 2.0, Some(3.0), Aperture::default()).unwrap());
     let plane = cam.focus_plane().unwrap();
     // hinge rule: J = f / sin(tilt), with f the lens's focal length as focused (Blender's thin
     // lens keeps the film at F = 50 mm and focuses by its power: f = F·s/(F + s))
@@ -85,7 +85,7 @@ fn tilted_sensor_focus_plane_thin_lens_is_exact() {
 fn sensor_tilted_30_degrees_realistic_focus_plane_verified_by_tracing() {
     let lens = library_lens("double-gauss-50mm").unwrap().stopped_down(4.0).unwrap();
     let sensor = Sensor { tilt_x_deg: 30.0, width_mm: 24.0, height_mm: 16.0, ..Sensor::default() };
-    let cam = Camera::Realistic(RealisticCamera::new(sensor, lens, Some(2.0)).unwrap());
+    let cam = Camera::Exact(ExactCamera::new(sensor, lens, Some(2.0)).unwrap());
     let plane = cam.focus_plane().unwrap();
     assert!(plane.hinge_distance_m.is_some());
     let mut checked = 0;
@@ -134,7 +134,7 @@ fn sensor_tilted_30_degrees_realistic_focus_plane_verified_by_tracing() {
 fn dispersive_lens_separates_wavelengths() {
     let lens = library_lens("zeiss-biotar-100mm").unwrap();
     assert!(lens.has_dispersion());
-    let cam = Camera::Realistic(RealisticCamera::new(Sensor::default(), lens, None).unwrap());
+    let cam = Camera::Exact(ExactCamera::new(Sensor::default(), lens, None).unwrap());
     let u = DVec2::new(0.5, 0.5);
     let (mut centre, mut corner) = (0.0f64, 0.0f64);
     for (film, out) in [(DVec2::new(0.5, 0.5), &mut centre), (DVec2::new(0.95, 0.9), &mut corner)] {
@@ -146,8 +146,85 @@ fn dispersive_lens_separates_wavelengths() {
     assert!(corner > 5.0 * centre, "it grows off axis: centre {centre}, corner {corner}");
     let plain = library_lens("double-gauss-50mm").unwrap();
     assert!(!plain.has_dispersion());
-    let cam = Camera::Realistic(RealisticCamera::new(Sensor::default(), plain, None).unwrap());
+    let cam = Camera::Exact(ExactCamera::new(Sensor::default(), plain, None).unwrap());
     let b = cam.generate_ray(DVec2::new(0.9, 0.9), u, 450.0).unwrap();
     let r = cam.generate_ray(DVec2::new(0.9, 0.9), u, 650.0).unwrap();
     assert_eq!(b.direction, r.direction);
+}
+
+mod host_conventions {
+    use glam::DVec2;
+    use petzval_renderer::camera::host::{self, FilmBack, HostCamera, SensorFit, Shift};
+    use petzval_renderer::{ApertureShape, Error};
+
+    fn back(fit: SensorFit, shift: Shift) -> FilmBack {
+        FilmBack { width_mm: 36.0, height_mm: 24.0, fit, shift }
+    }
+
+    #[test]
+    fn sensor_fit_follows_blender_and_usd() {
+        let none = Shift::Mm(DVec2::ZERO);
+        // AUTO: the width spans the larger side, in landscape and portrait
+        let s = back(SensorFit::Auto, none).sensor(300, 200, DVec2::ZERO).unwrap();
+        assert_eq!((s.width_mm, s.height_mm), (36.0, 24.0));
+        let s = back(SensorFit::Auto, none).sensor(200, 400, DVec2::ZERO).unwrap();
+        assert_eq!((s.width_mm, s.height_mm), (18.0, 36.0));
+        // HORIZONTAL / VERTICAL: the width spans the width, the height the height
+        let s = back(SensorFit::Horizontal, none).sensor(200, 400, DVec2::ZERO).unwrap();
+        assert_eq!((s.width_mm, s.height_mm), (36.0, 72.0));
+        let s = back(SensorFit::Vertical, none).sensor(400, 200, DVec2::ZERO).unwrap();
+        assert_eq!((s.width_mm, s.height_mm), (48.0, 24.0));
+        // USD expandAperture: grown, never cropped, to the frame's aspect; offsets in mm
+        let s = FilmBack::usd(36.0, 24.0, 1.0, -2.0).sensor(100, 100, DVec2::ZERO).unwrap();
+        assert_eq!((s.width_mm, s.height_mm, s.shift_mm), (36.0, 36.0, DVec2::new(1.0, -2.0)));
+        let s = FilmBack::usd(36.0, 24.0, 0.0, 0.0).sensor(400, 100, DVec2::ZERO).unwrap();
+        assert_eq!((s.width_mm, s.height_mm), (96.0, 24.0));
+        // Blender's shift is a fraction of the fitted side
+        let s = back(SensorFit::Vertical, Shift::FitFraction(DVec2::new(0.5, 0.25))).sensor(400, 200, DVec2::ZERO);
+        assert_eq!(s.unwrap().shift_mm, DVec2::new(12.0, 6.0));
+        assert_eq!("HORIZONTAL".parse::<SensorFit>().unwrap(), SensorFit::Horizontal);
+        assert!("diagonal".parse::<SensorFit>().unwrap_err().to_string().contains("sensor_fit"));
+    }
+
+    #[test]
+    fn aperture_text_and_blender_fields() {
+        let a = host::parse_aperture("blades:6:30").unwrap();
+        assert!(matches!(a.shape, ApertureShape::Blades { count: 6, .. }));
+        assert!((a.rotation_rad - 30f64.to_radians()).abs() < 1e-15);
+        for bad in ["blades:2", "blades:x", "blades:6:nan", "blades:6:1:2", "hexagon"] {
+            let e = host::parse_aperture(bad).unwrap_err();
+            assert!(matches!(&e, Error::Camera { field, .. } if field == "aperture"), "{bad}: {e}");
+        }
+        assert!(host::blender_aperture(0, 0.0, 1.0, None).unwrap().is_none());
+        assert!(matches!(host::blender_aperture(2, 0.0, 1.5, None).unwrap().unwrap().shape, ApertureShape::Circle));
+        let e = host::blender_aperture(6, f64::NAN, 1.0, None).unwrap_err().to_string();
+        assert!(e.contains("aperture_rotation_rad"), "{e}");
+        let e = host::blender_aperture(6, 0.0, 0.0, None).unwrap_err().to_string();
+        assert!(e.contains("aperture_ratio"), "{e}");
+    }
+
+    #[test]
+    fn every_field_is_validated_and_named() {
+        assert_eq!(host::focus_distance_m(Some(f64::INFINITY)).unwrap(), None);
+        assert_eq!(host::focus_distance_m(Some(2.0)).unwrap(), Some(2.0));
+        for (field, cam) in [
+            ("focus_distance_m", HostCamera { focus_distance_m: Some(f64::NAN), ..HostCamera::default() }),
+            ("focus_distance_m", HostCamera { focus_distance_m: Some(-1.0), ..HostCamera::default() }),
+            ("f_number", HostCamera { f_number: Some(f64::NAN), ..HostCamera::default() }),
+            ("focal_length_mm", HostCamera { focal_length_mm: 0.0, ..HostCamera::default() }),
+            ("tolerance_px", HostCamera { tolerance_px: -1.0, ..HostCamera::default() }),
+            ("clip", HostCamera { clip_m: (1.0, 0.5), ..HostCamera::default() }),
+            ("tilt_x_deg", HostCamera { tilt_deg: DVec2::new(70.0, 0.0), ..HostCamera::default() }),
+        ] {
+            let e = cam.camera_spec(64, 48).unwrap_err().to_string();
+            assert!(e.contains(field), "{field}: {e}");
+        }
+        let e = HostCamera::default().camera_spec(0, 48).unwrap_err();
+        assert!(matches!(e, Error::Settings { .. }), "{e}");
+        // glTF's vertical field of view → the focal length that frames it
+        let s = FilmBack::default().sensor(300, 200, DVec2::ZERO).unwrap();
+        let f = host::focal_length_from_yfov_mm(2.0 * (12.0f64 / 50.0).atan(), 300, 200, &s).unwrap();
+        assert!((f - 50.0).abs() < 1e-12, "{f}");
+        assert!(host::focal_length_from_yfov_mm(f64::NAN, 300, 200, &s).is_err());
+    }
 }

@@ -18,9 +18,7 @@ use petzval_renderer::integrator::RenderScene;
 use petzval_renderer::render::{render, CameraRig, RenderResult, RenderSettings};
 use petzval_renderer::scene::texture::Wrap;
 use petzval_renderer::scene::{demo, Environment, Material, Mesh, Scene, Texture, TextureRef};
-use petzval_renderer::{
-    library_lens, Aperture, ApertureShape, Camera, PinholeCamera, RealisticCamera, Sensor, ThinLensCamera,
-};
+use petzval_renderer::{library_lens, Aperture, ApertureShape, Camera, ExactCamera, PinholeCamera, Sensor, ThinCamera};
 
 // ------------------------------------------------------------------------------------------
 // Scene helpers.
@@ -112,9 +110,7 @@ fn shoot_img(scene: &RenderScene, camera: Camera, s: &RenderSettings) -> Image {
 }
 
 fn thin(sensor: Sensor, f_mm: f64, n: f64, focus_m: f64, aperture: Aperture, vignetting: bool) -> Camera {
-    let mut c = ThinLensCamera::new(sensor, f_mm, n, Some(focus_m), aperture).unwrap();
-    c.natural_vignetting = vignetting;
-    Camera::ThinLens(c)
+    Camera::Thin(ThinCamera::new(sensor, f_mm, n, Some(focus_m), aperture).unwrap().with_natural_vignetting(vignetting))
 }
 
 fn square_sensor(side_mm: f64) -> Sensor {
@@ -201,8 +197,7 @@ fn render_furnace_white_sphere_pinhole() {
         vec![diffuse(Vec3::ONE)],
         Environment::Constant(Vec3::ONE),
     );
-    let mut cam = PinholeCamera::new(Sensor::default(), 50.0).unwrap();
-    cam.natural_vignetting = false;
+    let cam = PinholeCamera::new(Sensor::default(), 50.0).unwrap().with_natural_vignetting(false);
     let (w, h) = (72, 48);
     let spp = 64;
     // Two independent seeds: their difference measures the per-pixel Monte Carlo noise, so the
@@ -410,7 +405,7 @@ fn render_defocus_conserves_flux() {
         power_through_lens(&lens, 600.0) * 0.6f64.powi(2) / (power_through_lens(&lens, 2000.0) * 2.0f64.powi(2));
     let pitch = 0.03125;
     let w = 128u32;
-    let cam = Camera::Realistic(RealisticCamera::new(square_sensor(w as f64 * pitch), lens, Some(d)).unwrap());
+    let cam = Camera::Exact(ExactCamera::new(square_sensor(w as f64 * pitch), lens, Some(d)).unwrap());
     let alpha = r_src_px * pitch / 50.0;
     let focused = emitter_moments(&cam, d, alpha, w, 256, 7);
     let blurred = emitter_moments(&cam, 0.6, alpha, w, 256, 7);
@@ -624,7 +619,7 @@ fn render_bokeh_cats_eye_double_gauss() {
     for shift in [DVec2::ZERO, DVec2::new(15.0, 10.0)] {
         let sensor =
             Sensor { width_mm: w as f64 * pitch, height_mm: w as f64 * pitch, shift_mm: shift, ..Sensor::default() };
-        let cam = Camera::Realistic(RealisticCamera::new(sensor, lens.clone(), Some(2.0)).unwrap());
+        let cam = Camera::Exact(ExactCamera::new(sensor, lens.clone(), Some(2.0)).unwrap());
         // aim the emitter along the ray through the window centre and the pupil centre
         let ray =
             cam.generate_ray(DVec2::new(0.5, 0.5), DVec2::new(0.5, 0.5), 587.56).expect("window centre sees the scene");
@@ -959,7 +954,7 @@ fn render_alpha_is_coverage_through_a_real_lens() {
     };
     let rs = scene_of(&[wall], vec![diffuse(Vec3::splat(0.5))], Environment::Constant(Vec3::splat(0.3)));
     let lens = library_lens("double-gauss-50mm").unwrap();
-    let cam = Camera::Realistic(RealisticCamera::new(Sensor::default(), lens, Some(3.0)).unwrap());
+    let cam = Camera::Exact(ExactCamera::new(Sensor::default(), lens, Some(3.0)).unwrap());
     let (w, h) = (48u32, 32u32);
     let img = shoot_img(&rs, cam, &settings(w, h, 8, 1, BOX1));
     // columns well clear of the edge (the defocus there is < 1 px: the wall is in focus)
@@ -993,7 +988,7 @@ fn demo_rig() -> (RenderScene, CameraRig) {
         anamorphic_ratio: 1.0,
     });
     let sensor = Sensor { tilt_x_deg: shot.tilt_x_deg, ..Sensor::default() };
-    let camera = Camera::Realistic(RealisticCamera::new(sensor, lens, Some(shot.focus_distance_m)).unwrap());
+    let camera = Camera::Exact(ExactCamera::new(sensor, lens, Some(shot.focus_distance_m)).unwrap());
     (RenderScene::new(scene).unwrap(), CameraRig { camera, to_world })
 }
 
@@ -1036,8 +1031,7 @@ fn furnace_for_interrupts() -> (RenderScene, CameraRig) {
         vec![diffuse(Vec3::ONE)],
         Environment::Constant(Vec3::ONE),
     );
-    let mut cam = PinholeCamera::new(Sensor::default(), 50.0).unwrap();
-    cam.natural_vignetting = false;
+    let cam = PinholeCamera::new(Sensor::default(), 50.0).unwrap().with_natural_vignetting(false);
     (rs, CameraRig { camera: Camera::Pinhole(cam), to_world: DAffine3::IDENTITY })
 }
 
@@ -1127,4 +1121,36 @@ fn render_time_limit_stops_early() {
     assert!(t < 3.0, "time limit overrun: {t} s");
     assert_finite(&r.image);
     check_furnace_image(&r.image);
+}
+
+/// Samples are keyed by absolute pixel, so a crop window renders exactly the full frame's
+/// pixels there (the Blender border test relies on it): a thin lens with depth of field, a
+/// Blackman–Harris filter and a lit sphere over a sky.
+#[test]
+fn crop_window_equals_the_full_frame() {
+    let rs = scene_of(
+        &[icosphere(Vec3::new(0.3, -0.2, -4.0), 1.0, 3, 0)],
+        vec![diffuse(Vec3::splat(0.6))],
+        Environment::Constant(Vec3::ONE),
+    );
+    let cam = thin(Sensor::default(), 50.0, 2.0, 3.0, Aperture::default(), true);
+    let filter = PixelFilter::BlackmanHarris { width_px: 3.0 };
+    let (w, h) = (48, 32);
+    let full = shoot(&rs, cam.clone(), DAffine3::IDENTITY, &settings(w, h, 8, 5, filter)).image;
+    let [x0, y0, x1, y1] = [10u32, 4, 37, 21];
+    let crop_settings = RenderSettings { crop: Some([x0, y0, x1, y1]), ..settings(w, h, 8, 5, filter) };
+    let crop = shoot(&rs, cam, DAffine3::IDENTITY, &crop_settings).image;
+    assert_eq!((crop.width, crop.height), (x1 - x0, y1 - y0));
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let c = ((y - y0) * (x1 - x0) + (x - x0)) as usize;
+            let f = (y * w + x) as usize;
+            for k in 0..4 {
+                let (a, b) = (crop.rgba[c][k], full.rgba[f][k]);
+                assert!((a - b).abs() <= 1e-6 * b.abs().max(1.0), "pixel ({x}, {y}) channel {k}: crop {a} vs full {b}");
+            }
+            let (a, b) = (crop.depth[c], full.depth[f]);
+            assert!(a == b || (a - b).abs() <= 1e-6 * b.abs(), "depth at ({x}, {y}): crop {a} vs full {b}");
+        }
+    }
 }

@@ -27,7 +27,7 @@ const PIXEL_PITCH_MM: f64 = 36.0 / 1920.0;
 pub(super) fn bench_lens_models(only: Option<String>, rays: usize, resolutions: &str, json: bool) -> Result<(), Error> {
     use petzval_renderer::optics::lrtf::{exit_sphere, BakeOptions, LrtfLookup, LrtfTable};
     use petzval_renderer::optics::pupil::{self, ExitPupilBounds};
-    use petzval_renderer::{Aperture, Camera, PinholeCamera, ThickLensCamera, ThinLensCamera};
+    use petzval_renderer::{Camera, CameraSpec, LensModel, ShotContext};
     let res_list: Vec<u32> = resolutions.split(',').filter_map(|r| r.trim().parse().ok()).collect();
     let names: Vec<String> = match only {
         Some(n) => vec![n],
@@ -96,19 +96,15 @@ pub(super) fn bench_lens_models(only: Option<String>, rays: usize, resolutions: 
                 chief.push((p, r.direction));
             }
         }
+        // The product's cameras (the one builder), wide open and focused at infinity.
+        let build = |model: LensModel| -> Result<Camera, Error> {
+            let spec = CameraSpec { lens: name.clone(), model, sensor, ..CameraSpec::default() };
+            Ok(spec.build(&ShotContext::default())?.camera)
+        };
         let analytic: Vec<(&str, Camera)> = vec![
-            ("pinhole", Camera::Pinhole(PinholeCamera::new(sensor, efl.abs())?)),
-            (
-                "thin",
-                Camera::ThinLens(ThinLensCamera::new(
-                    sensor,
-                    efl.abs(),
-                    lens.paraxial().f_number,
-                    None,
-                    Aperture::default(),
-                )?),
-            ),
-            ("thick", Camera::ThickLens(ThickLensCamera::new(sensor, &lens, None, None, Aperture::default())?)),
+            ("pinhole", build(LensModel::Pinhole)?),
+            ("thin", build(LensModel::Thin)?),
+            ("thick", build(LensModel::Thick)?),
         ];
         for (model, cam) in analytic {
             let t0 = Instant::now();

@@ -145,10 +145,7 @@ pub(super) fn parse_wxh(resolution: &str) -> Result<(u32, u32), Error> {
         .split_once('x')
         .and_then(|(a, b)| Some((a.trim().parse::<u32>().ok()?, b.trim().parse::<u32>().ok()?)))
         .filter(|(w, h)| *w > 0 && *h > 0)
-        .ok_or_else(|| Error::Camera {
-            field: "resolution".into(),
-            message: format!("expected WxH such as 480x320, got '{resolution}'"),
-        })
+        .ok_or_else(|| Error::settings("resolution", format!("expected WxH such as 480x320, got '{resolution}'")))
 }
 
 /// Parses a comma-separated list of LRTF resolutions.
@@ -156,9 +153,11 @@ pub(super) fn parse_resolutions(list: &str) -> Result<Vec<u32>, Error> {
     list.split(',')
         .filter(|r| !r.trim().is_empty())
         .map(|r| {
-            r.trim().parse::<u32>().ok().filter(|v| (8..=512).contains(v)).ok_or_else(|| Error::Camera {
-                field: "resolutions".into(),
-                message: format!("expected comma-separated LRTF resolutions in 8..=512, got '{r}'"),
+            r.trim().parse::<u32>().ok().filter(|v| (8..=512).contains(v)).ok_or_else(|| {
+                Error::settings(
+                    "resolutions",
+                    format!("expected comma-separated LRTF resolutions in 8..=512, got '{r}'"),
+                )
             })
         })
         .collect()

@@ -61,7 +61,7 @@ pub(super) fn bench_render(resolution: &str, spp: u32, triangles: usize) -> Resu
     use petzval_renderer::integrator::{primary_ray_throughput, RenderScene};
     use petzval_renderer::render::{render, CameraRig, RenderSettings};
     use petzval_renderer::scene::demo;
-    use petzval_renderer::{Aperture, Camera, PinholeCamera, RealisticCamera, ThickLensCamera, ThinLensCamera};
+    use petzval_renderer::{Aperture, Camera, ExactCamera, PinholeCamera, ThickCamera, ThinCamera};
     let (w, h) = resolution
         .split_once('x')
         .and_then(|(a, b)| Some((a.parse::<u32>().ok()?, b.parse::<u32>().ok()?)))
@@ -101,9 +101,9 @@ pub(super) fn bench_render(resolution: &str, spp: u32, triangles: usize) -> Resu
     let focus = Some(shot.focus_distance_m);
     let models: Vec<(&str, Camera)> = vec![
         ("pinhole", Camera::Pinhole(PinholeCamera::new(sensor, f)?)),
-        ("thin", Camera::ThinLens(ThinLensCamera::new(sensor, f, shot.f_number, focus, Aperture::default())?)),
-        ("thick", Camera::ThickLens(ThickLensCamera::new(sensor, &lens, None, focus, Aperture::default())?)),
-        ("exact (double-gauss-50mm)", Camera::Realistic(RealisticCamera::new(sensor, lens.clone(), focus)?)),
+        ("thin", Camera::Thin(ThinCamera::new(sensor, f, shot.f_number, focus, Aperture::default())?)),
+        ("thick", Camera::Thick(ThickCamera::new(sensor, &lens, None, focus, Aperture::default())?)),
+        ("exact (double-gauss-50mm)", Camera::Exact(ExactCamera::new(sensor, lens.clone(), focus)?)),
     ];
     let settings = RenderSettings { width: w, height: h, spp, ..RenderSettings::default() };
     println!(

@@ -101,6 +101,14 @@ BAD_RENDER_ARGS = [
     ("zero-fstop", ["--lens", "thin", "--fstop", "0"], ["f_number"]),
     ("unknown-lens-model", ["--lens", "double-gauss-50mm", "--lens-model", "wobbly"], ["lens_model"]),
     ("zero-threads", ["--threads", "0"], ["threads"]),
+    # the host-convention checks the Python module makes, now made for the CLI too
+    ("nan-focus", ["--focus", "nan"], ["focus_distance_m", "NaN"]),
+    ("nan-blade-rotation", ["--aperture", "blades:6:nan"], ["aperture", "finite"]),
+    ("nan-fstop", ["--lens", "thin", "--fstop", "nan"], ["f_number"]),
+    ("nan-shift", ["--shift-x", "nan"], ["shift"]),
+    ("zero-sensor", ["--sensor-width", "0"], ["sensor_width_mm"]),
+    ("zero-focal-length", ["--lens", "thin", "--focal-length", "0"], ["focal_length_mm"]),
+    ("bad-vignetting", ["--natural-vignetting", "maybe"], ["natural_vignetting"]),
 ]
 
 

@@ -94,9 +94,9 @@ def test_trace_matches_the_cli_and_reverses(petzval):
 
 def test_render_thin_lens_exposure_depth_and_determinism(petzval):
     s = ground_scene(petzval)
-    kw = dict(lens="thin", focal_length_mm=20.0, fstop=None, spp=8, seed=3)
-    r1 = petzval.render(s, camera(), 64, 48, threads=1, **kw)
-    r2 = petzval.render(s, camera(), 64, 48, threads=2, **kw)
+    cam = petzval.Camera(camera(), lens="thin", focal_length_mm=20.0, fstop=None)
+    r1 = petzval.render(s, cam, 64, 48, threads=1, spp=8, seed=3)
+    r2 = petzval.render(s, cam, 64, 48, threads=2, spp=8, seed=3)
     assert r1["lens_model"] == "pinhole" and "pinhole" in r1["lens_model_reason"]
     assert r1["rgba"].shape == (48, 64, 4) and r1["rgba"].dtype == np.float32
     assert r1["depth"].shape == (48, 64)
@@ -119,7 +119,7 @@ def test_progress_images_and_cancel(petzval):
         seen.append((fraction, spp, None if rgba is None else rgba.shape))
         return None  # None continues
 
-    r = petzval.render(s, camera(), 160, 120, spp=64, progress=progress, progress_interval_s=0.02)
+    r = petzval.render(s, petzval.Camera(camera()), 160, 120, spp=64, progress=progress, progress_interval_s=0.02)
     assert r["complete"] and r["spp"] == 64
     # every call reports the samples done so far; the finished image was shown
     assert seen and seen[-1][1] == 64, seen[-3:]
@@ -130,12 +130,10 @@ def test_progress_images_and_cancel(petzval):
     with pytest.raises(petzval.CancelledError):
         petzval.render(
             s,
-            camera(),
+            petzval.Camera(camera(), lens="double-gauss-50mm", lens_model="exact"),
             2048,
             2048,
             spp=4,
-            lens="double-gauss-50mm",
-            lens_model="exact",
             progress=lambda f, n, img: False,
             progress_interval_s=0.01,
         )
@@ -147,13 +145,15 @@ def test_progress_images_and_cancel(petzval):
             t["at"] = time.perf_counter()
         return "at" not in t
 
-    r = petzval.render(s, camera(), 400, 300, spp=100000, progress=stop_after_first_pass, progress_interval_s=0.05)
+    r = petzval.render(
+        s, petzval.Camera(camera()), 400, 300, spp=100000, progress=stop_after_first_pass, progress_interval_s=0.05
+    )
     latency = time.perf_counter() - t["at"]
     assert not r["complete"] and 1 <= r["spp"] < 100000
     assert latency < 0.5, f"render returned {latency:.3f} s after cancel"
     # an exception in the callback cancels and is re-raised
     with pytest.raises(ZeroDivisionError):
-        petzval.render(s, camera(), 64, 48, spp=16, progress=lambda f, n, img: 1 / 0)
+        petzval.render(s, petzval.Camera(camera()), 64, 48, spp=16, progress=lambda f, n, img: 1 / 0)
 
 
 def test_render_releases_the_gil(petzval):
@@ -169,7 +169,7 @@ def test_render_releases_the_gil(petzval):
     th = threading.Thread(target=ticker)
     th.start()
     try:
-        petzval.render(s, camera(), 256, 192, spp=16)
+        petzval.render(s, petzval.Camera(camera()), 256, 192, spp=16)
     finally:
         stop.set()
         th.join()
@@ -197,27 +197,34 @@ def test_render_releases_the_gil(petzval):
             "InvalidSceneError",
             ["base_color_texture", "3"],
         ),
-        (lambda pz: pz.render(pz.Scene(), np.eye(4), 0, 10), "InvalidSettingsError", ["resolution"]),
-        (lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, tilt_x_deg=80), "InvalidSettingsError", ["tilt_x_deg"]),
+        (lambda pz: pz.render(pz.Scene(), pz.Camera(np.eye(4)), 0, 10), "InvalidSettingsError", ["resolution"]),
+        (lambda pz: pz.Camera(np.eye(4), tilt_x_deg=80), "InvalidSettingsError", ["tilt_x_deg"]),
+        (lambda pz: pz.Camera(np.eye(4), lens_model="fast"), "InvalidSettingsError", ["lens_model"]),
+        (lambda pz: pz.Camera(np.zeros((4, 4))), "InvalidSettingsError", ["camera_to_world"]),
         (
-            lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, lens_model="fast"),
+            lambda pz: pz.render(pz.Scene(), pz.Camera(np.eye(4)), 10, 10, crop=(5, 5, 20, 20)),
             "InvalidSettingsError",
-            ["lens_model"],
+            ["crop"],
         ),
-        (lambda pz: pz.render(pz.Scene(), np.zeros((4, 4)), 10, 10), "InvalidSettingsError", ["camera_to_world"]),
-        (lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, crop=(5, 5, 20, 20)), "InvalidSettingsError", ["crop"]),
         (
-            lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, fstop=2.0, focus_distance_m=float("nan")),
+            lambda pz: pz.Camera(np.eye(4), fstop=2.0, focus_distance_m=float("nan")),
             "InvalidSettingsError",
             ["focus_distance_m"],
         ),
         (
-            lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, aperture_blades=6, aperture_rotation_rad=float("nan")),
+            lambda pz: pz.Camera(np.eye(4), aperture_blades=6, aperture_rotation_rad=float("nan")),
             "InvalidSettingsError",
             ["aperture_rotation_rad"],
         ),
+        (lambda pz: pz.Camera(np.eye(4), aperture_ratio=0.0), "InvalidSettingsError", ["aperture_ratio"]),
+        (lambda pz: pz.Camera(np.eye(4), sensor_fit="diagonal"), "InvalidSettingsError", ["sensor_fit"]),
+        (lambda pz: pz.Camera(np.eye(4), clip_start_m=2.0, clip_end_m=1.0), "InvalidSettingsError", ["clip"]),
+        (lambda pz: pz.Camera(np.eye(4), focal_length_mm=-5.0), "InvalidSettingsError", ["focal_length_mm"]),
+        (lambda pz: pz.Camera(np.eye(4), shift_x=float("nan")), "InvalidSettingsError", ["shift"]),
+        (lambda pz: pz.Camera(np.eye(4), fstop=float("nan")), "InvalidSettingsError", ["f_number"]),
+        (lambda pz: pz.Camera(np.eye(4), lensmodel="exact"), TypeError, ["lensmodel"]),
         (
-            lambda pz: pz.render(pz.Scene(), np.eye(4), 10, 10, lens="double-gauss-50mm", fstop=0.5),
+            lambda pz: pz.render(pz.Scene(), pz.Camera(np.eye(4), lens="double-gauss-50mm", fstop=0.5), 10, 10),
             "InvalidLensError",
             ["f/0.5"],
         ),
@@ -248,3 +255,42 @@ def test_broken_lens_file_names_file_and_line(petzval, tmp_path):
         petzval.Lens(str(p))
     msg = str(info.value)
     assert "broken.toml" in msg and ":6" in msg and "radius_mm" in msg, msg
+
+
+def test_crop_equals_the_full_frame(petzval):
+    """Samples are keyed by absolute pixel, so a crop is the full frame's window to float noise."""
+    s = ground_scene(petzval)
+    cam = petzval.Camera(camera(), lens="thin", focal_length_mm=20.0, fstop=2.0, focus_distance_m=3.0)
+    full = petzval.render(s, cam, 80, 60, spp=4, seed=1)
+    crop = petzval.render(s, cam, 80, 60, spp=4, seed=1, crop=(20, 0, 60, 30))
+    assert crop["rgba"].shape == (30, 40, 4)
+    np.testing.assert_allclose(crop["rgba"], full["rgba"][0:30, 20:60], rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(crop["depth"], full["depth"][0:30, 20:60], rtol=1e-6, atol=1e-7)
+
+
+def test_camera_description_is_typed_and_named(petzval):
+    cam = petzval.Camera(np.eye(4), lens="double-gauss-50mm", lens_model="lrtf")
+    assert cam.lens == "double-gauss-50mm" and cam.lens_model == "lrtf:96"
+    assert "double-gauss-50mm" in repr(cam)
+    # inf focuses at infinity, as None does
+    petzval.Camera(np.eye(4), fstop=2.0, focus_distance_m=float("inf"))
+
+
+def test_stub_matches_the_module(petzval):
+    """mypy's stubtest checks ``_native.pyi`` against the built module."""
+    import os
+    import sys
+    from pathlib import Path
+
+    pytest.importorskip("mypy")
+    site = Path(petzval.__file__).resolve().parents[1]
+    allowlist = Path(__file__).resolve().parent / "stubtest_allowlist.txt"
+    env = {**os.environ, "PYTHONPATH": str(site), "MYPYPATH": str(site)}
+    r = subprocess.run(
+        [sys.executable, "-m", "mypy.stubtest", "petzval._native", "--allowlist", str(allowlist)],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=site,
+    )
+    assert r.returncode == 0, r.stdout + r.stderr

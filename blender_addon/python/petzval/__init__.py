@@ -5,6 +5,7 @@ the API and its conventions.
 """
 
 from ._native import (
+    Camera,
     CancelledError,
     InvalidLensError,
     InvalidSceneError,
@@ -18,6 +19,7 @@ from ._native import (
 )
 
 __all__ = [
+    "Camera",
     "CancelledError",
     "InvalidLensError",
     "InvalidSceneError",

@@ -18,6 +18,7 @@ Conventions
 """
 
 from collections.abc import Callable, Sequence
+from typing import final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,11 +44,12 @@ def library_lenses() -> list[dict]:
     """The built-in lens library: ``[{"name", "description", "focal_length_mm", "f_number",
     "source"}]`` sorted by name."""
 
+@final
 class Lens:
     """A lens: a library name (``"double-gauss-50mm"``) or a path to a lens file
     (``.toml``, pbrt ``.dat``, Zemax ``.zmx``, lentil ``.json``)."""
 
-    def __init__(self, name_or_path: str) -> None: ...
+    def __new__(cls, name_or_path: str) -> Lens: ...
     @property
     def name(self) -> str: ...
     @property
@@ -67,6 +69,7 @@ class Lens:
         through every surface. ``direction`` is ``"film_to_scene"`` or ``"scene_to_film"``.
         Returns (origins, unit directions, passed); rows that did not pass are NaN."""
 
+@final
 class Scene:
     """A scene assembled from buffers. Build it, then pass it to :func:`render`."""
 
@@ -152,73 +155,96 @@ class Scene:
     @property
     def warnings(self) -> list[str]: ...
 
-ProgressCallback = Callable[[float, int, NDArray[np.float32] | None], bool]
+_ProgressCallback = Callable[[float, int, NDArray[np.float32] | None], bool]
+
+@final
+class Camera:
+    """One camera description for :func:`render`, with Blender's camera data semantics.
+    Validated when constructed: an invalid value raises InvalidSettingsError naming the
+    argument (a missing aperture image FileNotFoundError), an unknown keyword TypeError.
+
+    ``camera_to_world`` is a ``(4, 4)`` camera-to-world matrix (glTF axes, column vectors; scale
+    is removed). ``lens`` ``"thin"`` or ``"pinhole"`` use ``focal_length_mm``; a library name or
+    lens file brings its own focal length and f-number (``fstop`` stops it down).
+    ``sensor_fit`` is Blender's ``"auto"`` (``sensor_width_mm`` spans the larger image side),
+    ``"horizontal"`` or ``"vertical"`` (``sensor_height_mm`` spans the height), or USD's
+    ``"expand"`` (the apertures grown to the image's aspect). ``shift_x``/``shift_y`` are
+    Blender's shifts, in units of the fitted sensor side. ``fstop None`` means no depth of field
+    for thin (pinhole) and the lens's own f-number for real lenses. ``focus_distance_m`` None
+    or inf is infinity (NaN is an error). ``aperture_blades`` 0 is a circle;
+    ``aperture_rotation_rad`` and ``aperture_ratio`` are Blender's; ``aperture_image`` (a mask
+    image) replaces the blades. ``lens_model`` ``"auto"`` picks the cheapest model within
+    ``tolerance_px`` (pinhole, thin, thick, LRTF, exact) and :func:`render` says why in
+    ``lens_model_reason``; or ``"exact"``, ``"lrtf"``, ``"lrtf:RES"``, ``"thick"``, ``"thin"``,
+    ``"pinhole"``. ``clip_start_m``/``clip_end_m`` are planes perpendicular to the view axis,
+    as in Cycles; beyond them the world shows. ``natural_vignetting`` adds the cos^4 falloff
+    of thin and pinhole cameras (off, as in Cycles)."""
+
+    def __new__(
+        cls,
+        camera_to_world: NDArray[np.float64],
+        *,
+        lens: str = "thin",
+        lens_model: str = "auto",
+        tolerance_px: float = 0.25,
+        focal_length_mm: float = 50.0,
+        sensor_width_mm: float = 36.0,
+        sensor_height_mm: float = 24.0,
+        sensor_fit: str = "auto",
+        shift_x: float = 0.0,
+        shift_y: float = 0.0,
+        tilt_x_deg: float = 0.0,
+        tilt_y_deg: float = 0.0,
+        fstop: float | None = None,
+        focus_distance_m: float | None = None,
+        aperture_blades: int = 0,
+        aperture_rotation_rad: float = 0.0,
+        aperture_ratio: float = 1.0,
+        aperture_image: str | None = None,
+        clip_start_m: float = 0.0,
+        clip_end_m: float = float("inf"),
+        natural_vignetting: bool = False,
+    ) -> Camera: ...
+    @property
+    def lens(self) -> str:
+        """The lens argument."""
+    @property
+    def lens_model(self) -> str:
+        """The lens model asked for."""
 
 def render(
     scene: Scene,
-    camera_to_world: NDArray[np.float64],
+    camera: Camera,
     width: int,
     height: int,
     *,
-    lens: str = "thin",
-    lens_model: str = "auto",
-    tolerance_px: float = 0.25,
-    focal_length_mm: float = 50.0,
-    sensor_width_mm: float = 36.0,
-    sensor_height_mm: float = 24.0,
-    sensor_fit: str = "auto",
-    shift_x: float = 0.0,
-    shift_y: float = 0.0,
-    tilt_x_deg: float = 0.0,
-    tilt_y_deg: float = 0.0,
-    fstop: float | None = None,
-    focus_distance_m: float | None = None,
-    aperture_blades: int = 0,
-    aperture_rotation_rad: float = 0.0,
-    aperture_ratio: float = 1.0,
-    aperture_image: str | None = None,
-    clip_start_m: float = 0.0,
-    clip_end_m: float = float("inf"),
     crop: tuple[int, int, int, int] | None = None,
     spp: int = 64,
     seed: int = 0,
     max_depth: int = 8,
     filter_width_px: float = 1.5,
-    natural_vignetting: bool = False,
     spectral: bool = False,
     threads: int = 0,
-    progress: ProgressCallback | None = None,
+    progress: _ProgressCallback | None = None,
     progress_interval_s: float = 0.1,
 ) -> dict:
-    """Renders ``scene`` and returns ``{"rgba": (H, W, 4) float32, "depth": (H, W) float32,
-    "spp": int, "complete": bool, "seconds": float, "lens_model": str, "lens_model_reason":
-    str, "warnings": list[str], "camera_rays": int, "dropped_samples": int}``. Row 0 of the
-    images is the TOP row (flip for Blender's render result, whose row 0 is the bottom). Depth
-    is the first hit's distance along the camera's view axis (planar, as Cycles' Z pass),
-    averaged over the pixel's samples that hit, ``inf`` where nothing was hit.
-
-    The camera follows Blender's camera data: ``lens`` ``"thin"`` or ``"pinhole"`` use
-    ``focal_length_mm``; a library name or lens file brings its own focal length and f-number
-    (``fstop`` stops it down). ``sensor_fit`` is Blender's ``"auto"`` (``sensor_width_mm``
-    spans the larger image side), ``"horizontal"`` or ``"vertical"`` (``sensor_height_mm``
-    spans the height). ``shift_x``/``shift_y`` are Blender's shifts, in units of the larger
-    sensor side. ``fstop None`` means no depth of field for thin (pinhole) and the lens's own
-    f-number for real lenses. ``focus_distance_m None`` is infinity. ``aperture_blades`` 0
-    is a circle; ``aperture_rotation_rad`` and ``aperture_ratio`` are Blender's. ``lens_model``
-    ``"auto"`` picks the cheapest model within ``tolerance_px`` (pinhole, thin, thick, LRTF,
-    exact) and says why in ``lens_model_reason``; or ``"exact"``, ``"lrtf"``, ``"thick"``,
-    ``"thin"``, ``"pinhole"``. ``clip_start_m``/``clip_end_m`` are planes perpendicular to
-    the view axis, as in Cycles; beyond them the world shows.
+    """Renders ``scene`` through ``camera`` and returns ``{"rgba": (H, W, 4) float32,
+    "depth": (H, W) float32, "spp": int, "complete": bool, "seconds": float, "lens_model": str,
+    "lens_model_reason": str, "warnings": list[str], "camera_rays": int, "dropped_samples":
+    int}``. Row 0 of the images is the TOP row (flip for Blender's render result, whose row 0
+    is the bottom). Depth is the first hit's distance along the camera's view axis (planar, as
+    Cycles' Z pass), averaged over the pixel's samples that hit, ``inf`` where nothing was hit.
+    ``lens_model`` is the model rendered (the one name of :class:`Camera`'s ``lens_model``).
 
     ``crop = (x0, y0, x1, y1)`` in pixels of the full ``width x height`` frame, row 0 at the
     top, renders only that window (Blender's border with "crop to border"); the returned
-    arrays are the window's size.
+    arrays are the window's size, and every pixel is the same as in the full frame (samples
+    are keyed by absolute pixel).
 
     ``progress(fraction, spp_done, rgba_or_None)`` (``spp_done``: samples per pixel finished so
-    far) is called from the calling thread about
-    every ``progress_interval_s`` seconds and once per finished pass with the image so far
-    (``rgba`` as above, else None); return ``False`` to cancel (``None`` or ``True``
-    continue). An exception raised by the callback cancels and is re-raised. A cancelled
-    render returns what
-    converged with ``complete False`` (raises CancelledError if not even one pass finished).
-    ``threads`` 0 uses all cores. The GIL is released while rendering."""
+    far) is called from the calling thread about every ``progress_interval_s`` seconds and
+    once per finished pass with the image so far (``rgba`` as above, else None); return
+    ``False`` to cancel (``None`` or ``True`` continue). An exception raised by the callback
+    cancels and is re-raised. A cancelled render returns what converged with ``complete
+    False`` (raises CancelledError if not even one pass finished). ``threads`` 0 uses all
+    cores. The GIL is released while rendering."""

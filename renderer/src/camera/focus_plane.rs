@@ -4,7 +4,7 @@
 //! sharp focus exactly; for real lenses the thick-lens approximation (focal length, principal
 //! planes) is used, and tests verify it by tracing.
 
-use super::Camera;
+use super::{Camera, ExactCamera};
 use glam::DVec3;
 
 /// The plane of sharp focus, in camera space (metres).
@@ -40,19 +40,26 @@ fn conjugate(p: DVec3, f: f64) -> DVec3 {
     -p * (f / (p.z - f))
 }
 
+/// Thin-lens data of a real lens's camera: focal length, film pivot relative to the rear
+/// principal plane, front principal point in camera space.
+fn real_lens_data(c: &ExactCamera) -> (f64, f64, f64) {
+    let p = c.lens().paraxial();
+    (p.efl_mm, c.film_z_mm() - p.rear_principal_z_mm, p.front_principal_z_mm - p.entrance_pupil_z_mm)
+}
+
 pub(super) fn focus_plane(cam: &Camera) -> Option<FocusPlane> {
     // 1. Thin-lens data: focal length, film pivot relative to the rear principal plane, and the
     //    front principal point in camera space.
     let (f, film_z, front_cam_z_mm) = match cam {
         Camera::Pinhole(_) => return None,
-        Camera::ThinLens(c) => (c.lens_focal_length_mm(), c.film_distance_mm(), 0.0),
-        Camera::ThickLens(c) => {
-            (c.focal_length_mm, c.film_z_mm() - c.rear_principal_z_mm, c.front_principal_z_mm - c.entrance_pupil_z_mm)
-        }
-        Camera::Realistic(c) | Camera::Lrtf(crate::camera::LrtfCamera { exact: c, .. }) => {
-            let p = c.lens.paraxial();
-            (p.efl_mm, c.film_z_mm - p.rear_principal_z_mm, p.front_principal_z_mm - p.entrance_pupil_z_mm)
-        }
+        Camera::Thin(c) => (c.lens_focal_length_mm(), c.film_distance_mm(), 0.0),
+        Camera::Thick(c) => (
+            c.focal_length_mm(),
+            c.film_z_mm() - c.rear_principal_z_mm(),
+            c.front_principal_z_mm() - c.entrance_pupil_z_mm(),
+        ),
+        Camera::Exact(c) => real_lens_data(c),
+        Camera::Lrtf(c) => real_lens_data(c.exact()),
     };
     let sensor = cam.sensor();
     let rot = sensor.rotation();

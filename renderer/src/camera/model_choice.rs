@@ -34,7 +34,8 @@
 //! | vignetting agreement | relative irradiance | — | 0.02 |
 //! | depth range without a scene | (near, far) | m | (0.3, ∞) |
 
-use super::spec::{cached_lrtf, CameraSpec, LensModel, SpecLens};
+use super::model::{build_model, cached_lrtf};
+use super::spec::{CameraSpec, LensModel, SpecLens};
 use super::Camera;
 use crate::error::{Error, Result};
 use glam::{DVec2, DVec3};
@@ -116,7 +117,7 @@ pub(crate) fn choose_model(
     shot: &ShotContext,
 ) -> Result<(ModelChoice, Option<Camera>)> {
     if shot.width == 0 || shot.height == 0 {
-        return Err(Error::Camera { field: "resolution".into(), message: "must be at least 1x1".into() });
+        return Err(Error::settings("resolution", "must be at least 1x1"));
     }
     match lens {
         SpecLens::Ideal => Ok((choose_ideal(spec, shot), None)),
@@ -274,10 +275,12 @@ fn compare(model: &[Landing], exact: &[Landing], footprint: &dyn Fn(usize, DVec3
 }
 
 fn choose_real(spec: &CameraSpec, lens: &SpecLens, shot: &ShotContext) -> Result<(ModelChoice, Option<Camera>)> {
-    let SpecLens::Real(real) = lens else { unreachable!("choose_real takes a real lens") };
+    let SpecLens::Real(real) = lens else { return Err(Error::Internal("choose_real takes a real lens".into())) };
     // 1. The reference: the exact camera, and the surfaces rays are followed to.
-    let exact = spec.build_model(lens, LensModel::Exact, None)?;
-    let Camera::Realistic(exact_cam) = &exact else { unreachable!("the exact model of a real lens is realistic") };
+    let exact = build_model(spec, lens, LensModel::Exact, None)?;
+    let Camera::Exact(exact_cam) = &exact else {
+        return Err(Error::Internal("the exact model of a real lens is not an exact camera".into()));
+    };
     let mut cameras: Vec<(LensModel, Camera)> = Vec::new();
     let (near, _far) = shot.depth_range_m.unwrap_or(DEFAULT_DEPTH_RANGE_M);
     let surfaces = Surfaces { focus_m: spec.focus_distance_m, near_m: near.max(1e-3) };
@@ -357,7 +360,7 @@ fn choose_real(spec: &CameraSpec, lens: &SpecLens, shot: &ShotContext) -> Result
                 continue;
             }
         }
-        let camera = match spec.build_model(lens, model, Some(exact_cam)) {
+        let camera = match build_model(spec, lens, model, Some(exact_cam)) {
             Ok(c) => c,
             Err(e) => {
                 report.note = format!("not applicable: {e}");
@@ -425,8 +428,9 @@ fn choose_real(spec: &CameraSpec, lens: &SpecLens, shot: &ShotContext) -> Result
         .iter()
         .filter(|r| r.meets)
         .min_by(|a, b| a.estimated_seconds.total_cmp(&b.estimated_seconds))
+        .or(reports.last())
         .cloned()
-        .unwrap_or_else(|| reports.last().cloned().expect("exact is always a candidate"));
+        .ok_or_else(|| Error::Internal("no candidate model (exact is always one)".into()))?;
     let best_index = reports.iter().position(|r| r.model == best.model).unwrap_or(reports.len());
     let cheaper_failed: Vec<String> =
         reports[..best_index].iter().filter(|r| !r.meets).map(|r| format!("{} ({})", r.model, r.note)).collect();

@@ -1,5 +1,5 @@
-//! Camera specification → [`Camera`]: the one place where a lens name, a lens model and a
-//! sensor become a camera, shared by the CLI and the Blender add-on.
+//! Camera specification: what a front end asks for (lens name, lens model, sensor, focus,
+//! aperture). [`CameraSpec::build`](super::builder) turns it into a [`Camera`](super::Camera).
 //!
 //! | name | type | unit | default |
 //! |---|---|---|---|
@@ -14,20 +14,13 @@
 //! | `natural_vignetting` | bool, thin and pinhole (cos⁴) | — | true |
 //! | `lrtf_file` | optional baked table to use for `lrtf` | — | None |
 
-use super::model_choice::{choose_model, ModelChoice, ShotContext};
-use super::{Camera, LrtfCamera, PinholeCamera, RealisticCamera, Sensor, ThickLensCamera, ThinLensCamera};
+use super::Sensor;
 use crate::error::{Error, Result};
-use crate::integrator::RenderScene;
 use crate::optics::aperture::Aperture;
 use crate::optics::lens::Lens;
 use crate::optics::library::load_lens;
-use crate::optics::lrtf::{BakeOptions, LrtfTable};
-use crate::render::scene_depth_range_m;
-use glam::DAffine3;
-use std::collections::HashMap;
 use std::path::PathBuf;
 use std::str::FromStr;
-use std::sync::{Arc, Mutex, OnceLock};
 
 /// Default LRTF resolution when `lrtf` is asked for without one.
 pub const DEFAULT_LRTF_RESOLUTION: u32 = 96;
@@ -35,7 +28,7 @@ pub const DEFAULT_LRTF_RESOLUTION: u32 = 96;
 /// How a real lens is evaluated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LensModel {
-    /// The cheapest model within the error budget (see [`choose_model`]).
+    /// The cheapest model within the error budget (see [`ModelChoice`](super::ModelChoice)).
     Auto,
     /// Exact trace through every surface.
     Exact,
@@ -55,9 +48,11 @@ pub enum LensModel {
 impl FromStr for LensModel {
     type Err = Error;
     fn from_str(s: &str) -> Result<Self> {
-        let bad = || Error::Camera {
-            field: "lens_model".into(),
-            message: format!("expected auto, exact, lrtf[:RESOLUTION], thick, thin or pinhole, got '{s}'"),
+        let bad = || {
+            Error::camera(
+                "lens_model",
+                format!("expected auto, exact, lrtf[:RESOLUTION], thick, thin or pinhole, got '{s}'"),
+            )
         };
         Ok(match s {
             "auto" => LensModel::Auto,
@@ -70,10 +65,10 @@ impl FromStr for LensModel {
                 Some(r) => {
                     let resolution: u32 = r.parse().map_err(|_| bad())?;
                     if !(8..=256).contains(&resolution) {
-                        return Err(Error::Camera {
-                            field: "lens_model".into(),
-                            message: format!("LRTF resolution {resolution} is outside 8..=256"),
-                        });
+                        return Err(Error::camera(
+                            "lens_model",
+                            format!("LRTF resolution {resolution} is outside 8..=256"),
+                        ));
                     }
                     LensModel::Lrtf { resolution }
                 }
@@ -138,21 +133,6 @@ impl Default for CameraSpec {
     }
 }
 
-/// A camera built from a [`CameraSpec`], with what was decided.
-#[derive(Debug, Clone)]
-pub struct BuiltCamera {
-    /// The camera.
-    pub camera: Camera,
-    /// The lens's name (`thin`, `pinhole` or the real lens's name).
-    pub lens_label: String,
-    /// Focal length (mm).
-    pub focal_length_mm: f64,
-    /// f-number (infinity for a pinhole).
-    pub f_number: f64,
-    /// The model used and why.
-    pub choice: ModelChoice,
-}
-
 /// The lens of a spec: ideal or real.
 #[derive(Debug, Clone)]
 pub(crate) enum SpecLens {
@@ -165,7 +145,7 @@ pub(crate) enum SpecLens {
 impl CameraSpec {
     /// Checks the numbers (the lens is checked when loaded).
     pub fn validate(&self) -> Result<()> {
-        let bad = |f: &str, m: String| Err(Error::Camera { field: f.into(), message: m });
+        let bad = |f: &str, m: String| Err(Error::camera(f, m));
         self.sensor.validate()?;
         if !(self.tolerance_px.is_finite() && self.tolerance_px > 0.0) {
             return bad("tolerance_px", format!("must be a positive number of pixels, got {}", self.tolerance_px));
@@ -201,150 +181,8 @@ impl CameraSpec {
         Ok(SpecLens::Real(Box::new(lens)))
     }
 
-    /// Builds the camera; `shot` (resolution, samples, scene depth range) informs `auto`.
-    pub fn build(&self, shot: &ShotContext) -> Result<BuiltCamera> {
-        self.validate()?;
-        self.build_loaded(self.load_lens()?, shot)
-    }
-
-    /// Builds the camera for a shot of `scene` seen from `to_world` at `width` × `height` and
-    /// `spp`: the depth range `auto` must honour is probed in the scene through a pinhole of the
-    /// lens's focal length. The lens is loaded once.
-    pub fn build_for_scene(
-        &self,
-        scene: &RenderScene,
-        to_world: &DAffine3,
-        width: u32,
-        height: u32,
-        spp: u32,
-        spectral: bool,
-    ) -> Result<BuiltCamera> {
-        self.validate()?;
-        let lens = self.load_lens()?;
-        let probe_focal_mm = match &lens {
-            SpecLens::Ideal => self.focal_length_mm,
-            SpecLens::Real(l) => l.paraxial().efl_mm,
-        };
-        let depth_range_m = scene_depth_range_m(scene, to_world, &self.sensor, probe_focal_mm);
-        self.build_loaded(lens, &ShotContext { width, height, spp, depth_range_m, spectral })
-    }
-
-    fn build_loaded(&self, lens: SpecLens, shot: &ShotContext) -> Result<BuiltCamera> {
-        let (choice, camera) = match self.model {
-            LensModel::Auto => choose_model(self, &lens, shot)?,
-            m => (ModelChoice::fixed(m), None),
-        };
-        let camera = match camera {
-            Some(c) => c,
-            None => self.build_model(&lens, choice.model, None)?,
-        };
-        let (lens_label, focal_length_mm, f_number) = match &lens {
-            SpecLens::Ideal if self.is_pinhole() => ("pinhole".to_string(), self.focal_length_mm, f64::INFINITY),
-            SpecLens::Ideal => ("thin".to_string(), self.focal_length_mm, self.f_number.unwrap_or(f64::INFINITY)),
-            SpecLens::Real(l) => (l.name().to_string(), l.paraxial().efl_mm, l.paraxial().f_number),
-        };
-        Ok(BuiltCamera { camera, lens_label, focal_length_mm, f_number, choice })
-    }
-
     /// An ideal lens without an aperture: `"pinhole"`, or `"thin"` without an f-number.
     pub(crate) fn is_pinhole(&self) -> bool {
         self.lens == "pinhole" || (self.lens == "thin" && self.f_number.is_none())
     }
-
-    /// The camera of one model (not `Auto`); `exact` is the exact camera when already built
-    /// (its exit-pupil bounds are costly), for the LRTF.
-    pub(crate) fn build_model(
-        &self,
-        lens: &SpecLens,
-        model: LensModel,
-        exact: Option<&RealisticCamera>,
-    ) -> Result<Camera> {
-        let sensor = self.sensor;
-        let focus = self.focus_distance_m;
-        match lens {
-            SpecLens::Ideal => match (model, self.is_pinhole()) {
-                (LensModel::Pinhole, _) | (LensModel::Exact | LensModel::Thin | LensModel::Auto, true) => {
-                    let mut c = PinholeCamera::new(sensor, self.focal_length_mm)?;
-                    c.natural_vignetting = self.natural_vignetting;
-                    Ok(Camera::Pinhole(c))
-                }
-                (LensModel::Exact | LensModel::Thin | LensModel::Auto, false) => {
-                    let n = self.f_number.unwrap_or(f64::INFINITY);
-                    let mut c = ThinLensCamera::new(
-                        sensor,
-                        self.focal_length_mm,
-                        n,
-                        focus,
-                        self.aperture.clone().unwrap_or_default(),
-                    )?;
-                    c.natural_vignetting = self.natural_vignetting;
-                    Ok(Camera::ThinLens(c))
-                }
-                (m, _) => Err(Error::Camera {
-                    field: "lens_model".into(),
-                    message: format!(
-                        "the {} model needs a real lens (a library name or a lens file), not '{}'",
-                        m, self.lens
-                    ),
-                }),
-            },
-            SpecLens::Real(lens) => match model {
-                LensModel::Exact | LensModel::Auto => {
-                    Ok(Camera::Realistic(RealisticCamera::new(sensor, (**lens).clone(), focus)?))
-                }
-                LensModel::Lrtf { resolution } => {
-                    let table = match &self.lrtf_file {
-                        Some(path) => Arc::new(LrtfTable::load(path, lens)?),
-                        None => cached_lrtf(lens, resolution)?,
-                    };
-                    let exact = match exact {
-                        Some(e) => e.clone(),
-                        None => RealisticCamera::new(sensor, (**lens).clone(), focus)?,
-                    };
-                    Ok(Camera::Lrtf(LrtfCamera::with_exact(exact, table)?))
-                }
-                LensModel::Thick => {
-                    Ok(Camera::ThickLens(ThickLensCamera::new(sensor, lens, None, focus, lens.aperture().clone())?))
-                }
-                LensModel::Thin => {
-                    let p = lens.paraxial();
-                    let mut c = ThinLensCamera::new(sensor, p.efl_mm, p.f_number, focus, lens.aperture().clone())?;
-                    c.natural_vignetting = true;
-                    Ok(Camera::ThinLens(c))
-                }
-                LensModel::Pinhole => {
-                    // The pinhole that frames as the lens does at this focus: the thick lens's
-                    // film distance behind its rear principal plane.
-                    let thick = ThickLensCamera::new(sensor, lens, None, focus, lens.aperture().clone())?;
-                    let mut c = PinholeCamera::new(sensor, thick.film_z_mm() - thick.rear_principal_z_mm)?;
-                    c.natural_vignetting = true;
-                    Ok(Camera::Pinhole(c))
-                }
-            },
-        }
-    }
-}
-
-type TableKey = (u64, u32);
-
-fn table_cache() -> &'static Mutex<HashMap<TableKey, Arc<LrtfTable>>> {
-    static CACHE: OnceLock<Mutex<HashMap<TableKey, Arc<LrtfTable>>>> = OnceLock::new();
-    CACHE.get_or_init(|| Mutex::new(HashMap::new()))
-}
-
-/// An LRTF table of `lens` at `resolution`, baked once per process (the stop is applied at
-/// lookup, so one table serves every f-number and stop shape of the lens). At most a few
-/// tables are kept.
-pub fn cached_lrtf(lens: &Lens, resolution: u32) -> Result<Arc<LrtfTable>> {
-    let key = (crate::optics::lrtf::lens_hash(lens), resolution);
-    if let Some(t) = table_cache().lock().map_err(|_| Error::Internal("LRTF cache poisoned".into()))?.get(&key) {
-        return Ok(t.clone());
-    }
-    let table = Arc::new(LrtfTable::bake(lens, &BakeOptions { resolution, ..BakeOptions::default() }, &|_| {})?);
-    let mut cache = table_cache().lock().map_err(|_| Error::Internal("LRTF cache poisoned".into()))?;
-    if cache.len() >= 8 {
-        cache.clear();
-    }
-    cache.insert(key, table.clone());
-    Ok(table)
 }

@@ -1,0 +1,78 @@
+//! The LRTF model: a real lens evaluated through its baked ray transfer table
+//! ([`LrtfTable`], film → scene); rays in cells that straddle a vignetting boundary are traced
+//! exactly. The film position, pupil bounds and exposure are those of the [`ExactCamera`] of
+//! the same lens.
+//!
+//! | name | type | unit | default |
+//! |---|---|---|---|
+//! | `exact` | [`ExactCamera`]: sensor, lens, focus | — | — |
+//! | `table` | [`LrtfTable`] baked for the lens, covering the sensor | — | baked at 96 on demand |
+
+use super::{CameraRay, ExactCamera, Sensor};
+use crate::error::{Error, Result};
+use crate::optics::lens::{Lens, TraceDirection};
+use crate::optics::lrtf::{LrtfLookup, LrtfTable};
+use glam::DVec2;
+use std::sync::Arc;
+
+/// A real lens evaluated through its ray transfer table (see the module docs).
+#[derive(Debug, Clone)]
+pub struct LrtfCamera {
+    exact: ExactCamera,
+    table: Arc<LrtfTable>,
+}
+
+impl LrtfCamera {
+    /// A camera through `table`, which must have been baked for `lens` and cover the sensor.
+    pub fn new(sensor: Sensor, lens: Lens, focus_distance_m: Option<f64>, table: Arc<LrtfTable>) -> Result<Self> {
+        Self::with_exact(ExactCamera::new(sensor, lens, focus_distance_m)?, table)
+    }
+
+    /// A camera through `table` for an exact camera already built (its pupil bounds and
+    /// exposure are reused).
+    pub fn with_exact(exact: ExactCamera, table: Arc<LrtfTable>) -> Result<Self> {
+        let h = &table.header;
+        let (r, dz) = exact.sensor().extent();
+        if r > h.max_film_radius_mm {
+            return Err(Error::camera(
+                "lens_model",
+                format!("the LRTF table covers film points up to {:.1} mm from the axis; this sensor reaches {r:.1} mm: re-bake with a larger --max-film-radius", h.max_film_radius_mm),
+            ));
+        }
+        if exact.film_z_mm() - dz - h.in_base_z_mm < h.min_film_distance_mm - 1e-9 {
+            return Err(Error::camera(
+                "lens_model",
+                "the sensor comes closer to the lens than the LRTF table covers: re-bake it",
+            ));
+        }
+        Ok(LrtfCamera { exact, table })
+    }
+
+    /// The same camera traced exactly (sensor, lens, focus, pupil bounds, exposure).
+    pub fn exact(&self) -> &ExactCamera {
+        &self.exact
+    }
+
+    /// The table.
+    pub fn table(&self) -> &Arc<LrtfTable> {
+        &self.table
+    }
+
+    fn raw_ray(&self, film: DVec2, lens_u: DVec2, wavelength_nm: f64) -> Option<CameraRay> {
+        let lens = self.exact.lens();
+        self.exact.raw_ray_with(film, lens_u, |ray| match self.table.lookup(ray, wavelength_nm) {
+            LrtfLookup::Hit(hit) => {
+                let tr = lens.aperture().transmission(hit.stop_point.x, hit.stop_point.y, lens.stop_semi_diameter_mm());
+                (tr > 0.0).then_some((hit.ray, tr))
+            }
+            LrtfLookup::Miss => None,
+            LrtfLookup::Uncertain => {
+                lens.trace(ray, wavelength_nm, TraceDirection::FilmToScene).map(|t| (t.ray, t.transmission))
+            }
+        })
+    }
+
+    pub(super) fn generate_ray(&self, film: DVec2, lens_u: DVec2, wavelength_nm: f64) -> Option<CameraRay> {
+        self.raw_ray(film, lens_u, wavelength_nm).map(|r| CameraRay { weight: r.weight * self.exact.exposure(), ..r })
+    }
+}

@@ -1,0 +1,91 @@
+//! The image sensor: size, shift in its plane and Scheimpflug tilt. Every camera model has one.
+//!
+//! | name | type | unit | default |
+//! |---|---|---|---|
+//! | `width_mm`, `height_mm` | f64 | mm | 36 × 24 |
+//! | `shift_mm` | (f64, f64): sensor moved in its plane; +x frames more of the right | mm | (0, 0) |
+//! | `tilt_x_deg` | f64: rotation about the horizontal axis; + moves the image bottom away from the lens, tilting focus towards the ground | degrees | 0 |
+//! | `tilt_y_deg` | f64: rotation about the vertical axis; + moves the image's right side away from the lens | degrees | 0 |
+
+use crate::error::{Error, Result};
+use glam::{DMat3, DVec2, DVec3};
+
+/// The image sensor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sensor {
+    /// Width.
+    pub width_mm: f64,
+    /// Height.
+    pub height_mm: f64,
+    /// Shift in the sensor plane.
+    pub shift_mm: DVec2,
+    /// Tilt about the horizontal axis.
+    pub tilt_x_deg: f64,
+    /// Tilt about the vertical axis.
+    pub tilt_y_deg: f64,
+}
+
+impl Default for Sensor {
+    fn default() -> Self {
+        Sensor { width_mm: 36.0, height_mm: 24.0, shift_mm: DVec2::ZERO, tilt_x_deg: 0.0, tilt_y_deg: 0.0 }
+    }
+}
+
+impl Sensor {
+    /// Checks the fields.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |f: &str, m: String| Err(Error::camera(f, m));
+        if !(self.width_mm.is_finite() && self.width_mm > 0.0) {
+            return bad("sensor_width_mm", format!("must be positive, got {}", self.width_mm));
+        }
+        if !(self.height_mm.is_finite() && self.height_mm > 0.0) {
+            return bad("sensor_height_mm", format!("must be positive, got {}", self.height_mm));
+        }
+        if !self.shift_mm.is_finite() {
+            return bad("shift_mm", "must be finite".into());
+        }
+        for (f, t) in [("tilt_x_deg", self.tilt_x_deg), ("tilt_y_deg", self.tilt_y_deg)] {
+            if !(t.is_finite() && t.abs() < 60.0) {
+                return bad(f, format!("must be within ±60°, got {t}"));
+            }
+        }
+        Ok(())
+    }
+
+    /// Rotation of the sensor plane (lens frame).
+    pub fn rotation(&self) -> DMat3 {
+        DMat3::from_rotation_y(-self.tilt_y_deg.to_radians()) * DMat3::from_rotation_x(self.tilt_x_deg.to_radians())
+    }
+
+    /// Unit normal of the sensor plane (lens frame, pointing towards +z).
+    pub fn normal(&self) -> DVec3 {
+        self.rotation() * DVec3::Z
+    }
+
+    /// Film point in the lens frame for an image position `film` in [0,1]² (0,0 = top left),
+    /// with the sensor's pivot (where the axis meets it) at z = `film_z_mm`. The image is
+    /// inverted on the film, so the upright image position maps to the mirrored film point.
+    pub fn film_point(&self, film: DVec2, film_z_mm: f64) -> DVec3 {
+        let sx = (film.x - 0.5) * self.width_mm + self.shift_mm.x;
+        let sy = (0.5 - film.y) * self.height_mm + self.shift_mm.y;
+        DVec3::new(0.0, 0.0, film_z_mm) + self.rotation() * DVec3::new(-sx, -sy, 0.0)
+    }
+
+    /// Image position (in [0,1]² when the shift is small) where the optical axis meets the sensor.
+    pub fn axis_film_coord(&self) -> DVec2 {
+        DVec2::new(0.5 - self.shift_mm.x / self.width_mm, 0.5 + self.shift_mm.y / self.height_mm)
+    }
+
+    /// Largest distance of a film point from the optical axis, and the largest |Δz| of the
+    /// tilted sensor from its pivot.
+    pub fn extent(&self) -> (f64, f64) {
+        let mut r: f64 = 0.0;
+        let mut dz: f64 = 0.0;
+        for (u, v) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)] {
+            let p = self.film_point(DVec2::new(u, v), 0.0);
+            r = r.max(p.x.hypot(p.y));
+            dz = dz.max(p.z.abs());
+        }
+        (r, dz)
+    }
+}
