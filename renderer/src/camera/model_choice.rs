@@ -233,22 +233,10 @@ fn measure(camera: &Camera, surfaces: &Surfaces, film_points: &[DVec2], waveleng
     out
 }
 
-/// Nominal cost of one camera ray (ns) of `model` for a lens of `surfaces` surfaces.
-fn nominal_ns(model: LensModel, surfaces: usize) -> f64 {
-    let exact = 40.0 * surfaces as f64;
-    match model {
-        LensModel::Pinhole => 30.0,
-        LensModel::Thin => 50.0,
-        LensModel::Thick => 60.0,
-        LensModel::Lrtf { .. } => 60.0 + 0.05 * exact,
-        LensModel::Exact | LensModel::Auto => exact,
-    }
-}
-
 /// Nominal bake cost (ns of one core) of a table: about five exact traces per entry.
 fn nominal_bake_ns(resolution: u32, wavelengths: usize, surfaces: usize) -> f64 {
     let n = resolution as f64;
-    n * n * (n / 2.0 + 1.0) * wavelengths as f64 * 5.0 * nominal_ns(LensModel::Exact, surfaces)
+    n * n * (n / 2.0 + 1.0) * wavelengths as f64 * 5.0 * LensModel::Exact.nominal_ns_per_ray(surfaces)
 }
 
 /// Errors of `model` against `exact` (pixels per film point, irradiance difference).
@@ -301,7 +289,7 @@ fn choose_real(spec: &CameraSpec, lens: &SpecLens, shot: &ShotContext) -> Result
     let exact_landings: Vec<Vec<Landing>> =
         wavelengths.iter().map(|&w| measure(&exact, &surfaces, &film_points, w)).collect();
     let n_surfaces = real.surfaces().len();
-    let exact_ns = nominal_ns(LensModel::Exact, n_surfaces);
+    let exact_ns = LensModel::Exact.nominal_ns_per_ray(n_surfaces);
     let table_wavelengths = if real.has_dispersion() { real.wavelengths_nm().len().max(1) } else { 1 };
     // Pixel footprint: pitch / f per metre of distance (planes), pitch / f radians (infinity).
     let angle_per_px = pixel_pitch_mm(spec, shot) / real.paraxial().efl_mm;
@@ -312,16 +300,7 @@ fn choose_real(spec: &CameraSpec, lens: &SpecLens, shot: &ShotContext) -> Result
     // 2. Candidates, cheapest first.
     let mut reports: Vec<CandidateReport> = Vec::new();
     let mut lrtf_met = false;
-    let candidates = [
-        LensModel::Pinhole,
-        LensModel::Thin,
-        LensModel::Thick,
-        LensModel::Lrtf { resolution: 32 },
-        LensModel::Lrtf { resolution: 64 },
-        LensModel::Lrtf { resolution: 96 },
-        LensModel::Lrtf { resolution: 128 },
-    ];
-    for model in candidates {
+    for model in LensModel::AUTO_CANDIDATES {
         let mut report = CandidateReport {
             model,
             max_error_px: f64::INFINITY,
@@ -345,7 +324,7 @@ fn choose_real(spec: &CameraSpec, lens: &SpecLens, shot: &ShotContext) -> Result
             }
             // Bake only when the table can pay off.
             setup = nominal_bake_ns(resolution, table_wavelengths, n_surfaces) * 1e-9;
-            if setup + render_seconds(nominal_ns(model, n_surfaces)) >= render_seconds(exact_ns) {
+            if setup + render_seconds(model.nominal_ns_per_ray(n_surfaces)) >= render_seconds(exact_ns) {
                 report.setup_seconds = setup;
                 report.note = format!(
                     "not baked: its bake (est. {setup:.2} s) costs more than it saves on {:.2e} camera rays",
@@ -385,7 +364,7 @@ fn choose_real(spec: &CameraSpec, lens: &SpecLens, shot: &ShotContext) -> Result
         report.max_error_px = errs.iter().cloned().fold(0.0, f64::max);
         report.mean_error_px = errs.iter().sum::<f64>() / errs.len() as f64;
         report.irradiance_error = irr;
-        report.ns_per_ray = nominal_ns(model, n_surfaces);
+        report.ns_per_ray = model.nominal_ns_per_ray(n_surfaces);
         report.setup_seconds = setup;
         report.estimated_seconds = setup + render_seconds(report.ns_per_ray);
         report.meets = report.mean_error_px <= spec.tolerance_px

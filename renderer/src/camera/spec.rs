@@ -45,6 +45,34 @@ pub enum LensModel {
     Pinhole,
 }
 
+impl LensModel {
+    /// The candidates `auto` evaluates for a real lens, cheapest first (exact is the reference
+    /// and the fallback).
+    pub const AUTO_CANDIDATES: [LensModel; 7] = [
+        LensModel::Pinhole,
+        LensModel::Thin,
+        LensModel::Thick,
+        LensModel::Lrtf { resolution: 32 },
+        LensModel::Lrtf { resolution: 64 },
+        LensModel::Lrtf { resolution: 96 },
+        LensModel::Lrtf { resolution: 128 },
+    ];
+
+    /// Nominal cost of one camera ray (ns, one core) for a lens of `surfaces` surfaces: the
+    /// fixed cost model of `auto` (measured with `petzval bench lens` and `bench lens-models`,
+    /// see docs/speed-vs-error.md), so its choice is the same on every run.
+    pub fn nominal_ns_per_ray(self, surfaces: usize) -> f64 {
+        let exact = 40.0 * surfaces as f64;
+        match self {
+            LensModel::Pinhole => 30.0,
+            LensModel::Thin => 50.0,
+            LensModel::Thick => 60.0,
+            LensModel::Lrtf { .. } => 60.0 + 0.05 * exact,
+            LensModel::Exact | LensModel::Auto => exact,
+        }
+    }
+}
+
 impl FromStr for LensModel {
     type Err = Error;
     fn from_str(s: &str) -> Result<Self> {
