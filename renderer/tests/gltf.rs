@@ -3,7 +3,7 @@
 //! worked out by hand from the numbers in that script.
 
 use glam::{Vec2, Vec3, Vec4};
-use petzval_renderer::scene::gltf_load::{load_gltf, load_gltf_slice};
+use petzval_renderer::scene::gltf::{load_gltf, load_gltf_slice};
 use petzval_renderer::scene::texture::{srgb_to_linear, Wrap};
 use petzval_renderer::scene::{AlphaMode, Light, Material, Scene};
 use petzval_renderer::Error;

@@ -1,5 +1,5 @@
 //! Scenes: triangle meshes in world space, glTF PBR materials and textures, punctual lights,
-//! an environment and the file's cameras. Built by the glTF loader ([`gltf_load`]), the
+//! an environment and the file's cameras. Built by the glTF loader ([`gltf`]), the
 //! built-in demo ([`demo`]) or in memory (the Blender add-on and the USD stage).
 //!
 //! Units: metres; world space is glTF's (+y up, right-handed). Colours are linear Rec.709.
@@ -20,7 +20,7 @@ use std::sync::Arc;
 
 pub mod demo;
 pub mod environment;
-pub mod gltf_load;
+pub mod gltf;
 pub mod texture;
 
 pub use environment::Environment;
