@@ -198,7 +198,7 @@ pub(crate) fn render(
         spec.validate().map_err(py_err)?;
         let mut scene_data = scene.scene.clone();
         if !scene.all_tangents {
-            scene_data.mesh.tangents.clear();
+            scene_data.meshes.iter_mut().for_each(|m| m.tangents.clear());
         }
         // 2. Build, decide and render on a worker thread; this thread (holding the GIL only to
         //    call `progress`) polls it.

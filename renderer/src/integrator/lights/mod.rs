@@ -58,7 +58,7 @@ mod set;
 mod tree;
 
 pub use sample::spot_attenuation;
-pub use set::LightSet;
+pub use set::{EmitterGroup, LightSet};
 pub use tree::P_INFINITE;
 
 use std::f32::consts::PI;
@@ -109,8 +109,13 @@ pub enum LightSelection {
 pub(crate) enum LightKind {
     /// Index into `Scene::lights`.
     Punctual(u32),
-    /// Mesh triangle index.
-    Triangle(u32),
+    /// Triangle `tri` of instance `instance` (indices into `Scene::instances` and its mesh).
+    Triangle {
+        /// Instance.
+        instance: u32,
+        /// Mesh triangle.
+        tri: u32,
+    },
     Environment,
 }
 

@@ -3,7 +3,7 @@
 use glam::{Vec2, Vec3};
 
 use super::{env_pdf, env_sample, LightKind, LightSample, LightSelection};
-use crate::integrator::accel::{offset_ray_origin, AlphaTest, RenderScene};
+use crate::integrator::accel::{offset_ray_origin, AlphaTest, RenderScene, SurfaceHit};
 use crate::scene::Light;
 
 /// glTF range window.
@@ -54,9 +54,9 @@ impl RenderScene {
         self.lights.pmf(p, n, light)
     }
 
-    /// Light index of emissive mesh triangle `tri` (None when it is not a light).
-    pub fn triangle_light(&self, tri: u32) -> Option<usize> {
-        self.lights.triangle_light(tri)
+    /// Light index of emissive triangle `tri` of instance `instance` (None when it is not a light).
+    pub fn triangle_light(&self, instance: u32, tri: u32) -> Option<usize> {
+        self.lights.triangle_light(instance, tri)
     }
 
     /// Samples a light for shading point `p` without a surface normal (as
@@ -108,11 +108,11 @@ impl RenderScene {
                 }
                 Some(LightSample { wi, radiance, pdf: pmf, delta: true, target })
             }
-            LightKind::Triangle(tri) => {
+            LightKind::Triangle { instance, tri } => {
                 let scene = self.scene();
-                let mesh = &scene.mesh;
-                let mat = &scene.materials[mesh.material_ids[tri as usize] as usize];
-                let [a, b, c] = mesh.indices[tri as usize].map(|i| mesh.positions[i as usize]);
+                let material_id = self.material_of(instance, tri);
+                let mat = &scene.materials[material_id as usize];
+                let [a, b, c] = self.world_triangle(instance, tri);
                 // Uniform point: barycentrics (1 − √u₀, √u₀(1 − u₁), √u₀·u₁).
                 let su = u.x.sqrt();
                 let (w0, w1, w2) = (1.0 - su, su * (1.0 - u.y), su * u.y);
@@ -122,7 +122,7 @@ impl RenderScene {
                 if !(area2 > 0.0) {
                     return None;
                 }
-                let nl = cross / area2;
+                let nl = cross / area2 * self.instance_sign(instance);
                 let area = 0.5 * area2;
                 let d = q - p;
                 let dist2 = d.length_squared();
@@ -139,30 +139,19 @@ impl RenderScene {
                 if cos_l < 1e-7 {
                     return None;
                 }
-                let (uv0, uv1) = if mesh.uv0.len() == mesh.positions.len() {
-                    let [i0, i1, i2] = mesh.indices[tri as usize].map(|i| i as usize);
-                    let uv0 = mesh.uv0[i0] * w0 + mesh.uv0[i1] * w1 + mesh.uv0[i2] * w2;
-                    let uv1 = if mesh.uv1.len() == mesh.positions.len() {
-                        mesh.uv1[i0] * w0 + mesh.uv1[i1] * w1 + mesh.uv1[i2] * w2
-                    } else {
-                        uv0
-                    };
-                    (uv0, uv1)
-                } else {
-                    (Vec2::ZERO, Vec2::ZERO)
-                };
+                let (uv0, uv1) = self.uvs_at(instance, tri, w1, w2);
                 let mut le =
                     mat.emissive * self.texture(mat.emissive_texture, uv0, uv1).map_or(Vec3::ONE, |t| t.truncate());
                 // Cut-outs of the emitter itself: Mask removes, Blend emits with weight alpha
                 // (the expected value of stochastic opacity).
-                match self.alpha_tests[mesh.material_ids[tri as usize] as usize] {
+                match self.alpha_tests[material_id as usize] {
                     AlphaTest::None => {}
                     AlphaTest::Mask(cutoff) => {
-                        if self.alpha_at(tri, w1, w2) < cutoff {
+                        if self.alpha_at(instance, tri, w1, w2) < cutoff {
                             return None;
                         }
                     }
-                    AlphaTest::Stochastic => le *= self.alpha_at(tri, w1, w2).clamp(0.0, 1.0),
+                    AlphaTest::Stochastic => le *= self.alpha_at(instance, tri, w1, w2).clamp(0.0, 1.0),
                 }
                 if le == Vec3::ZERO {
                     return None;
@@ -186,17 +175,17 @@ impl RenderScene {
     }
 
     /// Pdf (selection × solid angle) with which [`RenderScene::sample_light_at`] at shading
-    /// point (`p`, `n`) would have produced a point on emissive triangle `tri` seen at distance
-    /// `dist` along unit `dir`.
-    pub fn triangle_light_pdf(&self, p: Vec3, n: Vec3, tri: u32, dir: Vec3, dist: f32, geometric_normal: Vec3) -> f32 {
-        let pmf = self.lights.triangle_pmf(p, n, tri);
+    /// point (`p`, `n`) would have produced the point of `hit` (an emissive triangle seen at
+    /// distance `hit.t` along unit `dir`).
+    pub fn triangle_light_pdf(&self, p: Vec3, n: Vec3, hit: &SurfaceHit, dir: Vec3) -> f32 {
+        let pmf = self.lights.triangle_pmf(p, n, hit.instance, hit.triangle);
         if pmf == 0.0 {
             return 0.0;
         }
-        let mesh = &self.scene().mesh;
-        let [a, b, c] = mesh.indices[tri as usize].map(|i| mesh.positions[i as usize]);
+        let [a, b, c] = self.world_triangle(hit.instance, hit.triangle);
         let area = 0.5 * (b - a).cross(c - a).length();
-        let cos_l = geometric_normal.dot(dir).abs();
+        let cos_l = hit.geometric_normal.dot(dir).abs();
+        let dist = hit.t;
         let pdf = pmf * dist * dist / (area * cos_l);
         if pdf.is_finite() {
             pdf

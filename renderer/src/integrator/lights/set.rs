@@ -12,13 +12,27 @@ use crate::scene::{Light, Scene};
 // ------------------------------------------------------------------------------------------
 // The light set.
 
+/// The emissive triangles of one instance, for [`LightSet::build`].
+#[derive(Debug, Clone)]
+pub struct EmitterGroup {
+    /// Index into `Scene::instances`.
+    pub instance: u32,
+    /// Triangles of the instance's mesh (the size of its slot in the triangle → light table).
+    pub mesh_triangles: u32,
+    /// Its valid triangles with an emissive material.
+    pub triangles: Vec<u32>,
+}
+
 /// Light list and selection distributions.
 #[derive(Debug, Clone, Default)]
 pub struct LightSet {
     pub(super) kinds: Vec<LightKind>,
     /// Power distribution: n + 1 entries, cdf[0] = 0, cdf[n] = 1.
     cdf: Vec<f32>,
-    /// Mesh triangle → light index (u32::MAX: not a light); empty when no triangle emits.
+    /// Instance → start of its slot in `tri_light` (u32::MAX: no emitter); empty when no
+    /// triangle emits.
+    tri_light_base: Vec<u32>,
+    /// Slot start + mesh triangle → light index (u32::MAX: not a light).
     tri_light: Vec<u32>,
     env_light: Option<u32>,
     scene_radius: f32,
@@ -27,7 +41,15 @@ pub struct LightSet {
 }
 
 impl LightSet {
-    pub(crate) fn build(scene: &Scene, valid_tris: &[u32], bmin: Vec3, bmax: Vec3) -> LightSet {
+    /// Builds the light list from the scene's punctual lights and environment and the emissive
+    /// triangles in `emitters` (`world_tri` gives a triangle's world-space vertices).
+    pub(crate) fn build(
+        scene: &Scene,
+        emitters: &[EmitterGroup],
+        world_tri: &dyn Fn(u32, u32) -> [Vec3; 3],
+        bmin: Vec3,
+        bmax: Vec3,
+    ) -> LightSet {
         let radius = if bmax.cmpge(bmin).all() { 0.5 * (bmax - bmin).length() } else { 0.0 };
         let radius = radius.max(1e-3);
         let mut kinds = Vec::new();
@@ -84,29 +106,40 @@ impl LightSet {
                 None => infinite.push((li, p as f64)),
             }
         }
-        let mesh = &scene.mesh;
-        let emissive: Vec<bool> = scene.materials.iter().map(|m| m.is_emissive()).collect();
+        let mut tri_light_base = Vec::new();
         let mut tri_light = Vec::new();
-        if emissive.iter().any(|&e| e) {
-            for &t in valid_tris {
+        for g in emitters {
+            let mesh = &scene.meshes[scene.instances[g.instance as usize].mesh as usize];
+            for &t in &g.triangles {
                 let m = &scene.materials[mesh.material_ids[t as usize] as usize];
                 if !m.is_emissive() {
                     continue;
                 }
-                let [a, b, c] = mesh.indices[t as usize].map(|i| mesh.positions[i as usize]);
+                let [a, b, c] = world_tri(g.instance, t);
                 let cross = (b - a).cross(c - a);
                 let area = 0.5 * cross.length();
                 let sides = if m.double_sided { 2.0 } else { 1.0 };
                 let p = PI * area * luminance(m.emissive) * sides;
                 if p.is_finite() && p > 0.0 {
-                    if tri_light.is_empty() {
-                        tri_light = vec![u32::MAX; mesh.indices.len()];
+                    if tri_light_base.is_empty() {
+                        tri_light_base = vec![u32::MAX; scene.instances.len()];
+                    }
+                    let base = &mut tri_light_base[g.instance as usize];
+                    if *base == u32::MAX {
+                        *base = tri_light.len() as u32;
+                        tri_light.resize(tri_light.len() + g.mesh_triangles as usize, u32::MAX);
                     }
                     let li = kinds.len() as u32;
-                    tri_light[t as usize] = li;
-                    kinds.push(LightKind::Triangle(t));
+                    tri_light[(*base + t) as usize] = li;
+                    kinds.push(LightKind::Triangle { instance: g.instance, tri: t });
                     power.push(p as f64);
-                    let w = cross.normalize_or_zero();
+                    // The emitting side's normal: the winding's, negated for a mirroring instance.
+                    let sign = if scene.instances[g.instance as usize].object_to_world.matrix3.determinant() < 0.0 {
+                        -1.0
+                    } else {
+                        1.0
+                    };
+                    let w = cross.normalize_or_zero() * sign;
                     if w != Vec3::ZERO {
                         bounded.push((
                             li,
@@ -171,7 +204,7 @@ impl LightSet {
         // with many small emitters).
         let has_spot = scene.lights.iter().any(|l| matches!(l, Light::Spot { .. }));
         let selection = if has_spot { LightSelection::Power } else { LightSelection::default() };
-        LightSet { kinds, cdf, tri_light, env_light, scene_radius: radius, tree, selection }
+        LightSet { kinds, cdf, tri_light_base, tri_light, env_light, scene_radius: radius, tree, selection }
     }
 
     /// Number of lights.
@@ -235,20 +268,24 @@ impl LightSet {
         self.env_light.map_or(0.0, |i| self.pmf(Vec3::ZERO, Vec3::ZERO, i as usize))
     }
 
-    /// Light index of mesh triangle `tri` (None when it does not emit).
+    /// Light index of triangle `tri` of instance `instance` (None when it does not emit).
     #[inline]
-    pub fn triangle_light(&self, tri: u32) -> Option<usize> {
-        match self.tri_light.get(tri as usize) {
+    pub fn triangle_light(&self, instance: u32, tri: u32) -> Option<usize> {
+        let base = *self.tri_light_base.get(instance as usize)?;
+        if base == u32::MAX {
+            return None;
+        }
+        match self.tri_light.get(base as usize + tri as usize) {
             Some(&i) if i != u32::MAX => Some(i as usize),
             _ => None,
         }
     }
 
-    /// Selection pmf of mesh triangle `tri` as a light for shading point (p, n) (0 when it does
-    /// not emit).
+    /// Selection pmf of triangle `tri` of instance `instance` as a light for shading point
+    /// (p, n) (0 when it does not emit).
     #[inline]
-    pub fn triangle_pmf(&self, p: Vec3, n: Vec3, tri: u32) -> f32 {
-        self.triangle_light(tri).map_or(0.0, |i| self.pmf(p, n, i))
+    pub fn triangle_pmf(&self, p: Vec3, n: Vec3, instance: u32, tri: u32) -> f32 {
+        self.triangle_light(instance, tri).map_or(0.0, |i| self.pmf(p, n, i))
     }
 
     /// Radius of the scene's bounding sphere.

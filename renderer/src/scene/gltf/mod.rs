@@ -3,13 +3,16 @@
 //! The file is parsed and validated by the `gltf` crate; buffers and images are read here (so
 //! that a missing or broken image is a warning with a visible fallback, not a failed load), and
 //! accessors are decoded here with checked byte ranges, so no input can make the loader panic.
-//! Everything is flattened into one world-space [`Mesh`]; warnings go to [`Scene::warnings`].
+//! Each glTF mesh becomes one object-space [`Mesh`](super::Mesh) (read once, however many
+//! nodes use it) and each node using it an [`Instance`](super::Instance) with the node's world
+//! transform; warnings go to [`Scene::warnings`].
 //!
 //! | glTF | becomes | notes |
 //! |---|---|---|
 //! | default scene (else the first; else every root node, with a warning) | nodes walked with their matrix or TRS | a cycle in the node graph is an error |
-//! | mesh primitive, mode `TRIANGLES` | triangles of [`Scene::mesh`] | other modes skipped with a warning |
-//! | `POSITION`, `NORMAL`, `TANGENT`, `TEXCOORD_0/1`, indices | world space: normals by the inverse transpose, tangents by the matrix with `w` × sign(det); det < 0 flips the winding | any component type (normalized integers too, `KHR_mesh_quantization`) and sparse accessors |
+//! | mesh | one [`Scene::meshes`] entry; each node using it one [`Scene::instances`] entry | the transform applies at render time |
+//! | mesh primitive, mode `TRIANGLES` | triangles of its mesh | other modes skipped with a warning |
+//! | `POSITION`, `NORMAL`, `TANGENT`, `TEXCOORD_0/1`, indices | object space, as stored; the renderer moves them by the instance (normals by the inverse transpose, tangents by the matrix with `w` × sign(det); det < 0 flips the winding) | any component type (normalized integers too, `KHR_mesh_quantization`) and sparse accessors |
 //! | no `NORMAL` | flat face normals (vertices unshared), as the glTF spec requires | |
 //! | no `TANGENT` | zero tangents | |
 //! | non-finite positions | those triangles dropped with a warning; an error if no triangle is left | |
@@ -135,6 +138,8 @@ struct Loader<'a> {
     textures: HashMap<(usize, TexKind), usize>,
     /// Decoded images by glTF image index (Err = the reason it is unusable).
     images: HashMap<usize, std::result::Result<Arc<image::DynamicImage>, String>>,
+    /// glTF mesh index → scene mesh (None: the mesh has no triangles), once read.
+    mesh_ids: HashMap<usize, Option<u32>>,
     /// Index of the default material, once a primitive without material needs it.
     default_material: Option<u32>,
     /// Triangles read, and dropped for non-finite positions.
@@ -197,6 +202,7 @@ impl<'a> Loader<'a> {
             scene: Scene::default(),
             textures: HashMap::new(),
             images: HashMap::new(),
+            mesh_ids: HashMap::new(),
             default_material: None,
             triangles_read: 0,
             triangles_dropped: 0,
@@ -205,7 +211,10 @@ impl<'a> Loader<'a> {
         loader.load_buffers(blob)?;
         loader.load_materials();
         loader.walk_nodes()?;
-        if loader.triangles_read > 0 && loader.scene.mesh.indices.is_empty() && loader.triangles_dropped > 0 {
+        if loader.triangles_read > 0
+            && loader.scene.meshes.iter().all(|m| m.indices.is_empty())
+            && loader.triangles_dropped > 0
+        {
             return Err(err(format!(
                 "all {} triangles have non-finite vertex positions (NaN or infinity)",
                 loader.triangles_read

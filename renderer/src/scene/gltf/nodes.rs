@@ -225,8 +225,27 @@ impl Loader<'_> {
 
     // ---------------------------------------------------------------- meshes
 
+    /// Places glTF mesh `mesh` with `world`: the mesh is read once (object space, all its
+    /// triangle primitives in one [`Mesh`]) and every node using it becomes an instance.
     pub(super) fn add_mesh(&mut self, mesh: &gltf::Mesh, world: &Mat4) -> Result<()> {
+        let id = match self.mesh_ids.get(&mesh.index()) {
+            Some(&id) => id,
+            None => {
+                let m = self.read_mesh(mesh)?;
+                let id = (!m.indices.is_empty()).then(|| self.scene.add_mesh(m));
+                self.mesh_ids.insert(mesh.index(), id);
+                id
+            }
+        };
+        if let Some(id) = id {
+            self.scene.add_instance(id, Affine3A::from_mat4(*world));
+        }
+        Ok(())
+    }
+
+    fn read_mesh(&mut self, mesh: &gltf::Mesh) -> Result<Mesh> {
         let mesh_loc = named("mesh", mesh.index(), mesh.name());
+        let mut out = Mesh::default();
         for prim in mesh.primitives() {
             let loc = format!("{mesh_loc}, primitive {}", prim.index());
             if prim.mode() != Mode::Triangles {
@@ -237,10 +256,10 @@ impl Loader<'_> {
                 Some(i) if i < self.scene.materials.len() => i as u32,
                 _ => self.default_material(),
             };
-            let m = self.read_primitive(&prim, world, material, &loc)?;
-            self.scene.mesh.append(&m, 0);
+            let m = self.read_primitive(&prim, &Mat4::IDENTITY, material, &loc)?;
+            out.append(&m, 0);
         }
-        Ok(())
+        Ok(out)
     }
 
     pub(super) fn attribute_f32(
