@@ -115,7 +115,8 @@ class Scene:
         name: str = "",
     ) -> int:
         """Adds a triangle mesh, stored once in object space, placed once by ``transform``;
-        returns its mesh id for :meth:`add_instance` / :meth:`add_instances`. ``positions (N, 3)``, ``triangles (M, 3)`` vertex indices,
+        returns its mesh id for :meth:`add_instance` / :meth:`add_instances`.
+        ``positions (N, 3)``, ``triangles (M, 3)`` vertex indices,
         ``material_ids (M,)`` indices into the scene's materials (default: all 0; a scene
         without materials gets a grey default), optional per-vertex ``normals (N, 3)``
         (computed from faces when absent), ``uvs (N, 2)`` (glTF convention), ``tangents

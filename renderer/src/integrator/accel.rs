@@ -18,13 +18,6 @@
 //!   traversal closure reads them sequentially; each keeps its index: in the world BVH a
 //!   running index over the baked instances' triangles, in an instanced mesh's BVH the mesh
 //!   triangle.
-//!
-//! | memory item | bytes |
-//! |---|---|
-//! | leaf-order triangle | 40 per triangle, once per mesh (or per baked instance) |
-//! | BVH node | 80 per node (obvhs `CwBvhNode`) |
-//! | instance transforms | 128 per instance (object-to-world, normal matrix, flags) |
-//! | top-level leaf | 80 per instance of an instanced mesh (world-to-object, indices), plus top-level nodes |
 //! * Intersection is watertight (Woop, Benthin & Wald 2013, with the double-precision fallback
 //!   on exactly-zero edge functions), so rays do not leak through shared edges of closed meshes.
 //! * Self-intersection: spawned rays start at the barycentric hit position pushed off the surface
@@ -37,6 +30,13 @@
 //!   `intersect` and `occluded`, and different pixel samples average to alpha coverage.
 //!   Cut-outs apply to camera, bounce and shadow rays alike.
 //! * Back faces are hit like front faces (no culling).
+//!
+//! | memory item | bytes |
+//! |---|---|
+//! | leaf-order triangle | 40 per triangle, once per mesh (or per baked instance) |
+//! | BVH node | 80 per node (obvhs `CwBvhNode`) |
+//! | instance transforms | 112 per instance (object-to-world, normal matrix, flags) |
+//! | top-level leaf | 80 per instance of an instanced mesh (world-to-object, indices), plus top-level nodes |
 
 use std::time::{Duration, Instant};
 

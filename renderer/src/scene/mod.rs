@@ -19,8 +19,8 @@
 //! | `Instance.object_to_world` | [`Affine3A`] (any invertible affine map: rotation, non-uniform or negative scale, shear) | metres | — |
 //!
 //! A mesh referenced by one instance costs what it did when scenes were one flattened mesh (the
-//! renderer bakes it into world space); a mesh referenced by many costs one copy plus 64 B per
-//! instance here (and about 200 B per instance in the two-level BVH, see
+//! renderer bakes it into world space); a mesh referenced by many costs one copy plus 80 B per
+//! instance here (and about 200 B more per instance in the two-level BVH, see
 //! [`crate::integrator::accel`]). A negative-determinant transform mirrors the mesh: its winding
 //! flips with it (glTF), so the front side stays the side the normals point to.
 
