@@ -88,4 +88,6 @@ def build(petzval, depsgraph, notes, stop=None):
         else:
             pz.add_instance(mesh_id, xf, name=obj.name)
         stats["objects" if not inst.is_instance else "instances"] += 1
+    stats["petzval_meshes"] = pz.mesh_count
+    stats["petzval_instances"] = pz.instance_count
     return pz, stats
