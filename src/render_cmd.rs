@@ -7,7 +7,7 @@ use petzval_renderer::camera::host::{self, FilmBack, HostCamera, SensorFit, Shif
 use petzval_renderer::film::{write_exr, write_png, ExrLayers, Metadata, PixelFilter, ToneMap};
 use petzval_renderer::integrator::RenderScene;
 use petzval_renderer::render::{render, CameraRig, RenderSettings};
-use petzval_renderer::scene::{demo, gltf_load, Environment, Scene, SceneCamera};
+use petzval_renderer::scene::{demo, gltf, Environment, Scene, SceneCamera};
 use petzval_renderer::shot;
 use petzval_renderer::{Aperture, ApertureShape, Camera, Error, LensModel};
 use std::path::PathBuf;
@@ -166,7 +166,7 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         .validate()?;
     // 1. Scene (file or demo) and the shot's defaults.
     let (mut scene, demo_shot): (Scene, Option<demo::DemoShot>) = match &args.scene {
-        Some(path) => (gltf_load::load_gltf(path)?, None),
+        Some(path) => (gltf::load_gltf(path)?, None),
         None => {
             let (s, shot) = demo::demo_scene();
             (s, Some(shot))

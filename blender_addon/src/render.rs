@@ -87,7 +87,7 @@ pub(crate) fn render(
         let spec = camera.host.camera_spec(width, height).map_err(py_err)?;
         let mut scene_data = scene.scene.clone();
         if !scene.all_tangents {
-            scene_data.mesh.tangents.clear();
+            scene_data.meshes.iter_mut().for_each(|m| m.tangents.clear());
         }
         // 2. Build, decide and render on a worker thread; this thread (holding the GIL only to
         //    call `progress`) polls it.

@@ -1,7 +1,7 @@
 //! `petzval.Scene`: a scene built from numpy buffers (meshes, materials, textures, lights,
 //! environment), validated with errors naming the object and field.
 
-use glam::{DAffine3, DMat3, DMat4, DVec3, DVec4, Vec2, Vec3, Vec4};
+use glam::{DAffine3, DMat4, DVec4, Vec2, Vec3, Vec4};
 use numpy::{AllowTypeChange, PyArrayLike1, PyArrayLike2, PyArrayLike3};
 use petzval_renderer::scene::environment::EnvironmentMap;
 use petzval_renderer::scene::texture::Wrap;
@@ -71,7 +71,23 @@ pub(crate) fn parse_alpha_mode(mode: &str, cutoff: f64) -> PyResult<AlphaMode> {
     })
 }
 
+/// An f64 affine map as the scene's f32 one.
+fn affine_f32(xf: &DAffine3) -> glam::Affine3A {
+    glam::Affine3A::from_cols_array(&xf.to_cols_array().map(|v| v as f32))
+}
+
 impl PyScene {
+    fn check_mesh_id(&self, name: &str, mesh_id: usize) -> PyResult<()> {
+        if mesh_id >= self.scene.meshes.len() {
+            return Err(scene_err(
+                name,
+                "mesh_id",
+                format!("mesh {mesh_id} does not exist ({} meshes)", self.scene.meshes.len()),
+            ));
+        }
+        Ok(())
+    }
+
     fn texture_ref(&self, name: &str, field: &str, index: Option<usize>) -> PyResult<Option<TextureRef>> {
         match index {
             None => Ok(None),
@@ -238,7 +254,7 @@ impl PyScene {
         tangents: Option<PyArrayLike2<'_, f32, AllowTypeChange>>,
         transform: Option<PyArrayLike2<'_, f64, AllowTypeChange>>,
         name: &str,
-    ) -> PyResult<()> {
+    ) -> PyResult<usize> {
         guard(|| {
             // 1. Shapes and values.
             let p = positions.as_array();
@@ -260,26 +276,11 @@ impl PyScene {
                 Some(m) => affine_from_rows(name, "transform", &m.as_array())?,
                 None => DAffine3::IDENTITY,
             };
-            let normal_xf: DMat3 = xf.matrix3.inverse().transpose();
-            let flip = xf.matrix3.determinant() < 0.0;
-            // 2. World-space attributes.
+            // 2. Object-space attributes (the transform places the mesh as its first instance;
+            //    the renderer applies it, flipping the winding of a mirroring one).
             let mut mesh = Mesh::default();
-            mesh.positions = (0..nv)
-                .map(|i| {
-                    xf.transform_point3(DVec3::new(p[[i, 0]] as f64, p[[i, 1]] as f64, p[[i, 2]] as f64)).as_vec3()
-                })
-                .collect();
-            mesh.indices = (0..nt)
-                .map(|i| {
-                    let tri = [t[[i, 0]] as u32, t[[i, 1]] as u32, t[[i, 2]] as u32];
-                    // A mirroring transform turns the winding; keep faces facing outwards.
-                    if flip {
-                        [tri[0], tri[2], tri[1]]
-                    } else {
-                        tri
-                    }
-                })
-                .collect();
+            mesh.positions = (0..nv).map(|i| Vec3::new(p[[i, 0]], p[[i, 1]], p[[i, 2]])).collect();
+            mesh.indices = (0..nt).map(|i| [t[[i, 0]] as u32, t[[i, 1]] as u32, t[[i, 2]] as u32]).collect();
             mesh.material_ids = match &material_ids {
                 Some(m) => {
                     let m = m.as_array();
@@ -303,12 +304,7 @@ impl PyScene {
                     if n.shape() != [nv, 3] {
                         return Err(scene_err(name, "normals", format!("expected ({nv}, 3), got {:?}", n.shape())));
                     }
-                    (0..nv)
-                        .map(|i| {
-                            let v = normal_xf * DVec3::new(n[[i, 0]] as f64, n[[i, 1]] as f64, n[[i, 2]] as f64);
-                            v.normalize_or_zero().as_vec3()
-                        })
-                        .collect()
+                    (0..nv).map(|i| Vec3::new(n[[i, 0]], n[[i, 1]], n[[i, 2]]).normalize_or_zero()).collect()
                 }
                 None => face_normals(&mesh.positions, &mesh.indices),
             };
@@ -336,11 +332,8 @@ impl PyScene {
                     }
                     mesh.tangents = (0..nv)
                         .map(|i| {
-                            let v = (xf.matrix3 * DVec3::new(tg[[i, 0]] as f64, tg[[i, 1]] as f64, tg[[i, 2]] as f64))
-                                .normalize_or_zero()
-                                .as_vec3();
-                            let w = if flip { -tg[[i, 3]] } else { tg[[i, 3]] };
-                            Vec4::new(v.x, v.y, v.z, if w < 0.0 { -1.0 } else { 1.0 })
+                            let v = Vec3::new(tg[[i, 0]], tg[[i, 1]], tg[[i, 2]]).normalize_or_zero();
+                            Vec4::new(v.x, v.y, v.z, if tg[[i, 3]] < 0.0 { -1.0 } else { 1.0 })
                         })
                         .collect();
                 }
@@ -349,9 +342,66 @@ impl PyScene {
                     mesh.tangents = vec![Vec4::ZERO; nv];
                 }
             }
-            self.scene.mesh.append(&mesh, 0);
+            let id = self.scene.add_mesh(mesh);
+            self.scene.add_instance(id, affine_f32(&xf));
+            Ok(id as usize)
+        })
+    }
+
+    /// Places mesh `mesh_id` (from `add_mesh`) once more with a (4, 4) object-to-world matrix.
+    #[pyo3(signature = (mesh_id, transform, name = ""))]
+    fn add_instance(
+        &mut self,
+        mesh_id: usize,
+        transform: PyArrayLike2<'_, f64, AllowTypeChange>,
+        name: &str,
+    ) -> PyResult<()> {
+        guard(|| {
+            self.check_mesh_id(name, mesh_id)?;
+            let xf = affine_from_rows(name, "transform", &transform.as_array())?;
+            self.scene.add_instance(mesh_id as u32, affine_f32(&xf));
             Ok(())
         })
+    }
+
+    /// Places mesh `mesh_id` once per (4, 4) matrix of an (N, 4, 4) array (scatters, particle
+    /// and point instancers); returns N. Validated before any is added.
+    #[pyo3(signature = (mesh_id, transforms, name = ""))]
+    fn add_instances(
+        &mut self,
+        mesh_id: usize,
+        transforms: PyArrayLike3<'_, f64, AllowTypeChange>,
+        name: &str,
+    ) -> PyResult<usize> {
+        guard(|| {
+            self.check_mesh_id(name, mesh_id)?;
+            let a = transforms.as_array();
+            let (n, r, c) = a.dim();
+            if (r, c) != (4, 4) {
+                return Err(scene_err(name, "transforms", format!("expected (N, 4, 4), got {:?}", a.shape())));
+            }
+            let mut xfs = Vec::with_capacity(n);
+            for k in 0..n {
+                let m = a.index_axis(numpy::ndarray::Axis(0), k);
+                xfs.push(affine_f32(&affine_from_rows(name, &format!("transforms[{k}]"), &m)?));
+            }
+            for xf in xfs {
+                self.scene.add_instance(mesh_id as u32, xf);
+            }
+            Ok(n)
+        })
+    }
+
+    /// Meshes so far (each stored once).
+    #[getter]
+    fn mesh_count(&self) -> usize {
+        self.scene.meshes.len()
+    }
+
+    /// Instances so far (placements of meshes).
+    #[getter]
+    fn instance_count(&self) -> usize {
+        self.scene.instances.len()
     }
 
     /// A point light (W/sr per channel).
@@ -458,10 +508,10 @@ impl PyScene {
         })
     }
 
-    /// Triangles so far.
+    /// Triangles so far, over all instances (a mesh counted once per placement).
     #[getter]
     fn triangle_count(&self) -> usize {
-        self.scene.mesh.triangle_count()
+        self.scene.instanced_triangle_count()
     }
 
     /// Warnings so far.

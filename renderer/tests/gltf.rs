@@ -3,7 +3,7 @@
 //! worked out by hand from the numbers in that script.
 
 use glam::{Vec2, Vec3, Vec4};
-use petzval_renderer::scene::gltf_load::{load_gltf, load_gltf_slice};
+use petzval_renderer::scene::gltf::{load_gltf, load_gltf_slice};
 use petzval_renderer::scene::texture::{srgb_to_linear, Wrap};
 use petzval_renderer::scene::{AlphaMode, Light, Material, Scene};
 use petzval_renderer::Error;
@@ -14,8 +14,11 @@ fn data(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/gltf").join(name)
 }
 
+/// Loads a test file with its instances baked into one world-space mesh (`meshes[0]`).
 fn load(name: &str) -> Scene {
-    load_gltf(&data(name)).unwrap_or_else(|e| panic!("{name}: {e}"))
+    let mut s = load_gltf(&data(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
+    s.flatten();
+    s
 }
 
 fn load_err(name: &str) -> String {
@@ -40,7 +43,7 @@ fn rel_close(a: Vec3, b: Vec3) -> bool {
 /// The triangle whose vertex set equals `expected` (in any rotation of the order); returns its
 /// vertex indices in stored order.
 fn find_triangle(scene: &Scene, expected: [Vec3; 3]) -> [u32; 3] {
-    let m = &scene.mesh;
+    let m = &scene.meshes[0];
     for t in &m.indices {
         let p = t.map(|i| m.positions[i as usize]);
         if expected.iter().all(|e| p.iter().any(|q| close(*q, *e))) {
@@ -54,7 +57,7 @@ fn find_triangle(scene: &Scene, expected: [Vec3; 3]) -> [u32; 3] {
 }
 
 fn geometric_normal(scene: &Scene, t: [u32; 3]) -> Vec3 {
-    let p = t.map(|i| scene.mesh.positions[i as usize]);
+    let p = t.map(|i| scene.meshes[0].positions[i as usize]);
     (p[1] - p[0]).cross(p[2] - p[0]).normalize()
 }
 
@@ -68,31 +71,31 @@ fn gltf_node_hierarchy_world_positions() {
     let mirror = find_triangle(&s, [Vec3::new(1.0, 0.0, 0.0), Vec3::new(1.0, 0.0, 2.0), Vec3::new(1.0, 2.0, 0.0)]);
     // MatrixNode: a translation by (0, 5, 0), no normals in the file.
     let flat = find_triangle(&s, [Vec3::new(0.0, 5.0, 0.0), Vec3::new(1.0, 5.0, 0.0), Vec3::new(0.0, 6.0, 0.0)]);
-    assert_eq!(s.mesh.triangle_count(), 3, "NotInDefaultScene and the LINES primitive must be skipped");
+    assert_eq!(s.meshes[0].triangle_count(), 3, "NotInDefaultScene and the LINES primitive must be skipped");
 
     // Normals (0,0,1) go to +x through the inverse transpose, also for the mirrored instance,
     // whose winding is flipped so that the geometric normal agrees.
     for t in [child, mirror] {
         for &i in &t {
-            assert!(close(s.mesh.normals[i as usize], Vec3::X), "{:?}", s.mesh.normals[i as usize]);
+            assert!(close(s.meshes[0].normals[i as usize], Vec3::X), "{:?}", s.meshes[0].normals[i as usize]);
         }
         assert!(close(geometric_normal(&s, t), Vec3::X), "winding of {t:?}");
     }
     // Computed flat normal, counter-clockwise winding.
     for &i in &flat {
-        assert!(close(s.mesh.normals[i as usize], Vec3::Z));
+        assert!(close(s.meshes[0].normals[i as usize], Vec3::Z));
     }
     assert!(close(geometric_normal(&s, flat), Vec3::Z));
 
     // Every vertex has every attribute; tangents are zero when absent; no UV set 1.
-    let n = s.mesh.positions.len();
-    assert_eq!((s.mesh.normals.len(), s.mesh.tangents.len(), s.mesh.uv0.len()), (n, n, n));
-    assert!(s.mesh.uv1.is_empty());
-    assert!(s.mesh.tangents.iter().all(|t| *t == Vec4::ZERO));
+    let n = s.meshes[0].positions.len();
+    assert_eq!((s.meshes[0].normals.len(), s.meshes[0].tangents.len(), s.meshes[0].uv0.len()), (n, n, n));
+    assert!(s.meshes[0].uv1.is_empty());
+    assert!(s.meshes[0].tangents.iter().all(|t| *t == Vec4::ZERO));
 
     // No material in the file: the glTF default.
     assert_eq!(s.materials, vec![Material::default()]);
-    assert!(s.mesh.material_ids.iter().all(|&m| m == 0));
+    assert!(s.meshes[0].material_ids.iter().all(|&m| m == 0));
     assert!(
         s.warnings.iter().any(|w| w.contains("NoNormals") && w.contains("primitive 1") && w.contains("Lines")),
         "{:?}",
@@ -123,13 +126,13 @@ fn gltf_textured_quad_material_and_texel_lookup() {
 
     // Texel lookup through the mesh: the quad maps (x, y) to uv ((x+1)/2, (1−y)/2).
     let uv_at = |p: Vec2| -> Vec2 {
-        for t in &s.mesh.indices {
-            let q = t.map(|i| s.mesh.positions[i as usize].truncate());
+        for t in &s.meshes[0].indices {
+            let q = t.map(|i| s.meshes[0].positions[i as usize].truncate());
             let d = (q[1] - q[0]).perp_dot(q[2] - q[0]);
             let b1 = (p - q[0]).perp_dot(q[2] - q[0]) / d;
             let b2 = (q[1] - q[0]).perp_dot(p - q[0]) / d;
             if b1 >= 0.0 && b2 >= 0.0 && b1 + b2 <= 1.0 {
-                let uv = t.map(|i| s.mesh.uv0[i as usize]);
+                let uv = t.map(|i| s.meshes[0].uv0[i as usize]);
                 return uv[0] * (1.0 - b1 - b2) + uv[1] * b1 + uv[2] * b2;
             }
         }
@@ -159,10 +162,10 @@ fn gltf_textured_quad_material_and_texel_lookup() {
     assert_eq!(s.textures[em.index].texels, tex.texels);
 
     // Vertex attributes.
-    assert_eq!(s.mesh.triangle_count(), 2);
-    assert!(s.mesh.tangents.iter().all(|t| *t == Vec4::new(1.0, 0.0, 0.0, 1.0)));
-    assert!(s.mesh.uv1.iter().all(|u| *u == Vec2::splat(0.5)));
-    assert!(s.mesh.normals.iter().all(|n| *n == Vec3::Z));
+    assert_eq!(s.meshes[0].triangle_count(), 2);
+    assert!(s.meshes[0].tangents.iter().all(|t| *t == Vec4::new(1.0, 0.0, 0.0, 1.0)));
+    assert!(s.meshes[0].uv1.iter().all(|u| *u == Vec2::splat(0.5)));
+    assert!(s.meshes[0].normals.iter().all(|n| *n == Vec3::Z));
 
     assert!(
         s.warnings.iter().any(|w| w.contains("KHR_texture_transform") && w.contains("emissiveTexture")),
@@ -230,7 +233,7 @@ fn gltf_cameras() {
 #[test]
 fn gltf_binary_glb_with_embedded_image() {
     let s = load("box.glb");
-    assert_eq!(s.mesh.triangle_count(), 2);
+    assert_eq!(s.meshes[0].triangle_count(), 2);
     let m = &s.materials[0];
     assert_eq!(m.name, "Embedded");
     assert_eq!((m.metallic, m.roughness, m.base_color), (1.0, 1.0, Vec4::ONE));
@@ -254,7 +257,7 @@ fn gltf_missing_texture_is_a_warning_with_fallback() {
         s.warnings.iter().find(|w| w.contains("does_not_exist.png")).unwrap_or_else(|| panic!("{:?}", s.warnings));
     assert!(missing.contains("missing_texture.gltf") && missing.contains("'Gone'"), "{missing}");
     assert!(s.warnings.iter().any(|w| w.contains("not-an-image") && w.contains("decode")), "{:?}", s.warnings);
-    assert_eq!(s.mesh.triangle_count(), 2);
+    assert_eq!(s.meshes[0].triangle_count(), 2);
 }
 
 #[test]
@@ -278,8 +281,8 @@ fn gltf_jpeg_texture() {
 #[test]
 fn gltf_non_finite_vertices() {
     let s = load("nan_vertices.gltf");
-    assert_eq!(s.mesh.triangle_count(), 2);
-    assert!(s.mesh.positions.iter().all(|p| p.is_finite()));
+    assert_eq!(s.meshes[0].triangle_count(), 2);
+    assert!(s.meshes[0].positions.iter().all(|p| p.is_finite()));
     assert!(
         s.warnings.iter().any(|w| w.contains("dropped 1 of 3 triangles") && w.contains("Partly NaN")),
         "{:?}",
@@ -294,7 +297,7 @@ fn gltf_interleaved_quantized_sparse_accessors() {
     let s = load("accessors.gltf");
     // Vertex 2 is (0, 7, 0) in the interleaved view and (0, 2, 0) after the sparse substitution.
     let t = find_triangle(&s, [Vec3::ZERO, Vec3::new(3.0, 0.0, 0.0), Vec3::new(0.0, 2.0, 0.0)]);
-    let uv = t.map(|i| s.mesh.uv0[i as usize]);
+    let uv = t.map(|i| s.meshes[0].uv0[i as usize]);
     assert!(uv.contains(&Vec2::ZERO) && uv.contains(&Vec2::new(1.0, 0.0)), "{uv:?}");
     assert!(uv.iter().any(|u| (*u - Vec2::new(0.0, 32768.0 / 65535.0)).length() < 1e-6), "{uv:?}");
     assert!(s.warnings.is_empty(), "{:?}", s.warnings);

@@ -52,7 +52,7 @@ fn scene_of(meshes: &[Mesh], materials: Vec<Material>) -> Scene {
     for m in meshes {
         mesh.append(m, 0);
     }
-    Scene { mesh, materials, ..Scene::default() }
+    Scene { materials, ..Scene::world(mesh) }
 }
 
 /// A sampler positioned as the render loop leaves it (camera dimensions consumed).
@@ -241,7 +241,7 @@ fn alpha_mask_cuts_out() {
     assert_eq!(opaque.intersect(Vec3::new(-0.5, 0.0, 1.0), Vec3::NEG_Z, f32::INFINITY).unwrap().material_id, 0);
     // The camera sees through the cut-out to the (lit) back quad.
     let mut scene = alpha_quads(AlphaMode::Mask(0.5), 1.0, true).into_scene();
-    scene.mesh = {
+    scene.meshes[0] = {
         // Only the front quad: the cut-out shows the environment with alpha 0.
         let mut m = quad(Vec3::new(-1.0, -1.0, 0.0), Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 2.0, 0.0), 0);
         m.material_ids = vec![0, 0];
@@ -958,7 +958,7 @@ fn light_tree_pmf_consistent() {
         let n = s.materials.len() as u32;
         s.materials.push(emitter(Vec3::splat(3.0), true));
         let side = quad(Vec3::new(1.5, 0.1, -0.2), Vec3::new(0.0, 0.0, 0.4), Vec3::new(0.0, 0.3, 0.0), n);
-        s.mesh.append(&side, 0);
+        s.meshes[0].append(&side, 0);
         s
     };
     let mut worst_pick = 0.0f32;
@@ -1018,7 +1018,7 @@ fn light_tree_pmf_consistent() {
             if (hit.t - (ls.target.unwrap() - p).length()).abs() > 1e-3 {
                 continue; // another emitter in the way
             }
-            let pdf = rs.triangle_light_pdf(p, Vec3::Y, hit.triangle, ls.wi, hit.t, hit.geometric_normal);
+            let pdf = rs.triangle_light_pdf(p, Vec3::Y, &hit, ls.wi);
             assert!((pdf - ls.pdf).abs() <= 1e-3 * ls.pdf, "{name}: MIS light pdf {pdf} vs sample pdf {}", ls.pdf);
             checked += 1;
         }

@@ -4,5 +4,6 @@ mod auto_model;
 mod camera;
 mod common;
 mod gltf;
+mod instances;
 mod integrator;
 mod render;

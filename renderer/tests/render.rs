@@ -77,7 +77,7 @@ fn scene_of(meshes: &[Mesh], materials: Vec<Material>, env: Environment) -> Rend
     for m in meshes {
         mesh.append(m, 0);
     }
-    RenderScene::new(Scene { mesh, materials, environment: env, ..Scene::default() }).unwrap()
+    RenderScene::new(Scene { materials, environment: env, ..Scene::world(mesh) }).unwrap()
 }
 
 fn settings(w: u32, h: u32, spp: u32, seed: u32, filter: PixelFilter) -> RenderSettings {
@@ -700,8 +700,7 @@ fn striped_ground(h: f64, cam_to_world: &DAffine3, stripes_per_radian: f64) -> R
     }
     let mat =
         Material { emissive: Vec3::ONE, emissive_texture: Some(TextureRef { index: 0, uv_set: 0 }), ..emitter(1.0) };
-    RenderScene::new(Scene { mesh, materials: vec![mat], textures: vec![Arc::new(texture)], ..Scene::default() })
-        .unwrap()
+    RenderScene::new(Scene { materials: vec![mat], textures: vec![Arc::new(texture)], ..Scene::world(mesh) }).unwrap()
 }
 
 /// Per-row sharpness: mean |∂x I| / mean I over the central columns; `None` where the row is

@@ -4,11 +4,13 @@ use clap::Subcommand;
 use glam::{DVec2, DVec3};
 use petzval_renderer::{Error, Sensor};
 
+mod instances;
 mod lens;
 mod lens_models;
 mod render;
 mod render_models;
 
+use instances::bench_instances;
 use lens::bench_lens;
 use lens_models::bench_lens_models;
 use render::bench_render;
@@ -87,6 +89,28 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 1_000_000)]
         triangles: usize,
     },
+    /// Memory of a scene of many instances of one mesh (mesh data, BLAS, instance records, TLAS)
+    /// against one copy, a render of it, and the built-in demo flattened vs instanced.
+    Instances {
+        /// Copies of the mesh.
+        #[arg(long, default_value_t = 10_000)]
+        instances: usize,
+        /// Triangles of the mesh (about).
+        #[arg(long, default_value_t = 10_000)]
+        triangles: usize,
+        /// Resolution WxH of the renders.
+        #[arg(long, default_value = "320x240")]
+        resolution: String,
+        /// Samples per pixel of the renders.
+        #[arg(long, default_value_t = 4)]
+        spp: u32,
+        /// Demo renders per configuration (the fastest is reported).
+        #[arg(long, default_value_t = 3)]
+        repeats: usize,
+        /// Write the instanced render as this PNG.
+        #[arg(long)]
+        save: Option<std::path::PathBuf>,
+    },
 }
 
 /// Runs a benchmark.
@@ -94,6 +118,9 @@ pub fn run(cmd: BenchCommand) -> Result<(), Error> {
     match cmd {
         BenchCommand::Lens { lens, rays, json } => bench_lens(lens, rays, json),
         BenchCommand::Render { resolution, spp, triangles } => bench_render(&resolution, spp, triangles),
+        BenchCommand::Instances { instances, triangles, resolution, spp, repeats, save } => {
+            bench_instances(instances, triangles, &resolution, spp, repeats, save.as_deref())
+        }
         BenchCommand::LensModels { lens, rays, resolutions, json } => bench_lens_models(lens, rays, &resolutions, json),
         BenchCommand::RenderModels { resolution, spp, resolutions, seed, save, json } => {
             bench_render_models(&resolution, spp, &resolutions, seed, save.as_deref(), json)

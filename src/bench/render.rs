@@ -10,7 +10,8 @@ pub(super) fn dense_scene(triangles: usize) -> petzval_renderer::scene::Scene {
     let mut scene = Scene::default();
     scene.materials.push(Material { metallic: 0.0, roughness: 0.8, ..Material::default() });
     let n = ((triangles as f64 * 0.75 / 2.0).sqrt() as u32).max(2);
-    let m = &mut scene.mesh;
+    let mut mesh = petzval_renderer::scene::Mesh::default();
+    let m = &mut mesh;
     for j in 0..=n {
         for i in 0..=n {
             let (x, z) = (i as f32 / n as f32 * 20.0 - 10.0, j as f32 / n as f32 * 20.0 - 10.0);
@@ -53,6 +54,7 @@ pub(super) fn dense_scene(triangles: usize) -> petzval_renderer::scene::Scene {
             m.material_ids.extend([0, 0]);
         }
     }
+    scene.add_world_mesh(mesh);
     scene.environment = Environment::Constant(Vec3::ONE);
     scene
 }

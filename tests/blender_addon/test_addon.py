@@ -697,6 +697,33 @@ def test_unsupported_features_listed_once(addon, report):
     assert entry.get("complete") is True
 
 
+def test_depsgraph_instances_reference_one_mesh(addon, report):
+    """Vertex instancing (4 depsgraph instances of a cube) plus two linked duplicates of a
+    sphere: petzval holds one mesh per evaluated data-block and one instance per placement."""
+    _depth_scene()
+    H.configure_petzval(2, seed=0, camera="DepthCam")
+    bpy.ops.mesh.primitive_plane_add(size=1.0, location=(0.0, 2.5, 0.0), rotation=(math.radians(90), 0, 0))
+    parent = bpy.context.active_object
+    parent.instance_type = "VERTS"
+    bpy.ops.mesh.primitive_cube_add(size=0.2, location=(0.0, 2.5, 0.0))
+    bpy.context.active_object.parent = parent
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.2, location=(-1.0, 2.5, 0.5))
+    sphere = bpy.context.active_object
+    for k in range(2):
+        dup = sphere.copy()  # a linked duplicate: the same mesh data-block
+        dup.location = (-1.0 + 0.5 * (k + 1), 2.5, 0.5)
+        bpy.context.collection.objects.link(dup)
+    _, entry = H.render_still(OUT / "instances.exr")
+    stats = entry["stats"]
+    report.line(f"depsgraph instances: {stats}")
+    # data-blocks: wall, sphere, cube (and the instancing plane if Blender shows it); placements:
+    # wall, 3 spheres, 4 cubes (and the plane): 5 more placements than meshes either way
+    assert stats["instances"] >= 4, stats
+    assert stats["petzval_meshes"] <= 4, stats
+    assert stats["petzval_instances"] - stats["petzval_meshes"] == 5, stats
+    assert entry.get("complete") is True
+
+
 # ------------------------------------------------------------------------------------------
 # camera mapping and UI (no rendering)
 

@@ -177,6 +177,42 @@ def test_render_releases_the_gil(petzval):
     assert len(ticks) > 5 and gaps.max() < 0.3, f"another Python thread stalled {gaps.max():.2f} s"
 
 
+def test_instances_render_like_copies(petzval):
+    """A mesh added once and placed by add_instance / add_instances renders exactly like the
+    same mesh added once per placement (mirrored and rotated placements included)."""
+    box = np.array([[-0.3, 0, -0.3], [0.3, 0, -0.3], [0.3, 0, 0.3], [-0.3, 0, 0.3],
+                    [-0.3, 0.6, -0.3], [0.3, 0.6, -0.3], [0.3, 0.6, 0.3], [-0.3, 0.6, 0.3]], np.float32)
+    tris = np.array([[0, 1, 2], [0, 2, 3], [4, 6, 5], [4, 7, 6], [0, 4, 5], [0, 5, 1],
+                     [1, 5, 6], [1, 6, 2], [2, 6, 7], [2, 7, 3], [3, 7, 4], [3, 4, 0]])
+    placements = []
+    for k, x in enumerate((-1.0, 0.0, 1.0)):
+        m = np.eye(4)
+        c, sn = np.cos(0.4 * k), np.sin(0.4 * k)
+        m[:3, :3] = [[c, 0, sn], [0, 1, 0], [-sn, 0, c]]
+        m[0, :3] *= -1.0 if k == 1 else 1.0  # the middle box mirrored
+        m[:3, 3] = (x, 0.0, -2.0)
+        placements.append(m)
+    copies, inst = ground_scene(petzval), ground_scene(petzval)
+    for m in placements:
+        copies.add_mesh(box, tris, transform=m, name="box")
+    mesh_id = inst.add_mesh(box, tris, transform=placements[0], name="box")
+    inst.add_instance(mesh_id, placements[1], name="box")
+    assert inst.add_instances(mesh_id, np.stack(placements[2:])) == 1
+    assert (copies.mesh_count, copies.instance_count) == (5, 5)
+    assert (inst.mesh_count, inst.instance_count) == (3, 5)
+    assert inst.triangle_count == copies.triangle_count == 2 + 2 + 3 * 12
+    kw = dict(lens="thin", focal_length_mm=20.0, fstop=None, spp=4, seed=1, threads=1)
+    a = petzval.render(copies, camera(0.5), 48, 32, **kw)
+    b = petzval.render(inst, camera(0.5), 48, 32, **kw)
+    assert np.allclose(a["depth"], b["depth"], rtol=1e-5, equal_nan=True)
+    assert np.abs(a["rgba"] - b["rgba"]).max() < 1e-3
+    with pytest.raises(petzval.InvalidSceneError, match="mesh_id"):
+        inst.add_instance(99, np.eye(4))
+    with pytest.raises(petzval.InvalidSceneError, match=r"transforms\[1\]"):
+        inst.add_instances(mesh_id, np.stack([np.eye(4), np.zeros((4, 4))]))
+    assert inst.instance_count == 5, "a failed add_instances adds none"
+
+
 @pytest.mark.parametrize(
     "call, exc, words",
     [

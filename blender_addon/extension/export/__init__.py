@@ -33,6 +33,10 @@ def build(petzval, depsgraph, notes, stop=None):
     pz = petzval.Scene()
     materials = Materials(pz, notes)
     meshes: dict = {}
+    # (data-block key, material table) -> petzval mesh id: the mesh is added once and every
+    # further instance of it only adds a transform (objects sharing a data-block may still
+    # have different object-level material slots, hence the table in the key).
+    mesh_ids: dict = {}
     stats = {"objects": 0, "instances": 0, "lights": 0, "meshes_converted": 0}
     for i, inst in enumerate(depsgraph.object_instances):
         if stop is not None and i % 64 == 0 and stop():
@@ -74,8 +78,16 @@ def build(petzval, depsgraph, notes, stop=None):
             table = np.array([materials.default()], dtype=np.uint32)
         else:
             table = np.array([materials.index(s.material) for s in slots], dtype=np.uint32)
-        mat_ids = table[np.minimum(md.slot_index, len(table) - 1)]
-        pz.add_mesh(md.positions, md.triangles, material_ids=mat_ids, normals=md.normals, uvs=md.uvs,
-                    transform=to_gltf(inst.matrix_world), name=obj.name)
+        xf = to_gltf(inst.matrix_world)
+        id_key = (key, tuple(table.tolist()))
+        mesh_id = mesh_ids.get(id_key)
+        if mesh_id is None:
+            mat_ids = table[np.minimum(md.slot_index, len(table) - 1)]
+            mesh_ids[id_key] = pz.add_mesh(md.positions, md.triangles, material_ids=mat_ids, normals=md.normals,
+                                           uvs=md.uvs, transform=xf, name=obj.name)
+        else:
+            pz.add_instance(mesh_id, xf, name=obj.name)
         stats["objects" if not inst.is_instance else "instances"] += 1
+    stats["petzval_meshes"] = pz.mesh_count
+    stats["petzval_instances"] = pz.instance_count
     return pz, stats

@@ -2,8 +2,9 @@
 
 Meshes: one vertex per face corner (loop), so split normals and UV seams come out right with no
 welding; triangles from ``loop_triangles``; UVs as (u, 1 - v); the evaluated mesh (modifiers
-applied) is converted once per evaluated data-block and reused by every instance of it (see
-``build`` in ``__init__``).
+applied) is converted once per evaluated data-block and added to the petzval scene once
+(``Scene.add_mesh``); every further instance of it is a transform referencing it
+(``Scene.add_instance``; see ``build`` in ``__init__``).
 """
 
 from __future__ import annotations

@@ -116,8 +116,10 @@ class Scene:
         tangents: NDArray[np.float32] | None = None,
         transform: NDArray[np.float64] | None = None,
         name: str = "",
-    ) -> None:
-        """Adds a triangle mesh: ``positions (N, 3)``, ``triangles (M, 3)`` vertex indices,
+    ) -> int:
+        """Adds a triangle mesh, stored once in object space, placed once by ``transform``;
+        returns its mesh id for :meth:`add_instance` / :meth:`add_instances`.
+        ``positions (N, 3)``, ``triangles (M, 3)`` vertex indices,
         ``material_ids (M,)`` indices into the scene's materials (default: all 0; a scene
         without materials gets a grey default), optional per-vertex ``normals (N, 3)``
         (computed from faces when absent), ``uvs (N, 2)`` (glTF convention), ``tangents
@@ -125,6 +127,19 @@ class Scene:
         (column vectors, i.e. Blender's ``matrix_world`` layout, already in glTF axes).
         Indices out of range, non-finite values or a singular transform raise
         InvalidSceneError naming ``name``."""
+    def add_instance(self, mesh_id: int, transform: NDArray[np.float64], name: str = "") -> None:
+        """Places mesh ``mesh_id`` (from :meth:`add_mesh`) once more with a ``(4, 4)``
+        object-to-world matrix (as ``add_mesh``'s ``transform``); the mesh data is not copied.
+        An unknown id or a singular, non-finite or projective matrix raises InvalidSceneError."""
+    def add_instances(self, mesh_id: int, transforms: NDArray[np.float64], name: str = "") -> int:
+        """Places mesh ``mesh_id`` once per matrix of a ``(N, 4, 4)`` array (scatters, particle
+        and point instancers); returns N. All are validated before any is added."""
+    @property
+    def mesh_count(self) -> int:
+        """Meshes added (each stored once)."""
+    @property
+    def instance_count(self) -> int:
+        """Placements of meshes (``add_mesh`` counts one)."""
     def add_point_light(self, position: Sequence[float], intensity_w_sr: Sequence[float], name: str = "") -> None:
         """A point light: radiant intensity per RGB channel in W/sr."""
     def add_spot_light(
@@ -151,7 +166,8 @@ class Scene:
         type *Texture* with that Z rotation does (a *Point* mapping turns the other way: pass
         the negated angle)."""
     @property
-    def triangle_count(self) -> int: ...
+    def triangle_count(self) -> int:
+        """Triangles over all instances (a mesh counted once per placement)."""
     @property
     def warnings(self) -> list[str]: ...
 

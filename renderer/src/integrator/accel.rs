@@ -1,8 +1,23 @@
-//! Ray casting: the scene's triangles in an obvhs compressed wide BVH (CWBVH), closest-hit and
-//! any-hit queries with alpha cut-outs, and surface hits with interpolated attributes.
+//! Ray casting: the scene's triangles in obvhs compressed wide BVHs (CWBVH), two levels,
+//! closest-hit and any-hit queries with alpha cut-outs, and surface hits with interpolated
+//! attributes.
 //!
+//! * Two levels. A mesh placed by exactly one instance is baked into world space into one
+//!   shared bottom-level BVH (as Cycles and Embree do for non-instanced geometry), so a scene
+//!   without real instancing pays nothing for the top level. Every mesh placed by two or more
+//!   instances gets its own BVH in object space (built once), and a top-level CWBVH over the
+//!   instances' world bounds holds them: at an instance leaf the ray is moved into object space
+//!   by the precomputed inverse transform, its direction left unnormalised so `t` stays the
+//!   world distance. A ray traverses the world BVH first, then the top level with `t_max`
+//!   shrunk to the hit found.
+//! * Attributes of a hit are brought to world space per hit: positions by the transform,
+//!   normals by the inverse transpose, tangents by the linear part (`w` × sign(det)); for a
+//!   negative determinant the geometric normal is negated (glTF: mirroring flips the winding),
+//!   so the front side stays the side the normals point to. Identity instances skip all this.
 //! * Triangles are copied into leaf order (the builder's `primitive_indices`), so the
-//!   traversal closure reads them sequentially; each keeps its index into `Scene::mesh.indices`.
+//!   traversal closure reads them sequentially; each keeps its index: in the world BVH a
+//!   running index over the baked instances' triangles, in an instanced mesh's BVH the mesh
+//!   triangle.
 //! * Intersection is watertight (Woop, Benthin & Wald 2013, with the double-precision fallback
 //!   on exactly-zero edge functions), so rays do not leak through shared edges of closed meshes.
 //! * Self-intersection: spawned rays start at the barycentric hit position pushed off the surface
@@ -15,20 +30,32 @@
 //!   `intersect` and `occluded`, and different pixel samples average to alpha coverage.
 //!   Cut-outs apply to camera, bounce and shadow rays alike.
 //! * Back faces are hit like front faces (no culling).
+//!
+//! | memory item | bytes |
+//! |---|---|
+//! | leaf-order triangle | 40 per triangle, once per mesh (or per baked instance) |
+//! | BVH node | 80 per node (obvhs `CwBvhNode`) |
+//! | instance transforms | 112 per instance (object-to-world, normal matrix, flags) |
+//! | top-level leaf | 80 per instance of an instanced mesh (world-to-object, indices), plus top-level nodes |
 
 use std::time::{Duration, Instant};
 
-use glam::{Vec2, Vec3, Vec4};
+use glam::{Affine3A, Mat3, Vec2, Vec3, Vec4};
 use obvhs::{
-    cwbvh::{builder::build_cwbvh_from_tris, node::CwBvhNode, CwBvh},
+    aabb::Aabb,
+    cwbvh::{
+        builder::{build_cwbvh, build_cwbvh_from_tris},
+        node::CwBvhNode,
+        CwBvh,
+    },
     ray::{Ray, RayHit},
     triangle::Triangle,
     BvhBuildParams,
 };
 
-use super::lights::LightSet;
+use super::lights::{EmitterGroup, LightSet};
 use crate::sampler::hash_u32;
-use crate::scene::{AlphaMode, Material, Scene, TextureRef};
+use crate::scene::{cofactor, AlphaMode, Material, Mesh, Scene, TextureRef};
 use crate::Result;
 
 /// BVH build quality (obvhs presets; all PLOC + reinsertion, no spatial splits).
@@ -102,7 +129,9 @@ fn alpha_test_of(m: &Material) -> AlphaTest {
 pub struct SurfaceHit {
     /// Distance along the (unit) ray direction.
     pub t: f32,
-    /// Index into `Scene::mesh.indices`.
+    /// Index into `Scene::instances`.
+    pub instance: u32,
+    /// Index into the instance's mesh's `indices`.
     pub triangle: u32,
     /// Barycentric weights of vertices 1 and 2 (vertex 0 has `1 − x − y`).
     pub barycentrics: Vec2,
@@ -258,17 +287,129 @@ impl WatertightRay {
     }
 }
 
-/// A [`Scene`] prepared for rendering: BVH, light sampling data, per-material flags.
-pub struct RenderScene {
-    scene: Scene,
+/// One bottom-level BVH: nodes and triangles in leaf order.
+#[derive(Default)]
+struct Blas {
     bvh: CwBvh,
     tris: Vec<PackedTri>,
-    pub(crate) alpha_tests: Vec<AlphaTest>,
-    any_stochastic: bool,
+}
+
+impl Blas {
+    /// Builds over `tris` (vertices, and the index kept in [`PackedTri::prim`] with its alpha bit).
+    fn build(tris: &[([Vec3; 3], u32)], quality: BvhQuality) -> Blas {
+        if tris.is_empty() {
+            return Blas::default();
+        }
+        let obvhs_tris: Vec<Triangle> = tris
+            .iter()
+            .map(|(v, _)| Triangle {
+                v0: v[0].to_array().into(),
+                v1: v[1].to_array().into(),
+                v2: v[2].to_array().into(),
+            })
+            .collect();
+        let mut bvh = build_cwbvh_from_tris(&obvhs_tris, quality.params(), &mut Duration::default());
+        drop(obvhs_tris);
+        let packed = bvh
+            .primitive_indices
+            .iter()
+            .map(|&pi| {
+                let (v, prim) = tris[pi as usize];
+                PackedTri { v: v.map(|p| p.to_array()), prim }
+            })
+            .collect();
+        // Traversal hands out positions in `primitive_indices`, which index `tris` directly.
+        bvh.primitive_indices = Vec::new();
+        Blas { bvh, tris: packed }
+    }
+
+    fn memory_bytes(&self) -> usize {
+        self.bvh.nodes.len() * std::mem::size_of::<CwBvhNode>() + self.tris.len() * std::mem::size_of::<PackedTri>()
+    }
+}
+
+/// An instance's transforms as shading needs them.
+#[derive(Debug, Clone, Copy)]
+struct InstanceXf {
+    object_to_world: Affine3A,
+    /// Inverse transpose × sign(det) (up to scale): object normals → world normals.
+    normal: Mat3,
+    /// sign(det): −1 flips the geometric normal and the tangent handedness.
+    sign: f32,
+    /// Exactly the identity: attributes are used as stored.
+    identity: bool,
+}
+
+/// A leaf of the top-level BVH.
+#[derive(Debug, Clone, Copy)]
+struct TlasLeaf {
+    world_to_object: Affine3A,
+    /// Index into `RenderScene::blases`.
+    blas: u32,
+    /// Index into `Scene::instances`.
+    instance: u32,
+}
+
+/// Which attribute arrays of a mesh are usable (lengths match the vertex count).
+#[derive(Debug, Clone, Copy, Default)]
+struct MeshInfo {
     has_normals: bool,
     has_uv0: bool,
     has_uv1: bool,
     has_tangents: bool,
+}
+
+/// A candidate hit during traversal.
+#[derive(Debug, Clone, Copy)]
+enum Candidate {
+    /// Running index into the world BVH's baked triangles.
+    Baked(u32),
+    /// (instance, mesh triangle).
+    Instanced(u32, u32),
+}
+
+/// Bytes of a [`RenderScene`]'s scene data and acceleration structures (see
+/// [`RenderScene::memory`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SceneMemory {
+    /// Mesh arrays (`Scene::meshes`, each mesh once).
+    pub mesh_bytes: usize,
+    /// Instance records (`Scene::instances`).
+    pub instance_bytes: usize,
+    /// The world BVH of baked (singly-placed) meshes: nodes and leaf-order triangles.
+    pub world_bvh_bytes: usize,
+    /// The per-mesh BVHs of instanced meshes (each once).
+    pub blas_bytes: usize,
+    /// The top level: nodes, leaves and the per-instance transforms.
+    pub tlas_bytes: usize,
+}
+
+impl SceneMemory {
+    /// Everything.
+    pub fn total(&self) -> usize {
+        self.mesh_bytes + self.instance_bytes + self.world_bvh_bytes + self.blas_bytes + self.tlas_bytes
+    }
+}
+
+/// A [`Scene`] prepared for rendering: BVHs, light sampling data, per-material flags.
+pub struct RenderScene {
+    scene: Scene,
+    /// Baked meshes in world space.
+    world: Blas,
+    /// Baked triangle k belongs to instance `baked_instances[j]` for
+    /// `baked_offsets[j] ≤ k < baked_offsets[j + 1]`, as mesh triangle `k − baked_offsets[j]`.
+    baked_offsets: Vec<u32>,
+    baked_instances: Vec<u32>,
+    /// Object-space BVHs of meshes with several instances.
+    blases: Vec<Blas>,
+    tlas: CwBvh,
+    tlas_leaves: Vec<TlasLeaf>,
+    /// Per instance (`Scene::instances` order).
+    xforms: Vec<InstanceXf>,
+    /// Per mesh.
+    mesh_info: Vec<MeshInfo>,
+    pub(crate) alpha_tests: Vec<AlphaTest>,
+    any_stochastic: bool,
     pub(crate) lights: LightSet,
     bounds_min: Vec3,
     bounds_max: Vec3,
@@ -280,41 +421,54 @@ impl std::fmt::Debug for RenderScene {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("RenderScene")
             .field("triangles", &self.triangle_count)
-            .field("bvh_nodes", &self.bvh.nodes.len())
+            .field("world_bvh_nodes", &self.world.bvh.nodes.len())
+            .field("instanced_meshes", &self.blases.len())
+            .field("tlas_leaves", &self.tlas_leaves.len())
             .field("lights", &self.lights.len())
             .field("build_time", &self.build_time)
             .finish()
     }
 }
 
+/// Repairs a mesh's material ids (missing or out of range → `fallback`); returns how many were bad.
+fn repair_material_ids(mesh: &mut Mesh, n_mat: u32, fallback: u32) -> usize {
+    let nt = mesh.indices.len();
+    let mut bad = 0;
+    if mesh.material_ids.len() != nt {
+        bad += nt.saturating_sub(mesh.material_ids.len());
+        mesh.material_ids.resize(nt, fallback);
+    }
+    for m in mesh.material_ids.iter_mut() {
+        if *m >= n_mat {
+            *m = fallback;
+            bad += 1;
+        }
+    }
+    bad
+}
+
 impl RenderScene {
-    /// Builds the BVH ([`BvhQuality::Medium`]) and the light sampling data.
+    /// Builds the BVHs ([`BvhQuality::Medium`]) and the light sampling data.
     ///
     /// Malformed input is repaired, with a note in `scene.warnings`: triangles with out-of-range
     /// vertex indices or non-finite positions are left out of the BVH, out-of-range material ids
     /// get an appended default (white dielectric) material, attribute arrays of the wrong length
-    /// are ignored (normals → geometric normal, UVs → 0, tangents → derived from UVs).
+    /// are ignored (normals → geometric normal, UVs → 0, tangents → derived from UVs), instances
+    /// of a missing mesh or with a singular or non-finite transform are skipped.
     pub fn new(scene: Scene) -> Result<RenderScene> {
         Self::with_quality(scene, BvhQuality::default())
     }
 
     /// [`RenderScene::new`] with a chosen BVH build quality.
     pub fn with_quality(mut scene: Scene, quality: BvhQuality) -> Result<RenderScene> {
-        let nv = scene.mesh.positions.len();
-        let nt = scene.mesh.indices.len();
-
         // Materials: make every id valid.
-        if scene.mesh.material_ids.len() != nt {
-            scene.warnings.push(format!(
-                "mesh has {} material ids for {} triangles; missing ones use a default material",
-                scene.mesh.material_ids.len(),
-                nt
-            ));
-            scene.mesh.material_ids.resize(nt, u32::MAX);
-        }
         let n_mat = scene.materials.len() as u32;
-        let bad_ids = scene.mesh.material_ids.iter().filter(|&&m| m >= n_mat).count();
-        if bad_ids > 0 || scene.materials.is_empty() {
+        let needs_fallback = scene.materials.is_empty()
+            || scene
+                .meshes
+                .iter()
+                .any(|m| m.material_ids.len() != m.indices.len() || m.material_ids.iter().any(|&i| i >= n_mat));
+        if needs_fallback {
             let fallback = scene.materials.len() as u32;
             scene.materials.push(Material {
                 name: "petzval-default".into(),
@@ -322,10 +476,16 @@ impl RenderScene {
                 roughness: 0.5,
                 ..Material::default()
             });
-            for m in scene.mesh.material_ids.iter_mut() {
-                if *m >= n_mat {
-                    *m = fallback;
+            let mut bad_ids = 0;
+            for (k, mesh) in scene.meshes.iter_mut().enumerate() {
+                if mesh.material_ids.len() != mesh.indices.len() {
+                    scene.warnings.push(format!(
+                        "mesh {k} has {} material ids for {} triangles; missing ones use a default material",
+                        mesh.material_ids.len(),
+                        mesh.indices.len()
+                    ));
                 }
+                bad_ids += repair_material_ids(mesh, n_mat, fallback);
             }
             if bad_ids > 0 {
                 scene
@@ -333,102 +493,256 @@ impl RenderScene {
                     .push(format!("{bad_ids} triangles had an out-of-range material id; they use a default material"));
             }
         }
-        let has_normals = scene.mesh.normals.len() == nv;
-        let has_uv0 = scene.mesh.uv0.len() == nv;
-        let has_uv1 = scene.mesh.uv1.len() == nv;
-        let has_tangents = scene.mesh.tangents.len() == nv;
-        if !has_normals && !scene.mesh.normals.is_empty() {
-            scene.warnings.push("mesh normal count differs from the vertex count; using geometric normals".into());
-        }
-        if !has_uv0 && !scene.mesh.uv0.is_empty() {
-            scene.warnings.push("mesh uv0 count differs from the vertex count; ignoring UVs".into());
+        let mut mesh_info = Vec::with_capacity(scene.meshes.len());
+        for (k, m) in scene.meshes.iter().enumerate() {
+            let nv = m.positions.len();
+            let info = MeshInfo {
+                has_normals: m.normals.len() == nv,
+                has_uv0: m.uv0.len() == nv,
+                has_uv1: m.uv1.len() == nv && m.uv0.len() == nv,
+                has_tangents: m.tangents.len() == nv,
+            };
+            if !info.has_normals && !m.normals.is_empty() {
+                scene
+                    .warnings
+                    .push(format!("mesh {k}: normal count differs from the vertex count; using geometric normals"));
+            }
+            if !info.has_uv0 && !m.uv0.is_empty() {
+                scene.warnings.push(format!("mesh {k}: uv0 count differs from the vertex count; ignoring UVs"));
+            }
+            mesh_info.push(info);
         }
 
         let alpha_tests: Vec<AlphaTest> = scene.materials.iter().map(alpha_test_of).collect();
         let any_stochastic = alpha_tests.contains(&AlphaTest::Stochastic);
+        let alpha_flag = |mesh: &Mesh, t: u32| {
+            if alpha_tests[mesh.material_ids[t as usize] as usize] != AlphaTest::None {
+                ALPHA_BIT
+            } else {
+                0
+            }
+        };
 
-        // Valid triangles.
-        let mut valid: Vec<u32> = Vec::with_capacity(nt);
+        // Triangles with valid indices and finite object-space positions, per mesh.
         let mut invalid = 0usize;
-        for (i, idx) in scene.mesh.indices.iter().enumerate() {
-            if idx.iter().any(|&v| v as usize >= nv) {
-                invalid += 1;
-                continue;
-            }
-            let p = idx.map(|v| scene.mesh.positions[v as usize]);
-            if !p.iter().all(|q| q.is_finite()) {
-                invalid += 1;
-                continue;
-            }
-            let area2 = (p[1] - p[0]).cross(p[2] - p[0]).length_squared();
-            if !(area2 > 0.0) || !area2.is_finite() {
-                continue; // degenerate: can never be hit
-            }
-            valid.push(i as u32);
-        }
+        let valid: Vec<Vec<u32>> = scene
+            .meshes
+            .iter()
+            .map(|m| {
+                let nv = m.positions.len();
+                let mut v = Vec::with_capacity(m.indices.len());
+                for (i, idx) in m.indices.iter().enumerate() {
+                    if idx.iter().any(|&k| k as usize >= nv)
+                        || !idx.iter().all(|&k| m.positions[k as usize].is_finite())
+                    {
+                        invalid += 1;
+                        continue;
+                    }
+                    v.push(i as u32);
+                }
+                v
+            })
+            .collect();
         if invalid > 0 {
             scene
                 .warnings
                 .push(format!("{invalid} triangles with bad vertex indices or non-finite positions were skipped"));
         }
 
-        let start = Instant::now();
-        let obvhs_tris: Vec<Triangle> = valid
-            .iter()
-            .map(|&i| {
-                let idx = scene.mesh.indices[i as usize];
-                let p = |k: usize| scene.mesh.positions[idx[k] as usize].to_array().into();
-                Triangle { v0: p(0), v1: p(1), v2: p(2) }
-            })
-            .collect();
-        let bvh = if obvhs_tris.is_empty() {
-            CwBvh::default()
-        } else {
-            build_cwbvh_from_tris(&obvhs_tris, quality.params(), &mut Duration::default())
-        };
-        drop(obvhs_tris);
-        let mut bvh = bvh;
-        let tris: Vec<PackedTri> = bvh
-            .primitive_indices
-            .iter()
-            .map(|&pi| {
-                let i = valid[pi as usize];
-                let idx = scene.mesh.indices[i as usize];
-                let v = idx.map(|k| scene.mesh.positions[k as usize].to_array());
-                let m = scene.mesh.material_ids[i as usize] as usize;
-                let flag = if alpha_tests[m] != AlphaTest::None { ALPHA_BIT } else { 0 };
-                PackedTri { v, prim: i | flag }
-            })
-            .collect();
-        // Traversal hands out positions in `primitive_indices`, which index `tris` directly.
-        bvh.primitive_indices = Vec::new();
-        let build_time = start.elapsed();
-
-        let (mut bounds_min, mut bounds_max) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-        for &i in &valid {
-            for &k in &scene.mesh.indices[i as usize] {
-                let p = scene.mesh.positions[k as usize];
-                bounds_min = bounds_min.min(p);
-                bounds_max = bounds_max.max(p);
+        // Instances: validate transforms; count placements per mesh.
+        let mut xforms = Vec::with_capacity(scene.instances.len());
+        let mut usable = vec![false; scene.instances.len()];
+        let mut uses = vec![0u32; scene.meshes.len()];
+        let mut skipped = 0usize;
+        for (i, inst) in scene.instances.iter().enumerate() {
+            let xf = inst.object_to_world;
+            let lin = Mat3::from(xf.matrix3);
+            let det = lin.determinant();
+            let sign = if det < 0.0 { -1.0 } else { 1.0 };
+            let inv = xf.inverse();
+            let ok = (inst.mesh as usize) < scene.meshes.len()
+                && xf.is_finite()
+                && det != 0.0
+                && det.is_finite()
+                && inv.is_finite();
+            xforms.push(InstanceXf {
+                object_to_world: xf,
+                normal: cofactor(lin) * sign,
+                sign,
+                identity: xf == Affine3A::IDENTITY,
+            });
+            if ok {
+                usable[i] = true;
+                uses[inst.mesh as usize] += 1;
+            } else {
+                skipped += 1;
             }
         }
-        if valid.is_empty() {
+        if skipped > 0 {
+            scene.warnings.push(format!(
+                "{skipped} instances refer to a missing mesh or have a singular or non-finite transform; skipped"
+            ));
+        }
+
+        let start = Instant::now();
+        // World BVH: meshes placed once, baked.
+        let mut baked: Vec<([Vec3; 3], u32)> = Vec::new();
+        let mut baked_offsets = vec![0u32];
+        let mut baked_instances = Vec::new();
+        let (mut bounds_min, mut bounds_max) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for (i, inst) in scene.instances.iter().enumerate() {
+            if !usable[i] || uses[inst.mesh as usize] != 1 {
+                continue;
+            }
+            let m = &scene.meshes[inst.mesh as usize];
+            let xf = &xforms[i];
+            let base = baked_offsets[baked_offsets.len() - 1];
+            for &t in &valid[inst.mesh as usize] {
+                let v = m.indices[t as usize].map(|k| {
+                    let p = m.positions[k as usize];
+                    if xf.identity {
+                        p
+                    } else {
+                        xf.object_to_world.transform_point3(p)
+                    }
+                });
+                let area2 = (v[1] - v[0]).cross(v[2] - v[0]).length_squared();
+                if !(area2 > 0.0) || !area2.is_finite() {
+                    continue; // degenerate (or overflowing): can never be hit
+                }
+                for p in v {
+                    bounds_min = bounds_min.min(p);
+                    bounds_max = bounds_max.max(p);
+                }
+                // The running index is the position in the mesh triangle list + base, so that a
+                // hit maps back without a table; skipped triangles leave gaps.
+                baked.push((v, (base + t) | alpha_flag(m, t)));
+            }
+            baked_offsets.push(base + m.indices.len() as u32);
+            baked_instances.push(i as u32);
+        }
+        if baked.len() >= ALPHA_BIT as usize || baked_offsets.last().is_some_and(|&o| o >= ALPHA_BIT) {
+            return Err(crate::Error::scene("scene", "", "more than 2³¹ triangles placed once"));
+        }
+        let mut triangle_count = baked.len();
+        let world = Blas::build(&baked, quality);
+        drop(baked);
+
+        // Per-mesh BVHs and the top level over their instances.
+        let mut blas_of_mesh = vec![u32::MAX; scene.meshes.len()];
+        let mut blases = Vec::new();
+        let mut blas_bounds: Vec<(Vec3, Vec3)> = Vec::new();
+        let mut blas_tris: Vec<usize> = Vec::new();
+        for (k, m) in scene.meshes.iter().enumerate() {
+            if uses[k] < 2 {
+                continue;
+            }
+            let mut tris = Vec::with_capacity(valid[k].len());
+            let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+            for &t in &valid[k] {
+                let v = m.indices[t as usize].map(|i| m.positions[i as usize]);
+                let area2 = (v[1] - v[0]).cross(v[2] - v[0]).length_squared();
+                if !(area2 > 0.0) || !area2.is_finite() {
+                    continue;
+                }
+                for p in v {
+                    lo = lo.min(p);
+                    hi = hi.max(p);
+                }
+                tris.push((v, t | alpha_flag(m, t)));
+            }
+            if tris.is_empty() {
+                continue;
+            }
+            blas_of_mesh[k] = blases.len() as u32;
+            blas_tris.push(tris.len());
+            blases.push(Blas::build(&tris, quality));
+            blas_bounds.push((lo, hi));
+        }
+        let mut leaves: Vec<TlasLeaf> = Vec::new();
+        let mut aabbs: Vec<Aabb> = Vec::new();
+        for (i, inst) in scene.instances.iter().enumerate() {
+            if !usable[i] {
+                continue;
+            }
+            let b = blas_of_mesh[inst.mesh as usize];
+            if b == u32::MAX {
+                continue;
+            }
+            let (lo, hi) = blas_bounds[b as usize];
+            let xf = &xforms[i].object_to_world;
+            let (mut wlo, mut whi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+            for c in 0..8 {
+                let corner = Vec3::new(
+                    if c & 1 == 0 { lo.x } else { hi.x },
+                    if c & 2 == 0 { lo.y } else { hi.y },
+                    if c & 4 == 0 { lo.z } else { hi.z },
+                );
+                let p = xf.transform_point3(corner);
+                wlo = wlo.min(p);
+                whi = whi.max(p);
+            }
+            if !(wlo.is_finite() && whi.is_finite()) {
+                continue;
+            }
+            bounds_min = bounds_min.min(wlo);
+            bounds_max = bounds_max.max(whi);
+            triangle_count += blas_tris[b as usize];
+            leaves.push(TlasLeaf { world_to_object: xf.inverse(), blas: b, instance: i as u32 });
+            aabbs.push(Aabb::new(wlo.to_array().into(), whi.to_array().into()));
+        }
+        let (tlas, tlas_leaves) = if aabbs.is_empty() {
+            (CwBvh::default(), Vec::new())
+        } else {
+            let mut tlas = build_cwbvh(&aabbs, quality.params(), &mut Duration::default());
+            let ordered = tlas.primitive_indices.iter().map(|&pi| leaves[pi as usize]).collect();
+            tlas.primitive_indices = Vec::new();
+            (tlas, ordered)
+        };
+        let build_time = start.elapsed();
+        if world.tris.is_empty() && tlas_leaves.is_empty() {
             bounds_min = Vec3::ZERO;
             bounds_max = Vec3::ZERO;
         }
-        let triangle_count = valid.len();
-        let lights = LightSet::build(&scene, &valid, bounds_min, bounds_max);
+
+        // Emissive triangles, per instance in instance order.
+        let emissive_mat: Vec<bool> = scene.materials.iter().map(|m| m.is_emissive()).collect();
+        let mut emitters = Vec::new();
+        if emissive_mat.contains(&true) {
+            let emissive_tris: Vec<Vec<u32>> = scene
+                .meshes
+                .iter()
+                .zip(&valid)
+                .map(|(m, v)| {
+                    v.iter().copied().filter(|&t| emissive_mat[m.material_ids[t as usize] as usize]).collect()
+                })
+                .collect();
+            for (i, inst) in scene.instances.iter().enumerate() {
+                let k = inst.mesh as usize;
+                if usable[i] && !emissive_tris[k].is_empty() && (uses[k] == 1 || blas_of_mesh[k] != u32::MAX) {
+                    emitters.push(EmitterGroup {
+                        instance: i as u32,
+                        mesh_triangles: scene.meshes[k].indices.len() as u32,
+                        triangles: emissive_tris[k].clone(),
+                    });
+                }
+            }
+        }
+        let world_tri = |inst: u32, tri: u32| world_triangle(&scene, &xforms, inst, tri);
+        let lights = LightSet::build(&scene, &emitters, &world_tri, bounds_min, bounds_max);
 
         Ok(RenderScene {
             scene,
-            bvh,
-            tris,
+            world,
+            baked_offsets,
+            baked_instances,
+            blases,
+            tlas,
+            tlas_leaves,
+            xforms,
+            mesh_info,
             alpha_tests,
             any_stochastic,
-            has_normals,
-            has_uv0,
-            has_uv1,
-            has_tangents,
             lights,
             bounds_min,
             bounds_max,
@@ -437,7 +751,7 @@ impl RenderScene {
         })
     }
 
-    /// The scene (meshes, materials, textures, lights, environment).
+    /// The scene (meshes, instances, materials, textures, lights, environment).
     #[inline]
     pub fn scene(&self) -> &Scene {
         &self.scene
@@ -448,19 +762,41 @@ impl RenderScene {
         self.scene
     }
 
-    /// Triangles in the BVH (degenerate and invalid triangles are left out).
+    /// Triangles the rays see (each instance's counted; degenerate and invalid ones left out).
     pub fn triangle_count(&self) -> usize {
         self.triangle_count
     }
 
-    /// Wall time of the BVH build (including the leaf-order triangle copy).
+    /// Instances that go through the top-level BVH (those of meshes placed more than once).
+    pub fn tlas_instance_count(&self) -> usize {
+        self.tlas_leaves.len()
+    }
+
+    /// Wall time of the BVH builds (including the leaf-order triangle copies).
     pub fn bvh_build_time(&self) -> Duration {
         self.build_time
     }
 
-    /// Bytes of the BVH: nodes and the leaf-order triangle copy (40 B per triangle).
+    /// Bytes of the BVHs: nodes and leaf-order triangles of every level, and the top level's
+    /// per-instance transforms.
     pub fn bvh_memory_bytes(&self) -> usize {
-        self.bvh.nodes.len() * std::mem::size_of::<CwBvhNode>() + self.tris.len() * std::mem::size_of::<PackedTri>()
+        let m = self.memory();
+        m.world_bvh_bytes + m.blas_bytes + m.tlas_bytes
+    }
+
+    /// Bytes of the scene data and the acceleration structures, item by item.
+    pub fn memory(&self) -> SceneMemory {
+        use std::mem::size_of;
+        SceneMemory {
+            mesh_bytes: self.scene.meshes.iter().map(Mesh::memory_bytes).sum(),
+            instance_bytes: self.scene.instances.len() * size_of::<crate::scene::Instance>(),
+            world_bvh_bytes: self.world.memory_bytes()
+                + (self.baked_offsets.len() + self.baked_instances.len()) * size_of::<u32>(),
+            blas_bytes: self.blases.iter().map(Blas::memory_bytes).sum(),
+            tlas_bytes: self.tlas.nodes.len() * size_of::<CwBvhNode>()
+                + self.tlas_leaves.len() * size_of::<TlasLeaf>()
+                + self.xforms.len() * size_of::<InstanceXf>(),
+        }
     }
 
     /// Number of lights the light sampler chooses from (punctual + emissive triangles + environment).
@@ -494,38 +830,78 @@ impl RenderScene {
         Some(tex.sample(if r.uv_set == 1 { uv1 } else { uv0 }))
     }
 
-    /// UV sets at barycentrics (b1, b2) of mesh triangle `tri`.
+    /// The mesh instance `inst` places.
     #[inline]
-    fn uvs_at(&self, tri: u32, b1: f32, b2: f32) -> (Vec2, Vec2) {
-        let m = &self.scene.mesh;
-        if !self.has_uv0 {
+    fn mesh_of(&self, inst: u32) -> (&Mesh, MeshInfo) {
+        let k = self.scene.instances[inst as usize].mesh as usize;
+        (&self.scene.meshes[k], self.mesh_info[k])
+    }
+
+    /// (instance, mesh triangle) of baked triangle `k`.
+    #[inline]
+    fn resolve_baked(&self, k: u32) -> (u32, u32) {
+        let j = self.baked_offsets.partition_point(|&o| o <= k) - 1;
+        (self.baked_instances[j], k - self.baked_offsets[j])
+    }
+
+    /// sign(det) of instance `inst`'s transform (−1: mirrored, the emitting side flips).
+    #[inline]
+    pub(crate) fn instance_sign(&self, inst: u32) -> f32 {
+        self.xforms[inst as usize].sign
+    }
+
+    /// World-space vertices of triangle `tri` of instance `inst`.
+    #[inline]
+    pub(crate) fn world_triangle(&self, inst: u32, tri: u32) -> [Vec3; 3] {
+        world_triangle(&self.scene, &self.xforms, inst, tri)
+    }
+
+    /// UV sets at barycentrics (b1, b2) of triangle `tri` of instance `inst`.
+    #[inline]
+    pub(crate) fn uvs_at(&self, inst: u32, tri: u32, b1: f32, b2: f32) -> (Vec2, Vec2) {
+        let (m, info) = self.mesh_of(inst);
+        if !info.has_uv0 {
             return (Vec2::ZERO, Vec2::ZERO);
         }
         let [i0, i1, i2] = m.indices[tri as usize].map(|i| i as usize);
         let b0 = 1.0 - b1 - b2;
         let uv0 = m.uv0[i0] * b0 + m.uv0[i1] * b1 + m.uv0[i2] * b2;
-        let uv1 = if self.has_uv1 { m.uv1[i0] * b0 + m.uv1[i1] * b1 + m.uv1[i2] * b2 } else { uv0 };
+        let uv1 = if info.has_uv1 { m.uv1[i0] * b0 + m.uv1[i1] * b1 + m.uv1[i2] * b2 } else { uv0 };
         (uv0, uv1)
     }
 
-    /// Alpha (factor × base-colour texture alpha) of mesh triangle `tri` at barycentrics (b1, b2).
-    pub(crate) fn alpha_at(&self, tri: u32, b1: f32, b2: f32) -> f32 {
-        let mat = &self.scene.materials[self.scene.mesh.material_ids[tri as usize] as usize];
-        let (uv0, uv1) = self.uvs_at(tri, b1, b2);
+    /// Material id of triangle `tri` of instance `inst`.
+    #[inline]
+    pub(crate) fn material_of(&self, inst: u32, tri: u32) -> u32 {
+        self.mesh_of(inst).0.material_ids[tri as usize]
+    }
+
+    /// Alpha (factor × base-colour texture alpha) of triangle `tri` of instance `inst` at
+    /// barycentrics (b1, b2).
+    pub(crate) fn alpha_at(&self, inst: u32, tri: u32, b1: f32, b2: f32) -> f32 {
+        let mat = &self.scene.materials[self.material_of(inst, tri) as usize];
+        let (uv0, uv1) = self.uvs_at(inst, tri, b1, b2);
         let tex = self.texture(mat.base_color_texture, uv0, uv1).map_or(1.0, |t| t.w);
         mat.base_color.w * tex
     }
 
-    /// Whether the surface is there (not cut out) at a candidate hit.
+    /// Whether the surface is there (not cut out) at a candidate hit; `key` identifies the
+    /// triangle for the stochastic decision.
     #[inline(never)]
-    fn alpha_passes(&self, tri: u32, b1: f32, b2: f32, ray_hash: u32) -> bool {
-        let m = self.scene.mesh.material_ids[tri as usize] as usize;
-        match self.alpha_tests[m] {
+    fn alpha_passes(&self, c: Candidate, b1: f32, b2: f32, ray_hash: u32) -> bool {
+        let (inst, tri, key) = match c {
+            Candidate::Baked(k) => {
+                let (i, t) = self.resolve_baked(k);
+                (i, t, k)
+            }
+            Candidate::Instanced(i, t) => (i, t, t ^ hash_u32(i ^ 0x5bd1_e995)),
+        };
+        match self.alpha_tests[self.material_of(inst, tri) as usize] {
             AlphaTest::None => true,
-            AlphaTest::Mask(cutoff) => self.alpha_at(tri, b1, b2) >= cutoff,
+            AlphaTest::Mask(cutoff) => self.alpha_at(inst, tri, b1, b2) >= cutoff,
             AlphaTest::Stochastic => {
-                let u = (hash_u32(ray_hash ^ hash_u32(tri)) >> 8) as f32 * (1.0 / (1u32 << 24) as f32);
-                u < self.alpha_at(tri, b1, b2)
+                let u = (hash_u32(ray_hash ^ hash_u32(key)) >> 8) as f32 * (1.0 / (1u32 << 24) as f32);
+                u < self.alpha_at(inst, tri, b1, b2)
             }
         }
     }
@@ -534,39 +910,95 @@ impl RenderScene {
     /// world units). Alpha cut-outs are skipped. None for no hit or a non-finite ray.
     pub fn intersect(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<SurfaceHit> {
         let dir = dir.normalize_or_zero();
-        if self.tris.is_empty() || dir == Vec3::ZERO || !origin.is_finite() || !(t_max > 0.0) {
+        if (self.world.tris.is_empty() && self.tlas_leaves.is_empty())
+            || dir == Vec3::ZERO
+            || !origin.is_finite()
+            || !(t_max > 0.0)
+        {
             return None;
         }
         // −0.0 → +0.0: obvhs takes the octant from `d < 0` but the inverse from the sign bit,
         // so a −0.0 component would make every node test miss.
         let dir = dir + Vec3::ZERO;
-        let wray = WatertightRay::new(origin, dir);
-        let ray = Ray::new(origin.to_array().into(), dir.to_array().into(), 0.0, t_max);
         let ray_hash = if self.any_stochastic { Self::ray_hash(origin, dir) } else { 0 };
-        let mut hit = RayHit::none();
-        let mut best = (u32::MAX, 0.0f32, 0.0f32);
-        let tris = &self.tris;
-        self.bvh.ray_traverse(ray, &mut hit, |r, id| {
-            let tri = &tris[id];
-            if let Some((t, b1, b2)) = wray.intersect(&tri.v, r.tmax) {
-                if tri.prim & ALPHA_BIT != 0 && !self.alpha_passes(tri.prim & !ALPHA_BIT, b1, b2, ray_hash) {
-                    return f32::INFINITY;
+        let mut best: Option<(Candidate, f32, f32)> = None;
+        let mut t_best = t_max;
+        if !self.world.tris.is_empty() {
+            let wray = WatertightRay::new(origin, dir);
+            let ray = Ray::new(origin.to_array().into(), dir.to_array().into(), 0.0, t_best);
+            let mut hit = RayHit::none();
+            let tris = &self.world.tris;
+            self.world.bvh.ray_traverse(ray, &mut hit, |r, id| {
+                let tri = &tris[id];
+                if let Some((t, b1, b2)) = wray.intersect(&tri.v, r.tmax) {
+                    let c = Candidate::Baked(tri.prim & !ALPHA_BIT);
+                    if tri.prim & ALPHA_BIT != 0 && !self.alpha_passes(c, b1, b2, ray_hash) {
+                        return f32::INFINITY;
+                    }
+                    best = Some((c, b1, b2));
+                    return t;
                 }
-                best = (tri.prim & !ALPHA_BIT, b1, b2);
-                return t;
+                f32::INFINITY
+            });
+            if best.is_some() && hit.t < t_best {
+                t_best = hit.t;
             }
-            f32::INFINITY
-        });
-        if best.0 == u32::MAX || !(hit.t < t_max) {
+        }
+        if !self.tlas_leaves.is_empty() {
+            let ray = Ray::new(origin.to_array().into(), dir.to_array().into(), 0.0, t_best);
+            let mut hit = RayHit::none();
+            self.tlas.ray_traverse(ray, &mut hit, |r, id| {
+                let leaf = &self.tlas_leaves[id];
+                let o = leaf.world_to_object.transform_point3(origin);
+                let d = leaf.world_to_object.transform_vector3(dir) + Vec3::ZERO;
+                let wray = WatertightRay::new(o, d);
+                let oray = Ray::new(o.to_array().into(), d.to_array().into(), 0.0, r.tmax);
+                let blas = &self.blases[leaf.blas as usize];
+                let mut h = RayHit::none();
+                let mut found = None;
+                blas.bvh.ray_traverse(oray, &mut h, |r2, id2| {
+                    let tri = &blas.tris[id2];
+                    if let Some((t, b1, b2)) = wray.intersect(&tri.v, r2.tmax) {
+                        let c = Candidate::Instanced(leaf.instance, tri.prim & !ALPHA_BIT);
+                        if tri.prim & ALPHA_BIT != 0 && !self.alpha_passes(c, b1, b2, ray_hash) {
+                            return f32::INFINITY;
+                        }
+                        found = Some((c, b1, b2));
+                        return t;
+                    }
+                    f32::INFINITY
+                });
+                match found {
+                    Some(f) if h.t < r.tmax => {
+                        best = Some(f);
+                        h.t
+                    }
+                    _ => f32::INFINITY,
+                }
+            });
+            if hit.t < t_best {
+                t_best = hit.t;
+            }
+        }
+        let (c, b1, b2) = best?;
+        if !(t_best < t_max) {
             return None;
         }
-        Some(self.surface_hit(best.0, best.1, best.2, hit.t, dir))
+        let (inst, tri) = match c {
+            Candidate::Baked(k) => self.resolve_baked(k),
+            Candidate::Instanced(i, t) => (i, t),
+        };
+        Some(self.surface_hit(inst, tri, b1, b2, t_best, dir))
     }
 
     /// Whether anything (after alpha cut-outs) lies on `origin + t·dir`, 0 < t < `t_max`
     /// (`dir` need not be unit; `t` is in units of its length).
     pub fn occluded(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
-        if self.tris.is_empty() || !origin.is_finite() || !dir.is_finite() || !(t_max > 0.0) {
+        if (self.world.tris.is_empty() && self.tlas_leaves.is_empty())
+            || !origin.is_finite()
+            || !dir.is_finite()
+            || !(t_max > 0.0)
+        {
             return false;
         }
         let len = dir.length();
@@ -575,34 +1007,72 @@ impl RenderScene {
         }
         let dir = dir.normalize_or_zero() + Vec3::ZERO; // −0.0 → +0.0 (see `intersect`)
         let t_max = t_max * len;
-        let wray = WatertightRay::new(origin, dir);
         let ray = Ray::new(origin.to_array().into(), dir.to_array().into(), 0.0, t_max);
         let ray_hash = if self.any_stochastic { Self::ray_hash(origin, dir) } else { 0 };
-        let tris = &self.tris;
-        !self.bvh.ray_traverse_miss(ray, |r, id| {
-            let tri = &tris[id];
-            if let Some((t, b1, b2)) = wray.intersect(&tri.v, r.tmax) {
-                if tri.prim & ALPHA_BIT != 0 && !self.alpha_passes(tri.prim & !ALPHA_BIT, b1, b2, ray_hash) {
-                    return f32::INFINITY;
+        if !self.world.tris.is_empty() {
+            let wray = WatertightRay::new(origin, dir);
+            let tris = &self.world.tris;
+            let miss = self.world.bvh.ray_traverse_miss(ray, |r, id| {
+                let tri = &tris[id];
+                if let Some((t, b1, b2)) = wray.intersect(&tri.v, r.tmax) {
+                    let c = Candidate::Baked(tri.prim & !ALPHA_BIT);
+                    if tri.prim & ALPHA_BIT != 0 && !self.alpha_passes(c, b1, b2, ray_hash) {
+                        return f32::INFINITY;
+                    }
+                    return t;
                 }
-                return t;
+                f32::INFINITY
+            });
+            if !miss {
+                return true;
             }
-            f32::INFINITY
+        }
+        if self.tlas_leaves.is_empty() {
+            return false;
+        }
+        !self.tlas.ray_traverse_miss(ray, |r, id| {
+            let leaf = &self.tlas_leaves[id];
+            let o = leaf.world_to_object.transform_point3(origin);
+            let d = leaf.world_to_object.transform_vector3(dir) + Vec3::ZERO;
+            let wray = WatertightRay::new(o, d);
+            let oray = Ray::new(o.to_array().into(), d.to_array().into(), 0.0, r.tmax);
+            let blas = &self.blases[leaf.blas as usize];
+            let mut t_hit = f32::INFINITY;
+            let miss = blas.bvh.ray_traverse_miss(oray, |r2, id2| {
+                let tri = &blas.tris[id2];
+                if let Some((t, b1, b2)) = wray.intersect(&tri.v, r2.tmax) {
+                    let c = Candidate::Instanced(leaf.instance, tri.prim & !ALPHA_BIT);
+                    if tri.prim & ALPHA_BIT != 0 && !self.alpha_passes(c, b1, b2, ray_hash) {
+                        return f32::INFINITY;
+                    }
+                    t_hit = t;
+                    return t;
+                }
+                f32::INFINITY
+            });
+            if miss {
+                f32::INFINITY
+            } else {
+                t_hit
+            }
         })
     }
 
-    /// Builds the full hit record for mesh triangle `tri` at barycentrics (b1, b2).
-    pub fn surface_hit(&self, tri: u32, b1: f32, b2: f32, t: f32, dir: Vec3) -> SurfaceHit {
-        let mesh = &self.scene.mesh;
-        let [i0, i1, i2] = mesh.indices[tri as usize].map(|i| i as usize);
-        let (p0, p1, p2) = (mesh.positions[i0], mesh.positions[i1], mesh.positions[i2]);
+    /// Builds the full hit record for triangle `tri` of instance `inst` at barycentrics
+    /// (b1, b2), hit at distance `t` along unit `dir`; attributes in world space.
+    pub fn surface_hit(&self, inst: u32, tri: u32, b1: f32, b2: f32, t: f32, dir: Vec3) -> SurfaceHit {
+        let xf = self.xforms[inst as usize];
+        let (mesh, info) = self.mesh_of(inst);
+        let idx = mesh.indices[tri as usize].map(|i| i as usize);
+        let p = self.world_triangle(inst, tri);
         let b0 = 1.0 - b1 - b2;
-        let position = p0 * b0 + p1 * b1 + p2 * b2;
-        let e1 = p1 - p0;
-        let e2 = p2 - p0;
-        let ng = e1.cross(e2).normalize_or(Vec3::Z);
-        let mut ns = if self.has_normals {
-            let n = mesh.normals[i0] * b0 + mesh.normals[i1] * b1 + mesh.normals[i2] * b2;
+        let position = p[0] * b0 + p[1] * b1 + p[2] * b2;
+        let ng = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or(Vec3::Z) * xf.sign;
+        let world_n = |n: Vec3| if xf.identity { n } else { (xf.normal * n).normalize_or_zero() };
+        let mut ns = if info.has_normals {
+            let n = world_n(mesh.normals[idx[0]]) * b0
+                + world_n(mesh.normals[idx[1]]) * b1
+                + world_n(mesh.normals[idx[2]]) * b2;
             let n = n.normalize_or_zero();
             if n == Vec3::ZERO || !n.is_finite() {
                 ng
@@ -616,12 +1086,31 @@ impl RenderScene {
         } else {
             ng
         };
-        let (uv0, uv1) = self.uvs_at(tri, b1, b2);
+        let (uv0, uv1) = self.uvs_at(inst, tri, b1, b2);
         let material_id = mesh.material_ids[tri as usize];
         let mat = &self.scene.materials[material_id as usize];
         if let Some(nref) = mat.normal_texture {
             if let Some(texel) = self.texture(Some(nref), uv0, uv1) {
-                let (tangent, bitangent) = self.tangent_frame(tri, [i0, i1, i2], [b0, b1, b2], ns, nref.uv_set);
+                let tangents = info.has_tangents.then(|| {
+                    idx.map(|i| {
+                        let t = mesh.tangents[i];
+                        if xf.identity || t == Vec4::ZERO {
+                            t
+                        } else {
+                            (xf.object_to_world.matrix3 * glam::Vec3A::from(t.truncate()))
+                                .normalize_or_zero()
+                                .extend(t.w * xf.sign)
+                        }
+                    })
+                });
+                let uvs = if nref.uv_set == 1 && info.has_uv1 {
+                    Some(idx.map(|i| mesh.uv1[i]))
+                } else if info.has_uv0 {
+                    Some(idx.map(|i| mesh.uv0[i]))
+                } else {
+                    None
+                };
+                let (tangent, bitangent) = tangent_frame(p, tangents, uvs, [b0, b1, b2], ns);
                 let s = mat.normal_scale;
                 let m = Vec3::new((texel.x * 2.0 - 1.0) * s, (texel.y * 2.0 - 1.0) * s, texel.z * 2.0 - 1.0);
                 let n = (tangent * m.x + bitangent * m.y + ns * m.z).normalize_or_zero();
@@ -632,6 +1121,7 @@ impl RenderScene {
         }
         SurfaceHit {
             t,
+            instance: inst,
             triangle: tri,
             barycentrics: Vec2::new(b1, b2),
             position,
@@ -644,50 +1134,6 @@ impl RenderScene {
         }
     }
 
-    /// Orthonormal tangent and bitangent around `n` for normal mapping: the vertex tangents
-    /// (glTF: bitangent = n × t · w), else the triangle's UV derivatives (glTF's v axis points
-    /// down the image, so the bitangent is −∂p/∂v), else an arbitrary frame.
-    fn tangent_frame(&self, tri: u32, idx: [usize; 3], b: [f32; 3], n: Vec3, uv_set: u32) -> (Vec3, Vec3) {
-        let mesh = &self.scene.mesh;
-        if self.has_tangents {
-            let t4: Vec4 = mesh.tangents[idx[0]] * b[0] + mesh.tangents[idx[1]] * b[1] + mesh.tangents[idx[2]] * b[2];
-            let t = t4.truncate();
-            let t = (t - n * n.dot(t)).normalize_or_zero();
-            if t != Vec3::ZERO && t.is_finite() {
-                let w = if mesh.tangents[idx[0]].w < 0.0 { -1.0 } else { 1.0 };
-                return (t, n.cross(t) * w);
-            }
-        }
-        let uvs: Option<&Vec<Vec2>> = if uv_set == 1 && self.has_uv1 {
-            Some(&mesh.uv1)
-        } else if self.has_uv0 {
-            Some(&mesh.uv0)
-        } else {
-            None
-        };
-        if let Some(uvs) = uvs {
-            let _ = tri;
-            let (p0, p1, p2) = (mesh.positions[idx[0]], mesh.positions[idx[1]], mesh.positions[idx[2]]);
-            let (t0, t1, t2) = (uvs[idx[0]], uvs[idx[1]], uvs[idx[2]]);
-            let (dp1, dp2) = (p1 - p0, p2 - p0);
-            let (du1, du2) = (t1 - t0, t2 - t0);
-            let det = du1.x * du2.y - du1.y * du2.x;
-            if det.abs() > 1e-20 {
-                let r = 1.0 / det;
-                let dpdu = (dp1 * du2.y - dp2 * du1.y) * r;
-                let dpdv = (dp2 * du1.x - dp1 * du2.x) * r;
-                let t = (dpdu - n * n.dot(dpdu)).normalize_or_zero();
-                if t != Vec3::ZERO && t.is_finite() {
-                    let up = -dpdv;
-                    let w = if n.cross(t).dot(up) < 0.0 { -1.0 } else { 1.0 };
-                    return (t, n.cross(t) * w);
-                }
-            }
-        }
-        let (t, b) = super::bsdf::orthonormal_basis(n);
-        (t, b)
-    }
-
     /// Emitted radiance of the hit's material toward the side the ray came from: front side
     /// only unless the material is double sided (glTF). Zero for non-emissive materials.
     pub fn emission(&self, hit: &SurfaceHit) -> Vec3 {
@@ -698,4 +1144,58 @@ impl RenderScene {
         let tex = self.texture(mat.emissive_texture, hit.uv0, hit.uv1).map_or(Vec3::ONE, |t| t.truncate());
         mat.emissive * tex
     }
+}
+
+/// World-space vertices of triangle `tri` of instance `inst`.
+#[inline]
+fn world_triangle(scene: &Scene, xforms: &[InstanceXf], inst: u32, tri: u32) -> [Vec3; 3] {
+    let xf = &xforms[inst as usize];
+    let m = &scene.meshes[scene.instances[inst as usize].mesh as usize];
+    m.indices[tri as usize].map(|k| {
+        let p = m.positions[k as usize];
+        if xf.identity {
+            p
+        } else {
+            xf.object_to_world.transform_point3(p)
+        }
+    })
+}
+
+/// Orthonormal tangent and bitangent around `n` for normal mapping: the vertex tangents
+/// (glTF: bitangent = n × t · w), else the triangle's UV derivatives (glTF's v axis points
+/// down the image, so the bitangent is −∂p/∂v), else an arbitrary frame. Positions and
+/// tangents in world space.
+fn tangent_frame(
+    p: [Vec3; 3],
+    tangents: Option<[Vec4; 3]>,
+    uvs: Option<[Vec2; 3]>,
+    b: [f32; 3],
+    n: Vec3,
+) -> (Vec3, Vec3) {
+    if let Some(tg) = tangents {
+        let t4: Vec4 = tg[0] * b[0] + tg[1] * b[1] + tg[2] * b[2];
+        let t = t4.truncate();
+        let t = (t - n * n.dot(t)).normalize_or_zero();
+        if t != Vec3::ZERO && t.is_finite() {
+            let w = if tg[0].w < 0.0 { -1.0 } else { 1.0 };
+            return (t, n.cross(t) * w);
+        }
+    }
+    if let Some([t0, t1, t2]) = uvs {
+        let (dp1, dp2) = (p[1] - p[0], p[2] - p[0]);
+        let (du1, du2) = (t1 - t0, t2 - t0);
+        let det = du1.x * du2.y - du1.y * du2.x;
+        if det.abs() > 1e-20 {
+            let r = 1.0 / det;
+            let dpdu = (dp1 * du2.y - dp2 * du1.y) * r;
+            let dpdv = (dp2 * du1.x - dp1 * du2.x) * r;
+            let t = (dpdu - n * n.dot(dpdu)).normalize_or_zero();
+            if t != Vec3::ZERO && t.is_finite() {
+                let up = -dpdv;
+                let w = if n.cross(t).dot(up) < 0.0 { -1.0 } else { 1.0 };
+                return (t, n.cross(t) * w);
+            }
+        }
+    }
+    super::bsdf::orthonormal_basis(n)
 }

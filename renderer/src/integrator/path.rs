@@ -182,8 +182,7 @@ impl PathTracer {
                 let w = if depth == 0 {
                     1.0
                 } else {
-                    let light_pdf =
-                        scene.triangle_light_pdf(prev_p, prev_n, hit.triangle, d, hit.t, hit.geometric_normal);
+                    let light_pdf = scene.triangle_light_pdf(prev_p, prev_n, &hit, d);
                     match self.strategy {
                         LightStrategy::Mis => power_heuristic(prev_pdf, light_pdf),
                         LightStrategy::BsdfOnly => 1.0,

@@ -181,7 +181,8 @@ pub fn demo_scene() -> (Scene, DemoShot) {
         ..Material::default()
     };
     scene.materials.push(window); // 10
-    let mesh = &mut scene.mesh;
+    let mut world = Mesh::default();
+    let mesh = &mut world;
     // 2. Table top (y = 0) and the street running away from the camera along −z.
     add_quad(
         mesh,
@@ -258,6 +259,7 @@ pub fn demo_scene() -> (Scene, DemoShot) {
         add_sphere(mesh, Vec3::new(x, y, -1.2), 0.003, 7 + (j % 2), 6, 10);
     }
     // 5. Dusk sky and a dim moon.
+    scene.add_world_mesh(world);
     scene.environment = Environment::Constant(Vec3::new(0.035, 0.045, 0.08));
     scene.lights.push(Light::Directional {
         direction: Vec3::new(0.3, -1.0, -0.4).normalize(),

@@ -1,5 +1,6 @@
-//! Scenes: triangle meshes in world space, glTF PBR materials and textures, punctual lights,
-//! an environment and the file's cameras. Built by the glTF loader ([`gltf_load`]), the
+//! Scenes: triangle meshes (each stored once, in object space) and instances of them (a mesh
+//! and an object-to-world transform), glTF PBR materials and textures, punctual lights,
+//! an environment and the file's cameras. Built by the glTF loader ([`gltf`]), the
 //! built-in demo ([`demo`]) or in memory (the Blender add-on and the USD stage).
 //!
 //! Units: metres; world space is glTF's (+y up, right-handed). Colours are linear Rec.709.
@@ -14,13 +15,21 @@
 //! | `Light::Spot.inner_cone_rad`, `outer_cone_rad` | f32 | radians | 0, π/4 |
 //! | `Light::Directional.irradiance` | RGB | W/m² | — |
 //! | `Material.alpha_cutoff` | f32 (alpha mask) | — | 0.5 |
+//! | `Instance.mesh` | u32 | index into `Scene::meshes` | — |
+//! | `Instance.object_to_world` | [`Affine3A`] (any invertible affine map: rotation, non-uniform or negative scale, shear) | metres | — |
+//!
+//! A mesh referenced by one instance costs what it did when scenes were one flattened mesh (the
+//! renderer bakes it into world space); a mesh referenced by many costs one copy plus 80 B per
+//! instance here (and about 200 B more per instance in the two-level BVH, see
+//! [`crate::integrator::accel`]). A negative-determinant transform mirrors the mesh: its winding
+//! flips with it (glTF), so the front side stays the side the normals point to.
 
 use glam::{Affine3A, Vec2, Vec3, Vec4};
 use std::sync::Arc;
 
 pub mod demo;
 pub mod environment;
-pub mod gltf_load;
+pub mod gltf;
 pub mod texture;
 
 pub use environment::Environment;
@@ -160,7 +169,7 @@ pub struct SceneCamera {
     pub zfar: Option<f32>,
 }
 
-/// Triangle meshes flattened into world space.
+/// A triangle mesh in its object space (placed in the world by [`Instance`]s).
 #[derive(Debug, Clone, Default)]
 pub struct Mesh {
     /// Vertex positions.
@@ -183,6 +192,50 @@ impl Mesh {
     /// Number of triangles.
     pub fn triangle_count(&self) -> usize {
         self.indices.len()
+    }
+
+    /// Bytes of the mesh's arrays (lengths, not capacities).
+    pub fn memory_bytes(&self) -> usize {
+        use std::mem::size_of;
+        self.positions.len() * size_of::<Vec3>()
+            + self.normals.len() * size_of::<Vec3>()
+            + self.tangents.len() * size_of::<Vec4>()
+            + self.uv0.len() * size_of::<Vec2>()
+            + self.uv1.len() * size_of::<Vec2>()
+            + self.indices.len() * size_of::<[u32; 3]>()
+            + self.material_ids.len() * size_of::<u32>()
+    }
+
+    /// This mesh moved by `xf` (positions by `xf`, normals by the inverse transpose, tangents
+    /// by the linear part with `w` × sign(det); a mirroring transform flips the winding so the
+    /// front side follows the normals), as the renderer sees an instance of it.
+    pub fn transformed(&self, xf: &Affine3A) -> Mesh {
+        let lin = glam::Mat3::from(xf.matrix3);
+        let det = lin.determinant();
+        let sign = if det < 0.0 { -1.0 } else { 1.0 };
+        let cof = cofactor(lin) * sign;
+        Mesh {
+            positions: self.positions.iter().map(|&p| xf.transform_point3(p)).collect(),
+            normals: self.normals.iter().map(|&n| (cof * n).normalize_or_zero()).collect(),
+            tangents: self
+                .tangents
+                .iter()
+                .map(|t| {
+                    if *t == Vec4::ZERO {
+                        return *t;
+                    }
+                    (lin * t.truncate()).normalize_or_zero().extend(if t.w < 0.0 { -sign } else { sign })
+                })
+                .collect(),
+            uv0: self.uv0.clone(),
+            uv1: self.uv1.clone(),
+            indices: if det < 0.0 {
+                self.indices.iter().map(|t| [t[0], t[2], t[1]]).collect()
+            } else {
+                self.indices.clone()
+            },
+            material_ids: self.material_ids.clone(),
+        }
     }
 
     /// Appends another mesh, offsetting its indices and material ids.
@@ -208,11 +261,28 @@ impl Mesh {
     }
 }
 
+/// Cofactor matrix of `m` (= det × inverse transpose; defined for singular matrices too).
+pub fn cofactor(m: glam::Mat3) -> glam::Mat3 {
+    glam::Mat3::from_cols(m.y_axis.cross(m.z_axis), m.z_axis.cross(m.x_axis), m.x_axis.cross(m.y_axis))
+}
+
+/// One placement of a mesh in the world.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Instance {
+    /// Index into [`Scene::meshes`].
+    pub mesh: u32,
+    /// Object-to-world transform (invertible; a singular or non-finite one is skipped with a
+    /// warning when the scene is prepared for rendering).
+    pub object_to_world: Affine3A,
+}
+
 /// A scene ready to render (before acceleration structures are built).
 #[derive(Debug, Clone, Default)]
 pub struct Scene {
-    /// All triangles in world space.
-    pub mesh: Mesh,
+    /// Meshes in object space, each stored once.
+    pub meshes: Vec<Mesh>,
+    /// Placements of the meshes (a mesh may have any number, including none).
+    pub instances: Vec<Instance>,
     /// Materials (index = material id).
     pub materials: Vec<Material>,
     /// Textures.
@@ -225,4 +295,57 @@ pub struct Scene {
     pub cameras: Vec<SceneCamera>,
     /// Warnings collected while loading (shown to the user once).
     pub warnings: Vec<String>,
+}
+
+impl Scene {
+    /// A scene whose geometry is `mesh`, already in world space (one identity instance).
+    pub fn world(mesh: Mesh) -> Scene {
+        let mut s = Scene::default();
+        s.add_world_mesh(mesh);
+        s
+    }
+
+    /// Stores a mesh (without placing it) and returns its index for [`Scene::add_instance`].
+    pub fn add_mesh(&mut self, mesh: Mesh) -> u32 {
+        self.meshes.push(mesh);
+        (self.meshes.len() - 1) as u32
+    }
+
+    /// Places mesh `mesh` with `object_to_world`; returns the instance index.
+    pub fn add_instance(&mut self, mesh: u32, object_to_world: Affine3A) -> u32 {
+        self.instances.push(Instance { mesh, object_to_world });
+        (self.instances.len() - 1) as u32
+    }
+
+    /// Stores a mesh already in world space with one identity instance (returns the mesh index).
+    pub fn add_world_mesh(&mut self, mesh: Mesh) -> u32 {
+        let m = self.add_mesh(mesh);
+        self.add_instance(m, Affine3A::IDENTITY);
+        m
+    }
+
+    /// Every instance baked into one world-space mesh (what scenes were before instancing;
+    /// instances of missing meshes are left out).
+    pub fn flattened_mesh(&self) -> Mesh {
+        let mut out = Mesh::default();
+        for inst in &self.instances {
+            if let Some(m) = self.meshes.get(inst.mesh as usize) {
+                out.append(&m.transformed(&inst.object_to_world), 0);
+            }
+        }
+        out
+    }
+
+    /// Replaces meshes and instances by [`Scene::flattened_mesh`] with one identity instance.
+    pub fn flatten(&mut self) {
+        let mesh = self.flattened_mesh();
+        self.meshes.clear();
+        self.instances.clear();
+        self.add_world_mesh(mesh);
+    }
+
+    /// Triangles over all instances (a mesh counted once per instance).
+    pub fn instanced_triangle_count(&self) -> usize {
+        self.instances.iter().filter_map(|i| self.meshes.get(i.mesh as usize)).map(Mesh::triangle_count).sum()
+    }
 }

@@ -1,0 +1,206 @@
+//! Light sampling on a [`RenderScene`]: picking a light, sampling a point on it, and the pdfs MIS needs.
+
+use glam::{Vec2, Vec3};
+
+use super::{env_pdf, env_sample, LightKind, LightSample, LightSelection};
+use crate::integrator::accel::{offset_ray_origin, AlphaTest, RenderScene, SurfaceHit};
+use crate::scene::Light;
+
+/// glTF range window.
+#[inline]
+fn range_window(d: f32, range: Option<f32>) -> f32 {
+    match range {
+        Some(r) if r > 0.0 && r.is_finite() => {
+            let x = d / r;
+            let x2 = x * x;
+            let w = (1.0 - x2 * x2).clamp(0.0, 1.0);
+            w * w
+        }
+        _ => 1.0,
+    }
+}
+
+/// KHR_lights_punctual spot attenuation for `cd` = cos(angle to the axis).
+#[inline]
+pub fn spot_attenuation(cd: f32, inner: f32, outer: f32) -> f32 {
+    let cos_outer = outer.cos();
+    let scale = 1.0 / (inner.cos() - cos_outer).max(0.001);
+    let a = ((cd - cos_outer) * scale).clamp(0.0, 1.0);
+    a * a
+}
+
+impl RenderScene {
+    /// How next-event estimation chooses lights ([`LightSelection::Tree`] unless changed).
+    pub fn light_selection(&self) -> LightSelection {
+        self.lights.selection
+    }
+
+    /// Switches the light selection strategy (the tree is the default, except in scenes with spot
+    /// lights, see `LightSet::build`).
+    pub fn set_light_selection(&mut self, selection: LightSelection) {
+        self.lights.selection = selection;
+    }
+
+    /// Picks a light for shading point `p` with normal `n` (the geometric normal on the side
+    /// the light must be on, or zero when there is none): (light index, selection pmf). This is
+    /// the choice [`RenderScene::sample_light_at`] makes with the same `u_pick`.
+    pub fn pick_light(&self, p: Vec3, n: Vec3, u_pick: f32) -> Option<(usize, f32)> {
+        self.lights.pick(p, n, u_pick)
+    }
+
+    /// Probability that [`RenderScene::pick_light`] at (p, n) picks light `light` (an index
+    /// below [`RenderScene::light_count`]). Equal to the pmf the pick returns.
+    pub fn light_pmf(&self, p: Vec3, n: Vec3, light: usize) -> f32 {
+        self.lights.pmf(p, n, light)
+    }
+
+    /// Light index of emissive triangle `tri` of instance `instance` (None when it is not a light).
+    pub fn triangle_light(&self, instance: u32, tri: u32) -> Option<usize> {
+        self.lights.triangle_light(instance, tri)
+    }
+
+    /// Samples a light for shading point `p` without a surface normal (as
+    /// [`RenderScene::sample_light_at`] with `n = 0`).
+    pub fn sample_light(&self, p: Vec3, u_pick: f32, u: Vec2) -> Option<LightSample> {
+        self.sample_light_at(p, Vec3::ZERO, u_pick, u)
+    }
+
+    /// Samples a light for shading point `p` with normal `n` (the geometric normal on the side
+    /// where light is wanted, or zero): `u_pick` selects the light, `u` the point on it. None
+    /// when nothing can be sampled. Lights wholly below `n` are never chosen.
+    pub fn sample_light_at(&self, p: Vec3, n: Vec3, u_pick: f32, u: Vec2) -> Option<LightSample> {
+        let (i, pmf) = self.lights.pick(p, n, u_pick)?;
+        match self.lights.kinds[i] {
+            LightKind::Punctual(li) => {
+                let light = self.scene().lights[li as usize];
+                let (wi, radiance, target) = match light {
+                    Light::Point { position, intensity, range } => {
+                        let d = position - p;
+                        let d2 = d.length_squared();
+                        let dist = d2.sqrt();
+                        if !(dist > 0.0) {
+                            return None;
+                        }
+                        (d / dist, intensity * (range_window(dist, range) / d2), Some(position))
+                    }
+                    Light::Spot { position, direction, intensity, inner_cone_rad, outer_cone_rad, range } => {
+                        let d = position - p;
+                        let d2 = d.length_squared();
+                        let dist = d2.sqrt();
+                        if !(dist > 0.0) {
+                            return None;
+                        }
+                        let wi = d / dist;
+                        let cd = direction.normalize_or_zero().dot(-wi);
+                        let att = spot_attenuation(cd, inner_cone_rad, outer_cone_rad) * range_window(dist, range);
+                        (wi, intensity * (att / d2), Some(position))
+                    }
+                    Light::Directional { direction, irradiance } => {
+                        let wi = -direction.normalize_or_zero();
+                        if wi == Vec3::ZERO {
+                            return None;
+                        }
+                        (wi, irradiance, None)
+                    }
+                };
+                if radiance == Vec3::ZERO || !radiance.is_finite() {
+                    return None;
+                }
+                Some(LightSample { wi, radiance, pdf: pmf, delta: true, target })
+            }
+            LightKind::Triangle { instance, tri } => {
+                let scene = self.scene();
+                let material_id = self.material_of(instance, tri);
+                let mat = &scene.materials[material_id as usize];
+                let [a, b, c] = self.world_triangle(instance, tri);
+                // Uniform point: barycentrics (1 − √u₀, √u₀(1 − u₁), √u₀·u₁).
+                let su = u.x.sqrt();
+                let (w0, w1, w2) = (1.0 - su, su * (1.0 - u.y), su * u.y);
+                let q = a * w0 + b * w1 + c * w2;
+                let cross = (b - a).cross(c - a);
+                let area2 = cross.length();
+                if !(area2 > 0.0) {
+                    return None;
+                }
+                let nl = cross / area2 * self.instance_sign(instance);
+                let area = 0.5 * area2;
+                let d = q - p;
+                let dist2 = d.length_squared();
+                let dist = dist2.sqrt();
+                if !(dist > 0.0) {
+                    return None;
+                }
+                let wi = d / dist;
+                let cos_l = -nl.dot(wi); // > 0: p sees the front side
+                if cos_l <= 0.0 && !mat.double_sided {
+                    return None;
+                }
+                let cos_l = cos_l.abs();
+                if cos_l < 1e-7 {
+                    return None;
+                }
+                let (uv0, uv1) = self.uvs_at(instance, tri, w1, w2);
+                let mut le =
+                    mat.emissive * self.texture(mat.emissive_texture, uv0, uv1).map_or(Vec3::ONE, |t| t.truncate());
+                // Cut-outs of the emitter itself: Mask removes, Blend emits with weight alpha
+                // (the expected value of stochastic opacity).
+                match self.alpha_tests[material_id as usize] {
+                    AlphaTest::None => {}
+                    AlphaTest::Mask(cutoff) => {
+                        if self.alpha_at(instance, tri, w1, w2) < cutoff {
+                            return None;
+                        }
+                    }
+                    AlphaTest::Stochastic => le *= self.alpha_at(instance, tri, w1, w2).clamp(0.0, 1.0),
+                }
+                if le == Vec3::ZERO {
+                    return None;
+                }
+                let pdf = pmf * dist2 / (area * cos_l);
+                if !(pdf > 0.0) || !pdf.is_finite() {
+                    return None;
+                }
+                let target = offset_ray_origin(q, if nl.dot(wi) < 0.0 { nl } else { -nl });
+                Some(LightSample { wi, radiance: le, pdf, delta: false, target: Some(target) })
+            }
+            LightKind::Environment => {
+                let (wi, radiance, pdf) = env_sample(&self.scene().environment, u)?;
+                let pdf = pdf * pmf;
+                if !(pdf > 0.0) || !pdf.is_finite() || radiance == Vec3::ZERO {
+                    return None;
+                }
+                Some(LightSample { wi, radiance, pdf, delta: false, target: None })
+            }
+        }
+    }
+
+    /// Pdf (selection × solid angle) with which [`RenderScene::sample_light_at`] at shading
+    /// point (`p`, `n`) would have produced the point of `hit` (an emissive triangle seen at
+    /// distance `hit.t` along unit `dir`).
+    pub fn triangle_light_pdf(&self, p: Vec3, n: Vec3, hit: &SurfaceHit, dir: Vec3) -> f32 {
+        let pmf = self.lights.triangle_pmf(p, n, hit.instance, hit.triangle);
+        if pmf == 0.0 {
+            return 0.0;
+        }
+        let [a, b, c] = self.world_triangle(hit.instance, hit.triangle);
+        let area = 0.5 * (b - a).cross(c - a).length();
+        let cos_l = hit.geometric_normal.dot(dir).abs();
+        let dist = hit.t;
+        let pdf = pmf * dist * dist / (area * cos_l);
+        if pdf.is_finite() {
+            pdf
+        } else {
+            0.0
+        }
+    }
+
+    /// Pdf (selection × solid angle) of sampling the environment toward `dir` (the environment's
+    /// selection pmf is the same at every shading point).
+    pub fn env_light_pdf(&self, dir: Vec3) -> f32 {
+        let pmf = self.lights.env_pmf();
+        if pmf == 0.0 {
+            return 0.0;
+        }
+        pmf * env_pdf(&self.scene().environment, dir)
+    }
+}

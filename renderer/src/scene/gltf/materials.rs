@@ -1,0 +1,277 @@
+//! Materials (metallic-roughness and extensions), images and textures.
+
+use super::{named, Loader, TexKind};
+use crate::scene::texture::{srgb_to_linear, Wrap};
+use crate::scene::{AlphaMode, Material, Texture, TextureRef};
+use glam::{Vec3, Vec4};
+use std::sync::Arc;
+
+impl Loader<'_> {
+    pub(super) fn decode_image(&mut self, index: usize) -> std::result::Result<Arc<image::DynamicImage>, String> {
+        if let Some(r) = self.images.get(&index) {
+            return r.clone();
+        }
+        let r = self.decode_image_uncached(index);
+        self.images.insert(index, r.clone());
+        r
+    }
+
+    pub(super) fn decode_image_uncached(&self, index: usize) -> std::result::Result<Arc<image::DynamicImage>, String> {
+        let json = self.doc.as_json().images.get(index).ok_or("no such image")?;
+        let bytes: Vec<u8> = if let Some(view) = json.buffer_view {
+            let view = self.doc.views().nth(view.value()).ok_or("no such bufferView")?;
+            self.view_bytes(&view)?.to_vec()
+        } else if let Some(uri) = &json.uri {
+            self.read_uri(uri)?
+        } else {
+            return Err("image has neither uri nor bufferView".into());
+        };
+        let format = image::guess_format(&bytes)
+            .map_err(|_| "cannot decode image: format not recognised (PNG and JPEG are supported)".to_string())?;
+        // The image crate's default limits (512 MiB per allocation) guard against image bombs.
+        let reader = image::ImageReader::with_format(std::io::Cursor::new(&bytes), format);
+        let img = reader.decode().map_err(|e| format!("cannot decode image: {e}"))?;
+        if img.width() == 0 || img.height() == 0 {
+            return Err("image is empty".into());
+        }
+        Ok(Arc::new(img))
+    }
+
+    /// Scene texture for a glTF texture used as `kind` (decoded once per kind).
+    pub(super) fn texture(&mut self, tex: &gltf::Texture, kind: TexKind, used_by: &str) -> usize {
+        if let Some(&i) = self.textures.get(&(tex.index(), kind)) {
+            return i;
+        }
+        let json_img = self.doc.as_json().images.get(tex.source().index());
+        let img_label = json_img
+            .and_then(|j| j.name.clone().or_else(|| j.uri.clone().filter(|u| !u.starts_with("data:"))))
+            .unwrap_or_else(|| format!("image {}", tex.source().index()));
+        let name = match tex.name() {
+            Some(n) if !n.is_empty() => format!("{n} ({img_label})"),
+            _ => img_label.clone(),
+        };
+        let sampler = tex.sampler();
+        let wrap = |w: gltf::texture::WrappingMode| match w {
+            gltf::texture::WrappingMode::ClampToEdge => Wrap::ClampToEdge,
+            gltf::texture::WrappingMode::MirroredRepeat => Wrap::MirroredRepeat,
+            gltf::texture::WrappingMode::Repeat => Wrap::Repeat,
+        };
+        let bilinear = !matches!(sampler.mag_filter(), Some(gltf::texture::MagFilter::Nearest));
+        let texture = match self.decode_image(tex.source().index()) {
+            Ok(img) => {
+                let (w, h) = (img.width(), img.height());
+                let texels = image_texels(&img, kind.srgb());
+                Texture {
+                    name: name.clone(),
+                    width: w,
+                    height: h,
+                    texels,
+                    wrap_s: wrap(sampler.wrap_s()),
+                    wrap_t: wrap(sampler.wrap_t()),
+                    bilinear,
+                }
+            }
+            Err(reason) => {
+                let (value, label) = kind.fallback();
+                let loc = named("texture", tex.index(), tex.name());
+                self.warn(&loc, format!("{img_label} (used by {used_by}): {reason}; using a {label} 1×1 fallback"));
+                Texture::constant(&format!("{name} (missing)"), value)
+            }
+        };
+        let i = self.scene.textures.len();
+        self.scene.textures.push(Arc::new(texture));
+        self.textures.insert((tex.index(), kind), i);
+        i
+    }
+
+    pub(super) fn texture_ref(
+        &mut self,
+        tex: &gltf::Texture,
+        tex_coord: u32,
+        kind: TexKind,
+        used_by: &str,
+    ) -> TextureRef {
+        let uv_set = if tex_coord > 1 {
+            self.warn(used_by, format!("texCoord {tex_coord} is not supported (UV sets 0 and 1 only); using 0"));
+            0
+        } else {
+            tex_coord
+        };
+        TextureRef { index: self.texture(tex, kind, used_by), uv_set }
+    }
+
+    pub(super) fn info_ref(
+        &mut self,
+        info: Option<gltf::texture::Info>,
+        kind: TexKind,
+        used_by: &str,
+    ) -> Option<TextureRef> {
+        let info = info?;
+        if info.texture_transform().is_some() {
+            self.warn(used_by, "KHR_texture_transform is not supported and is ignored");
+        }
+        Some(self.texture_ref(&info.texture(), info.tex_coord(), kind, used_by))
+    }
+
+    // ---------------------------------------------------------------- materials
+
+    pub(super) fn load_materials(&mut self) {
+        let doc = self.doc;
+        let materials: Vec<_> = doc.materials().collect();
+        for m in materials {
+            let index = m.index().unwrap_or(0);
+            let loc = named("material", index, m.name());
+            let pbr = m.pbr_metallic_roughness();
+            let mut base_color = Vec4::from_array(pbr.base_color_factor());
+            if !base_color.is_finite() {
+                self.warn(&loc, "non-finite baseColorFactor; using white");
+                base_color = Vec4::ONE;
+            }
+            let metallic = self.unit_factor(&loc, "metallicFactor", pbr.metallic_factor(), 1.0);
+            let roughness = self.unit_factor(&loc, "roughnessFactor", pbr.roughness_factor(), 1.0);
+            let base_color_texture =
+                self.info_ref(pbr.base_color_texture(), TexKind::BaseColor, &format!("{loc} baseColorTexture"));
+            let metallic_roughness_texture = self.info_ref(
+                pbr.metallic_roughness_texture(),
+                TexKind::Linear,
+                &format!("{loc} metallicRoughnessTexture"),
+            );
+            let (normal_texture, normal_scale) = match m.normal_texture() {
+                Some(n) => {
+                    let r =
+                        self.texture_ref(&n.texture(), n.tex_coord(), TexKind::Normal, &format!("{loc} normalTexture"));
+                    let s = if n.scale().is_finite() { n.scale() } else { 1.0 };
+                    (Some(r), s)
+                }
+                None => (None, 1.0),
+            };
+            let strength = m.emissive_strength().unwrap_or(1.0);
+            let mut emissive = Vec3::from_array(m.emissive_factor()) * strength;
+            if !emissive.is_finite() || emissive.min_element() < 0.0 {
+                self.warn(&loc, "emission is negative or not finite; using none");
+                emissive = Vec3::ZERO;
+            }
+            let emissive_texture =
+                self.info_ref(m.emissive_texture(), TexKind::Emissive, &format!("{loc} emissiveTexture"));
+            let specular = match m.specular() {
+                Some(s) => {
+                    if s.specular_texture().is_some()
+                        || s.specular_color_texture().is_some()
+                        || s.specular_color_factor() != [1.0, 1.0, 1.0]
+                    {
+                        self.warn(
+                            &loc,
+                            "KHR_materials_specular: only specularFactor is used (colour and textures ignored)",
+                        );
+                    }
+                    let f = s.specular_factor();
+                    if f.is_finite() && f >= 0.0 {
+                        f
+                    } else {
+                        self.warn(&loc, "invalid specularFactor; using 1");
+                        1.0
+                    }
+                }
+                None => 1.0,
+            };
+            let ior = match m.ior() {
+                Some(i) if i.is_finite() && i >= 1.0 => i,
+                Some(i) => {
+                    self.warn(&loc, format!("KHR_materials_ior ior {i} is invalid; using 1.5"));
+                    1.5
+                }
+                None => 1.5,
+            };
+            let alpha_mode = match m.alpha_mode() {
+                gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
+                gltf::material::AlphaMode::Mask => {
+                    let c = m.alpha_cutoff().unwrap_or(0.5);
+                    AlphaMode::Mask(if c.is_finite() { c } else { 0.5 })
+                }
+                gltf::material::AlphaMode::Blend => AlphaMode::Blend,
+            };
+            let name = m.name().map(str::to_string).unwrap_or_else(|| format!("material {index}"));
+            self.scene.materials.push(Material {
+                name,
+                base_color,
+                base_color_texture,
+                metallic,
+                roughness,
+                metallic_roughness_texture,
+                normal_texture,
+                normal_scale,
+                emissive,
+                emissive_texture,
+                specular,
+                ior,
+                alpha_mode,
+                double_sided: m.double_sided(),
+            });
+        }
+    }
+
+    pub(super) fn unit_factor(&mut self, loc: &str, what: &str, v: f32, default: f32) -> f32 {
+        if !v.is_finite() {
+            self.warn(loc, format!("{what} is not finite; using {default}"));
+            default
+        } else if !(0.0..=1.0).contains(&v) {
+            self.warn(loc, format!("{what} {v} is outside [0, 1]; clamped"));
+            v.clamp(0.0, 1.0)
+        } else {
+            v
+        }
+    }
+
+    pub(super) fn default_material(&mut self) -> u32 {
+        if let Some(i) = self.default_material {
+            return i;
+        }
+        let i = self.scene.materials.len() as u32;
+        self.scene.materials.push(Material::default());
+        self.default_material = Some(i);
+        i
+    }
+}
+
+/// Linear RGBA texels of a decoded image, row 0 at the top; RGB sRGB-decoded if `srgb`
+/// (alpha is always linear).
+fn image_texels(img: &image::DynamicImage, srgb: bool) -> Vec<Vec4> {
+    let eight_bit = matches!(
+        img,
+        image::DynamicImage::ImageLuma8(_)
+            | image::DynamicImage::ImageLumaA8(_)
+            | image::DynamicImage::ImageRgb8(_)
+            | image::DynamicImage::ImageRgba8(_)
+    );
+    if eight_bit {
+        let lut: Vec<f32> = (0..256)
+            .map(|i| {
+                let c = i as f32 / 255.0;
+                if srgb {
+                    srgb_to_linear(c)
+                } else {
+                    c
+                }
+            })
+            .collect();
+        img.to_rgba8()
+            .pixels()
+            .map(|p| {
+                let [r, g, b, a] = p.0;
+                Vec4::new(lut[r as usize], lut[g as usize], lut[b as usize], a as f32 / 255.0)
+            })
+            .collect()
+    } else {
+        img.to_rgba32f()
+            .pixels()
+            .map(|p| {
+                let [r, g, b, a] = p.0;
+                if srgb {
+                    Vec4::new(srgb_to_linear(r), srgb_to_linear(g), srgb_to_linear(b), a)
+                } else {
+                    Vec4::new(r, g, b, a)
+                }
+            })
+            .collect()
+    }
+}

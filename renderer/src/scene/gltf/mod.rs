@@ -1,0 +1,306 @@
+//! glTF 2.0 loading (`.gltf` with external or embedded buffers, and binary `.glb`).
+//!
+//! The file is parsed and validated by the `gltf` crate; buffers and images are read here (so
+//! that a missing or broken image is a warning with a visible fallback, not a failed load), and
+//! accessors are decoded here with checked byte ranges, so no input can make the loader panic.
+//! Each glTF mesh becomes one object-space [`Mesh`](super::Mesh) (read once, however many
+//! nodes use it) and each node using it an [`Instance`](super::Instance) with the node's world
+//! transform; warnings go to [`Scene::warnings`].
+//!
+//! | glTF | becomes | notes |
+//! |---|---|---|
+//! | default scene (else the first; else every root node, with a warning) | nodes walked with their matrix or TRS | a cycle in the node graph is an error |
+//! | mesh | one [`Scene::meshes`] entry; each node using it one [`Scene::instances`] entry | the transform applies at render time |
+//! | mesh primitive, mode `TRIANGLES` | triangles of its mesh | other modes skipped with a warning |
+//! | `POSITION`, `NORMAL`, `TANGENT`, `TEXCOORD_0/1`, indices | object space, as stored; the renderer moves them by the instance (normals by the inverse transpose, tangents by the matrix with `w` × sign(det); det < 0 flips the winding) | any component type (normalized integers too, `KHR_mesh_quantization`) and sparse accessors |
+//! | no `NORMAL` | flat face normals (vertices unshared), as the glTF spec requires | |
+//! | no `TANGENT` | zero tangents | |
+//! | non-finite positions | those triangles dropped with a warning; an error if no triangle is left | |
+//! | indices out of range, attribute counts that differ | error naming the mesh and primitive | |
+//! | material (metallic-roughness) | [`Material`] | base colour and emissive textures sRGB-decoded, others linear |
+//! | `KHR_materials_emissive_strength` | × `Material::emissive` | |
+//! | `KHR_materials_specular` `specularFactor` | `Material::specular` | specular colour and textures ignored (warning) |
+//! | `KHR_materials_ior` | `Material::ior` | |
+//! | `KHR_texture_transform` | ignored, with a warning | |
+//! | no material | [`Material::default`] (white, metallic 1, roughness 1) | |
+//! | image (PNG, JPEG; file, data URI or bufferView) | [`Texture`], sampler wrap modes, `magFilter` nearest → nearest | missing or undecodable: warning and a 1×1 fallback: magenta for base colour, flat for normal maps, white for metallic-roughness, black for emission |
+//! | `KHR_lights_punctual` point, spot | [`Light::Point`], [`Light::Spot`]: `color × intensity / 683` W/sr | see below |
+//! | `KHR_lights_punctual` directional | [`Light::Directional`]: `color × intensity / 683` W/m² | |
+//! | perspective camera | [`SceneCamera`] (rigid part of the node's world transform) | orthographic cameras skipped with a warning |
+//!
+//! Light units. Blender's glTF exporter (io_scene_gltf2, as bundled with Blender 5.0.1:
+//! `io_scene_gltf2/blender/exp/lights.py`, `__gather_intensity`, lines 138–159, with
+//! `PBR_WATTS_TO_LUMENS = 683` from `blender/com/conversion.py` line 10), in its default
+//! lighting mode `SPEC`, writes a point or spot light of power `P` W as
+//! `intensity = P / (4π) × 683` cd (a spot is exported "as if it were a point": no cone factor)
+//! and a sun of strength `E` W/m² as `intensity = E × 683` lx. The importer
+//! (`blender/imp/light.py`, lines 57–77) inverts exactly that: `P = I / 683 × 4π` and
+//! `E = lux / 683`. A Blender point or spot light of power `P` radiates `P / (4π)` W/sr, so the
+//! radiant intensity is `I_cd / 683` W/sr for both, and a sun's irradiance is `lux / 683`
+//! W/m²: dividing by 683 is the exact inverse of the exporter. Spot cones: the exporter writes
+//! `outerConeAngle = spot_size / 2` and `innerConeAngle = outer × (1 − spot_blend)`
+//! (`blender/exp/light_spots.py`, lines 28–47); they are kept as glTF angles.
+
+//!
+//! | file | contents |
+//! |---|---|
+//! | `mod.rs` | entry points ([`load_gltf`], [`load_gltf_slice`]), the loader state, extensions |
+//! | `nodes.rs` | node hierarchy, meshes and primitives, lights, cameras |
+//! | `materials.rs` | materials, images and textures |
+//! | `accessors.rs` | buffers, URIs (data, files), accessor decoding |
+
+mod accessors;
+mod materials;
+mod nodes;
+
+use super::Scene;
+use crate::{Error, Result};
+use glam::Vec4;
+use gltf::mesh::Semantic;
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::Arc;
+
+/// Luminous efficacy (lm/W) Blender's glTF exporter uses to convert watts to lumens.
+pub const WATTS_TO_LUMENS: f32 = 683.0;
+
+/// Most node instances one file may expand to (a node shared by several parents is instanced
+/// once per path; this bounds that).
+const MAX_NODE_INSTANCES: usize = 10_000_000;
+
+/// Loads a `.gltf` or `.glb` file into a [`Scene`].
+///
+/// Fails (naming the file and, where it applies, the glTF object) on an unreadable, corrupt or
+/// truncated file, a missing buffer, out-of-range indices or a file whose triangles are all
+/// invalid. Problems that leave the scene usable (a missing texture, an unsupported primitive
+/// mode or camera type, ignored extensions, dropped non-finite triangles) are reported in
+/// [`Scene::warnings`].
+pub fn load_gltf(path: &Path) -> Result<Scene> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let base = path.parent().map(|p| if p.as_os_str().is_empty() { Path::new(".") } else { p });
+    load_gltf_slice(&bytes, base, &path.display().to_string())
+}
+
+/// Loads glTF from memory. `base_dir` resolves relative URIs (None: only embedded data is
+/// allowed); `file_name` is used in messages.
+pub fn load_gltf_slice(bytes: &[u8], base_dir: Option<&Path>, file_name: &str) -> Result<Scene> {
+    // Defence in depth: the loader checks every index and byte range itself, but the `gltf`
+    // crate's accessors rely on its validation; a panic there becomes an error, not a crash.
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| Loader::load(bytes, base_dir, file_name)));
+    match result {
+        Ok(r) => r,
+        Err(payload) => {
+            let what = payload
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| payload.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "unknown".into());
+            Err(Error::scene(file_name, "", format!("malformed glTF (loader failure: {what})")))
+        }
+    }
+}
+
+/// What a texture is used for: decides the colour decoding and the fallback.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+enum TexKind {
+    /// Base colour: sRGB, magenta fallback.
+    BaseColor,
+    /// Emission: sRGB, black fallback (a missing image must not turn a surface into a lamp).
+    Emissive,
+    /// Metallic-roughness: linear, white fallback (the factors alone).
+    Linear,
+    /// Normal map: linear, flat fallback.
+    Normal,
+}
+
+impl TexKind {
+    fn srgb(self) -> bool {
+        matches!(self, TexKind::BaseColor | TexKind::Emissive)
+    }
+
+    fn fallback(self) -> (Vec4, &'static str) {
+        match self {
+            TexKind::BaseColor => (Vec4::new(1.0, 0.0, 1.0, 1.0), "magenta"),
+            TexKind::Emissive => (Vec4::new(0.0, 0.0, 0.0, 1.0), "black"),
+            TexKind::Linear => (Vec4::ONE, "white"),
+            TexKind::Normal => (Vec4::new(0.5, 0.5, 1.0, 1.0), "flat normal"),
+        }
+    }
+}
+
+struct Loader<'a> {
+    file: String,
+    base: Option<&'a Path>,
+    doc: &'a gltf::Document,
+    buffers: Vec<Vec<u8>>,
+    scene: Scene,
+    /// (glTF texture index, kind) → index into `scene.textures`.
+    textures: HashMap<(usize, TexKind), usize>,
+    /// Decoded images by glTF image index (Err = the reason it is unusable).
+    images: HashMap<usize, std::result::Result<Arc<image::DynamicImage>, String>>,
+    /// glTF mesh index → scene mesh (None: the mesh has no triangles), once read.
+    mesh_ids: HashMap<usize, Option<u32>>,
+    /// Index of the default material, once a primitive without material needs it.
+    default_material: Option<u32>,
+    /// Triangles read, and dropped for non-finite positions.
+    triangles_read: usize,
+    triangles_dropped: usize,
+}
+
+fn named(kind: &str, index: usize, name: Option<&str>) -> String {
+    match name {
+        Some(n) if !n.is_empty() => format!("{kind} {index} '{n}'"),
+        _ => format!("{kind} {index}"),
+    }
+}
+
+impl<'a> Loader<'a> {
+    fn load(bytes: &[u8], base: Option<&Path>, file: &str) -> Result<Scene> {
+        let err = |m: String| Error::scene(file, "", m);
+        if bytes.is_empty() {
+            return Err(err("empty file".into()));
+        }
+        let gltf::Gltf { document, blob } =
+            gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| err(format!("not a valid glTF file: {e}")))?;
+        // KHR_mesh_quantization only widens the accessor types allowed for attributes, which
+        // the accessor reader below handles; the gltf crate does not know the name.
+        let mut json = document.into_json();
+        json.extensions_required.retain(|e| e != "KHR_mesh_quantization");
+        // POSITION accessors must state min and max, which this loader does not use; many
+        // writers omit them, so fill them in rather than reject the file.
+        // (The gltf crate's validation also indexes the accessor list with this index.)
+        let mut positions = Vec::new();
+        for (mi, m) in json.meshes.iter().enumerate() {
+            for (pi, p) in m.primitives.iter().enumerate() {
+                let key = gltf::json::validation::Checked::Valid(Semantic::Positions);
+                if let Some(i) = p.attributes.get(&key).map(|i| i.value()) {
+                    if i >= json.accessors.len() {
+                        let loc = format!("{}, primitive {pi}", named("mesh", mi, m.name.as_deref()));
+                        return Err(Error::scene(file, loc, format!("POSITION accessor {i} does not exist")));
+                    }
+                    positions.push(i);
+                }
+            }
+        }
+        for i in positions {
+            let acc = &mut json.accessors[i];
+            let zero = || gltf::json::Value::from(vec![0.0f64; 3]);
+            acc.min.get_or_insert_with(zero);
+            acc.max.get_or_insert_with(zero);
+        }
+        let doc =
+            gltf::Document::from_json(json).map_err(|e| err(format!("invalid glTF: {}", describe_gltf_error(&e))))?;
+        let version = &doc.as_json().asset.version;
+        if !version.starts_with("2.") {
+            return Err(err(format!("glTF version {version} is not supported (2.x only)")));
+        }
+        let mut loader = Loader {
+            file: file.to_string(),
+            base,
+            doc: &doc,
+            buffers: Vec::new(),
+            scene: Scene::default(),
+            textures: HashMap::new(),
+            images: HashMap::new(),
+            mesh_ids: HashMap::new(),
+            default_material: None,
+            triangles_read: 0,
+            triangles_dropped: 0,
+        };
+        loader.warn_extensions();
+        loader.load_buffers(blob)?;
+        loader.load_materials();
+        loader.walk_nodes()?;
+        if loader.triangles_read > 0
+            && loader.scene.meshes.iter().all(|m| m.indices.is_empty())
+            && loader.triangles_dropped > 0
+        {
+            return Err(err(format!(
+                "all {} triangles have non-finite vertex positions (NaN or infinity)",
+                loader.triangles_read
+            )));
+        }
+        Ok(loader.scene)
+    }
+
+    fn warn(&mut self, location: &str, message: impl AsRef<str>) {
+        let w = if location.is_empty() {
+            format!("{}: {}", self.file, message.as_ref())
+        } else {
+            format!("{}: {}: {}", self.file, location, message.as_ref())
+        };
+        if !self.scene.warnings.contains(&w) {
+            self.scene.warnings.push(w);
+        }
+    }
+
+    fn error(&self, location: &str, message: impl Into<String>) -> Error {
+        Error::scene(&self.file, location, message)
+    }
+
+    fn warn_extensions(&mut self) {
+        const HANDLED: &[&str] = &[
+            "KHR_lights_punctual",
+            "KHR_materials_emissive_strength",
+            "KHR_materials_ior",
+            "KHR_materials_specular",
+            "KHR_mesh_quantization",
+            "KHR_texture_transform",
+        ];
+        let used: Vec<String> = self.doc.extensions_used().map(|s| s.to_string()).collect();
+        for ext in used {
+            if !HANDLED.contains(&ext.as_str()) {
+                self.warn("", format!("extension {ext} is not supported and is ignored"));
+            }
+        }
+    }
+}
+
+fn describe_gltf_error(e: &gltf::Error) -> String {
+    match e {
+        gltf::Error::Validation(list) => {
+            let mut parts: Vec<String> = list.iter().take(5).map(|(path, err)| format!("{path}: {err}")).collect();
+            if list.len() > 5 {
+                parts.push(format!("and {} more", list.len() - 5));
+            }
+            parts.join("; ")
+        }
+        other => other.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::accessors::{base64_decode, percent_decode};
+    use super::*;
+
+    #[test]
+    fn base64_round_trip() {
+        assert_eq!(base64_decode("aGVsbG8=").unwrap(), b"hello");
+        assert_eq!(base64_decode("aGVsbG8").unwrap(), b"hello");
+        assert_eq!(base64_decode("").unwrap(), b"");
+        assert!(base64_decode("a*b").is_none());
+    }
+
+    #[test]
+    fn percent_decoding() {
+        assert_eq!(percent_decode("my%20file.png"), "my file.png");
+        assert_eq!(percent_decode("100%"), "100%");
+        assert_eq!(percent_decode("a%2"), "a%2");
+        assert_eq!(percent_decode("%FF"), "\u{FFFD}");
+    }
+
+    #[test]
+    fn garbage_never_panics() {
+        let mut seed = 12345u64;
+        for len in 0..200 {
+            let bytes: Vec<u8> = (0..len)
+                .map(|_| {
+                    seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                    (seed >> 33) as u8
+                })
+                .collect();
+            assert!(load_gltf_slice(&bytes, None, "garbage").is_err());
+        }
+    }
+}

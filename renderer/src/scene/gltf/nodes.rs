@@ -1,0 +1,469 @@
+//! The node hierarchy: transforms, meshes and their primitives, lights and cameras.
+
+use super::accessors::read_accessor;
+use super::{named, Loader, MAX_NODE_INSTANCES, WATTS_TO_LUMENS};
+use crate::scene::{Light, Mesh, SceneCamera};
+use crate::Result;
+use glam::{Affine3A, Mat3, Mat4, Quat, Vec2, Vec3, Vec4};
+use gltf::accessor::{DataType, Dimensions};
+use gltf::mesh::{Mode, Semantic};
+
+impl Loader<'_> {
+    // ---------------------------------------------------------------- node hierarchy
+
+    pub(super) fn walk_nodes(&mut self) -> Result<()> {
+        self.check_node_cycles()?;
+        let roots: Vec<usize> = match self.doc.default_scene().or_else(|| self.doc.scenes().next()) {
+            Some(s) => s.nodes().map(|n| n.index()).collect(),
+            None => {
+                let n = self.doc.nodes().count();
+                let mut is_child = vec![false; n];
+                for node in self.doc.nodes() {
+                    for c in node.children() {
+                        if let Some(slot) = is_child.get_mut(c.index()) {
+                            *slot = true;
+                        }
+                    }
+                }
+                let roots: Vec<usize> = (0..n).filter(|&i| !is_child[i]).collect();
+                if !roots.is_empty() {
+                    self.warn("", "the file has no scene; using every root node");
+                }
+                roots
+            }
+        };
+        let doc = self.doc;
+        let nodes: Vec<gltf::Node> = doc.nodes().collect();
+        let mut stack: Vec<(usize, Mat4)> = roots.into_iter().rev().map(|i| (i, Mat4::IDENTITY)).collect();
+        let mut instances = 0usize;
+        while let Some((index, parent)) = stack.pop() {
+            instances += 1;
+            if instances > MAX_NODE_INSTANCES {
+                return Err(self.error("", "node hierarchy expands to too many node instances (shared subtrees)"));
+            }
+            let Some(node) = nodes.get(index).cloned() else { continue };
+            let loc = named("node", index, node.name());
+            let local = self.node_matrix(&node, &loc);
+            let world = parent * local;
+            if let Some(mesh) = node.mesh() {
+                self.add_mesh(&mesh, &world)?;
+            }
+            if let Some(light) = node.light() {
+                self.add_light(&light, &world, &loc);
+            }
+            if let Some(camera) = node.camera() {
+                self.add_camera(&camera, &world, &node, &loc);
+            }
+            for c in node.children().collect::<Vec<_>>().into_iter().rev() {
+                stack.push((c.index(), world));
+            }
+        }
+        Ok(())
+    }
+
+    /// Fails if a node is (indirectly) its own descendant.
+    pub(super) fn check_node_cycles(&self) -> Result<()> {
+        let children: Vec<Vec<usize>> = self.doc.nodes().map(|n| n.children().map(|c| c.index()).collect()).collect();
+        let n = children.len();
+        // 0 = unvisited, 1 = on the current path, 2 = done.
+        let mut state = vec![0u8; n];
+        for start in 0..n {
+            if state[start] != 0 {
+                continue;
+            }
+            let mut stack: Vec<(usize, usize)> = vec![(start, 0)];
+            state[start] = 1;
+            while let Some(&mut (node, ref mut next)) = stack.last_mut() {
+                if let Some(&child) = children[node].get(*next) {
+                    *next += 1;
+                    match state.get(child).copied() {
+                        Some(0) => {
+                            state[child] = 1;
+                            stack.push((child, 0));
+                        }
+                        Some(1) => {
+                            let name = self.doc.nodes().nth(child).and_then(|c| c.name().map(str::to_string));
+                            return Err(self.error(
+                                &named("node", child, name.as_deref()),
+                                "node hierarchy has a cycle (a node is its own ancestor)",
+                            ));
+                        }
+                        _ => {}
+                    }
+                } else {
+                    state[node] = 2;
+                    stack.pop();
+                }
+            }
+        }
+        Ok(())
+    }
+
+    pub(super) fn node_matrix(&mut self, node: &gltf::Node, loc: &str) -> Mat4 {
+        match node.transform() {
+            gltf::scene::Transform::Matrix { matrix } => {
+                let m = Mat4::from_cols_array_2d(&matrix);
+                if !m.is_finite() {
+                    self.warn(loc, "matrix is not finite; using identity");
+                    return Mat4::IDENTITY;
+                }
+                m
+            }
+            gltf::scene::Transform::Decomposed { translation, rotation, scale } => {
+                let mut t = Vec3::from_array(translation);
+                let mut s = Vec3::from_array(scale);
+                let mut q = Quat::from_array(rotation);
+                if !t.is_finite() {
+                    self.warn(loc, "translation is not finite; using 0");
+                    t = Vec3::ZERO;
+                }
+                if !s.is_finite() {
+                    self.warn(loc, "scale is not finite; using 1");
+                    s = Vec3::ONE;
+                }
+                if !q.is_finite() || q.length_squared() < 1e-12 {
+                    self.warn(loc, "rotation is not a valid quaternion; using identity");
+                    q = Quat::IDENTITY;
+                }
+                Mat4::from_scale_rotation_translation(s, q.normalize(), t)
+            }
+        }
+    }
+
+    // ---------------------------------------------------------------- lights and cameras
+
+    pub(super) fn add_light(&mut self, light: &gltf::khr_lights_punctual::Light, world: &Mat4, node_loc: &str) {
+        let loc = format!("{node_loc}, {}", named("light", light.index(), light.name()));
+        let color = Vec3::from_array(light.color());
+        let intensity = light.intensity();
+        if !color.is_finite() || !intensity.is_finite() || color.min_element() < 0.0 || intensity < 0.0 {
+            self.warn(&loc, "colour or intensity is negative or not finite; light skipped");
+            return;
+        }
+        let radiometric = color * intensity / WATTS_TO_LUMENS;
+        let position = world.w_axis.truncate();
+        let dir = world.transform_vector3(Vec3::NEG_Z);
+        let range = light.range().filter(|r| r.is_finite() && *r > 0.0);
+        let needs_dir = !matches!(light.kind(), gltf::khr_lights_punctual::Kind::Point);
+        if !position.is_finite() || (needs_dir && !(dir.is_finite() && dir.length_squared() > 0.0)) {
+            self.warn(&loc, "node transform is degenerate or not finite; light skipped");
+            return;
+        }
+        let direction = dir.normalize_or_zero();
+        let l = match light.kind() {
+            gltf::khr_lights_punctual::Kind::Point => Light::Point { position, intensity: radiometric, range },
+            gltf::khr_lights_punctual::Kind::Directional => Light::Directional { direction, irradiance: radiometric },
+            gltf::khr_lights_punctual::Kind::Spot { inner_cone_angle, outer_cone_angle } => {
+                let mut outer = outer_cone_angle;
+                let mut inner = inner_cone_angle;
+                if !outer.is_finite() || outer <= 0.0 || outer > std::f32::consts::FRAC_PI_2 {
+                    self.warn(&loc, format!("outerConeAngle {outer} is outside (0, π/2]; clamped"));
+                    outer = if outer.is_finite() {
+                        outer.clamp(1e-4, std::f32::consts::FRAC_PI_2)
+                    } else {
+                        std::f32::consts::FRAC_PI_4
+                    };
+                }
+                if !inner.is_finite() || inner < 0.0 || inner >= outer {
+                    self.warn(&loc, format!("innerConeAngle {inner} is outside [0, outerConeAngle); clamped"));
+                    inner = if inner.is_finite() { inner.clamp(0.0, outer) } else { 0.0 };
+                }
+                Light::Spot {
+                    position,
+                    direction,
+                    intensity: radiometric,
+                    inner_cone_rad: inner,
+                    outer_cone_rad: outer,
+                    range,
+                }
+            }
+        };
+        self.scene.lights.push(l);
+    }
+
+    pub(super) fn add_camera(&mut self, camera: &gltf::Camera, world: &Mat4, node: &gltf::Node, node_loc: &str) {
+        let loc = format!("{node_loc}, {}", named("camera", camera.index(), camera.name()));
+        let p = match camera.projection() {
+            gltf::camera::Projection::Perspective(p) => p,
+            gltf::camera::Projection::Orthographic(_) => {
+                self.warn(&loc, "orthographic cameras are not supported; skipped");
+                return;
+            }
+        };
+        let yfov = p.yfov();
+        if !yfov.is_finite() || yfov <= 0.0 || yfov >= std::f32::consts::PI {
+            self.warn(&loc, format!("yfov {yfov} is outside (0, π); camera skipped"));
+            return;
+        }
+        // Rigid part: keep the viewing direction (−z) exactly, make +y orthogonal to it.
+        let position = world.w_axis.truncate();
+        let back = world.transform_vector3(Vec3::Z);
+        let up = world.transform_vector3(Vec3::Y);
+        let z = back.normalize_or_zero();
+        let y = (up - z * up.dot(z)).normalize_or_zero();
+        let x = y.cross(z);
+        if !position.is_finite() || z == Vec3::ZERO || y == Vec3::ZERO || !x.is_finite() {
+            self.warn(&loc, "node transform is degenerate or not finite; camera skipped");
+            return;
+        }
+        let to_world = Affine3A::from_mat3_translation(Mat3::from_cols(x, y, z), position);
+        let name = node
+            .name()
+            .filter(|n| !n.is_empty())
+            .or(camera.name().filter(|n| !n.is_empty()))
+            .map(str::to_string)
+            .unwrap_or_else(|| format!("camera {}", camera.index()));
+        let aspect_ratio = p.aspect_ratio().filter(|a| a.is_finite() && *a > 0.0);
+        let mut znear = p.znear();
+        if !znear.is_finite() || znear < 0.0 {
+            self.warn(&loc, format!("znear {znear} is invalid; using 0"));
+            znear = 0.0;
+        }
+        let zfar = p.zfar().filter(|f| f.is_finite() && *f > znear);
+        self.scene.cameras.push(SceneCamera { name, to_world, yfov_rad: yfov, aspect_ratio, znear, zfar });
+    }
+
+    // ---------------------------------------------------------------- meshes
+
+    /// Places glTF mesh `mesh` with `world`: the mesh is read once (object space, all its
+    /// triangle primitives in one [`Mesh`]) and every node using it becomes an instance.
+    pub(super) fn add_mesh(&mut self, mesh: &gltf::Mesh, world: &Mat4) -> Result<()> {
+        let id = match self.mesh_ids.get(&mesh.index()) {
+            Some(&id) => id,
+            None => {
+                let m = self.read_mesh(mesh)?;
+                let id = (!m.indices.is_empty()).then(|| self.scene.add_mesh(m));
+                self.mesh_ids.insert(mesh.index(), id);
+                id
+            }
+        };
+        if let Some(id) = id {
+            self.scene.add_instance(id, Affine3A::from_mat4(*world));
+        }
+        Ok(())
+    }
+
+    fn read_mesh(&mut self, mesh: &gltf::Mesh) -> Result<Mesh> {
+        let mesh_loc = named("mesh", mesh.index(), mesh.name());
+        let mut out = Mesh::default();
+        for prim in mesh.primitives() {
+            let loc = format!("{mesh_loc}, primitive {}", prim.index());
+            if prim.mode() != Mode::Triangles {
+                self.warn(&loc, format!("mode {:?} is not supported (triangles only); skipped", prim.mode()));
+                continue;
+            }
+            let material = match prim.material().index() {
+                Some(i) if i < self.scene.materials.len() => i as u32,
+                _ => self.default_material(),
+            };
+            let m = self.read_primitive(&prim, &Mat4::IDENTITY, material, &loc)?;
+            out.append(&m, 0);
+        }
+        Ok(out)
+    }
+
+    pub(super) fn attribute_f32(
+        &self,
+        prim: &gltf::Primitive,
+        semantic: Semantic,
+        dims: Dimensions,
+        count: Option<usize>,
+        loc: &str,
+    ) -> Result<Option<Vec<f32>>> {
+        let Some(acc) = prim.get(&semantic) else { return Ok(None) };
+        let what = format!("attribute {semantic:?} (accessor {})", acc.index());
+        if acc.dimensions() != dims {
+            return Err(self.error(loc, format!("{what} has type {:?}, expected {dims:?}", acc.dimensions())));
+        }
+        if let Some(n) = count {
+            if acc.count() != n {
+                return Err(self.error(loc, format!("{what} has {} elements but POSITION has {n}", acc.count())));
+            }
+        }
+        read_accessor(self, &acc).map(Some).map_err(|m| self.error(loc, format!("{what}: {m}")))
+    }
+
+    pub(super) fn read_primitive(
+        &mut self,
+        prim: &gltf::Primitive,
+        world: &Mat4,
+        material: u32,
+        loc: &str,
+    ) -> Result<Mesh> {
+        let Some(positions) = self.attribute_f32(prim, Semantic::Positions, Dimensions::Vec3, None, loc)? else {
+            self.warn(loc, "has no POSITION attribute; skipped");
+            return Ok(Mesh::default());
+        };
+        let n = positions.len() / 3;
+        let normals = self.attribute_f32(prim, Semantic::Normals, Dimensions::Vec3, Some(n), loc)?;
+        let tangents = self.attribute_f32(prim, Semantic::Tangents, Dimensions::Vec4, Some(n), loc)?;
+        let uv0 = self.attribute_f32(prim, Semantic::TexCoords(0), Dimensions::Vec2, Some(n), loc)?;
+        let uv1 = self.attribute_f32(prim, Semantic::TexCoords(1), Dimensions::Vec2, Some(n), loc)?;
+
+        // Indices.
+        let mut flat: Vec<u32> = match prim.indices() {
+            Some(acc) => {
+                let what = format!("indices (accessor {})", acc.index());
+                if acc.dimensions() != Dimensions::Scalar
+                    || !matches!(acc.data_type(), DataType::U8 | DataType::U16 | DataType::U32)
+                {
+                    return Err(self.error(loc, format!("{what} must be unsigned integer scalars")));
+                }
+                let v = read_accessor(self, &acc).map_err(|m| self.error(loc, format!("{what}: {m}")))?;
+                let mut out = Vec::with_capacity(v.len());
+                for (k, &i) in v.iter().enumerate() {
+                    if !(i >= 0.0 && (i as usize) < n) {
+                        return Err(self.error(loc, format!("{what}: index {k} is {i}, out of range for {n} vertices")));
+                    }
+                    out.push(i as u32);
+                }
+                out
+            }
+            None => {
+                if n > u32::MAX as usize {
+                    return Err(self.error(loc, "too many vertices"));
+                }
+                (0..n as u32).collect()
+            }
+        };
+        if !flat.len().is_multiple_of(3) {
+            self.warn(
+                loc,
+                format!("{} indices is not a multiple of 3; the last {} ignored", flat.len(), flat.len() % 3),
+            );
+            flat.truncate(flat.len() - flat.len() % 3);
+        }
+
+        // World-space attributes.
+        let lin = Mat3::from_mat4(*world);
+        let det = lin.determinant();
+        let sign = if det < 0.0 { -1.0 } else { 1.0 };
+        // Cofactor matrix = det × inverse transpose: defined even for singular matrices.
+        let cof =
+            Mat3::from_cols(lin.y_axis.cross(lin.z_axis), lin.z_axis.cross(lin.x_axis), lin.x_axis.cross(lin.y_axis))
+                * sign;
+        let pos: Vec<Vec3> =
+            positions.chunks_exact(3).map(|p| world.transform_point3(Vec3::new(p[0], p[1], p[2]))).collect();
+
+        // Triangles, dropping those with a non-finite vertex and flipping mirrored ones.
+        let mut tris: Vec<[u32; 3]> = Vec::with_capacity(flat.len() / 3);
+        let mut dropped = 0usize;
+        for t in flat.chunks_exact(3) {
+            let tri = if det < 0.0 { [t[0], t[2], t[1]] } else { [t[0], t[1], t[2]] };
+            if tri.iter().all(|&i| pos[i as usize].is_finite()) {
+                tris.push(tri);
+            } else {
+                dropped += 1;
+            }
+        }
+        self.triangles_read += flat.len() / 3;
+        self.triangles_dropped += dropped;
+        if dropped > 0 {
+            self.warn(
+                loc,
+                format!("dropped {dropped} of {} triangles with non-finite vertex positions", flat.len() / 3),
+            );
+        }
+
+        let to_vec2 = |v: &Option<Vec<f32>>| -> Option<Vec<Vec2>> {
+            v.as_ref().map(|v| {
+                v.chunks_exact(2)
+                    .map(|c| {
+                        let uv = Vec2::new(c[0], c[1]);
+                        if uv.is_finite() {
+                            uv
+                        } else {
+                            Vec2::ZERO
+                        }
+                    })
+                    .collect()
+            })
+        };
+        let uv0 = to_vec2(&uv0);
+        let uv1 = to_vec2(&uv1);
+        let tangents: Option<Vec<Vec4>> = tangents.map(|t| {
+            t.chunks_exact(4)
+                .map(|c| {
+                    let d = lin * Vec3::new(c[0], c[1], c[2]);
+                    let w = if c[3] < 0.0 { -sign } else { sign };
+                    if d.is_finite() && d.length_squared() > 0.0 {
+                        d.normalize().extend(w)
+                    } else {
+                        Vec4::ZERO
+                    }
+                })
+                .collect()
+        });
+
+        let face_normal = |t: &[u32; 3]| {
+            let (a, b, c) = (pos[t[0] as usize], pos[t[1] as usize], pos[t[2] as usize]);
+            (b - a).cross(c - a)
+        };
+
+        let mut out = Mesh::default();
+        match normals {
+            Some(nrm) => {
+                // Shared vertices; compact to the ones the kept triangles use.
+                let mut world_n: Vec<Vec3> =
+                    nrm.chunks_exact(3).map(|c| (cof * Vec3::new(c[0], c[1], c[2])).normalize_or_zero()).collect();
+                if world_n.iter().any(|v| *v == Vec3::ZERO || !v.is_finite()) {
+                    // Replace unusable normals by area-weighted vertex normals.
+                    let mut acc = vec![Vec3::ZERO; n];
+                    for t in &tris {
+                        let f = face_normal(t);
+                        if f.is_finite() {
+                            for &i in t {
+                                acc[i as usize] += f;
+                            }
+                        }
+                    }
+                    for (v, a) in world_n.iter_mut().zip(&acc) {
+                        if *v == Vec3::ZERO || !v.is_finite() {
+                            *v = a.try_normalize().unwrap_or(Vec3::Y);
+                        }
+                    }
+                }
+                let mut remap = vec![u32::MAX; n];
+                for t in &tris {
+                    let mut nt = [0u32; 3];
+                    for (k, &i) in t.iter().enumerate() {
+                        let i = i as usize;
+                        if remap[i] == u32::MAX {
+                            remap[i] = out.positions.len() as u32;
+                            out.positions.push(pos[i]);
+                            out.normals.push(world_n[i]);
+                            out.tangents.push(tangents.as_ref().map_or(Vec4::ZERO, |t| t[i]));
+                            out.uv0.push(uv0.as_ref().map_or(Vec2::ZERO, |u| u[i]));
+                            if let Some(u) = &uv1 {
+                                out.uv1.push(u[i]);
+                            }
+                        }
+                        nt[k] = remap[i];
+                    }
+                    out.indices.push(nt);
+                }
+            }
+            None => {
+                // Flat normals: every triangle gets its own three vertices.
+                for t in &tris {
+                    let f = face_normal(t);
+                    let normal = if f.is_finite() { f.try_normalize().unwrap_or(Vec3::Y) } else { Vec3::Y };
+                    let base = out.positions.len() as u32;
+                    for &i in t {
+                        let i = i as usize;
+                        out.positions.push(pos[i]);
+                        out.normals.push(normal);
+                        out.tangents.push(tangents.as_ref().map_or(Vec4::ZERO, |t| t[i]));
+                        out.uv0.push(uv0.as_ref().map_or(Vec2::ZERO, |u| u[i]));
+                        if let Some(u) = &uv1 {
+                            out.uv1.push(u[i]);
+                        }
+                    }
+                    out.indices.push([base, base + 1, base + 2]);
+                }
+            }
+        }
+        out.material_ids = vec![material; out.indices.len()];
+        Ok(out)
+    }
+}
