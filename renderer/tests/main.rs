@@ -1,5 +1,6 @@
 //! Integration tests of the renderer crate (one binary; modules per area).
 
+mod architecture;
 mod auto_model;
 mod camera;
 mod common;

@@ -6,11 +6,13 @@
 
 pub mod accel;
 pub mod bsdf;
+mod light_sampling;
 pub mod lights;
 pub mod path;
 
 pub use accel::{offset_ray_origin, BvhQuality, RenderScene, SurfaceHit};
 pub use bsdf::{Bsdf, BsdfSample, SurfaceBsdf};
+pub use light_sampling::spot_attenuation;
 pub use lights::{LightSample, LightSelection};
 pub use path::{LightStrategy, PathSample, PathTracer};
 

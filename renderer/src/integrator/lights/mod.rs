@@ -53,11 +53,9 @@
 //! | `set.rs` | [`LightSet`]: the light list, power CDF and tree, built from a scene |
 //! | `sample.rs` | [`RenderScene`](super::RenderScene) light sampling: pick, sample a point, pdfs for MIS |
 
-mod sample;
 mod set;
 mod tree;
 
-pub use sample::spot_attenuation;
 pub use set::{EmitterGroup, LightSet};
 pub use tree::P_INFINITE;
 

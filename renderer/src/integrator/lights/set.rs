@@ -26,7 +26,7 @@ pub struct EmitterGroup {
 /// Light list and selection distributions.
 #[derive(Debug, Clone, Default)]
 pub struct LightSet {
-    pub(super) kinds: Vec<LightKind>,
+    pub(in crate::integrator) kinds: Vec<LightKind>,
     /// Power distribution: n + 1 entries, cdf[0] = 0, cdf[n] = 1.
     cdf: Vec<f32>,
     /// Instance → start of its slot in `tri_light` (u32::MAX: no emitter); empty when no
@@ -37,7 +37,7 @@ pub struct LightSet {
     env_light: Option<u32>,
     scene_radius: f32,
     tree: LightTree,
-    pub(super) selection: LightSelection,
+    pub(in crate::integrator) selection: LightSelection,
 }
 
 impl LightSet {

@@ -1,8 +1,10 @@
-//! Light sampling on a [`RenderScene`]: picking a light, sampling a point on it, and the pdfs MIS needs.
+//! Light sampling on a [`RenderScene`]: picking a light, sampling a point on it, and the pdfs MIS
+//! needs. It sits above both the lights (what can be sampled) and the acceleration structure
+//! (the scene that holds them and answers shadow rays), so neither imports the other's user.
 
 use glam::{Vec2, Vec3};
 
-use super::{env_pdf, env_sample, LightKind, LightSample, LightSelection};
+use super::lights::{env_pdf, env_sample, LightKind, LightSample, LightSelection};
 use crate::integrator::accel::{offset_ray_origin, AlphaTest, RenderScene, SurfaceHit};
 use crate::scene::Light;
 
