@@ -201,9 +201,9 @@ def test_instances_render_like_copies(petzval):
     assert (copies.mesh_count, copies.instance_count) == (5, 5)
     assert (inst.mesh_count, inst.instance_count) == (3, 5)
     assert inst.triangle_count == copies.triangle_count == 2 + 2 + 3 * 12
-    kw = dict(lens="thin", focal_length_mm=20.0, fstop=None, spp=4, seed=1, threads=1)
-    a = petzval.render(copies, camera(0.5), 48, 32, **kw)
-    b = petzval.render(inst, camera(0.5), 48, 32, **kw)
+    cam = petzval.Camera(camera(0.5), lens="thin", focal_length_mm=20.0, fstop=None)
+    a = petzval.render(copies, cam, 48, 32, spp=4, seed=1, threads=1)
+    b = petzval.render(inst, cam, 48, 32, spp=4, seed=1, threads=1)
     assert np.allclose(a["depth"], b["depth"], rtol=1e-5, equal_nan=True)
     assert np.abs(a["rgba"] - b["rgba"]).max() < 1e-3
     with pytest.raises(petzval.InvalidSceneError, match="mesh_id"):
