@@ -109,7 +109,9 @@ def optiland_fit(petzval_fit_bin) -> dict:
     (OUT / "train.toml").write_text(manifest("cooke_triplet.zmx", free, train))
     (OUT / "held_out.toml").write_text(manifest("cooke_triplet.zmx", free, held))
     bin_ = str(petzval_fit_bin)
-    fit_s = _run([bin_, str(OUT / "train.toml"), "-o", str(OUT / "fitted.toml"), "--report", str(OUT / "fit"), *FIT_ARGS])
+    fit_s = _run(
+        [bin_, str(OUT / "train.toml"), "-o", str(OUT / "fitted.toml"), "--report", str(OUT / "fit"), *FIT_ARGS]
+    )
     eval_s = _run(
         [bin_, str(OUT / "held_out.toml"), "--evaluate", str(OUT / "fit"), "--report", str(OUT / "eval"), *FIT_ARGS]
     )

@@ -116,7 +116,7 @@ class OptilandCamera:
         z0 = -5.0
         slope = 1e-6 / (z0 - zo)
         p0 = np.array([[0.0, 1e-6, z0]])
-        x, y, z, _, m, nn, ok = self.trace(p0, np.array([[0.0, slope, 1.0]]), with_apertures=False)
+        _, y, z, _, m, nn, ok = self.trace(p0, np.array([[0.0, slope, 1.0]]), with_apertures=False)
         assert ok[0]
         return float(z[0] - y[0] / (m[0] / nn[0])) - self.z[-1]
 
@@ -155,10 +155,10 @@ class OptilandCamera:
                 w = dA * (d[:, 2] / np.sqrt(r2)) / r2
                 z0 = -5.0
                 p0 = s + d * ((z0 - s[2]) / d[:, 2])[:, None]
-                x, y, z, l, m, nn, ok = self.trace(p0, d)
+                x, y, z, dx, dy, dz, ok = self.trace(p0, d)
                 ring_passed += int(np.count_nonzero(ok & ring[lo : lo + 400_000]))
-                tt = (film_z - z[ok]) / nn[ok]
-                qx, qy = x[ok] + l[ok] * tt, y[ok] + m[ok] * tt
+                tt = (film_z - z[ok]) / dz[ok]
+                qx, qy = x[ok] + dx[ok] * tt, y[ok] + dy[ok] * tt
                 cols.append(SENSOR["pixels"][0] / 2.0 - qx / PITCH_MM)
                 rows.append(SENSOR["pixels"][1] / 2.0 + qy / PITCH_MM)
                 weights.append(w[ok])
