@@ -127,7 +127,7 @@ class OptilandCamera:
         y_stop = float(_np(self.optic.surfaces.surfaces[self.stop].y)[0])
         return self.efl / (2.0 * f_number) * abs(y_stop / eps)
 
-    def render(self, shot: Shot, size: int, grid: int = 560, offset_px=(0.3, -0.2)) -> tuple[np.ndarray, list[int]]:
+    def render(self, shot: Shot, size: int, grid: int = 900, offset_px=(0.3, -0.2)) -> tuple[np.ndarray, list[int]]:
         """The image (size × size, row 0 at the top) and its crop origin on the full sensor."""
         surfaces = self.optic.surfaces.surfaces
         r_stop = self.stop_radius(shot.f_number)
