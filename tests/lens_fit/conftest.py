@@ -33,19 +33,20 @@ START_FACTOR = 1.02
 SIZE = 48
 FIT_ARGS = ["--time-limit", "20", "--rays", "32768"]
 
-# six captures to fit: in focus on and off the axis, defocused both ways, f/5.6 and f/8
+# six captures to fit: in focus on and off the axis, defocused both ways, f/5.6 and f/8; one
+# (and one held out) with its distances from the sensor, the rest from the entrance pupil
 TRAIN = [
     Shot((0.0, 0.0, 2.0), 2.0, 5.6),
     Shot((0.25, 0.15, 2.0), 2.0, 5.6),
     Shot((0.0, 0.0, 1.4), 2.0, 5.6),
     Shot((-0.2, 0.1, 1.5), 2.0, 5.6),
     Shot((0.15, -0.1, 3.0), 2.0, 8.0),
-    Shot((0.0, 0.0, 1.2), 1.6, 8.0),
+    Shot((0.0, 0.0, 1.2), 1.6, 8.0, from_sensor=True),
 ]
 # three to predict: other field positions, focus distances and f-numbers
 HELD_OUT = [
     Shot((-0.3, -0.15, 2.5), 2.5, 6.3),
-    Shot((0.1, 0.2, 1.0), 1.5, 7.1),
+    Shot((0.1, 0.2, 1.0), 1.5, 7.1, from_sensor=True),
     Shot((0.0, 0.0, 3.0), 1.5, 5.6),
 ]
 
@@ -77,7 +78,7 @@ def _render(camera: OptilandCamera, shots: list[Shot], folder: Path, prefix: str
                 "crop_origin_px": origin,
                 "source_m": list(s.source_m),
                 "focus_m": s.focus_m,
-                "distances_from": "entrance_pupil",
+                "distances_from": "sensor" if s.from_sensor else "entrance_pupil",
                 "f_number": s.f_number,
                 "wavelength_nm": 550.0,
             }

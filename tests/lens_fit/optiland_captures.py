@@ -5,11 +5,12 @@ is petzval-fit's start lens. A capture is made here without any petzval code:
 
 1. **Geometry** (optiland's paraxial data, at the primary wavelength 550 nm): the lens frame has
    its first vertex at z = 0, z towards the film, x right and y up looking from the camera at the
-   scene (optiland's global frame, unchanged). The manifest uses ``distances_from =
-   "entrance_pupil"``: the source at ``source_m = (X, Y, Z)`` is at ``(1000 X, 1000 Y, z_EP − 1000
-   Z)`` mm, and the sensor plane is where the lens focused at ``focus_m`` puts it: the paraxial
-   image of the axial object point ``focus_m`` in front of the entrance pupil, found with
-   optiland's real-ray trace of a ray 1e-6 mm off the axis (paraxial to ~1e-14).
+   scene (optiland's global frame, unchanged). With ``distances_from = "entrance_pupil"`` the
+   source at ``source_m = (X, Y, Z)`` is at ``(1000 X, 1000 Y, z_EP − 1000 Z)`` mm, and the sensor
+   plane is where the lens focused at ``focus_m`` puts it: the paraxial image of the axial object
+   point ``focus_m`` in front of the entrance pupil, found with optiland's real-ray trace of a ray
+   1e-6 mm off the axis (paraxial to ~1e-14). With ``"sensor"`` both distances are from the
+   sensor plane (``OptilandCamera.placement`` solves for the pupil distance).
 2. **Stop**: f/N sets the stop's radius to ``EFL / (2N)`` (the entrance-pupil radius) times the
    paraxial ratio (stop height / entrance-pupil height) of a collimated ray (optiland's trace).
    Every surface clips at its Zemax semi-diameter (optiland ``RadialAperture``), the stop at
@@ -46,11 +47,13 @@ PITCH_MM = SENSOR["width_mm"] / SENSOR["pixels"][0]
 
 @dataclass
 class Shot:
-    """One capture: the source (m, from the entrance pupil), focus (m, ditto), f-number."""
+    """One capture: the source (m), focus (m), f-number; distances from the entrance pupil, or
+    with ``from_sensor`` from the sensor plane."""
 
     source_m: tuple[float, float, float]
     focus_m: float
     f_number: float
+    from_sensor: bool = False
 
 
 def _np(v) -> np.ndarray:
@@ -120,6 +123,23 @@ class OptilandCamera:
         assert ok[0]
         return float(z[0] - y[0] / (m[0] / nn[0])) - self.z[-1]
 
+    def placement(self, shot: Shot) -> tuple[float, float]:
+        """(sensor plane z, origin of the shot's distances z). From the sensor, the focus distance
+        D is the object's distance d from the entrance pupil plus the pupil-to-sensor length,
+        which depends on d: d = D − (z_last + image_distance(d) − z_EP), iterated."""
+        focus = shot.focus_m * 1e3
+        if not shot.from_sensor:
+            return self.z[-1] + self.image_distance(focus), self.ep_z
+        d = focus
+        for _ in range(100):
+            nxt = focus - (self.z[-1] + self.image_distance(d) - self.ep_z)
+            if abs(nxt - d) < 1e-10:
+                break
+            d = nxt
+        film_z = self.z[-1] + self.image_distance(d)
+        assert abs(d + film_z - self.ep_z - focus) < 1e-8
+        return film_z, film_z
+
     def stop_radius(self, f_number: float) -> float:
         eps = 1e-6
         p0 = np.array([[0.0, eps, -5.0]])
@@ -134,8 +154,8 @@ class OptilandCamera:
         assert r_stop <= self.semi[self.stop] * (1 + 1e-9), f"f/{shot.f_number} is wider than the lens"
         surfaces[self.stop].aperture = RadialAperture(r_max=r_stop)
         try:
-            film_z = self.z[-1] + self.image_distance(shot.focus_m * 1e3)
-            s = np.array([shot.source_m[0] * 1e3, shot.source_m[1] * 1e3, self.ep_z - shot.source_m[2] * 1e3])
+            film_z, z_origin = self.placement(shot)
+            s = np.array([shot.source_m[0] * 1e3, shot.source_m[1] * 1e3, z_origin - shot.source_m[2] * 1e3])
             # the disc on the entrance-pupil plane, centred where the chief ray aims (paraxially)
             r_ep = self.efl / (2.0 * shot.f_number)
             radius = 1.3 * r_ep
