@@ -25,8 +25,9 @@ def test_fit_reproduces_optiland_captures(optiland_fit):
     truth, start = optiland_fit["truth_radius"], optiland_fit["start_radius"]
     residuals = [c["residual"] for c in fit["captures"]]
     shifts = [math.hypot(*c["shift_px"]) for c in fit["captures"]]
+    sigma = "not determined" if p["sigma"] is None else f"{p['sigma']:.2g}"
     print(
-        f"\noptiland captures, Cooke triplet, 6 × 48² px: radius {p['value']:.5f} mm ± {p['sigma']} (optiland "
+        f"\noptiland captures, Cooke triplet, 6 × 48² px: radius {p['value']:.5f} mm ± {sigma} (optiland "
         f"{truth:.5f}, start {start:.5f}: error {100 * (p['value'] / truth - 1):+.3f} %), residuals "
         f"{', '.join(f'{r:.4f}' for r in residuals)}, |shift| ≤ {max(shifts):.3f} px; fit {fit['seconds']:.1f} s "
         f"(wall {optiland_fit['fit_s']:.1f} s), renders {optiland_fit['render_s']:.1f} s"
