@@ -22,6 +22,7 @@ pub mod manifest;
 pub mod params;
 pub mod report;
 pub mod solve;
+pub mod synth;
 
 pub use error::{Error, Result};
 pub use manifest::{Capture, FreeParam, Manifest, SensorSpec};

@@ -4,7 +4,7 @@
 //! `fit.json` keys: `params` (name → `{value, sigma, start, determined}`; `sigma` is null for
 //! a parameter the captures cannot determine), `captures` (list of `{image, residual,
 //! shift_px, scale, background, clipped_pixels, hot_pixels}`), `seconds`, `iterations`
-//! (objective evaluations per stage), `correlations` (`{names, matrix}`), `history`
+//! (objective evaluations per stage), `stage_seconds` (wall-clock per stage), `correlations` (`{names, matrix}`), `history`
 //! (`[seconds, objective]` after each improvement), `camera` (the fitted camera parameters),
 //! `start_lens`, `manifest`.
 
@@ -63,6 +63,7 @@ pub fn write_report(dir: &Path, problem: &Problem, result: &FitResult, model: &M
         }));
     }
     let iterations: Map<String, Value> = result.evaluations.iter().map(|(k, v)| (k.clone(), json!(v))).collect();
+    let stage_seconds: Map<String, Value> = result.stage_seconds.iter().map(|(k, v)| (k.clone(), json!(v))).collect();
     let report = json!({
         "manifest": problem.file,
         "start_lens": problem.source_label,
@@ -77,6 +78,7 @@ pub fn write_report(dir: &Path, problem: &Problem, result: &FitResult, model: &M
         "captures": captures,
         "seconds": result.seconds,
         "iterations": iterations,
+        "stage_seconds": stage_seconds,
         "history": result.history,
     });
     let text = serde_json::to_string_pretty(&report).unwrap_or_default();

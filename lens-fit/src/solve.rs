@@ -8,6 +8,7 @@ use glam::DVec2;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
 use nlopt::{Algorithm, Nlopt, Target};
+use rayon::prelude::*;
 use std::cell::RefCell;
 use std::time::Instant;
 
@@ -37,6 +38,8 @@ pub struct FitResult {
     pub residuals: Vec<f64>,
     /// Objective evaluations of each stage.
     pub evaluations: Vec<(String, usize)>,
+    /// Wall-clock seconds of each stage (the same stages; the last is the uncertainty).
+    pub stage_seconds: Vec<(String, f64)>,
     /// (seconds, objective) after each improvement.
     pub history: Vec<(f64, f64)>,
     /// Wall-clock time.
@@ -76,6 +79,7 @@ fn nlopt_stages(
     start: Instant,
     history: &mut Vec<(f64, f64)>,
     evals: &mut Vec<(String, usize)>,
+    stage_seconds: &mut Vec<(String, f64)>,
 ) -> Vec<f64> {
     let n = x0.len();
     let tracker = RefCell::new(Tracker {
@@ -86,7 +90,15 @@ fn nlopt_stages(
         best_x: x0.to_vec(),
         history: std::mem::take(history),
     });
-    tracker.borrow_mut().eval(x0);
+    let f0 = tracker.borrow_mut().eval(x0);
+    let mut fine_best = (f0, x0.to_vec());
+    // the global stage samples the pupil more coarsely (its job is the basin, not the digits)
+    let coarse_rays = options.global_rays();
+    let coarse = if coarse_rays < problem.pattern.len() {
+        Problem { pattern: crate::forward::disc_pattern(coarse_rays), ..problem.clone() }
+    } else {
+        problem.clone()
+    };
     let stages: [(Algorithm, f64, &str); 2] =
         [(Algorithm::Crs2Lm, options.global_share, "global (CRS2)"), (Algorithm::Bobyqa, 0.3, "local (BOBYQA)")];
     for (algorithm, share, label) in stages {
@@ -95,6 +107,12 @@ fn nlopt_stages(
             continue;
         }
         let before = tracker.borrow().evaluations;
+        let stage_start = Instant::now();
+        let global = matches!(algorithm, Algorithm::Crs2Lm);
+        if global {
+            tracker.borrow_mut().problem = &coarse;
+            tracker.borrow_mut().best = f64::INFINITY;
+        }
         let objective = |x: &[f64], _g: Option<&mut [f64]>, _: &mut ()| tracker.borrow_mut().eval(x);
         let mut opt = Nlopt::new(algorithm, n, objective, Target::Minimize, ());
         let _ = opt.set_lower_bounds(&vec![0.0; n]);
@@ -109,8 +127,23 @@ fn nlopt_stages(
         let mut x = tracker.borrow().best_x.clone();
         let _ = opt.optimize(&mut x);
         drop(opt);
+        if global {
+            // back to the fit's own rays: the coarse best counts only if it is better there
+            let mut t = tracker.borrow_mut();
+            t.problem = problem;
+            let coarse_best = t.best_x.clone();
+            let f = problem.objective(&coarse_best);
+            t.evaluations += 1;
+            if f < fine_best.0 {
+                fine_best = (f, coarse_best);
+                t.history.push((elapsed_s(start), f));
+            }
+            t.best = fine_best.0;
+            t.best_x = fine_best.1.clone();
+        }
         let done = tracker.borrow().evaluations - before;
         evals.push((label.to_string(), done));
+        stage_seconds.push((label.to_string(), elapsed_s(stage_start)));
     }
     let t = tracker.into_inner();
     *history = t.history;
@@ -123,6 +156,9 @@ struct LmProblem<'a> {
     x: DVector<f64>,
     landings: Option<Vec<Vec<Landing>>>,
     evaluations: usize,
+    /// After the first Jacobian, none is computed past this (the fit's time limit).
+    deadline: Option<Instant>,
+    jacobians: std::sync::atomic::AtomicUsize,
 }
 
 impl LmProblem<'_> {
@@ -166,6 +202,13 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for LmProblem<'_> {
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
+        // past the time limit the minimiser stops at its last accepted point
+        if self.jacobians.load(std::sync::atomic::Ordering::Relaxed) > 0
+            && self.deadline.is_some_and(|d| Instant::now() > d)
+        {
+            return None;
+        }
+        self.jacobians.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         // Forward differences: a parameter re-traces every capture, a shift re-splats its own.
         let base = self.residuals()?;
         let m = base.len();
@@ -173,12 +216,18 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for LmProblem<'_> {
         let cols = self.x.len();
         let mut j = DMatrix::zeros(m, cols);
         let (scaled, shifts) = self.split(&self.x);
-        for k in 0..n {
-            let h = if scaled[k] > 0.5 { -1e-4 } else { 1e-4 };
-            let mut s = scaled.clone();
-            s[k] += h;
-            let l = self.landings_at(&s);
-            let r = self.problem.residual_vector(l.as_deref(), &shifts);
+        // the parameter columns are independent: in parallel, collected in order
+        let columns: Vec<(f64, Vec<f64>)> = (0..n)
+            .into_par_iter()
+            .map(|k| {
+                let h = if scaled[k] > 0.5 { -1e-4 } else { 1e-4 };
+                let mut s = scaled.clone();
+                s[k] += h;
+                let l = self.landings_at(&s);
+                (h, self.problem.residual_vector(l.as_deref(), &shifts))
+            })
+            .collect();
+        for (k, (h, r)) in columns.iter().enumerate() {
             for i in 0..m {
                 j[(i, k)] = (r[i] - base[i]) / h;
             }
@@ -227,8 +276,10 @@ pub fn run(problem: &Problem, options: &FitOptions) -> FitResult {
         .collect();
     let mut history = Vec::new();
     let mut evaluations = Vec::new();
+    let mut stage_seconds = Vec::new();
     // 1–2. Global and local stages with centroid-matched shifts.
-    let best = nlopt_stages(problem, &x0, options, start, &mut history, &mut evaluations);
+    let best = nlopt_stages(problem, &x0, options, start, &mut history, &mut evaluations, &mut stage_seconds);
+    let lm_start = Instant::now();
     // 3. Levenberg–Marquardt on parameters and shifts together.
     let model = problem.model_at(&unscale(&problem.free, &best)).ok();
     let landings = model.as_ref().and_then(|m| problem.landings(m));
@@ -241,10 +292,21 @@ pub fn run(problem: &Problem, options: &FitOptions) -> FitResult {
         x.push(s.x);
         x.push(s.y);
     }
-    let mut lm = LmProblem { problem, x: DVector::from_vec(x.clone()), landings: None, evaluations: 0 };
+    let deadline = start + std::time::Duration::from_secs_f64(options.time_limit_s);
+    let mut lm = LmProblem {
+        problem,
+        x: DVector::from_vec(x.clone()),
+        landings: None,
+        evaluations: 0,
+        deadline: Some(deadline),
+        jacobians: std::sync::atomic::AtomicUsize::new(0),
+    };
     lm.set_params(&DVector::from_vec(x));
-    let (lm, _report) = LevenbergMarquardt::new().with_patience(20).minimize(lm);
+    let (mut lm, _report) = LevenbergMarquardt::new().with_patience(20).minimize(lm);
+    lm.deadline = None;
     evaluations.push(("Levenberg–Marquardt".to_string(), lm.evaluations));
+    stage_seconds.push(("Levenberg–Marquardt".to_string(), elapsed_s(lm_start)));
+    let sigma_start = Instant::now();
     let (scaled, shifts) = lm.split(&lm.x);
     let r = lm.residuals().unwrap_or_else(|| DVector::zeros(0));
     let objective = r.norm_squared();
@@ -253,29 +315,15 @@ pub fn run(problem: &Problem, options: &FitOptions) -> FitResult {
     let jac = lm.jacobian();
     let dof = (r.len() as f64 - lm.x.len() as f64).max(1.0);
     let s2 = objective / dof;
-    let mut sigma = vec![None; n];
-    let mut correlations = vec![vec![None; n]; n];
-    if let Some(j) = jac {
-        let jtj = j.transpose() * &j;
-        if let Some(cov) = jtj.clone().try_inverse() {
-            for a in 0..n {
-                let range = problem.free[a].max - problem.free[a].min;
-                let var = cov[(a, a)] * s2;
-                // a parameter whose 1σ spans more than its whole range is not determined
-                let column = j.column(a).norm();
-                if var.is_finite() && var >= 0.0 && var.sqrt() < 1.0 && column > 1e-9 {
-                    sigma[a] = Some(var.sqrt() * range);
-                }
-            }
-            for a in 0..n {
-                for b in 0..n {
-                    if sigma[a].is_some() && sigma[b].is_some() {
-                        correlations[a][b] = Some(cov[(a, b)] / (cov[(a, a)] * cov[(b, b)]).sqrt());
-                    }
-                }
-            }
+    let (sigma, correlations) = match jac {
+        Some(j) => {
+            let (scaled_sigma, correlations) = uncertainties(&j, n, s2);
+            let sigma = scaled_sigma.iter().zip(&problem.free).map(|(s, f)| s.map(|s| s * (f.max - f.min))).collect();
+            (sigma, correlations)
         }
-    }
+        None => (vec![None; n], vec![vec![None; n]; n]),
+    };
+    stage_seconds.push(("uncertainty".to_string(), elapsed_s(sigma_start)));
     let values = unscale(&problem.free, &scaled);
     let model = problem.model_at(&values).ok();
     let landings = model.as_ref().and_then(|m| problem.landings(m));
@@ -299,8 +347,113 @@ pub fn run(problem: &Problem, options: &FitOptions) -> FitResult {
         shifts_px: shifts,
         residuals,
         evaluations,
+        stage_seconds,
         history,
         seconds: elapsed_s(start),
         scaled,
+    }
+}
+
+/// One-sigma uncertainties (scaled units, the first `n` columns of `j`) and their correlations
+/// from `s2 (JᵀJ)⁻¹`. A parameter is undetermined (None) when no residual responds to it (its
+/// column is zero, or below 1e-9 of the largest column), when it has a share in a direction
+/// the data cannot see (an eigenvector of the equilibrated JᵀJ with an eigenvalue under 1e-12
+/// of the largest: a degeneracy with other unknowns), or when its 1σ spans more than its whole
+/// range. The other unknowns keep their uncertainties (the covariance is taken over the
+/// columns that respond, through the eigen-decomposition, not a plain inverse that a single
+/// dead column would make fail for all).
+pub fn uncertainties(j: &DMatrix<f64>, n: usize, s2: f64) -> (Vec<Option<f64>>, Vec<Vec<Option<f64>>>) {
+    let mut sigma = vec![None; n];
+    let mut correlations = vec![vec![None; n]; n];
+    let norms: Vec<f64> = (0..j.ncols()).map(|c| j.column(c).norm()).collect();
+    let largest = norms.iter().copied().filter(|v| v.is_finite()).fold(0.0, f64::max);
+    if !(largest > 0.0) || !s2.is_finite() {
+        return (sigma, correlations);
+    }
+    let live: Vec<usize> = (0..j.ncols()).filter(|&c| norms[c].is_finite() && norms[c] > 1e-9 * largest).collect();
+    if live.is_empty() {
+        return (sigma, correlations);
+    }
+    // equilibrated normal matrix over the live columns: unit diagonal
+    let m = live.len();
+    let mut a = DMatrix::zeros(m, m);
+    for (p, &cp) in live.iter().enumerate() {
+        for (q, &cq) in live.iter().enumerate().skip(p) {
+            let v = j.column(cp).dot(&j.column(cq)) / (norms[cp] * norms[cq]);
+            a[(p, q)] = v;
+            a[(q, p)] = v;
+        }
+    }
+    let eig = nalgebra::SymmetricEigen::new(a);
+    let lmax = eig.eigenvalues.iter().copied().fold(0.0, f64::max);
+    let threshold = lmax * 1e-12;
+    let mut cov = DMatrix::zeros(m, m);
+    let mut blind = vec![0.0; m];
+    for k in 0..m {
+        let l = eig.eigenvalues[k];
+        let v = eig.eigenvectors.column(k);
+        if l > threshold {
+            cov += v * v.transpose() / l;
+        } else {
+            for p in 0..m {
+                blind[p] += v[p] * v[p];
+            }
+        }
+    }
+    let index: Vec<Option<usize>> = (0..n).map(|c| live.iter().position(|&l| l == c)).collect();
+    for a in 0..n {
+        let Some(p) = index[a] else { continue };
+        if blind[p] > 1e-6 {
+            continue;
+        }
+        let var = cov[(p, p)] * s2 / (norms[a] * norms[a]);
+        // a parameter whose 1σ spans more than its whole range is not determined
+        if var.is_finite() && var >= 0.0 && var.sqrt() < 1.0 {
+            sigma[a] = Some(var.sqrt());
+        }
+    }
+    for a in 0..n {
+        for b in 0..n {
+            if let (Some(p), Some(q), Some(_), Some(_)) = (index[a], index[b], sigma[a], sigma[b]) {
+                correlations[a][b] = Some(cov[(p, q)] / (cov[(p, p)] * cov[(q, q)]).sqrt());
+            }
+        }
+    }
+    (sigma, correlations)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn jacobian(cols: &[Vec<f64>]) -> DMatrix<f64> {
+        DMatrix::from_fn(cols[0].len(), cols.len(), |i, c| cols[c][i])
+    }
+
+    #[test]
+    fn a_dead_column_is_undetermined_and_the_others_keep_their_sigma() {
+        let rows = 50;
+        let a: Vec<f64> = (0..rows).map(|i| (i as f64 * 0.37).sin()).collect();
+        let b: Vec<f64> = (0..rows).map(|i| (i as f64 * 0.11).cos()).collect();
+        let zero = vec![0.0; rows];
+        let (s, c) = uncertainties(&jacobian(&[a.clone(), zero.clone(), b.clone()]), 3, 1e-4);
+        assert!(s[0].is_some() && s[2].is_some(), "{s:?}");
+        assert_eq!(s[1], None);
+        assert_eq!(c[1][0], None);
+        assert!((c[0][0].unwrap() - 1.0).abs() < 1e-12);
+        // the same sigmas as without the dead column
+        let (s2, _) = uncertainties(&jacobian(&[a.clone(), b.clone()]), 2, 1e-4);
+        assert!((s[0].unwrap() - s2[0].unwrap()).abs() < 1e-12 * s2[0].unwrap());
+        // a column of round-off next to real ones is dead too, never a tiny sigma
+        let tiny: Vec<f64> = (0..rows).map(|i| 1e-14 * (i as f64).sin()).collect();
+        let (s, _) = uncertainties(&jacobian(&[a.clone(), tiny, b.clone()]), 3, 1e-4);
+        assert_eq!(s[1], None);
+        // two identical columns (a degeneracy): both undetermined, the third not
+        let (s, _) = uncertainties(&jacobian(&[a.clone(), a.clone(), b.clone()]), 3, 1e-4);
+        assert_eq!((s[0], s[1]), (None, None));
+        assert!(s[2].is_some());
+        // all zero: nothing determined
+        let (s, _) = uncertainties(&jacobian(&[zero.clone(), zero]), 2, 1e-4);
+        assert_eq!(s, vec![None, None]);
     }
 }

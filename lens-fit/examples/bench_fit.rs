@@ -1,0 +1,103 @@
+//! Speed benchmark (issue 10): nine synthetic 128 × 128 captures of double-gauss-50mm with two
+//! radii perturbed and the sensor tilted and offset, five free parameters, the whole fit timed
+//! by stage.
+//!
+//! ```sh
+//! cargo run --release -p petzval-fit --example bench_fit [-- TIME_LIMIT_S [RAYS]]
+//! ```
+//!
+//! Prints the cost of one evaluation (all nine captures traced, splatted and fitted), of one
+//! Jacobian, the whole fit's wall-clock time with its evaluations per stage, and the values
+//! against the truth.
+
+use petzval_fit::fit::{unscale, FitOptions, Problem};
+use petzval_fit::synth::{write_captures, Shot, SynthOptions};
+use petzval_fit::{solve, CameraParams, Manifest, Model, Param};
+use std::time::Instant;
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let time_limit: f64 = args.first().map(|a| a.parse().expect("TIME_LIMIT_S")).unwrap_or(20.0);
+    let rays: usize = args.get(1).map(|a| a.parse().expect("RAYS")).unwrap_or(petzval_fit::forward::DEFAULT_RAYS);
+    let dir = std::env::temp_dir().join(format!("petzval-fit-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let lens = petzval_optics::library_lens("double-gauss-50mm").unwrap();
+    let mut truth = Model { prescription: lens.prescription().clone(), camera: CameraParams::default() };
+    let radii: Vec<(Param, f64)> = ["surface.3.radius_mm", "surface.7.radius_mm"]
+        .iter()
+        .map(|n| {
+            let p: Param = n.parse().unwrap();
+            let v = truth.get(&p).unwrap();
+            (p, v)
+        })
+        .collect();
+    truth.set(&radii[0].0, radii[0].1 * 1.03).unwrap();
+    truth.set(&radii[1].0, radii[1].1 * 0.98).unwrap();
+    truth.camera.sensor_tilt_x_deg = 0.4;
+    truth.camera.sensor_tilt_y_deg = -0.3;
+    truth.camera.sensor_offset_mm = 0.05;
+    let mut shots = Vec::new();
+    for (x, y) in [(0.0, 0.0), (0.25, 0.0), (-0.25, 0.0), (0.0, 0.17), (0.0, -0.17), (0.2, 0.12), (-0.2, -0.12)] {
+        shots.push(Shot { source_m: [x, y, 2.0], focus_m: 2.0, f_number: 2.8 });
+    }
+    shots.push(Shot { source_m: [0.0, 0.0, 1.5], focus_m: 2.0, f_number: 2.8 });
+    shots.push(Shot { source_m: [0.2, 0.0, 3.0], focus_m: 2.0, f_number: 4.0 });
+    let free = format!(
+        "[[free]]\nparam = \"surface.3.radius_mm\"\nmin = {}\nmax = {}\n\n\
+         [[free]]\nparam = \"surface.7.radius_mm\"\nmin = {}\nmax = {}\n\n\
+         [[free]]\nparam = \"sensor.tilt_x_deg\"\nmin = -1.0\nmax = 1.0\n\n\
+         [[free]]\nparam = \"sensor.tilt_y_deg\"\nmin = -1.0\nmax = 1.0\n\n\
+         [[free]]\nparam = \"sensor.offset_mm\"\nmin = -0.3\nmax = 0.3\n\n",
+        radii[0].1 * 0.95,
+        radii[0].1 * 1.05,
+        (radii[1].1 * 0.95).min(radii[1].1 * 1.05),
+        (radii[1].1 * 0.95).max(radii[1].1 * 1.05),
+    );
+    let t = Instant::now();
+    let manifest_path = write_captures(&dir, "double-gauss-50mm", &truth, &shots, &free, 128, &SynthOptions::default());
+    println!("synthesis: 9 captures of 128² px in {:.2} s", t.elapsed().as_secs_f64());
+    let manifest = Manifest::load(&manifest_path).unwrap();
+    let options = FitOptions { time_limit_s: time_limit, rays, ..Default::default() };
+    let t = Instant::now();
+    let problem = Problem::new(&manifest, &options).unwrap();
+    println!("prepare: {:.2} s", t.elapsed().as_secs_f64());
+    let x0 = vec![0.5; problem.free.len()];
+    let t = Instant::now();
+    let reps = 5;
+    let mut f = 0.0;
+    for _ in 0..reps {
+        f = problem.objective(&x0);
+    }
+    println!(
+        "one evaluation (9 captures, {rays} rays each): {:.1} ms (objective {f:.6})",
+        t.elapsed().as_secs_f64() * 1e3 / reps as f64
+    );
+    let model = problem.model_at(&unscale(&problem.free, &x0)).unwrap();
+    let t = Instant::now();
+    let landings = problem.landings(&model).unwrap();
+    let trace = t.elapsed().as_secs_f64();
+    let shifts = problem.centroid_shifts(&landings);
+    let t = Instant::now();
+    let r = problem.residual_vector(Some(&landings), &shifts);
+    println!(
+        "  of which trace {:.1} ms, splat + scale/background {:.1} ms ({} residuals)",
+        trace * 1e3,
+        t.elapsed().as_secs_f64() * 1e3,
+        r.len()
+    );
+    let t = Instant::now();
+    let result = solve::run(&problem, &options);
+    let total = t.elapsed().as_secs_f64();
+    let truth_values = [radii[0].1 * 1.03, radii[1].1 * 0.98, 0.4, -0.3, 0.05];
+    for (p, tv) in result.params.iter().zip(truth_values) {
+        println!("{:<24} {:>12.6} (truth {:>10.6}, start {:>10.6}) σ {:?}", p.name, p.value, tv, p.start, p.sigma);
+    }
+    println!("residuals {:?}", result.residuals.iter().map(|r| (r * 1e4).round() / 1e4).collect::<Vec<_>>());
+    println!("evaluations {:?}", result.evaluations);
+    println!(
+        "stage seconds {:?}",
+        result.stage_seconds.iter().map(|(k, v)| (k.as_str(), (v * 100.0).round() / 100.0)).collect::<Vec<_>>()
+    );
+    println!("fit: {total:.1} s (time limit {time_limit} s for CRS2 + BOBYQA, then Levenberg–Marquardt)");
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -1,0 +1,196 @@
+//! Robustness: clipped highlights, hot pixels, a start 5 % off on several radii, and a
+//! parameter the captures cannot see (issue 10). Captures come from `petzval_fit::synth`.
+
+use petzval_fit::fit::{FitOptions, Problem};
+use petzval_fit::synth::{write_captures, Shot, SynthOptions};
+use petzval_fit::{report, solve, CameraParams, Manifest, Model};
+use std::path::{Path, PathBuf};
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("petzval-fit-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn nominal() -> Model {
+    let lens = petzval_optics::library_lens("double-gauss-50mm").unwrap();
+    Model { prescription: lens.prescription().clone(), camera: CameraParams::default() }
+}
+
+/// Three in-focus field positions and one defocused capture at f/2.8.
+fn few_shots() -> Vec<Shot> {
+    vec![
+        Shot { source_m: [0.0, 0.0, 2.0], focus_m: 2.0, f_number: 2.8 },
+        Shot { source_m: [0.2, 0.1, 2.0], focus_m: 2.0, f_number: 2.8 },
+        Shot { source_m: [-0.15, -0.1, 2.0], focus_m: 2.0, f_number: 2.8 },
+        Shot { source_m: [0.0, 0.05, 1.6], focus_m: 2.0, f_number: 2.8 },
+    ]
+}
+
+const OFFSET_FREE: &str = "[[free]]\nparam = \"sensor.offset_mm\"\nmin = -0.2\nmax = 0.2\n\n";
+
+/// Fits a manifest, writes the report and returns the result with fit.json.
+fn fit(manifest: &Path, options: &FitOptions, report_dir: &Path) -> (Problem, solve::FitResult, serde_json::Value) {
+    let manifest = Manifest::load(manifest).unwrap();
+    let problem = Problem::new(&manifest, options).unwrap();
+    let result = solve::run(&problem, options);
+    let values: Vec<f64> = result.params.iter().map(|p| p.value).collect();
+    let model = problem.model_at(&values).unwrap();
+    report::write_report(report_dir, &problem, &result, &model).unwrap();
+    let json = serde_json::from_str(&std::fs::read_to_string(report_dir.join("fit.json")).unwrap()).unwrap();
+    (problem, result, json)
+}
+
+fn value(result: &solve::FitResult, name: &str) -> solve::ParamResult {
+    result.params.iter().find(|p| p.name == name).unwrap().clone()
+}
+
+/// (a) 16-bit PNG captures whose peak is clipped at 65535 (the spot's peak is 4× over): the
+/// clipped pixels are masked and counted, and the sensor offset is still found.
+#[test]
+fn clipped_highlights_are_masked_and_the_fit_recovers() {
+    let dir = temp_dir("clipped");
+    let mut truth = nominal();
+    truth.camera.sensor_offset_mm = 0.05;
+    let synth = SynthOptions { png16: true, peak_photons: 4.0 * 65535.0, ..Default::default() };
+    let manifest = write_captures(&dir, "double-gauss-50mm", &truth, &few_shots(), OFFSET_FREE, 40, &synth);
+    let options = FitOptions { time_limit_s: 8.0, rays: 8192, global_share: 0.0, ..Default::default() };
+    let (problem, result, json) = fit(&manifest, &options, &dir.join("report"));
+    let offset = value(&result, "sensor.offset_mm");
+    let clipped: Vec<usize> = problem.captures.iter().map(|p| p.image.clipped).collect();
+    println!(
+        "clipped: offset {} ± {:?} (truth 0.05), clipped pixels {clipped:?}, residuals {:?}",
+        offset.value, offset.sigma, result.residuals
+    );
+    for (c, p) in problem.captures.iter().enumerate() {
+        assert!(p.image.clipped > 0, "capture {c}: no clipped pixels masked");
+        assert_eq!(json["captures"][c]["clipped_pixels"].as_u64().unwrap() as usize, p.image.clipped);
+        // every pixel at 65535 is masked, nothing below it
+        let saturated = p.image.channels[0].iter().filter(|v| **v >= 65535.0).count();
+        assert_eq!(saturated, p.image.clipped);
+        assert!(p.image.channels[0].iter().zip(&p.image.mask).all(|(v, m)| *v < 65535.0 || !m));
+    }
+    assert!((offset.value - 0.05).abs() < 0.004, "offset {}", offset.value);
+    // measured 0.4–0.8 % in focus, 4.6 % for the defocused disc (150 px clipped: the 4× brighter
+    // signal leaves the model's own sampling error, not photon noise, as the residual)
+    for r in &result.residuals {
+        assert!(*r < 0.08, "residual {r}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// (b) A few isolated hot pixels away from the spot: masked (counted) and the fit comes out as
+/// on the same captures without them.
+#[test]
+fn hot_pixels_are_masked_and_do_not_bias_the_fit() {
+    let dir = temp_dir("hot");
+    let mut truth = nominal();
+    truth.camera.sensor_offset_mm = 0.05;
+    let hot = vec![(4, 5, 30_000.0), (33, 6, 12_000.0), (7, 34, 50_000.0), (30, 31, 8_000.0)];
+    let options = FitOptions { time_limit_s: 5.0, rays: 8192, global_share: 0.0, ..Default::default() };
+    let mut offsets = Vec::new();
+    for (label, pixels) in [("clean", vec![]), ("hot", hot.clone())] {
+        let sub = dir.join(label);
+        std::fs::create_dir_all(&sub).unwrap();
+        let synth = SynthOptions { hot_pixels: pixels.clone(), ..Default::default() };
+        let manifest = write_captures(&sub, "double-gauss-50mm", &truth, &few_shots(), OFFSET_FREE, 40, &synth);
+        let (problem, result, json) = fit(&manifest, &options, &sub.join("report"));
+        for (c, p) in problem.captures.iter().enumerate() {
+            assert_eq!(p.image.hot, pixels.len(), "{label} capture {c}: hot pixels masked");
+            assert_eq!(json["captures"][c]["hot_pixels"].as_u64().unwrap() as usize, pixels.len());
+            for &(x, y, _) in &pixels {
+                assert!(!p.image.mask[y * 40 + x], "{label} capture {c}: ({x}, {y}) not masked");
+            }
+        }
+        let o = value(&result, "sensor.offset_mm");
+        println!("hot pixels ({label}): offset {} ± {:?}, residuals {:?}", o.value, o.sigma, result.residuals);
+        offsets.push(o.value);
+    }
+    assert!((offsets[1] - 0.05).abs() < 0.004, "offset {}", offsets[1]);
+    // the masked pixels carried no information about the spot: the same answer
+    assert!((offsets[1] - offsets[0]).abs() < 5e-4, "hot {} vs clean {}", offsets[1], offsets[0]);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// (c) Four radii of double-gauss-50mm free (surfaces 1, 3, 7, 9), the truth nominal, the fit
+/// starting 5 % off on every one (alternating signs; `FIT_START_OFF` sets the fraction,
+/// `FIT_SHARE` the global stage's share of the 20 s). Measured (docs/lens-fit.md): from the
+/// truth it stays within 0.014 %; from 1 % off it ends 1.5 % off with 3–6 % residuals, from 5 %
+/// off 6.9 % off with 38–97 % residuals. The fit does not come back yet, so this is ignored.
+#[test]
+#[ignore = "the fit does not recover four radii started 1-5 % off within 20 s (measured; issue 10)"]
+fn a_start_five_percent_off_on_four_radii_comes_back() {
+    let dir = temp_dir("radii");
+    let truth = nominal();
+    let surfaces = [1usize, 3, 7, 9];
+    let mut free = String::new();
+    let mut nominal_r = Vec::new();
+    for (k, s) in surfaces.iter().enumerate() {
+        let p: petzval_fit::Param = format!("surface.{s}.radius_mm").parse().unwrap();
+        let r = truth.get(&p).unwrap();
+        nominal_r.push(r);
+        let off = std::env::var("FIT_START_OFF").ok().and_then(|v| v.parse().ok()).unwrap_or(0.05);
+        let start = r * if k % 2 == 0 { 1.0 + off } else { 1.0 - off };
+        let (lo, hi) = (r * 0.92, r * 1.08);
+        free.push_str(&format!(
+            "[[free]]\nparam = \"surface.{s}.radius_mm\"\nmin = {}\nmax = {}\nstart = {start}\n\n",
+            lo.min(hi),
+            lo.max(hi)
+        ));
+    }
+    let mut shots = Vec::new();
+    for (x, y) in [(0.0, 0.0), (0.25, 0.0), (-0.25, 0.0), (0.0, 0.17), (0.0, -0.17), (0.2, 0.12), (-0.2, -0.12)] {
+        shots.push(Shot { source_m: [x, y, 2.0], focus_m: 2.0, f_number: 2.8 });
+    }
+    shots.push(Shot { source_m: [0.0, 0.0, 1.5], focus_m: 2.0, f_number: 2.8 });
+    shots.push(Shot { source_m: [0.2, 0.0, 3.0], focus_m: 2.0, f_number: 4.0 });
+    let manifest = write_captures(&dir, "double-gauss-50mm", &truth, &shots, &free, 48, &SynthOptions::default());
+    let share = std::env::var("FIT_SHARE").ok().and_then(|v| v.parse().ok()).unwrap_or(0.35);
+    let options = FitOptions { time_limit_s: 20.0, rays: 16_384, global_share: share, ..Default::default() };
+    let (_, result, _) = fit(&manifest, &options, &dir.join("report"));
+    let mut worst: f64 = 0.0;
+    for (s, r) in surfaces.iter().zip(&nominal_r) {
+        let p = value(&result, &format!("surface.{s}.radius_mm"));
+        let rel = p.value / r - 1.0;
+        println!("radius {s}: {} (truth {r}, start {}), {:+.4} %, σ {:?}", p.value, p.start, rel * 100.0, p.sigma);
+        worst = worst.max(rel.abs());
+    }
+    println!(
+        "radii: worst {:.4} %, residuals {:?}, {:.1} s, {:?}",
+        worst * 100.0,
+        result.residuals,
+        result.seconds,
+        result.evaluations
+    );
+    assert!(worst < TOLERANCE_RADII, "worst radius error {:.4} %", worst * 100.0);
+    for r in &result.residuals {
+        assert!(*r < 0.03, "residual {r}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Relative tolerance on each radius in (c) (measured: see docs/lens-fit.md).
+const TOLERANCE_RADII: f64 = 0.005;
+
+/// (d) The blade rotation of a circular stop changes nothing: reported as not determined
+/// (sigma null, determined false), while the sensor offset fitted with it is determined.
+#[test]
+fn a_parameter_the_captures_cannot_see_is_not_determined() {
+    let dir = temp_dir("blind");
+    let mut truth = nominal();
+    truth.camera.sensor_offset_mm = 0.05;
+    let free = format!("{OFFSET_FREE}[[free]]\nparam = \"aperture.rotation_deg\"\nmin = 0.0\nmax = 60.0\n\n");
+    let manifest =
+        write_captures(&dir, "double-gauss-50mm", &truth, &few_shots()[..2], &free, 40, &SynthOptions::default());
+    let options = FitOptions { time_limit_s: 4.0, rays: 8192, ..Default::default() };
+    let (_, result, json) = fit(&manifest, &options, &dir.join("report"));
+    let (o, rot) = (value(&result, "sensor.offset_mm"), value(&result, "aperture.rotation_deg"));
+    println!("blind: offset {} ± {:?}, rotation {} ± {:?}", o.value, o.sigma, rot.value, rot.sigma);
+    assert_eq!(rot.sigma, None);
+    assert_eq!(json["params"]["aperture.rotation_deg"]["determined"], serde_json::Value::Bool(false));
+    assert!(json["params"]["aperture.rotation_deg"]["sigma"].is_null());
+    assert!(o.sigma.is_some(), "the offset must stay determined");
+    assert_eq!(json["params"]["sensor.offset_mm"]["determined"], serde_json::Value::Bool(true));
+    assert!((o.value - 0.05).abs() < 0.004, "offset {}", o.value);
+    std::fs::remove_dir_all(&dir).ok();
+}
