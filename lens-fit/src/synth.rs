@@ -1,5 +1,5 @@
 //! Synthetic captures for tests and the benchmark: a point source rendered by our own tracer
-//! (a denser ray pattern than a fit uses, a 0.25 px footprint), photon noise (normal
+//! (a denser ray pattern than a fit uses, its own density footprint), photon noise (normal
 //! approximation, deterministic) on a dark level, written as EXR or 16-bit PNG with the
 //! manifest that fits them.
 //!
@@ -117,7 +117,7 @@ pub fn write_captures(
         let origin = [(c.x - size as f64 / 2.0).round() as i64 + 1, (c.y - size as f64 / 2.0).round() as i64 - 1];
         let frame = Frame { sensor, crop_origin_px: origin, width: size, height: size };
         let landing = land(&l, &truth.camera, &g, &aim, &pattern, 550.0, &frame);
-        let img = splat(&landing, DVec2::ZERO, 0.25, size, size);
+        let img = splat(&landing, DVec2::ZERO, 0.0, size, size);
         let peak = img.iter().copied().fold(0.0, f64::max);
         let mut values: Vec<f64> =
             img.iter().map(|v| noise.photons(options.dark + options.peak_photons * v / peak)).collect();

@@ -60,7 +60,7 @@ fn write_captures(dir: &Path, truth: &Model, shots: &[Shot], free: &str, size: u
         let origin = [(c.x - size as f64 / 2.0).round() as i64 + 1, (c.y - size as f64 / 2.0).round() as i64 - 1];
         let frame = Frame { sensor, crop_origin_px: origin, width: size, height: size };
         let landing = land(&l, &truth.camera, &g, &aim, &pattern, 550.0, &frame);
-        let img = splat(&landing, DVec2::ZERO, 0.25, size, size);
+        let img = splat(&landing, DVec2::ZERO, 0.0, size, size);
         let peak = img.iter().copied().fold(0.0, f64::max);
         let dark = 100.0;
         let values: Vec<f32> = img.iter().map(|v| noise.photons(dark + 20_000.0 * v / peak) as f32).collect();

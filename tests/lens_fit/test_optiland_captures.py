@@ -38,13 +38,8 @@ def test_fit_reproduces_optiland_captures(optiland_fit):
         assert s < SHIFT_MAX_PX, f"capture {i + 1}: shift {s} px"
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the model's ray footprint has a 0.25 px floor (forward.rs auto_footprint_px), which blurs the "
-    "caustics of sharp off-axis spots: 1.9-2.1 % residual; with a 0.02 px floor 0.2-0.4 %",
-)
 def test_sharp_off_axis_spots_fit_within_half_a_percent(optiland_fit):
-    """Known limitation, kept visible: when the footprint floor goes, this passes (strict xfail
-    then fails) and docs/lens-fit.md's figures need updating."""
+    """Sharp off-axis spots keep their caustics in the model: with the footprint's old 0.25 px
+    floor (forward.rs auto_footprint_px) these two came out at 1.9-2.1 %."""
     off_axis = [optiland_fit["fit"]["captures"][k]["residual"] for k in (1, 3)]  # train02, train04
     assert max(off_axis) < 0.005, off_axis
