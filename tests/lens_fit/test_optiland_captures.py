@@ -13,8 +13,6 @@ from __future__ import annotations
 
 import math
 
-import pytest
-
 RESIDUAL_MAX = 0.03  # optiland's binned images are noiseless; 32 768 model rays sample to ~1-2 %
 SHIFT_MAX_PX = 0.3
 
