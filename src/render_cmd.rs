@@ -152,11 +152,29 @@ fn parse_environment(s: &str, strength: f32) -> Result<Environment, Error> {
     Ok(Environment::Constant(c * strength))
 }
 
+/// The longest `--time-limit` (one year), so the duration is representable.
+const MAX_TIME_LIMIT_S: f64 = 365.0 * 86_400.0;
+
+/// The most `--threads` (as the Python module allows).
+const MAX_THREADS: usize = 1024;
+
 /// Runs `petzval render`.
 pub fn run(args: RenderArgs) -> Result<(), Error> {
+    if let Some(t) = args.time_limit {
+        // Duration::from_secs_f64 panics on negative, NaN and huge values: refuse them here.
+        if !(t.is_finite() && t > 0.0 && t <= MAX_TIME_LIMIT_S) {
+            return Err(settings_err(
+                "time-limit",
+                format!("must be a number of seconds in (0, {MAX_TIME_LIMIT_S}], got {t}"),
+            ));
+        }
+    }
     if let Some(t) = args.threads {
         if t == 0 {
             return Err(settings_err("threads", "must be at least 1".into()));
+        }
+        if t > MAX_THREADS {
+            return Err(settings_err("threads", format!("{t} is more than the {MAX_THREADS} a render may use")));
         }
         let _ = rayon::ThreadPoolBuilder::new().num_threads(t).build_global();
     }

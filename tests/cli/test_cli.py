@@ -101,6 +101,11 @@ BAD_RENDER_ARGS = [
     ("zero-fstop", ["--lens", "thin", "--fstop", "0"], ["f_number"]),
     ("unknown-lens-model", ["--lens", "double-gauss-50mm", "--lens-model", "wobbly"], ["lens_model"]),
     ("zero-threads", ["--threads", "0"], ["threads"]),
+    ("too-many-threads", ["--threads", "10000"], ["threads", "1024"]),
+    ("negative-time-limit", ["--time-limit=-1"], ["time-limit"]),
+    ("nan-time-limit", ["--time-limit", "nan"], ["time-limit"]),
+    ("inf-time-limit", ["--time-limit", "inf"], ["time-limit"]),
+    ("huge-time-limit", ["--time-limit", "1e300"], ["time-limit"]),
     # the host-convention checks the Python module makes, now made for the CLI too
     ("nan-focus", ["--focus", "nan"], ["focus_distance_m", "NaN"]),
     ("nan-blade-rotation", ["--aperture", "blades:6:nan"], ["aperture", "finite"]),
