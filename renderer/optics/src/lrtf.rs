@@ -760,12 +760,16 @@ impl LrtfTable {
             )));
         }
         let (n, ny, nw) = (header.resolution as usize, header.resolution_y as usize, header.wavelengths_nm.len());
-        if n < 2 || ny < 2 || nw == 0 || n > 4096 || ny > 4096 {
+        if n < 2 || ny < 2 || nw == 0 || n > 4096 || ny > 4096 || nw > 64 {
             return Err(bad("implausible table size in the header".into()));
         }
-        let count = nw * n * n * ny * CHANNELS;
-        if bytes.len() != hend + count * 4 {
-            return Err(bad(format!("expected {} bytes of table data, found {}", count * 4, bytes.len() - hend)));
+        // sizes from the file: multiply without overflow, and compare with what is there
+        let count = [n, n, ny, CHANNELS, 4].iter().try_fold(nw, |a, b| a.checked_mul(*b));
+        let data_bytes = bytes.len() - hend;
+        if count != Some(data_bytes) {
+            return Err(bad(format!(
+                "the header's table size ({nw} wavelengths × {n}² × {ny}) does not match the {data_bytes} bytes of table data"
+            )));
         }
         let data: Vec<f32> =
             bytes[hend..].chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();

@@ -316,3 +316,32 @@ fn scene_to_film_table_matches_the_exact_trace() {
     assert!(e.contains("reversed"), "{e}");
     let _ = std::fs::remove_file(&path);
 }
+
+/// A table file whose header claims a size that does not match its data (a crafted or
+/// corrupted file: huge resolutions, many wavelengths, a few bytes of data) is refused with an
+/// error naming the file, without allocating what the header claims.
+#[test]
+fn a_header_that_lies_about_the_size_is_refused() {
+    let lens = library_lens("double-gauss-50mm").unwrap();
+    let table = bake(&lens, 8);
+    let path = std::env::temp_dir().join(format!("petzval-lrtf-lie-{}.lrtf", std::process::id()));
+    table.save(&path).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let hlen = u32::from_le_bytes([bytes[12], bytes[13], bytes[14], bytes[15]]) as usize;
+    let mut header: serde_json::Value = serde_json::from_slice(&bytes[16..16 + hlen]).unwrap();
+    for (res, res_y, wavelengths) in [(4096, 4096, 64), (4096, 4096, 1), (8, 8, 65), (9, 8, 1)] {
+        header["resolution"] = res.into();
+        header["resolution_y"] = res_y.into();
+        header["wavelengths_nm"] = vec![550.0; wavelengths].into();
+        let h = serde_json::to_vec(&header).unwrap();
+        let mut crafted = bytes[..12].to_vec();
+        crafted.extend_from_slice(&(h.len() as u32).to_le_bytes());
+        crafted.extend_from_slice(&h);
+        crafted.extend_from_slice(&bytes[16 + hlen..]);
+        std::fs::write(&path, &crafted).unwrap();
+        let err = LrtfTable::load(&path, &lens).err().expect("a lying header must be refused").to_string();
+        assert!(err.contains(&path.display().to_string()), "{err}");
+        assert!(err.contains("size") || err.contains("implausible"), "{err}");
+    }
+    let _ = std::fs::remove_file(&path);
+}
