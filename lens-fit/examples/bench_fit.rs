@@ -54,7 +54,8 @@ fn main() {
         (radii[1].1 * 0.95).max(radii[1].1 * 1.05),
     );
     let t = Instant::now();
-    let manifest_path = write_captures(&dir, "double-gauss-50mm", &truth, &shots, &free, 128, &SynthOptions::default());
+    let manifest_path =
+        write_captures(&dir, "double-gauss-50mm", &truth, &shots, &free, 128, &SynthOptions::default()).unwrap();
     println!("synthesis: 9 captures of 128² px in {:.2} s", t.elapsed().as_secs_f64());
     let manifest = Manifest::load(&manifest_path).unwrap();
     let options = FitOptions { time_limit_s: time_limit, rays, ..Default::default() };

@@ -11,6 +11,7 @@
 //! | `png16` | write 16-bit PNG (values clipped at 65535) instead of EXR | false |
 //! | `hot_pixels` | (x, y, value) set after the noise | none |
 
+use crate::error::{Error, Result};
 use crate::forward::{disc_pattern, land, splat, Aim, Frame, Geometry};
 use crate::manifest::{DistancesFrom, SensorSpec};
 use crate::params::Model;
@@ -82,7 +83,7 @@ impl Default for SynthOptions {
 
 /// Renders `truth` for each shot into `dir` (size × size crops around the spot) and writes
 /// `manifest.toml` starting from the library lens `start` with the `[[free]]` tables `free`.
-/// Returns the manifest's path.
+/// Returns the manifest's path; errors name what could not be rendered or written.
 pub fn write_captures(
     dir: &Path,
     start: &str,
@@ -91,14 +92,14 @@ pub fn write_captures(
     free: &str,
     size: usize,
     options: &SynthOptions,
-) -> PathBuf {
+) -> Result<PathBuf> {
     let sensor = SensorSpec { width_mm: 36.0, height_mm: 24.0, pixels: [6000, 4000] };
     let lens = petzval_optics::Lens::new(
         truth.prescription.clone(),
         &petzval_optics::prescription::SourceMap::new("truth", vec![]),
         None,
-    )
-    .expect("the truth lens builds");
+    )?;
+    let image_err = |path: PathBuf, message: String| Error::Image { path, message };
     let pattern = disc_pattern(options.rays);
     let mut manifest = format!(
         "[lens]\nstart = \"{start}\"\n\n[sensor]\nwidth_mm = 36.0\nheight_mm = 24.0\npixels = [6000, 4000]\n\n"
@@ -106,9 +107,15 @@ pub fn write_captures(
     manifest.push_str(free);
     let mut noise = Noise(options.seed);
     for (i, s) in shots.iter().enumerate() {
-        let l = lens.stopped_down(s.f_number).expect("f-number");
-        let g = Geometry::new(&l, &truth.camera, s.source_m, s.focus_m, DistancesFrom::Sensor).expect("geometry");
-        let aim = Aim::find(&l, g.source_mm, 550.0).expect("the source is in the field");
+        let l = lens.stopped_down(s.f_number)?;
+        let g = Geometry::new(&l, &truth.camera, s.source_m, s.focus_m, DistancesFrom::Sensor)?;
+        let aim = Aim::find(&l, g.source_mm, 550.0).ok_or_else(|| {
+            Error::manifest(
+                dir.display().to_string(),
+                format!("shot {}", i + 1),
+                "the source is outside the lens's field",
+            )
+        })?;
         // where the spot lands on the full sensor: crop around it
         let full = Frame { sensor, crop_origin_px: [0, 0], width: 1, height: 1 };
         let landing = land(&l, &truth.camera, &g, &aim, &pattern, 550.0, &full);
@@ -129,13 +136,13 @@ pub fn write_captures(
             let buf = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(size as u32, size as u32, |x, y| {
                 image::Luma([values[y as usize * size + x as usize].round().clamp(0.0, 65535.0) as u16])
             });
-            buf.save(dir.join(&name)).expect("write PNG");
+            buf.save(dir.join(&name)).map_err(|e| image_err(dir.join(&name), e.to_string()))?;
         } else {
             exr::prelude::write_rgb_file(dir.join(&name), size, size, |x, y| {
                 let v = values[y * size + x] as f32;
                 (v, v, v)
             })
-            .expect("write EXR");
+            .map_err(|e| image_err(dir.join(&name), e.to_string()))?;
         }
         manifest.push_str(&format!(
             "[[capture]]\nimage = \"{name}\"\ncrop_origin_px = [{}, {}]\nsource_m = [{}, {}, {}]\nfocus_m = {}\nf_number = {}\nwavelength_nm = 550\n\n",
@@ -143,6 +150,6 @@ pub fn write_captures(
         ));
     }
     let path = dir.join("manifest.toml");
-    std::fs::write(&path, manifest).expect("write the manifest");
-    path
+    std::fs::write(&path, manifest).map_err(|e| Error::Io { path: path.clone(), source: e })?;
+    Ok(path)
 }

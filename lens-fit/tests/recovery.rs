@@ -2,82 +2,16 @@
 //! uses, photon noise and a dark level) from a library lens with a known perturbation; the fit
 //! starts from the unperturbed lens and must find the perturbation.
 
-use glam::DVec2;
 use petzval_fit::fit::{FitOptions, Problem};
-use petzval_fit::forward::{disc_pattern, land, splat, Aim, Frame, Geometry};
-use petzval_fit::manifest::DistancesFrom;
-use petzval_fit::{solve, CameraParams, Manifest, Model, SensorSpec};
+use petzval_fit::synth::{self, Shot, SynthOptions};
+use petzval_fit::{solve, CameraParams, Manifest, Model};
 use std::path::Path;
 
-/// A deterministic Poisson-ish photon count (normal approximation, Box–Muller on SplitMix).
-struct Noise(u64);
-impl Noise {
-    fn uniform(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn photons(&mut self, mean: f64) -> f64 {
-        let (u1, u2) = (self.uniform().max(1e-300), self.uniform());
-        let g = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
-        (mean + g * mean.max(0.0).sqrt()).max(0.0)
-    }
-}
-
-struct Shot {
-    source_m: [f64; 3],
-    focus_m: f64,
-    f_number: f64,
-}
-
-/// Renders the captures of `truth` into `dir` and writes a manifest fitting `free` from the
+/// Renders `truth`'s captures into `dir` (the shared synthetic renderer, its defaults: 120 000
+/// rays, 20 000-photon peaks, dark level 100) and writes a manifest fitting `free` from the
 /// library lens.
 fn write_captures(dir: &Path, truth: &Model, shots: &[Shot], free: &str, size: usize) -> std::path::PathBuf {
-    let sensor = SensorSpec { width_mm: 36.0, height_mm: 24.0, pixels: [6000, 4000] };
-    let lens = petzval_optics::Lens::new(
-        truth.prescription.clone(),
-        &petzval_optics::prescription::SourceMap::new("truth", vec![]),
-        None,
-    )
-    .unwrap();
-    let pattern = disc_pattern(120_000);
-    let mut manifest = String::from(
-        "[lens]\nstart = \"double-gauss-50mm\"\n\n[sensor]\nwidth_mm = 36.0\nheight_mm = 24.0\npixels = [6000, 4000]\n\n",
-    );
-    manifest.push_str(free);
-    let mut noise = Noise(7);
-    for (i, s) in shots.iter().enumerate() {
-        let l = lens.stopped_down(s.f_number).unwrap();
-        let g = Geometry::new(&l, &truth.camera, s.source_m, s.focus_m, DistancesFrom::Sensor).unwrap();
-        let aim = Aim::find(&l, g.source_mm, 550.0).unwrap();
-        // where the spot lands on the full sensor: crop around it
-        let full = Frame { sensor, crop_origin_px: [0, 0], width: 1, height: 1 };
-        let landing = land(&l, &truth.camera, &g, &aim, &pattern, 550.0, &full);
-        let w: f64 = landing.weights.iter().sum();
-        let c = landing.positions_px.iter().zip(&landing.weights).fold(DVec2::ZERO, |a, (p, wt)| a + *p * *wt) / w;
-        let origin = [(c.x - size as f64 / 2.0).round() as i64 + 1, (c.y - size as f64 / 2.0).round() as i64 - 1];
-        let frame = Frame { sensor, crop_origin_px: origin, width: size, height: size };
-        let landing = land(&l, &truth.camera, &g, &aim, &pattern, 550.0, &frame);
-        let img = splat(&landing, DVec2::ZERO, 0.0, size, size);
-        let peak = img.iter().copied().fold(0.0, f64::max);
-        let dark = 100.0;
-        let values: Vec<f32> = img.iter().map(|v| noise.photons(dark + 20_000.0 * v / peak) as f32).collect();
-        let name = format!("c{:02}.exr", i + 1);
-        exr::prelude::write_rgb_file(dir.join(&name), size, size, |x, y| {
-            let v = values[y * size + x];
-            (v, v, v)
-        })
-        .unwrap();
-        manifest.push_str(&format!(
-            "[[capture]]\nimage = \"{name}\"\ncrop_origin_px = [{}, {}]\nsource_m = [{}, {}, {}]\nfocus_m = {}\nf_number = {}\nwavelength_nm = 550\n\n",
-            origin[0], origin[1], s.source_m[0], s.source_m[1], s.source_m[2], s.focus_m, s.f_number
-        ));
-    }
-    let path = dir.join("manifest.toml");
-    std::fs::write(&path, manifest).unwrap();
-    path
+    synth::write_captures(dir, "double-gauss-50mm", truth, shots, free, size, &SynthOptions::default()).unwrap()
 }
 
 #[test]

@@ -53,7 +53,7 @@ fn clipped_highlights_are_masked_and_the_fit_recovers() {
     let mut truth = nominal();
     truth.camera.sensor_offset_mm = 0.05;
     let synth = SynthOptions { png16: true, peak_photons: 4.0 * 65535.0, ..Default::default() };
-    let manifest = write_captures(&dir, "double-gauss-50mm", &truth, &few_shots(), OFFSET_FREE, 40, &synth);
+    let manifest = write_captures(&dir, "double-gauss-50mm", &truth, &few_shots(), OFFSET_FREE, 40, &synth).unwrap();
     let options = FitOptions { time_limit_s: 8.0, rays: 8192, global_share: 0.0, ..Default::default() };
     let (problem, result, json) = fit(&manifest, &options, &dir.join("report"));
     let offset = value(&result, "sensor.offset_mm");
@@ -93,7 +93,8 @@ fn hot_pixels_are_masked_and_do_not_bias_the_fit() {
         let sub = dir.join(label);
         std::fs::create_dir_all(&sub).unwrap();
         let synth = SynthOptions { hot_pixels: pixels.clone(), ..Default::default() };
-        let manifest = write_captures(&sub, "double-gauss-50mm", &truth, &few_shots(), OFFSET_FREE, 40, &synth);
+        let manifest =
+            write_captures(&sub, "double-gauss-50mm", &truth, &few_shots(), OFFSET_FREE, 40, &synth).unwrap();
         let (problem, result, json) = fit(&manifest, &options, &sub.join("report"));
         for (c, p) in problem.captures.iter().enumerate() {
             assert_eq!(p.image.hot, pixels.len(), "{label} capture {c}: hot pixels masked");
@@ -144,7 +145,8 @@ fn a_start_five_percent_off_on_four_radii_comes_back() {
     }
     shots.push(Shot { source_m: [0.0, 0.0, 1.5], focus_m: 2.0, f_number: 2.8 });
     shots.push(Shot { source_m: [0.2, 0.0, 3.0], focus_m: 2.0, f_number: 4.0 });
-    let manifest = write_captures(&dir, "double-gauss-50mm", &truth, &shots, &free, 48, &SynthOptions::default());
+    let manifest =
+        write_captures(&dir, "double-gauss-50mm", &truth, &shots, &free, 48, &SynthOptions::default()).unwrap();
     let share = std::env::var("FIT_SHARE").ok().and_then(|v| v.parse().ok()).unwrap_or(0.35);
     let options = FitOptions { time_limit_s: 20.0, rays: 16_384, global_share: share, ..Default::default() };
     let (_, result, _) = fit(&manifest, &options, &dir.join("report"));
@@ -181,7 +183,8 @@ fn a_parameter_the_captures_cannot_see_is_not_determined() {
     truth.camera.sensor_offset_mm = 0.05;
     let free = format!("{OFFSET_FREE}[[free]]\nparam = \"aperture.rotation_deg\"\nmin = 0.0\nmax = 60.0\n\n");
     let manifest =
-        write_captures(&dir, "double-gauss-50mm", &truth, &few_shots()[..2], &free, 40, &SynthOptions::default());
+        write_captures(&dir, "double-gauss-50mm", &truth, &few_shots()[..2], &free, 40, &SynthOptions::default())
+            .unwrap();
     let options = FitOptions { time_limit_s: 4.0, rays: 8192, ..Default::default() };
     let (_, result, json) = fit(&manifest, &options, &dir.join("report"));
     let (o, rot) = (value(&result, "sensor.offset_mm"), value(&result, "aperture.rotation_deg"));
