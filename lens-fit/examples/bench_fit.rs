@@ -12,7 +12,7 @@
 
 use petzval_fit::fit::{unscale, FitOptions, Problem};
 use petzval_fit::synth::{write_captures, Shot, SynthOptions};
-use petzval_fit::{solve, CameraParams, Manifest, Model, Param};
+use petzval_fit::{solve, Manifest, Model, Param};
 use std::time::Instant;
 
 fn main() {
@@ -22,7 +22,7 @@ fn main() {
     let dir = std::env::temp_dir().join(format!("petzval-fit-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let lens = petzval_optics::library_lens("double-gauss-50mm").unwrap();
-    let mut truth = Model { prescription: lens.prescription().clone(), camera: CameraParams::default() };
+    let mut truth = Model::new(lens.prescription().clone());
     let radii: Vec<(Param, f64)> = ["surface.3.radius_mm", "surface.7.radius_mm"]
         .iter()
         .map(|n| {

@@ -9,6 +9,7 @@
 //! | `rays` | rays per wavelength per capture | — | 16 384 |
 //! | `footprint_px` | ray footprint on the sensor (0: from the ray density) | px | 0 |
 //! | `global_share` | share of the time for the global stage (0 skips it) | — | 0.35 |
+//! | `local_share` | share of the time for the local stage (0 skips it) | — | 0.3 |
 //! | `global_rays` | rays per wavelength per capture in the global stage (0: `rays / 4`, at least 2048) | — | 0 |
 //!
 //! The whole fit keeps to `time_limit_s`: CRS2 35 %, BOBYQA 30 %, Levenberg–Marquardt computes
@@ -20,11 +21,13 @@
 //! on the measured one; Levenberg–Marquardt then fits the shifts with the parameters.
 
 use crate::captures::{self, CaptureImage};
+use crate::correction::{Basis, Correction};
 use crate::error::{Error, Result};
 use crate::forward::{disc_pattern, land, splat, Aim, Frame, Geometry, Landing};
 use crate::manifest::{Capture, FNumber, FreeParam, Manifest, Wavelength};
 use crate::params::Model;
 use glam::DVec2;
+use petzval_optics::lrtf::{BakeOptions, LrtfTable};
 use petzval_optics::prescription::SourceMap;
 use petzval_optics::Lens;
 use rayon::prelude::*;
@@ -41,6 +44,8 @@ pub struct FitOptions {
     pub footprint_px: f64,
     /// Share of the time for the global stage.
     pub global_share: f64,
+    /// Share of the time for the local stage (0 skips it).
+    pub local_share: f64,
     /// Rays of the global stage (0: from `rays`).
     pub global_rays: usize,
 }
@@ -63,6 +68,7 @@ impl Default for FitOptions {
             rays: crate::forward::DEFAULT_RAYS,
             footprint_px: 0.0,
             global_share: 0.35,
+            local_share: 0.3,
             global_rays: 0,
         }
     }
@@ -104,6 +110,10 @@ pub struct Problem {
     pub pattern: Vec<DVec2>,
     /// Ray footprint.
     pub footprint_px: f64,
+    /// The LRTF correction's normalisation (from the start lens and the sensor).
+    pub basis: Basis,
+    /// How `--lrtf` bakes the fitted table (from `[lens] table`, else 96³ over the sensor).
+    pub table_options: BakeOptions,
 }
 
 /// What one evaluation gives for one capture.
@@ -139,7 +149,7 @@ impl Problem {
     pub fn new(manifest: &Manifest, options: &FitOptions) -> Result<Problem> {
         let file = manifest.file.display().to_string();
         let lens = petzval_optics::load_lens(&manifest.start_lens)?;
-        let mut start = Model { prescription: lens.prescription().clone(), camera: Default::default() };
+        let mut start = Model::new(lens.prescription().clone());
         for (i, f) in manifest.free.iter().enumerate() {
             let field = format!("free[{}].param", i + 1);
             let v = start.get(&f.param).map_err(|m| Error::manifest(&file, &field, m))?;
@@ -154,7 +164,24 @@ impl Problem {
             captures: Vec::new(),
             pattern: disc_pattern(options.rays),
             footprint_px: options.footprint_px,
+            basis: Basis::new(&lens, 0.5 * manifest.sensor.width_mm.hypot(manifest.sensor.height_mm)),
+            table_options: BakeOptions {
+                max_film_radius_mm: 0.5 * manifest.sensor.width_mm.hypot(manifest.sensor.height_mm) * 1.05,
+                ..BakeOptions::default()
+            },
         };
+        if let Some(path) = &manifest.start_table {
+            // the start table must be the start lens's; the output table keeps its sampling
+            let table = LrtfTable::load(path, &lens)
+                .map_err(|e| Error::manifest(&file, "lens.table", format!("{}: {e}", path.display())))?;
+            let h = &table.header;
+            problem.table_options = BakeOptions {
+                resolution: h.resolution,
+                max_film_radius_mm: h.max_film_radius_mm,
+                min_film_distance_mm: None,
+                wavelengths_nm: Some(h.wavelengths_nm.clone()),
+            };
+        }
         let start_lens = problem.build_lens(&problem.start)?;
         for (i, c) in manifest.captures.iter().enumerate() {
             let field = |k: &str| format!("capture[{}] ({}).{k}", i + 1, c.image.display());
@@ -239,10 +266,26 @@ impl Problem {
         Lens::new(model.prescription.clone(), &SourceMap::new(self.source_label.clone(), vec![]), None)
     }
 
+    /// Bakes the film → scene LRTF table of a fitted model: its lens, with the model's
+    /// correction applied to every outgoing ray (see [`crate::correction`]).
+    pub fn bake_lrtf(&self, model: &Model) -> Result<LrtfTable> {
+        let lens = self.build_lens(model)?;
+        let correction = self.correction(model);
+        let map = |r: &petzval_optics::Ray| correction.as_ref().map_or(Some(*r), |c| c.correct_outgoing(r));
+        let map: &petzval_optics::lrtf::OutgoingMap<'_> = &map;
+        Ok(LrtfTable::bake_mapped(&lens, &self.table_options, correction.is_some().then_some(map), &|_| {})?)
+    }
+
+    /// The model's LRTF correction (None when it has none).
+    pub fn correction(&self, model: &Model) -> Option<Correction> {
+        model.has_correction().then_some(Correction { basis: self.basis, coefficients: model.correction })
+    }
+
     /// Where each capture's rays land (per channel) for a model; `None` where the lens cannot
     /// be built or set as the capture asks.
     pub fn landings(&self, model: &Model) -> Option<Vec<Vec<Landing>>> {
         let lens = self.build_lens(model).ok()?;
+        let correction = self.correction(model);
         // captures in parallel (each traces its rays in parallel too); collect keeps the order
         self.captures
             .par_iter()
@@ -260,7 +303,9 @@ impl Problem {
                     p.wavelengths_nm
                         .iter()
                         .zip(&p.aims)
-                        .map(|(wl, aim)| land(&lens, &model.camera, &g, aim, &self.pattern, *wl, &p.frame))
+                        .map(|(wl, aim)| {
+                            land(&lens, &model.camera, correction.as_ref(), &g, aim, &self.pattern, *wl, &p.frame)
+                        })
                         .collect(),
                 )
             })

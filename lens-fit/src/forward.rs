@@ -21,6 +21,7 @@
 //! small square whose overlap with each pixel is integrated exactly, so the model image is a
 //! continuous function of every parameter (no ray jumps between pixels).
 
+use crate::correction::Correction;
 use crate::manifest::{DistancesFrom, SensorSpec};
 use crate::params::CameraParams;
 use glam::{DMat3, DVec2, DVec3};
@@ -163,10 +164,13 @@ pub struct Landing {
     pub weights: Vec<f64>,
 }
 
-/// Traces the fixed pattern from the source through the lens onto the (tilted) sensor.
+/// Traces the fixed pattern from the source through the lens onto the (tilted) sensor; with a
+/// `correction` (LRTF correction mode), through the lens with its outgoing rays corrected.
+#[allow(clippy::too_many_arguments)]
 pub fn land(
     lens: &Lens,
     camera: &CameraParams,
+    correction: Option<&Correction>,
     geometry: &Geometry,
     aim: &Aim,
     pattern: &[DVec2],
@@ -189,8 +193,11 @@ pub fn land(
             let to = target - s;
             let r2 = to.length_squared();
             let cos = to.z / r2.sqrt();
-            let ray = Ray::new(s, to);
-            // 2. Through the lens.
+            // 2. Through the lens (in correction mode: the start-lens ray standing for this one).
+            let ray = match correction {
+                Some(c) if !c.is_zero() => c.uncorrect_incoming(s, to)?,
+                _ => Ray::new(s, to),
+            };
             let out = lens.trace(&ray, wavelength_nm, TraceDirection::SceneToFilm)?;
             // 3. Onto the sensor plane.
             let d = out.ray.direction;

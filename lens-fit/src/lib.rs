@@ -7,14 +7,18 @@
 //!
 //! Stages: [`manifest`] (parse, validate) → [`captures`] (load, mask) → [`forward`] (exact
 //! trace of a fixed pupil pattern onto the sensor) → [`fit`] (the residuals) → [`solve`]
-//! (NLopt CRS2, BOBYQA, Levenberg–Marquardt, uncertainties) → [`report`] (lens file, fit.json,
-//! images). Not built yet: the LRTF correction mode.
+//! (NLopt CRS2, BOBYQA, Levenberg–Marquardt, uncertainties) → [`staged`] (which stages)
+//! → [`report`] (lens file, fit.json,
+//! images).
+//! [`correction`] is the LRTF correction mode: a smooth, rotationally symmetric correction of
+//! the outgoing rays, fitted like any parameter and baked into a corrected table.
 
 // `!(x > 0.0)` is our NaN-rejecting validation: unlike `x <= 0.0` it is also true for NaN, which
 // is exactly what every such check wants (a NaN setting or sample must be refused).
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod captures;
+pub mod correction;
 mod error;
 pub mod fit;
 pub mod forward;
@@ -22,6 +26,7 @@ pub mod manifest;
 pub mod params;
 pub mod report;
 pub mod solve;
+pub mod staged;
 pub mod synth;
 
 pub use error::{Error, Result};

@@ -21,7 +21,8 @@ struct Args {
     /// The fitted lens (our TOML lens format).
     #[arg(short = 'o', long = "output")]
     output: Option<PathBuf>,
-    /// Also bake the fitted lens's LRTF table (film → scene) to this file.
+    /// Also bake the fitted lens's LRTF table (film → scene) to this file, with the fitted
+    /// correction applied when `correction.*` parameters are free (LRTF correction mode).
     #[arg(long)]
     lrtf: Option<PathBuf>,
     /// The report folder (fit.json, a PNG per capture, convergence.svg).
@@ -131,7 +132,7 @@ fn run(args: &Args) -> petzval_fit::Result<()> {
     } else {
         problem.clone()
     };
-    let result = solve::run(&fit_problem, &options);
+    let result = petzval_fit::staged::run(&fit_problem, &options);
     let values: Vec<f64> = result.params.iter().map(|p| p.value).collect();
     let model = fit_problem.model_at(&values).map_err(|m| usage(&m))?;
     let mut result = result;
@@ -165,10 +166,7 @@ fn run(args: &Args) -> petzval_fit::Result<()> {
         report::write_lens(out, &model, &file)?;
         println!("wrote {}", out.display());
         if let Some(lrtf) = &args.lrtf {
-            let lens = fit_problem.build_lens(&model)?;
-            let options = petzval_optics::lrtf::BakeOptions::default();
-            let table = petzval_optics::lrtf::LrtfTable::bake(&lens, &options, &|_| {})?;
-            table.save(lrtf)?;
+            fit_problem.bake_lrtf(&model)?.save(lrtf)?;
             println!("wrote {}", lrtf.display());
         }
     }

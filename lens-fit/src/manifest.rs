@@ -6,6 +6,7 @@
 //! | name | type | unit | default |
 //! |---|---|---|---|
 //! | `start` | library name or lens file (`.toml`, `.zmx`, `.dat`, `FILE.json#ID`) | — | required |
+//! | `table` | the start lens's baked LRTF table (`petzval lrtf bake`); checked against `start`, its resolution, film radius and wavelengths are those of the corrected table `--lrtf` writes | — | none (96³, the sensor's half-diagonal) |
 //!
 //! `[sensor]`:
 //!
@@ -54,6 +55,8 @@ pub struct Manifest {
     pub file: PathBuf,
     /// Where the fit starts.
     pub start_lens: String,
+    /// The start lens's baked LRTF table (`[lens] table`), if given.
+    pub start_table: Option<PathBuf>,
     /// The full sensor.
     pub sensor: SensorSpec,
     /// The fitted parameters, in manifest order.
@@ -180,6 +183,7 @@ struct RawManifest {
 #[serde(deny_unknown_fields)]
 struct RawLens {
     start: String,
+    table: Option<String>,
 }
 
 #[derive(Deserialize)]
@@ -356,6 +360,7 @@ impl Manifest {
         } else {
             raw.lens.start.clone()
         };
-        Ok(Manifest { file: path.to_path_buf(), start_lens, sensor: s, free, captures })
+        let start_table = raw.lens.table.as_deref().map(resolve);
+        Ok(Manifest { file: path.to_path_buf(), start_lens, start_table, sensor: s, free, captures })
     }
 }

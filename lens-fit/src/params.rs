@@ -18,7 +18,9 @@
 //! | `sensor.tilt_x_deg`, `sensor.tilt_y_deg` | f64 | degrees | sensor tilt (the renderer's tilt-shift convention) |
 //! | `sensor.offset_mm` | f64 | mm | the sensor's displacement along the axis from where the focus setting puts it, positive away from the lens |
 //! | `focus.scale` | f64 | — | factor on every capture's `focus_m` |
+//! | `correction.TERM` | f64 | mrad | a coefficient of the LRTF correction (TERM: `defocus`, `scale`, `spherical`, `coma`, `astigmatism`, `field_curvature`, `distortion` nine fifth-order terms, `pupil_scale` (parts per thousand); see [`crate::correction`]) |
 
+use crate::correction::{Coefficients, Term, TERMS, TERM_NAMES};
 use petzval_optics::prescription::{ApertureShapeSpec, MaterialSpec, ModelGlass, Prescription};
 use petzval_optics::Material;
 use std::str::FromStr;
@@ -76,6 +78,8 @@ pub enum Param {
     SensorOffsetMm,
     /// `focus.scale`.
     FocusScale,
+    /// `correction.TERM`: a coefficient of the LRTF correction.
+    Correction(Term),
 }
 
 const SURFACE_FIELDS: [(&str, SurfaceField); 10] = [
@@ -109,10 +113,14 @@ impl FromStr for Param {
         if let Some((_, p)) = OTHER.iter().find(|(n, _)| *n == s) {
             return Ok(*p);
         }
+        if let Some(term) = s.strip_prefix("correction.") {
+            return term.parse().map(Param::Correction).map_err(|m| format!("'{s}': {m}"));
+        }
         let unknown = || {
             format!(
-                "unknown parameter '{s}': expected surface.N.{{{}}} or one of {}",
+                "unknown parameter '{s}': expected surface.N.{{{}}}, correction.{{{}}} or one of {}",
                 SURFACE_FIELDS.map(|(n, _)| n).join(","),
+                TERM_NAMES.map(|(n, _)| n).join(","),
                 OTHER.map(|(n, _)| n).join(", ")
             )
         };
@@ -134,6 +142,7 @@ impl std::fmt::Display for Param {
                 let name = SURFACE_FIELDS.iter().find(|(_, g)| g == field).map(|(n, _)| *n).unwrap_or("?");
                 write!(f, "surface.{index}.{name}")
             }
+            Param::Correction(t) => write!(f, "correction.{}", t.name()),
             other => write!(f, "{}", OTHER.iter().find(|(_, p)| p == other).map(|(n, _)| *n).unwrap_or("?")),
         }
     }
@@ -147,7 +156,19 @@ impl Param {
 
     /// Whether the parameter belongs to the lens (else to the camera around it).
     pub fn is_lens(&self) -> bool {
-        !matches!(self, Param::SensorTiltXDeg | Param::SensorTiltYDeg | Param::SensorOffsetMm | Param::FocusScale)
+        !matches!(
+            self,
+            Param::SensorTiltXDeg
+                | Param::SensorTiltYDeg
+                | Param::SensorOffsetMm
+                | Param::FocusScale
+                | Param::Correction(_)
+        )
+    }
+
+    /// Whether the parameter is a coefficient of the LRTF correction.
+    pub fn is_correction(&self) -> bool {
+        matches!(self, Param::Correction(_))
     }
 }
 
@@ -170,16 +191,29 @@ impl Default for CameraParams {
     }
 }
 
-/// Everything a fit changes: the lens prescription and the camera parameters.
+/// Everything a fit changes: the lens prescription, the camera parameters and the LRTF
+/// correction.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Model {
     /// The lens.
     pub prescription: Prescription,
     /// The camera.
     pub camera: CameraParams,
+    /// Coefficients of the LRTF correction (all zero: none).
+    pub correction: Coefficients,
 }
 
 impl Model {
+    /// A lens with the default camera and no correction.
+    pub fn new(prescription: Prescription) -> Model {
+        Model { prescription, camera: CameraParams::default(), correction: [0.0; TERMS] }
+    }
+
+    /// Whether the model corrects the lens's rays (a correction coefficient is not zero).
+    pub fn has_correction(&self) -> bool {
+        self.correction.iter().any(|c| *c != 0.0)
+    }
+
     fn stop_index(&self) -> Result<usize, String> {
         self.prescription.surfaces.iter().position(|s| s.stop).ok_or_else(|| "the lens has no stop".to_string())
     }
@@ -226,6 +260,7 @@ impl Model {
             Param::SensorTiltYDeg => self.camera.sensor_tilt_y_deg,
             Param::SensorOffsetMm => self.camera.sensor_offset_mm,
             Param::FocusScale => self.camera.focus_scale,
+            Param::Correction(t) => self.correction[t.index()],
         })
     }
 
@@ -294,6 +329,7 @@ impl Model {
             Param::SensorTiltYDeg => self.camera.sensor_tilt_y_deg = value,
             Param::SensorOffsetMm => self.camera.sensor_offset_mm = value,
             Param::FocusScale => self.camera.focus_scale = value,
+            Param::Correction(t) => self.correction[t.index()] = value,
         }
         Ok(())
     }

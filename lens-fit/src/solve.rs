@@ -99,8 +99,10 @@ fn nlopt_stages(
     } else {
         problem.clone()
     };
-    let stages: [(Algorithm, f64, &str); 2] =
-        [(Algorithm::Crs2Lm, options.global_share, "global (CRS2)"), (Algorithm::Bobyqa, 0.3, "local (BOBYQA)")];
+    let stages: [(Algorithm, f64, &str); 2] = [
+        (Algorithm::Crs2Lm, options.global_share, "global (CRS2)"),
+        (Algorithm::Bobyqa, options.local_share, "local (BOBYQA)"),
+    ];
     for (algorithm, share, label) in stages {
         let budget = options.time_limit_s * share;
         if budget <= 0.0 || n == 0 {

@@ -118,12 +118,12 @@ pub fn write_captures(
         })?;
         // where the spot lands on the full sensor: crop around it
         let full = Frame { sensor, crop_origin_px: [0, 0], width: 1, height: 1 };
-        let landing = land(&l, &truth.camera, &g, &aim, &pattern, 550.0, &full);
+        let landing = land(&l, &truth.camera, None, &g, &aim, &pattern, 550.0, &full);
         let w: f64 = landing.weights.iter().sum();
         let c = landing.positions_px.iter().zip(&landing.weights).fold(DVec2::ZERO, |a, (p, wt)| a + *p * *wt) / w;
         let origin = [(c.x - size as f64 / 2.0).round() as i64 + 1, (c.y - size as f64 / 2.0).round() as i64 - 1];
         let frame = Frame { sensor, crop_origin_px: origin, width: size, height: size };
-        let landing = land(&l, &truth.camera, &g, &aim, &pattern, 550.0, &frame);
+        let landing = land(&l, &truth.camera, None, &g, &aim, &pattern, 550.0, &frame);
         let img = splat(&landing, DVec2::ZERO, 0.0, size, size);
         let peak = img.iter().copied().fold(0.0, f64::max);
         let mut values: Vec<f64> =

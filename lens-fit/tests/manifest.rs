@@ -88,7 +88,7 @@ fn bad_manifests_name_the_capture_and_field() {
 #[test]
 fn parameters_read_and_write_the_prescription() {
     let lens = petzval_optics::library_lens("double-gauss-50mm").unwrap();
-    let mut model = Model { prescription: lens.prescription().clone(), camera: CameraParams::default() };
+    let mut model = Model::new(lens.prescription().clone());
     for name in ["surface.3.radius_mm", "surface.1.nd", "surface.4.tilt_y_deg", "stop.position_mm", "focus.scale"] {
         let p: Param = name.parse().unwrap();
         assert_eq!(p.to_string(), name);
@@ -116,7 +116,7 @@ fn a_point_source_images_where_the_lens_says() {
     let image = |lens: &petzval_optics::Lens, source: [f64; 3], focus: f64| {
         let g = Geometry::new(lens, &camera, source, focus, DistancesFrom::Sensor).unwrap();
         let aim = Aim::find(lens, g.source_mm, 550.0).unwrap();
-        let landing = land(lens, &camera, &g, &aim, &pattern, 550.0, &frame);
+        let landing = land(lens, &camera, None, &g, &aim, &pattern, 550.0, &frame);
         splat(&landing, DVec2::ZERO, 1.0, frame.width, frame.height)
     };
     let stats = |img: &[f64]| {

@@ -4,7 +4,7 @@
 
 use petzval_fit::fit::{FitOptions, Problem};
 use petzval_fit::synth::{self, Shot, SynthOptions};
-use petzval_fit::{solve, CameraParams, Manifest, Model};
+use petzval_fit::{solve, Manifest, Model};
 use std::path::Path;
 
 /// Renders `truth`'s captures into `dir` (the shared synthetic renderer, its defaults: 120 000
@@ -19,7 +19,7 @@ fn recovers_a_radius_a_sensor_tilt_and_offset() {
     let dir = std::env::temp_dir().join(format!("petzval-fit-recovery-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let nominal = petzval_optics::library_lens("double-gauss-50mm").unwrap();
-    let mut truth = Model { prescription: nominal.prescription().clone(), camera: CameraParams::default() };
+    let mut truth = Model::new(nominal.prescription().clone());
     let r3: petzval_fit::Param = "surface.3.radius_mm".parse().unwrap();
     let r3_nominal = truth.get(&r3).unwrap();
     truth.set(&r3, r3_nominal * 1.03).unwrap();
@@ -73,7 +73,7 @@ fn the_command_line_fits_reports_and_evaluates() {
     let dir = std::env::temp_dir().join(format!("petzval-fit-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let nominal = petzval_optics::library_lens("double-gauss-50mm").unwrap();
-    let mut truth = Model { prescription: nominal.prescription().clone(), camera: CameraParams::default() };
+    let mut truth = Model::new(nominal.prescription().clone());
     truth.camera.sensor_offset_mm = 0.04;
     let free = "[[free]]\nparam = \"sensor.offset_mm\"\nmin = -0.2\nmax = 0.2\n\n[[free]]\nparam = \"surface.9.tilt_y_deg\"\nmin = -0.5\nmax = 0.5\n\n";
     let fit_dir = dir.join("fit");

@@ -3,7 +3,7 @@
 
 use petzval_fit::fit::{FitOptions, Problem};
 use petzval_fit::synth::{write_captures, Shot, SynthOptions};
-use petzval_fit::{report, solve, CameraParams, Manifest, Model};
+use petzval_fit::{report, solve, Manifest, Model};
 use std::path::{Path, PathBuf};
 
 fn temp_dir(name: &str) -> PathBuf {
@@ -14,7 +14,7 @@ fn temp_dir(name: &str) -> PathBuf {
 
 fn nominal() -> Model {
     let lens = petzval_optics::library_lens("double-gauss-50mm").unwrap();
-    Model { prescription: lens.prescription().clone(), camera: CameraParams::default() }
+    Model::new(lens.prescription().clone())
 }
 
 /// Three in-focus field positions and one defocused capture at f/2.8.

@@ -291,6 +291,10 @@ pub fn exit_sphere(o: DVec3, d: DVec3, centre: DVec3, radius: f64) -> Option<DVe
     (t >= 0.0).then(|| o + d * t)
 }
 
+/// A correction of a lens's outgoing (scene-side) rays, applied while baking
+/// ([`LrtfTable::bake_mapped`]); `None` absorbs the ray.
+pub type OutgoingMap<'a> = dyn Fn(&Ray) -> Option<Ray> + Sync + 'a;
+
 /// Bake options.
 #[derive(Debug, Clone)]
 pub struct BakeOptions {
@@ -361,6 +365,21 @@ impl LrtfTable {
     /// Bakes the table for `lens` (rotationally symmetric lenses only). `progress` gets the
     /// fraction done.
     pub fn bake(lens: &Lens, options: &BakeOptions, progress: &(dyn Fn(f64) + Sync)) -> Result<LrtfTable> {
+        Self::bake_mapped(lens, options, None, progress)
+    }
+
+    /// Bakes the table of `lens` with every outgoing (scene-side) ray passed through
+    /// `outgoing`, a correction of the lens's ray transfer (lens-fit's LRTF correction mode). The
+    /// map must keep rotational symmetry (the table is 3-D) and may return any point on the
+    /// corrected ray's line; `None` absorbs the ray. The header is that of `lens`, so the table
+    /// loads with it; where a lookup is uncertain (a vignetting rim) the renderer traces `lens`
+    /// itself, uncorrected.
+    pub fn bake_mapped(
+        lens: &Lens,
+        options: &BakeOptions,
+        outgoing: Option<&OutgoingMap<'_>>,
+        progress: &(dyn Fn(f64) + Sync),
+    ) -> Result<LrtfTable> {
         if !lens.is_rotationally_symmetric() {
             return Err(Error::Optics(format!(
                 "lens '{}' has cylindrical surfaces or misaligned elements: its ray transfer is not rotationally symmetric, so a 3-D LRTF cannot represent it (use the exact model)",
@@ -477,6 +496,10 @@ impl LrtfTable {
                         let e = &mut out[(ix * ny + iy) * CHANNELS..(ix * ny + iy + 1) * CHANNELS];
                         let u = trace_unclipped(lens, &Ray { origin: p, direction: d.normalize() }, wl);
                         let out_ray = u.ray.and_then(|r| {
+                            let r = match outgoing {
+                                Some(map) => map(&r)?,
+                                None => r,
+                            };
                             Some((
                                 exit_sphere(r.origin, r.direction, DVec3::new(0.0, 0.0, z_front), out_radius)?,
                                 r.direction,
