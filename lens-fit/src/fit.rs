@@ -266,14 +266,14 @@ impl Problem {
         Lens::new(model.prescription.clone(), &SourceMap::new(self.source_label.clone(), vec![]), None)
     }
 
-    /// Bakes the film → scene LRTF table of a fitted model: its lens, with the model's
+    /// Bakes the film → scene LRTF table of a fitted model for `lens` (the fitted lens as written
+    /// to its file, so the table's hash matches what the renderer loads), with the model's
     /// correction applied to every outgoing ray (see [`crate::correction`]).
-    pub fn bake_lrtf(&self, model: &Model) -> Result<LrtfTable> {
-        let lens = self.build_lens(model)?;
+    pub fn bake_lrtf(&self, lens: &Lens, model: &Model) -> Result<LrtfTable> {
         let correction = self.correction(model);
         let map = |r: &petzval_optics::Ray| correction.as_ref().map_or(Some(*r), |c| c.correct_outgoing(r));
         let map: &petzval_optics::lrtf::OutgoingMap<'_> = &map;
-        Ok(LrtfTable::bake_mapped(&lens, &self.table_options, correction.is_some().then_some(map), &|_| {})?)
+        Ok(LrtfTable::bake_mapped(lens, &self.table_options, correction.is_some().then_some(map), &|_| {})?)
     }
 
     /// The model's LRTF correction (None when it has none).

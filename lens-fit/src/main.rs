@@ -166,7 +166,9 @@ fn run(args: &Args) -> petzval_fit::Result<()> {
         report::write_lens(out, &model, &file)?;
         println!("wrote {}", out.display());
         if let Some(lrtf) = &args.lrtf {
-            fit_problem.bake_lrtf(&model)?.save(lrtf)?;
+            // baked for the lens as written (its name and hash are what the renderer loads)
+            let written = petzval_optics::load_lens_file(out)?;
+            fit_problem.bake_lrtf(&written, &model)?.save(lrtf)?;
             println!("wrote {}", lrtf.display());
         }
     }
