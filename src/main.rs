@@ -9,6 +9,7 @@ mod bench;
 mod lens_cmd;
 mod lrtf_cmd;
 mod render_cmd;
+mod signals;
 
 /// Command line.
 #[derive(Parser)]
@@ -47,6 +48,8 @@ fn main() -> ExitCode {
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
+    // Interrupts are handled from the start (a Ctrl-C while the scene loads ends cleanly).
+    signals::install();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Lens { command } => lens_cmd::run(command),

@@ -11,8 +11,6 @@ use petzval_renderer::scene::{demo, gltf, Environment, Scene, SceneCamera};
 use petzval_renderer::shot;
 use petzval_renderer::{Aperture, ApertureShape, Camera, Error, LensModel};
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 use std::time::Duration;
 
 /// Options of `petzval render`.
@@ -152,6 +150,87 @@ fn parse_environment(s: &str, strength: f32) -> Result<Environment, Error> {
     Ok(Environment::Constant(c * strength))
 }
 
+/// Where the outputs go, checked before the render.
+struct Outputs {
+    /// The preview PNG.
+    png: PathBuf,
+    /// Its tone mapping.
+    tone: ToneMap,
+    /// EXR channels beyond RGBA.
+    layers: ExrLayers,
+}
+
+/// The output paths, tone mapping and channels, checked before anything is loaded: the folders
+/// exist, the EXR path is not a PNG and the preview never overwrites the EXR.
+fn check_outputs(args: &RenderArgs) -> Result<Outputs, Error> {
+    let folder_of = |p: &std::path::Path| match p.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let ext = |p: &std::path::Path| p.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+    if ext(&args.output).as_deref() != Some("exr") {
+        return Err(settings_err(
+            "output",
+            format!("'{}' must be an .exr file (the preview PNG goes to --png)", args.output.display()),
+        ));
+    }
+    let png = args.png.clone().unwrap_or_else(|| args.output.with_extension("png"));
+    let same = |a: &std::path::Path, b: &std::path::Path| {
+        let abs = |p: &std::path::Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+        abs(a) == abs(b) || (a.exists() && b.exists() && a.canonicalize().ok() == b.canonicalize().ok())
+    };
+    if !args.no_png && same(&png, &args.output) {
+        return Err(settings_err("png", format!("'{}' is the EXR output itself", png.display())));
+    }
+    let mut paths = vec![("output", args.output.clone())];
+    if !args.no_png {
+        paths.push(("png", png.clone()));
+    }
+    for (field, p) in paths {
+        let dir = folder_of(&p);
+        if !dir.is_dir() {
+            return Err(settings_err(field, format!("the folder '{}' does not exist", dir.display())));
+        }
+        if p.is_dir() {
+            return Err(settings_err(field, format!("'{}' is a folder", p.display())));
+        }
+    }
+    let tone = match args.tonemap.as_str() {
+        "srgb" => ToneMap::Srgb,
+        "filmic" => ToneMap::Filmic,
+        t => return Err(settings_err("tonemap", format!("expected srgb or filmic, got '{t}'"))),
+    };
+    let mut layers = ExrLayers { depth: false, normal: false, albedo: false };
+    for a in args.aovs.split(',').map(str::trim).filter(|a| !a.is_empty()) {
+        match a {
+            "depth" => layers.depth = true,
+            "normal" => layers.normal = true,
+            "albedo" => layers.albedo = true,
+            other => return Err(settings_err("aovs", format!("unknown channel '{other}' (depth, normal, albedo)"))),
+        }
+    }
+    Ok(Outputs { png, tone, layers })
+}
+
+/// The numeric flags, checked before anything is loaded: finite and in range (a NaN or infinite
+/// value would otherwise give a black or infinite image with exit code 0).
+fn check_numbers(args: &RenderArgs) -> Result<(), Error> {
+    let finite_in = |field: &str, v: f64, lo: f64, hi: f64| {
+        if v.is_finite() && v >= lo && v <= hi {
+            Ok(())
+        } else {
+            Err(settings_err(field, format!("must be a number in [{lo}, {hi}], got {v}")))
+        }
+    };
+    finite_in("exposure", args.exposure as f64, -64.0, 64.0)?;
+    finite_in("environment-strength", args.environment_strength as f64, 0.0, 1e6)?;
+    finite_in("filter-width", args.filter_width as f64, 0.0, 16.0)?;
+    if !(args.tolerance.is_finite() && args.tolerance > 0.0) {
+        return Err(settings_err("tolerance", format!("must be a positive number of pixels, got {}", args.tolerance)));
+    }
+    Ok(())
+}
+
 /// The longest `--time-limit` (one year), so the duration is representable.
 const MAX_TIME_LIMIT_S: f64 = 365.0 * 86_400.0;
 
@@ -179,7 +258,9 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         let _ = rayon::ThreadPoolBuilder::new().num_threads(t).build_global();
     }
     let (width, height) = parse_resolution(&args.resolution)?;
-    // Check the settings before loading anything.
+    // Check the settings and outputs before loading anything.
+    let outputs = check_outputs(&args)?;
+    check_numbers(&args)?;
     RenderSettings { width, height, spp: args.spp, max_depth: args.max_depth, ..RenderSettings::default() }
         .validate()?;
     // 1. Scene (file or demo) and the shot's defaults.
@@ -199,13 +280,17 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     let scene_cam: SceneCamera = match &args.camera {
         Some(name) => scene.cameras.iter().find(|c| &c.name == name).cloned().ok_or_else(|| {
             let names: Vec<&str> = scene.cameras.iter().map(|c| c.name.as_str()).collect();
-            camera_err("camera", format!("no camera named '{name}' in the scene (cameras: {})", names.join(", ")))
+            let file = args.scene.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "the demo".into());
+            camera_err(&file, format!("--camera: no camera named '{name}' (cameras: {})", names.join(", ")))
         })?,
         None => scene
             .cameras
             .first()
             .cloned()
-            .ok_or_else(|| camera_err("camera", "the scene has no camera; add one in the glTF file".into()))?,
+            .ok_or_else(|| {
+                let file = args.scene.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "the demo".into());
+                camera_err(&file, "the scene has no camera; add one in the scene file".into())
+            })?,
     };
     let to_world = DAffine3::from_cols_array(&scene_cam.to_world.to_cols_array().map(|v| v as f64));
     let t0 = std::time::Instant::now();
@@ -340,16 +425,7 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         ..RenderSettings::default()
     };
     settings.validate()?;
-    let interrupted = Arc::new(AtomicBool::new(false));
-    {
-        let flag = interrupted.clone();
-        let _ = ctrlc::set_handler(move || {
-            if flag.swap(true, Ordering::SeqCst) {
-                std::process::exit(130);
-            }
-            eprintln!("\ninterrupted: finishing and writing what has converged (Ctrl-C again to quit)");
-        });
-    }
+    crate::signals::enter(crate::signals::Phase::Rendering);
     let bar = ProgressBar::new(1000);
     bar.set_style(
         ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {percent}% ETA {eta}")
@@ -357,10 +433,11 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     );
     let progress = |f: f32| {
         bar.set_position((f * 1000.0) as u64);
-        !interrupted.load(Ordering::Relaxed)
+        !crate::signals::interrupted()
     };
     let result = render(&render_scene, &rig, &settings, &progress)?;
     bar.finish_and_clear();
+    crate::signals::enter(crate::signals::Phase::Writing);
     eprintln!(
         "rendered {}x{} at {} spp in {:.2} s ({}, {:.2} M camera rays/s){}",
         width,
@@ -399,22 +476,12 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         ),
         ("renderSeconds".into(), format!("{:.3}", result.seconds)),
     ];
-    let layers = ExrLayers {
-        depth: args.aovs.contains("depth"),
-        normal: args.aovs.contains("normal"),
-        albedo: args.aovs.contains("albedo"),
-    };
-    write_exr(&args.output, &result.image, layers, &metadata)?;
+    write_exr(&args.output, &result.image, outputs.layers, &metadata)?;
     eprintln!("wrote {}", args.output.display());
     if !args.no_png {
-        let png = args.png.clone().unwrap_or_else(|| args.output.with_extension("png"));
-        let tone = match args.tonemap.as_str() {
-            "srgb" => ToneMap::Srgb,
-            "filmic" => ToneMap::Filmic,
-            t => return Err(settings_err("tonemap", format!("expected srgb or filmic, got '{t}'"))),
-        };
-        write_png(&png, &result.image, args.exposure, tone)?;
-        eprintln!("wrote {}", png.display());
+        write_png(&outputs.png, &result.image, args.exposure, outputs.tone)?;
+        eprintln!("wrote {}", outputs.png.display());
     }
+    crate::signals::finish_writing();
     Ok(())
 }

@@ -6,7 +6,7 @@
   EXR header carries the shot's metadata (parsed here from the OpenEXR header itself, no
   OpenEXR library needed) and its pixels decode completely.
 * `lens list`, `lens info`, `lens draw` work.
-* SIGINT during a render: a complete EXR marked `complete=false...`, no temporary files.
+* SIGINT, SIGTERM or SIGHUP during a render: a complete EXR marked `complete=false...`, no temporary files.
 
 The binary is $PETZVAL_BIN, else target/release/petzval (built with `cargo build --release`
 when missing).
@@ -114,6 +114,18 @@ BAD_RENDER_ARGS = [
     ("zero-sensor", ["--sensor-width", "0"], ["sensor_width_mm"]),
     ("zero-focal-length", ["--lens", "thin", "--focal-length", "0"], ["focal_length_mm"]),
     ("bad-vignetting", ["--natural-vignetting", "maybe"], ["natural_vignetting"]),
+    # issue 12: outputs and numbers checked before the render (they failed after it, or gave
+    # black or infinite images with exit code 0)
+    ("png-is-the-exr", ["-o", "a.exr", "--png", "a.exr"], ["png", "a.exr"]),
+    ("output-is-a-png", ["-o", "x.png"], ["output", "x.png"]),
+    ("missing-output-folder", ["-o", "no-such-folder/x.exr"], ["no-such-folder"]),
+    ("missing-png-folder", ["--png", "no-such-folder/x.png"], ["png", "no-such-folder"]),
+    ("bad-tonemap", ["--tonemap", "sepia"], ["tonemap", "sepia"]),
+    ("unknown-aov", ["--aovs", "depht"], ["aovs", "depht"]),
+    ("nan-exposure", ["--exposure", "nan"], ["exposure"]),
+    ("nan-environment-strength", ["--environment-strength", "nan"], ["environment-strength"]),
+    ("inf-filter-width", ["--filter-width", "inf"], ["filter-width"]),
+    ("nan-tolerance", ["--tolerance", "nan"], ["tolerance"]),
 ]
 
 
@@ -432,7 +444,8 @@ def test_lens_draw_writes_valid_svg(petzval, tmp_path):
 # Interrupting a render.
 
 
-def test_sigint_writes_complete_exr_marked_incomplete(petzval, tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP], ids=["INT", "TERM", "HUP"])
+def test_signal_writes_complete_exr_marked_incomplete(petzval, tmp_path, sig):
     env = dict(os.environ, RUST_BACKTRACE="0")
     proc = subprocess.Popen(
         [str(petzval), "render", "--resolution", "96x64", "--spp", "100000", "--threads", "2"],
@@ -469,7 +482,7 @@ def test_sigint_writes_complete_exr_marked_incomplete(petzval, tmp_path):
         assert started.wait(60), "the render did not start:\n" + "".join(err_lines)
         time.sleep(1.0)
         assert proc.poll() is None, "the render finished before it could be interrupted"
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(sig)
         rc = proc.wait(timeout=60)
     finally:
         if proc.poll() is None:
