@@ -283,14 +283,10 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
             let file = args.scene.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "the demo".into());
             camera_err(&file, format!("--camera: no camera named '{name}' (cameras: {})", names.join(", ")))
         })?,
-        None => scene
-            .cameras
-            .first()
-            .cloned()
-            .ok_or_else(|| {
-                let file = args.scene.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "the demo".into());
-                camera_err(&file, "the scene has no camera; add one in the scene file".into())
-            })?,
+        None => scene.cameras.first().cloned().ok_or_else(|| {
+            let file = args.scene.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "the demo".into());
+            camera_err(&file, "the scene has no camera; add one in the scene file".into())
+        })?,
     };
     let to_world = DAffine3::from_cols_array(&scene_cam.to_world.to_cols_array().map(|v| v as f64));
     let t0 = std::time::Instant::now();
