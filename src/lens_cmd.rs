@@ -127,6 +127,7 @@ pub fn run(cmd: LensCommand) -> Result<(), Error> {
             Ok(())
         }
         LensCommand::Info { lens, json, fstop, focus, wavelength, sensor } => {
+            check_wavelength(wavelength)?;
             let lens = open_lens(&lens, fstop)?;
             let sensor = parse_sensor(&sensor)?;
             let info = petzval_renderer::optics::info::lens_info(&lens, focus, wavelength, sensor)?;
@@ -138,6 +139,7 @@ pub fn run(cmd: LensCommand) -> Result<(), Error> {
             Ok(())
         }
         LensCommand::Export { lens, json, fstop, wavelength } => {
+            check_wavelength(wavelength)?;
             let lens = open_lens(&lens, fstop)?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&export_json(&lens, wavelength)).unwrap_or_default());
@@ -147,6 +149,7 @@ pub fn run(cmd: LensCommand) -> Result<(), Error> {
             Ok(())
         }
         LensCommand::Trace { lens, direction, wavelength, fstop, open_stop } => {
+            check_wavelength(wavelength)?;
             let lens = open_lens(&lens, fstop)?;
             trace_stdin(&lens, direction, wavelength, open_stop)
         }
@@ -290,4 +293,14 @@ fn trace_stdin(lens: &Lens, direction: Direction, wavelength: Option<f64>, open_
         writeln!(out, "{result}").map_err(|e| Error::io("<stdout>", e))?;
     }
     Ok(())
+}
+
+/// `--wavelength`: finite and in the visible range the lens format allows (380–780 nm).
+fn check_wavelength(w: Option<f64>) -> Result<(), Error> {
+    match w {
+        Some(w) if !(w.is_finite() && (380.0..=780.0).contains(&w)) => {
+            Err(Error::settings("wavelength", format!("{w} nm is outside 380..780 nm")))
+        }
+        _ => Ok(()),
+    }
 }

@@ -45,6 +45,12 @@ pub enum LrtfCommand {
 pub fn run(cmd: LrtfCommand) -> Result<(), Error> {
     match cmd {
         LrtfCommand::Bake { lens, output, resolution, max_film_radius, wavelengths, direction } => {
+            if !(max_film_radius.is_finite() && max_film_radius > 0.0 && max_film_radius <= 1000.0) {
+                return Err(Error::settings(
+                    "max-film-radius",
+                    format!("must be a radius in (0, 1000] mm, got {max_film_radius}"),
+                ));
+            }
             let lens = petzval_renderer::load_lens(&lens)?;
             let wavelengths_nm = match wavelengths {
                 None => None,

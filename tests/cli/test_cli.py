@@ -170,6 +170,56 @@ def test_lens_bad_input_fails_cleanly(petzval, tmp_path, args, words):
     assert_clean_failure(r, tmp_path, *words)
 
 
+FLAT_LENS = """[lens]
+name = "flat"
+source = "test"
+[[surface]]
+radius_mm = 0.0
+thickness_mm = THICKNESS
+material = { nd = 1.5, vd = VD }
+semi_diameter_mm = 10.0
+[[surface]]
+radius_mm = RADIUS
+thickness_mm = 5.0
+semi_diameter_mm = 10.0
+stop = true
+"""
+
+
+@pytest.mark.parametrize(
+    "values,args,words",
+    [
+        # issue 12: a lens without power gave NaN focal lengths and wrote a table
+        pytest.param(("5.0", "60.0", "0.0"), ["lens", "info"], ["no optical power"], id="info-no-power"),
+        pytest.param(
+            ("5.0", "60.0", "0.0"), ["lrtf", "bake", "-o", "t.lrtf"], ["no optical power"], id="bake-no-power"
+        ),
+        # the same limits as the .dat importer, and a sane Abbe number
+        pytest.param(("1e12", "60.0", "-50.0"), ["lens", "info"], ["thickness_mm", "implausibly"], id="huge-thickness"),
+        pytest.param(("5.0", "1e-300", "-50.0"), ["lens", "info"], ["vd"], id="tiny-abbe"),
+        pytest.param(
+            ("5.0", "60.0", "-50.0"), ["lens", "info", "--wavelength=-1"], ["wavelength"], id="bad-wavelength"
+        ),
+        pytest.param(
+            ("5.0", "60.0", "-50.0"),
+            ["lrtf", "bake", "--max-film-radius", "nan", "-o", "t.lrtf"],
+            ["max-film-radius"],
+            id="nan-film-radius",
+        ),
+    ],
+)
+def test_bad_lens_files_and_lens_flags_fail_cleanly(petzval, tmp_path, values, args, words):
+    thickness, vd, radius = values
+    text = FLAT_LENS.replace("THICKNESS", thickness).replace("VD", vd).replace("RADIUS", radius)
+    (tmp_path / "corrupt.glb").write_text(text)  # an INPUTS name, so the check below ignores it
+    lens = tmp_path / "lens.toml"
+    lens.write_text(text)
+    cmd = [*args[:2], str(lens), *args[2:]]
+    r = run(petzval, cmd, tmp_path)
+    lens.unlink()
+    assert_clean_failure(r, tmp_path, *words)
+
+
 # ------------------------------------------------------------------------------------------
 # OpenEXR reading (single-part scan-line files, as the `exr` crate writes them).
 

@@ -9,6 +9,7 @@ use serde_json::{json, Value};
 /// First-order data, pupils, field of view and image circle of `lens` focused at `focus_m`
 /// (None = infinity) for a `sensor` (width, height in mm), as `petzval lens info --json` prints.
 pub fn lens_info(lens: &Lens, focus_m: Option<f64>, wavelength: Option<f64>, sensor: (f64, f64)) -> Result<Value> {
+    lens.check_forms_image()?;
     let wl = wavelength.unwrap_or(lens.primary_wavelength_nm());
     let p = paraxial::analyse(lens, wl);
     let image_distance = lens.focus_image_distance_mm(focus_m.map(|m| m * 1e3))?;

@@ -258,6 +258,20 @@ impl Lens {
         Ok(lens.analysed())
     }
 
+    /// Whether the lens forms an image (it has optical power in some meridian): an error
+    /// naming the lens when it does not. A plate or an afocal system traces fine, but nothing
+    /// can be focused, rendered or tabulated through it.
+    pub fn check_forms_image(&self) -> Result<()> {
+        let has_power = |f: f64| f.is_finite() && f.abs() < 1e7;
+        if has_power(self.paraxial.efl_mm) || has_power(self.paraxial.efl_x_mm) {
+            return Ok(());
+        }
+        Err(Error::Optics(format!(
+            "{}: the lens has no optical power (its focal length is infinite): it forms no image",
+            self.source_label
+        )))
+    }
+
     /// This lens with its first-order data computed for its current surfaces and stop: the
     /// last step of every constructor and copy-with-change, so no `Lens` carries stale
     /// paraxial data.

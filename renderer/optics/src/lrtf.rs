@@ -380,6 +380,7 @@ impl LrtfTable {
         outgoing: Option<&OutgoingMap<'_>>,
         progress: &(dyn Fn(f64) + Sync),
     ) -> Result<LrtfTable> {
+        lens.check_forms_image()?;
         if !lens.is_rotationally_symmetric() {
             return Err(Error::Optics(format!(
                 "lens '{}' has cylindrical surfaces or misaligned elements: its ray transfer is not rotationally symmetric, so a 3-D LRTF cannot represent it (use the exact model)",

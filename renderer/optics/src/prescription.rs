@@ -426,6 +426,11 @@ fn check_misalignment(p: &Prescription, i: usize, map: &SourceMap) -> Result<()>
     Ok(())
 }
 
+/// The smallest Abbe number a model glass may have (0 means no dispersion).
+pub const MIN_ABBE: f64 = 5.0;
+/// The largest Abbe number a model glass may have.
+pub const MAX_ABBE: f64 = 1000.0;
+
 /// Checks every field and resolves materials. Geometry checks (intersecting elements) happen
 /// in [`super::lens::Lens::new`], where surface shapes exist.
 pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedSurface>> {
@@ -493,6 +498,16 @@ pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedS
         if s.thickness_mm < 0.0 {
             return Err(map.surface_error(i, "thickness_mm", format!("negative thickness {}", s.thickness_mm)));
         }
+        // the same plausibility limit as the .dat, .zmx and lentil importers
+        for (field, v) in [("thickness_mm", s.thickness_mm), ("semi_diameter_mm", s.semi_diameter_mm)] {
+            if v.abs() > crate::import::MAX_LENGTH_MM {
+                return Err(map.surface_error(
+                    i,
+                    field,
+                    format!("{v} mm is implausibly large (limit {} mm)", crate::import::MAX_LENGTH_MM),
+                ));
+            }
+        }
         if s.semi_diameter_mm <= 0.0 {
             return Err(map.surface_error(
                 i,
@@ -530,8 +545,14 @@ pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedS
                 if !(m.nd.is_finite() && (1.0..=3.0).contains(&m.nd)) {
                     return Err(map.surface_error(i, "material", format!("nd = {} must be in [1, 3]", m.nd)));
                 }
-                if !(m.vd.is_finite() && m.vd >= 0.0) {
-                    return Err(map.surface_error(i, "material", format!("vd = {} must be >= 0", m.vd)));
+                // 0 = no dispersion; real glasses have Abbe numbers of about 15–100, and a tiny
+                // vd would spread the index over the visible range without bound
+                if !(m.vd.is_finite() && (m.vd == 0.0 || (MIN_ABBE..=MAX_ABBE).contains(&m.vd))) {
+                    return Err(map.surface_error(
+                        i,
+                        "material",
+                        format!("vd = {} must be 0 (no dispersion) or in [{MIN_ABBE}, {MAX_ABBE}]", m.vd),
+                    ));
                 }
                 if m.nd == 1.0 {
                     Material::Air

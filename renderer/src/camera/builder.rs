@@ -38,6 +38,9 @@ impl CameraSpec {
 
     /// Builds the camera with the lens already loaded by [`CameraSpec::load_lens`].
     pub(crate) fn build_loaded(&self, lens: SpecLens, shot: &ShotContext) -> Result<BuiltCamera> {
+        if let SpecLens::Real(l) = &lens {
+            l.check_forms_image()?;
+        }
         let (choice, camera) = match self.model {
             LensModel::Auto => choose_model(self, &lens, shot)?,
             m => (ModelChoice::fixed(m), None),

@@ -33,7 +33,7 @@ use crate::surface::Shape;
 
 /// Largest accepted length (radius, thickness, aperture) in a lens table, mm. Anything larger
 /// is a typo or garbage, and would overflow the tracer's arithmetic.
-pub(super) const MAX_LENGTH_MM: f64 = 1.0e7;
+pub(crate) const MAX_LENGTH_MM: f64 = 1.0e7;
 
 /// Which meaning column 2 of a pbrt table has.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
