@@ -384,6 +384,9 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     } else if matches!(model, LensModel::Lrtf { .. }) && args.lrtf_file.is_none() {
         eprintln!("lrtf: table baked in {:.2} s", t0.elapsed().as_secs_f64());
     }
+    for w in &built.warnings {
+        eprintln!("warning: {w}");
+    }
     let (camera, lens_label, focal_mm, f_number) =
         (built.camera, built.lens_label, built.focal_length_mm, built.f_number);
     let rig = CameraRig { camera, to_world };

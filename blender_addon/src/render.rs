@@ -113,8 +113,9 @@ pub(crate) fn render(
             move || -> Outcome {
                 let run = || -> Outcome {
                     let render_scene = RenderScene::new(scene_data)?;
-                    let warnings = render_scene.scene().warnings.clone();
+                    let mut warnings = render_scene.scene().warnings.clone();
                     let built = shot::build_for_scene(&spec, &render_scene, &to_world, width, height, spp, spectral)?;
+                    warnings.extend(built.warnings.iter().cloned());
                     let rig = CameraRig { camera: built.camera, to_world };
                     let settings = RenderSettings {
                         spectral: settings.spectral && rig.camera.is_dispersive(),

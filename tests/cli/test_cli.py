@@ -490,6 +490,17 @@ def test_lens_draw_writes_valid_svg(petzval, tmp_path):
     assert len(drawn) > 10, "expected the elements and a ray fan"
 
 
+def test_fstop_wider_than_the_lens_opens_renders_fully_open(petzval, tmp_path):
+    """Issue 12: as a camera body does, f/1 on a double Gauss whose widest is f/2.03 opens it
+    fully with a warning, and the EXR records the f-number used."""
+    args = ["render", "--lens", "double-gauss-50mm", "--lens-model", "exact", "--fstop", "1.0"]
+    r = run(petzval, [*args, "--resolution", "24x16", "--spp", "1", "-o", "f.exr", "--no-png"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "opens only to f/2.03" in r.stderr, r.stderr
+    meta, _ = read_exr(tmp_path / "f.exr")
+    assert abs(float(meta["petzval/fNumber"]) - 2.03) < 0.01, meta["petzval/fNumber"]
+
+
 # ------------------------------------------------------------------------------------------
 # Interrupting a render.
 

@@ -477,6 +477,17 @@ impl Lens {
         self.with_stop_semi_diameter(r.min(max))
     }
 
+    /// A copy stopped to `f_number`, or fully open when the lens cannot open that wide (as a
+    /// camera body does); the flag says it was opened fully instead.
+    pub fn stopped_down_or_open(&self, f_number: f64) -> Result<(Lens, bool)> {
+        let r = paraxial::stop_radius_for_f_number(self, f_number)?;
+        let max = self.max_stop_semi_diameter_mm();
+        if r > max * (1.0 + 1e-9) {
+            return Ok((self.with_stop_semi_diameter(max)?, true));
+        }
+        Ok((self.with_stop_semi_diameter(r)?, false))
+    }
+
     /// A copy with a different stop shape.
     pub fn with_aperture(&self, aperture: Aperture) -> Lens {
         let mut lens = self.clone();

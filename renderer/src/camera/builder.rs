@@ -27,6 +27,8 @@ pub struct BuiltCamera {
     pub f_number: f64,
     /// The model used and why.
     pub choice: ModelChoice,
+    /// What the build changed from the request (an f-number wider than the lens opens).
+    pub warnings: Vec<String>,
 }
 
 impl CameraSpec {
@@ -54,6 +56,14 @@ impl CameraSpec {
             SpecLens::Ideal => ("thin".to_string(), self.focal_length_mm, self.f_number.unwrap_or(f64::INFINITY)),
             SpecLens::Real(l) => (l.name().to_string(), l.paraxial().efl_mm, l.paraxial().f_number),
         };
-        Ok(BuiltCamera { camera, lens_label, focal_length_mm, f_number, choice })
+        let mut warnings = Vec::new();
+        if let (SpecLens::Real(_), Some(asked)) = (&lens, self.f_number) {
+            if f_number > asked * (1.0 + 1e-6) {
+                warnings.push(format!(
+                    "lens '{lens_label}' opens only to f/{f_number:.3}: rendering fully open (f/{asked} was asked)"
+                ));
+            }
+        }
+        Ok(BuiltCamera { camera, lens_label, focal_length_mm, f_number, choice, warnings })
     }
 }

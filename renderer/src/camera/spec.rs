@@ -201,7 +201,8 @@ impl CameraSpec {
         }
         let mut lens = load_lens(&self.lens)?;
         if let Some(n) = self.f_number {
-            lens = lens.stopped_down(n)?;
+            // wider than the lens opens: fully open, as a camera body does (the build warns)
+            lens = lens.stopped_down_or_open(n)?.0;
         }
         if let Some(a) = &self.aperture {
             lens = lens.with_aperture(a.clone());
