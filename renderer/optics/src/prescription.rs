@@ -426,6 +426,9 @@ fn check_misalignment(p: &Prescription, i: usize, map: &SourceMap) -> Result<()>
     Ok(())
 }
 
+/// The longest length (thickness, semi-diameter) a lens file may give, in mm (every format).
+pub const MAX_LENGTH_MM: f64 = 1.0e7;
+
 /// The smallest Abbe number a model glass may have (0 means no dispersion).
 pub const MIN_ABBE: f64 = 5.0;
 /// The largest Abbe number a model glass may have.
@@ -500,11 +503,11 @@ pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedS
         }
         // the same plausibility limit as the .dat, .zmx and lentil importers
         for (field, v) in [("thickness_mm", s.thickness_mm), ("semi_diameter_mm", s.semi_diameter_mm)] {
-            if v.abs() > crate::import::MAX_LENGTH_MM {
+            if v.abs() > MAX_LENGTH_MM {
                 return Err(map.surface_error(
                     i,
                     field,
-                    format!("{v} mm is implausibly large (limit {} mm)", crate::import::MAX_LENGTH_MM),
+                    format!("{v} mm is implausibly large (limit {} mm)", MAX_LENGTH_MM),
                 ));
             }
         }

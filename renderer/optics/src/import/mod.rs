@@ -12,7 +12,6 @@ mod pbrt;
 mod zemax;
 
 pub use lentil::import_lentil;
-pub(crate) use pbrt::MAX_LENGTH_MM;
 pub use pbrt::{import_pbrt, import_pbrt_axpos};
 pub use zemax::import_zemax;
 

@@ -31,9 +31,9 @@ use crate::error::{Error, Result};
 use crate::prescription::{LensMeta, MaterialSpec, ModelGlass, Prescription, SourceMap, SurfaceSpec};
 use crate::surface::Shape;
 
-/// Largest accepted length (radius, thickness, aperture) in a lens table, mm. Anything larger
-/// is a typo or garbage, and would overflow the tracer's arithmetic.
-pub(crate) const MAX_LENGTH_MM: f64 = 1.0e7;
+// Largest accepted length (radius, thickness, aperture) in a lens table, mm: anything larger is
+// a typo or garbage, and would overflow the tracer's arithmetic (shared by every format).
+pub(super) use crate::prescription::MAX_LENGTH_MM;
 
 /// Which meaning column 2 of a pbrt table has.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
