@@ -39,7 +39,7 @@ use std::path::Path;
 /// File magic.
 const MAGIC: &[u8; 8] = b"PZLRTF\0\0";
 /// File format version.
-pub const LRTF_VERSION: u32 = 1;
+pub const LRTF_VERSION: u32 = 2;
 /// Boundary cells whose interpolated margin lies within this fraction of their corners' margin
 /// spread around zero are traced exactly. Measured for double-gauss-50mm at 96³ (camera rays,
 /// `bench lens-models`): 0.1 → 1.9 % traced exactly, 0.035 % misclassified; 0.05 → 0.9 %,
@@ -84,6 +84,42 @@ pub struct LrtfHeader {
     pub max_film_radius_mm: f64,
     /// Nearest film distance behind the dome centre the table covers.
     pub min_film_distance_mm: f64,
+    /// FNV-1a 64 of the table data as stored (little-endian f32s after the header); set by
+    /// [`LrtfTable::save`], checked by [`LrtfTable::load`] (format version 2).
+    pub data_checksum: u64,
+}
+
+impl LrtfHeader {
+    /// The checks every table passes before it is written and after it is read: sizes in range,
+    /// geometry finite and positive where it must be, wavelengths visible.
+    fn check(&self) -> std::result::Result<(), String> {
+        let (n, ny, nw) = (self.resolution as usize, self.resolution_y as usize, self.wavelengths_nm.len());
+        if n < 2 || ny < 2 || nw == 0 || n > 4096 || ny > 4096 || nw > 64 {
+            return Err(format!("implausible table size in the header ({nw} wavelengths × {n}² × {ny})"));
+        }
+        if let Some(w) = self.wavelengths_nm.iter().find(|w| !(w.is_finite() && (300.0..=1000.0).contains(*w))) {
+            return Err(format!("wavelength {w} nm in the header is outside 300..1000 nm"));
+        }
+        for (field, v, positive) in [
+            ("in_base_z_mm", self.in_base_z_mm, false),
+            ("in_base_radius_mm", self.in_base_radius_mm, true),
+            ("in_centre_z_mm", self.in_centre_z_mm, false),
+            ("in_radius_mm", self.in_radius_mm, true),
+            ("s_max", self.s_max, true),
+            ("out_centre_z_mm", self.out_centre_z_mm, false),
+            ("out_radius_mm", self.out_radius_mm, true),
+            ("max_film_radius_mm", self.max_film_radius_mm, true),
+            ("min_film_distance_mm", self.min_film_distance_mm, true),
+        ] {
+            if !v.is_finite() || (positive && !(v > 0.0)) {
+                return Err(format!(
+                    "header field {field} = {v} must be finite{}",
+                    if positive { " and positive" } else { "" }
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// A baked table.
@@ -475,6 +511,7 @@ impl LrtfTable {
             out_radius_mm: out_radius,
             max_film_radius_mm: options.max_film_radius_mm,
             min_film_distance_mm: min_film,
+            data_checksum: 0,
         };
         // 3. Trace every entry (rows of u in parallel).
         let (n, ny) = (n as usize, ny as usize);
@@ -744,16 +781,25 @@ impl LrtfTable {
 
     /// Writes the table (temporary file, then rename).
     pub fn save(&self, path: &Path) -> Result<()> {
-        let header = serde_json::to_vec(&self.header).map_err(|e| Error::io(path, std::io::Error::other(e)))?;
+        // validated before anything is written: a table this build cannot read is never saved
+        let bad = |m: String| Error::Optics(format!("{}: not written: {m}", path.display()));
+        self.header.check().map_err(bad)?;
         let data = self.entries();
-        let mut buf = Vec::with_capacity(16 + header.len() + data.len() * 4);
+        if data.iter().any(|v| !v.is_finite()) {
+            return Err(bad("non-finite values in the table".into()));
+        }
+        let mut bytes = Vec::with_capacity(data.len() * 4);
+        for v in &data {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+        let header = LrtfHeader { data_checksum: fnv1a64(&bytes), ..self.header.clone() };
+        let header = serde_json::to_vec(&header).map_err(|e| Error::io(path, std::io::Error::other(e)))?;
+        let mut buf = Vec::with_capacity(16 + header.len() + bytes.len());
         buf.extend_from_slice(MAGIC);
         buf.extend_from_slice(&LRTF_VERSION.to_le_bytes());
         buf.extend_from_slice(&(header.len() as u32).to_le_bytes());
         buf.write_all(&header).map_err(|e| Error::io(path, e))?;
-        for v in &data {
-            buf.extend_from_slice(&v.to_le_bytes());
-        }
+        buf.extend_from_slice(&bytes);
         crate::write_atomic(path, &buf)
     }
 
@@ -783,10 +829,8 @@ impl LrtfTable {
                 lens.name()
             )));
         }
+        header.check().map_err(bad)?;
         let (n, ny, nw) = (header.resolution as usize, header.resolution_y as usize, header.wavelengths_nm.len());
-        if n < 2 || ny < 2 || nw == 0 || n > 4096 || ny > 4096 || nw > 64 {
-            return Err(bad("implausible table size in the header".into()));
-        }
         // sizes from the file: multiply without overflow, and compare with what is there
         let count = [n, n, ny, CHANNELS, 4].iter().try_fold(nw, |a, b| a.checked_mul(*b));
         let data_bytes = bytes.len() - hend;
@@ -794,6 +838,9 @@ impl LrtfTable {
             return Err(bad(format!(
                 "the header's table size ({nw} wavelengths × {n}² × {ny}) does not match the {data_bytes} bytes of table data"
             )));
+        }
+        if fnv1a64(&bytes[hend..]) != header.data_checksum {
+            return Err(bad("the table data does not match its checksum (the file is corrupted)".into()));
         }
         let data: Vec<f32> =
             bytes[hend..].chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();

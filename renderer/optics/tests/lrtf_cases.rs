@@ -348,3 +348,44 @@ fn a_header_that_lies_about_the_size_is_refused() {
     }
     let _ = std::fs::remove_file(&path);
 }
+
+/// A corrupted table (one flipped byte of data, a header field made NaN, or a table whose
+/// header would not read back) is refused on load, and a table that could not be read back is
+/// never written (issue 12: a corrupted header rendered black; `lrtf bake` wrote unreadable
+/// tables).
+#[test]
+fn corrupted_tables_are_refused_and_unreadable_ones_never_written() {
+    let lens = library_lens("double-gauss-50mm").unwrap();
+    let table = bake(&lens, 8);
+    let path = std::env::temp_dir().join(format!("petzval-lrtf-sum-{}.lrtf", std::process::id()));
+    table.save(&path).unwrap();
+    LrtfTable::load(&path, &lens).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    // 1. One flipped bit in the data.
+    let mut flipped = bytes.clone();
+    let k = flipped.len() - 100;
+    flipped[k] ^= 0x10;
+    std::fs::write(&path, &flipped).unwrap();
+    let err = LrtfTable::load(&path, &lens).map(|_| ()).unwrap_err().to_string();
+    assert!(err.contains("checksum"), "{err}");
+    // 2. A NaN geometry field in the header.
+    let hlen = u32::from_le_bytes([bytes[12], bytes[13], bytes[14], bytes[15]]) as usize;
+    let text = String::from_utf8(bytes[16..16 + hlen].to_vec()).unwrap();
+    let mut header: serde_json::Value = serde_json::from_str(&text).unwrap();
+    header["out_radius_mm"] = (-1.0).into();
+    let h = serde_json::to_vec(&header).unwrap();
+    let mut crafted = bytes[..12].to_vec();
+    crafted.extend_from_slice(&(h.len() as u32).to_le_bytes());
+    crafted.extend_from_slice(&h);
+    crafted.extend_from_slice(&bytes[16 + hlen..]);
+    std::fs::write(&path, &crafted).unwrap();
+    let err = LrtfTable::load(&path, &lens).map(|_| ()).unwrap_err().to_string();
+    assert!(err.contains("out_radius_mm"), "{err}");
+    // 3. Saving a table whose header is invalid writes nothing.
+    std::fs::remove_file(&path).unwrap();
+    let mut broken = table.clone();
+    broken.header.max_film_radius_mm = f64::NAN;
+    let err = broken.save(&path).unwrap_err().to_string();
+    assert!(err.contains("not written") && err.contains("max_film_radius_mm"), "{err}");
+    assert!(!path.exists(), "an invalid table was written");
+}
