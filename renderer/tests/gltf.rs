@@ -352,3 +352,37 @@ fn gltf_truncated_and_mutated_inputs_never_panic() {
         }
     }
 }
+
+/// Issue 12: a buffer URI naming a device (here /dev/zero, which never ends) or a folder is
+/// refused instead of read without bound; a buffer file longer than its byteLength is read only
+/// up to it.
+#[test]
+fn buffer_uris_naming_devices_or_folders_are_refused() {
+    let dir = std::env::temp_dir().join(format!("petzval-gltf-uri-{}", std::process::id()));
+    std::fs::create_dir_all(dir.join("folder")).unwrap();
+    let gltf = |uri: &str| {
+        format!(
+            r#"{{"asset":{{"version":"2.0"}},"buffers":[{{"uri":"{uri}","byteLength":36}}],
+            "bufferViews":[{{"buffer":0,"byteLength":36}}],
+            "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}}],
+            "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}}}}]}}],"nodes":[{{"mesh":0}}],"scenes":[{{"nodes":[0]}}]}}"#
+        )
+    };
+    for (uri, words) in [("/dev/zero", "not a regular file"), ("folder", "not a regular file")] {
+        let path = dir.join("scene.gltf");
+        std::fs::write(&path, gltf(uri)).unwrap();
+        let err = load_gltf(&path).map(|_| ()).unwrap_err().to_string();
+        assert!(err.contains(words) && err.contains("buffer"), "{uri}: {err}");
+    }
+    // a buffer file with more bytes than byteLength: the triangle loads from the first 36
+    let mut bytes = Vec::new();
+    for v in [0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0] {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    bytes.extend(std::iter::repeat_n(0u8, 1 << 20));
+    std::fs::write(dir.join("long.bin"), &bytes).unwrap();
+    std::fs::write(dir.join("scene.gltf"), gltf("long.bin")).unwrap();
+    let scene = load_gltf(&dir.join("scene.gltf")).unwrap();
+    assert_eq!(scene.meshes.iter().map(|m| m.indices.len()).sum::<usize>(), 1, "one triangle");
+    let _ = std::fs::remove_dir_all(&dir);
+}

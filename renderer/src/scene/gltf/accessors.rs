@@ -5,11 +5,17 @@ use crate::Result;
 use gltf::accessor::{DataType, Dimensions};
 use std::path::PathBuf;
 
+/// The largest image file a glTF scene may reference (the decoder's own limits guard the pixels).
+pub(super) const MAX_IMAGE_FILE_BYTES: u64 = 1 << 30;
+
 impl Loader<'_> {
     // ---------------------------------------------------------------- buffers and images
 
     /// Reads a URI: a data URI (base64) or a file relative to the glTF file.
-    pub(super) fn read_uri(&self, uri: &str) -> std::result::Result<Vec<u8>, String> {
+    /// The bytes a URI names: data URIs, or regular files (a device, pipe or folder is refused).
+    /// At most `max_bytes` are read: a longer file is cut there when `truncate` (a buffer, of
+    /// which only byteLength counts), else refused (an image).
+    pub(super) fn read_uri(&self, uri: &str, max_bytes: u64, truncate: bool) -> std::result::Result<Vec<u8>, String> {
         if let Some(rest) = uri.strip_prefix("data:") {
             let (_, data) = rest.split_once(";base64,").ok_or("data URI is not base64")?;
             return base64_decode(data).ok_or_else(|| "data URI has invalid base64".to_string());
@@ -22,7 +28,23 @@ impl Loader<'_> {
             let base = self.base.ok_or("external file references need a base directory")?;
             base.join(percent_decode(uri))
         };
-        std::fs::read(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))
+        let meta = std::fs::metadata(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        if !meta.is_file() {
+            return Err(format!("{} is not a regular file (a device, pipe or folder)", path.display()));
+        }
+        if meta.len() > max_bytes && !truncate {
+            return Err(format!("{} is {} bytes, more than the {max_bytes}-byte limit", path.display(), meta.len()));
+        }
+        let mut data = Vec::with_capacity(meta.len().min(max_bytes) as usize);
+        std::io::Read::read_to_end(
+            &mut std::io::Read::take(
+                std::fs::File::open(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?,
+                max_bytes,
+            ),
+            &mut data,
+        )
+        .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        Ok(data)
     }
 
     pub(super) fn load_buffers(&mut self, mut blob: Option<Vec<u8>>) -> Result<()> {
@@ -34,7 +56,10 @@ impl Loader<'_> {
                 gltf::buffer::Source::Bin => {
                     blob.take().ok_or_else(|| self.error(&loc, "refers to the GLB binary chunk, which is missing"))?
                 }
-                gltf::buffer::Source::Uri(uri) => self.read_uri(uri).map_err(|m| self.error(&loc, m))?,
+                gltf::buffer::Source::Uri(uri) => {
+                    // only what byteLength declares is read (the rest would be dropped anyway)
+                    self.read_uri(uri, b.length() as u64, true).map_err(|m| self.error(&loc, m))?
+                }
             };
             if data.len() < b.length() {
                 return Err(self.error(

@@ -22,7 +22,7 @@ impl Loader<'_> {
             let view = self.doc.views().nth(view.value()).ok_or("no such bufferView")?;
             self.view_bytes(&view)?.to_vec()
         } else if let Some(uri) = &json.uri {
-            self.read_uri(uri)?
+            self.read_uri(uri, super::accessors::MAX_IMAGE_FILE_BYTES, false)?
         } else {
             return Err("image has neither uri nor bufferView".into());
         };
