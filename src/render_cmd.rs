@@ -18,7 +18,8 @@ use std::time::Duration;
 /// Options of `petzval render`.
 #[derive(Args, Debug)]
 pub struct RenderArgs {
-    /// Scene file (.gltf or .glb). Without one, the built-in demo is rendered.
+    /// Scene file (.gltf, .glb, or a USD shot: .usd, .usda, .usdc, .usdz). Without one, the
+    /// built-in demo is rendered.
     pub scene: Option<PathBuf>,
     /// Output EXR file.
     #[arg(short, long, default_value = "render.exr")]
@@ -85,9 +86,12 @@ pub struct RenderArgs {
     /// Stop after this many seconds (the last pass finishes first).
     #[arg(long)]
     pub time_limit: Option<f64>,
-    /// Scene camera by name (default: the first).
+    /// Scene camera by name, or a USD camera prim path (default: the first).
     #[arg(long)]
     pub camera: Option<String>,
+    /// USD time code to render (default: the stage's startTimeCode, else the default values).
+    #[arg(long, allow_hyphen_values = true)]
+    pub frame: Option<f64>,
     /// Environment: R,G,B radiance or an equirectangular .exr.
     #[arg(long)]
     pub environment: Option<String>,
@@ -183,8 +187,24 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     RenderSettings { width, height, spp: args.spp, max_depth: args.max_depth, ..RenderSettings::default() }
         .validate()?;
     // 1. Scene (file or demo) and the shot's defaults.
+    let mut usd_cam: Option<(String, petzval_usd::UsdCamera, Option<f64>)> = None;
     let (mut scene, demo_shot): (Scene, Option<demo::DemoShot>) = match &args.scene {
-        Some(path) => (gltf::load_gltf(path)?, None),
+        Some(path) if petzval_usd::is_usd_path(path) => {
+            let usd_err = |e: petzval_usd::Error| match e {
+                petzval_usd::Error::Renderer(e) => e,
+                e => Error::scene(path.display().to_string(), "", e.to_string()),
+            };
+            let shot = petzval_usd::load(path, args.frame).map_err(usd_err)?;
+            let cam = shot.camera(args.camera.as_deref()).map_err(usd_err)?.clone();
+            usd_cam = Some((shot.file.clone(), cam, shot.time));
+            (shot.scene, None)
+        }
+        Some(path) => {
+            if args.frame.is_some() {
+                return Err(settings_err("frame", "--frame applies to USD shots only".into()));
+            }
+            (gltf::load_gltf(path)?, None)
+        }
         None => {
             let (s, shot) = demo::demo_scene();
             (s, Some(shot))
@@ -196,18 +216,29 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     if let Some(env) = &args.environment {
         scene.environment = parse_environment(env, args.environment_strength)?;
     }
-    let scene_cam: SceneCamera = match &args.camera {
-        Some(name) => scene.cameras.iter().find(|c| &c.name == name).cloned().ok_or_else(|| {
+    let scene_cam: SceneCamera = match (&args.camera, &usd_cam) {
+        (_, Some((_, c, _))) => SceneCamera {
+            name: c.path.clone(),
+            to_world: glam::Affine3A::from_mat4(c.to_world.as_mat4()),
+            yfov_rad: 0.5,
+            aspect_ratio: None,
+            znear: c.clipping_range_m.0 as f32,
+            zfar: Some(c.clipping_range_m.1 as f32),
+        },
+        (Some(name), None) => scene.cameras.iter().find(|c| &c.name == name).cloned().ok_or_else(|| {
             let names: Vec<&str> = scene.cameras.iter().map(|c| c.name.as_str()).collect();
             camera_err("camera", format!("no camera named '{name}' in the scene (cameras: {})", names.join(", ")))
         })?,
-        None => scene
+        (None, None) => scene
             .cameras
             .first()
             .cloned()
             .ok_or_else(|| camera_err("camera", "the scene has no camera; add one in the glTF file".into()))?,
     };
-    let to_world = DAffine3::from_cols_array(&scene_cam.to_world.to_cols_array().map(|v| v as f64));
+    let to_world = match &usd_cam {
+        Some((_, c, _)) => DAffine3::from_mat4(c.to_world),
+        None => DAffine3::from_cols_array(&scene_cam.to_world.to_cols_array().map(|v| v as f64)),
+    };
     let t0 = std::time::Instant::now();
     let render_scene = RenderScene::new(scene)?;
     eprintln!("scene: {} triangles, BVH built in {:.2} s", render_scene.triangle_count(), t0.elapsed().as_secs_f64());
@@ -240,6 +271,9 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         (Some(f), _) => Some(f),
         (None, _) if args.focus.is_some() => None,
         (None, Some(d)) => Some(d.focus_distance_m),
+        (None, None) if usd_cam.as_ref().is_some_and(|u| u.1.focus_distance_m.is_some()) => {
+            usd_cam.as_ref().and_then(|u| u.1.focus_distance_m)
+        }
         (None, None) => {
             let f = shot::autofocus_m(&render_scene, &to_world);
             match f {
@@ -263,20 +297,28 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         Some(f) => f,
         None => host::focal_length_from_yfov_mm(scene_cam.yfov_rad as f64, width, height, &sensor)?,
     };
-    let host_camera = HostCamera {
-        lens: lens_name.clone(),
-        lens_model: model,
-        tolerance_px: args.tolerance,
-        focal_length_mm,
-        film_back,
-        tilt_deg,
-        f_number: if lens_name == "thin" { Some(fstop.unwrap_or(2.8)) } else { fstop },
-        focus_distance_m: focus_m,
-        aperture: aperture.clone(),
-        clip_m: (0.0, f64::INFINITY),
-        natural_vignetting: vignetting,
-        lrtf_file: args.lrtf_file.clone(),
+    let usd_host = match &usd_cam {
+        Some((_, c, _)) => Some(usd_host_camera(c, &args, focus_m)?),
+        None => None,
     };
+    let host_camera = match usd_host {
+        Some(h) => h,
+        None => HostCamera {
+            lens: lens_name.clone(),
+            lens_model: model,
+            tolerance_px: args.tolerance,
+            focal_length_mm,
+            film_back,
+            tilt_deg,
+            f_number: if lens_name == "thin" { Some(fstop.unwrap_or(2.8)) } else { fstop },
+            focus_distance_m: focus_m,
+            aperture: aperture.clone(),
+            clip_m: (0.0, f64::INFINITY),
+            natural_vignetting: vignetting,
+            lrtf_file: args.lrtf_file.clone(),
+        },
+    };
+    let model = host_camera.lens_model;
     let spec = host_camera.camera_spec(width, height)?;
     // 4. The camera: auto picks the cheapest model within the error budget for this shot.
     let t0 = std::time::Instant::now();
@@ -332,6 +374,8 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         max_depth: args.max_depth,
         spectral,
         time_limit: args.time_limit.map(Duration::from_secs_f64),
+        clip_start_m: host_camera.clip_m.0,
+        clip_end_m: host_camera.clip_m.1,
         filter: if args.filter_width > 0.0 {
             PixelFilter::BlackmanHarris { width_px: 2.0 * args.filter_width }
         } else {
@@ -399,6 +443,12 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         ),
         ("renderSeconds".into(), format!("{:.3}", result.seconds)),
     ];
+    let mut metadata = metadata;
+    if let Some((file, c, time)) = &usd_cam {
+        metadata.push(("usdShot".into(), file.clone()));
+        metadata.push(("usdCamera".into(), c.path.clone()));
+        metadata.push(("usdFrame".into(), time.map(|t| t.to_string()).unwrap_or_else(|| "default".into())));
+    }
     let layers = ExrLayers {
         depth: args.aovs.contains("depth"),
         normal: args.aovs.contains("normal"),
@@ -417,4 +467,48 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         eprintln!("wrote {}", png.display());
     }
     Ok(())
+}
+
+/// The USD camera prim's host camera with the command line's explicit options on top
+/// (`--lens`, `--lens-model` other than auto, `--fstop`, `--focus`, `--focal-length`,
+/// non-zero `--tilt-*`/`--shift-*`, `--aperture`, `--lrtf-file`, `--tolerance` other than
+/// 0.25). Without a focus distance on the prim, `focus_m` (the autofocus) is used.
+fn usd_host_camera(c: &petzval_usd::UsdCamera, args: &RenderArgs, focus_m: Option<f64>) -> Result<HostCamera, Error> {
+    let mut h = c.host_camera().map_err(|e| match e {
+        petzval_usd::Error::Renderer(e) => e,
+        e => camera_err("usd", e.to_string()),
+    })?;
+    if let Some(l) = &args.lens {
+        h.lens = l.clone();
+    }
+    if args.lens_model != "auto" {
+        h.lens_model = args.lens_model.parse()?;
+    }
+    if args.lrtf_file.is_some() {
+        h.lrtf_file = args.lrtf_file.clone();
+        if h.lens_model == LensModel::Auto {
+            h.lens_model = LensModel::Lrtf { resolution: petzval_renderer::camera::DEFAULT_LRTF_RESOLUTION };
+        }
+    }
+    if args.tolerance != 0.25 {
+        h.tolerance_px = args.tolerance;
+    }
+    if args.fstop.is_some() {
+        h.f_number = args.fstop;
+    }
+    h.focus_distance_m = focus_m;
+    if let Some(f) = args.focal_length {
+        h.focal_length_mm = f;
+    }
+    if args.tilt_x != 0.0 || args.tilt_y != 0.0 {
+        h.tilt_deg = DVec2::new(args.tilt_x, args.tilt_y);
+    }
+    if args.shift_x != 0.0 || args.shift_y != 0.0 {
+        h.film_back.shift = Shift::Mm(DVec2::new(args.shift_x, args.shift_y));
+    }
+    if let Some(a) = &args.aperture {
+        h.aperture = Some(host::parse_aperture(a)?);
+    }
+    h.natural_vignetting = host::parse_on_off("natural_vignetting", &args.natural_vignetting)?;
+    Ok(h)
 }
