@@ -120,5 +120,9 @@ pub fn set_lens(shot: &Path, camera: &str, lens: &str, attrs: &LensAttrs, out: &
         spec.add(FieldKey::Custom, Value::Bool(false));
         spec.add(FieldKey::Default, value);
     }
-    openusd::usda::TextWriter::write_to_file(&data, out).map_err(|e| aerr(format!("{e:#}")))
+    let text = openusd::usda::TextWriter::write_to_string(&data).map_err(|e| aerr(format!("{e:#}")))?;
+    // openusd 0.6's writer prints a one-item list op without brackets, which Pixar's parser
+    // accepts for references but not for the token list of apiSchemas.
+    let text = text.replace("apiSchemas = \"PetzvalLensAPI\"", "apiSchemas = [\"PetzvalLensAPI\"]");
+    std::fs::write(out, text).map_err(|e| aerr(e.to_string()))
 }

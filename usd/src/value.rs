@@ -76,14 +76,52 @@ impl Reader<'_> {
         }
     }
 
+    /// Between two time samples authored as integer literals (`1: 0, 10: 90` in usda),
+    /// openusd 0.6 holds the earlier value instead of interpolating (pxr stores them as the
+    /// attribute's float type and interpolates): interpolate here, linearly, as pxr does.
+    fn int_samples_lerp<T>(
+        &self,
+        prim: &usd::Prim,
+        name: &str,
+        read: impl Fn(sdf::Value) -> Option<T>,
+        lerp: impl Fn(T, T, f64) -> T,
+    ) -> Option<T> {
+        let t = self.time?;
+        let attr = prim.attribute(name);
+        let (lo, hi) = attr.bracketing_time_samples(usd::TimeCode::new(t)).ok()??;
+        if hi <= lo {
+            return None;
+        }
+        let a = read(attr.get_at::<sdf::Value>(usd::TimeCode::new(lo)).ok()??)?;
+        let b = read(attr.get_at::<sdf::Value>(usd::TimeCode::new(hi)).ok()??)?;
+        Some(lerp(a, b, (t - lo) / (hi - lo)))
+    }
+
     /// A scalar number.
     pub fn f64(&self, prim: &usd::Prim, name: &str) -> Result<Option<f64>, Error> {
-        Ok(match self.raw(prim, name)? {
+        let v = self.raw(prim, name)?;
+        if matches!(v, Some(sdf::Value::Int(_) | sdf::Value::Int64(_))) {
+            let num = |v: sdf::Value| match v {
+                sdf::Value::Int(i) => Some(i as f64),
+                sdf::Value::Int64(i) => Some(i as f64),
+                sdf::Value::Float(f) => Some(f as f64),
+                sdf::Value::Double(f) => Some(f),
+                _ => None,
+            };
+            if let Some(x) = self.int_samples_lerp(prim, name, num, |a, b, u| a + (b - a) * u) {
+                return Ok(Some(x));
+            }
+        }
+        Ok(match v {
             None => None,
             Some(sdf::Value::Float(v)) => Some(v as f64),
             Some(sdf::Value::Double(v)) => Some(v),
             Some(sdf::Value::Half(v)) => Some(f16(v)),
+            // usda time samples keep the literal's type: `1: 0` reads as an int64
             Some(sdf::Value::Int(v)) => Some(v as f64),
+            Some(sdf::Value::Int64(v)) => Some(v as f64),
+            Some(sdf::Value::Uint(v)) => Some(v as f64),
+            Some(sdf::Value::Uint64(v)) => Some(v as f64),
             Some(v) => return Err(attr_error(prim, name, format!("expected a float or double, got {}", kind(&v)))),
         })
     }
@@ -136,7 +174,19 @@ impl Reader<'_> {
 
     /// One 3-vector (colour, translation, scale…).
     pub fn vec3(&self, prim: &usd::Prim, name: &str) -> Result<Option<DVec3>, Error> {
-        Ok(match self.raw(prim, name)? {
+        let v = self.raw(prim, name)?;
+        if matches!(v, Some(sdf::Value::Vec3i(_))) {
+            let vec = |v: sdf::Value| match v {
+                sdf::Value::Vec3i(v) => Some(DVec3::new(v.x as f64, v.y as f64, v.z as f64)),
+                sdf::Value::Vec3f(v) => Some(DVec3::new(v.x as f64, v.y as f64, v.z as f64)),
+                sdf::Value::Vec3d(v) => Some(DVec3::new(v.x, v.y, v.z)),
+                _ => None,
+            };
+            if let Some(x) = self.int_samples_lerp(prim, name, vec, |a, b, u| a.lerp(b, u)) {
+                return Ok(Some(x));
+            }
+        }
+        Ok(match v {
             None => None,
             Some(sdf::Value::Vec3f(v)) => Some(DVec3::new(v.x as f64, v.y as f64, v.z as f64)),
             Some(sdf::Value::Vec3d(v)) => Some(DVec3::new(v.x, v.y, v.z)),
