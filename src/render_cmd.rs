@@ -16,7 +16,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 /// Options of `petzval render`.
-#[derive(Args, Debug)]
+#[derive(Args, Debug, Clone)]
 pub struct RenderArgs {
     /// Scene file (.gltf, .glb, or a USD shot: .usd, .usda, .usdc, .usdz). Without one, the
     /// built-in demo is rendered.
@@ -92,6 +92,10 @@ pub struct RenderArgs {
     /// USD time code to render (default: the stage's startTimeCode, else the default values).
     #[arg(long, allow_hyphen_values = true)]
     pub frame: Option<f64>,
+    /// USD frames START-END[xSTEP] (inclusive), rendered one after another; `-o` names each
+    /// frame with a run of `#` (`out.####.exr` → `out.1001.exr`).
+    #[arg(long)]
+    pub frames: Option<String>,
     /// Environment: R,G,B radiance or an equirectangular .exr.
     #[arg(long)]
     pub environment: Option<String>,
@@ -162,8 +166,70 @@ const MAX_TIME_LIMIT_S: f64 = 365.0 * 86_400.0;
 /// The most `--threads` (as the Python module allows).
 const MAX_THREADS: usize = 1024;
 
-/// Runs `petzval render`.
+/// `START-END[xSTEP]` → the frames (at most 100 000).
+fn parse_frames(s: &str) -> Result<Vec<i64>, Error> {
+    let bad = || settings_err("frames", format!("expected START-END[xSTEP] such as 1001-1010 or 1-100x5, got '{s}'"));
+    let (range, step) = match s.split_once('x') {
+        Some((r, st)) => (r, st.trim().parse::<i64>().map_err(|_| bad())?),
+        None => (s, 1),
+    };
+    // a negative start: the '-' separating START and END is the last one after a digit
+    let cut = range.char_indices().skip(1).find(|&(i, c)| c == '-' && range.as_bytes()[i - 1].is_ascii_digit());
+    let (a, b) = match cut {
+        Some((i, _)) => (&range[..i], &range[i + 1..]),
+        None => (range, range),
+    };
+    let (a, b): (i64, i64) = (a.trim().parse().map_err(|_| bad())?, b.trim().parse().map_err(|_| bad())?);
+    if step <= 0 || b < a {
+        return Err(bad());
+    }
+    let n = (b - a) / step + 1;
+    if n > 100_000 {
+        return Err(settings_err("frames", format!("{n} frames is more than 100000")));
+    }
+    Ok((0..n).map(|k| a + k * step).collect())
+}
+
+/// `path` with its first run of `#` replaced by `frame`, zero-padded to the run's length.
+fn frame_path(path: &std::path::Path, frame: f64) -> PathBuf {
+    let s = path.to_string_lossy().to_string();
+    let Some(start) = s.find('#') else { return path.to_path_buf() };
+    let len = s[start..].chars().take_while(|&c| c == '#').count();
+    let f = if frame.fract() == 0.0 {
+        let w = len + usize::from(frame < 0.0);
+        format!("{:0w$}", frame as i64, w = w)
+    } else {
+        format!("{frame}")
+    };
+    PathBuf::from(format!("{}{}{}", &s[..start], f, &s[start + len..]))
+}
+
+/// Runs `petzval render` (every frame of `--frames` in turn).
 pub fn run(args: RenderArgs) -> Result<(), Error> {
+    if let Some(fr) = &args.frames {
+        if args.frame.is_some() {
+            return Err(settings_err("frames", "give --frame or --frames, not both".into()));
+        }
+        if !args.output.to_string_lossy().contains('#') {
+            return Err(settings_err("frames", "-o must name the frame with #### (e.g. out.####.exr)".into()));
+        }
+        for f in parse_frames(fr)? {
+            let mut a = args.clone();
+            a.frames = None;
+            a.frame = Some(f as f64);
+            eprintln!("== frame {f}");
+            run_frame(a)?;
+        }
+        return Ok(());
+    }
+    run_frame(args)
+}
+
+fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
+    if let Some(f) = args.frame {
+        args.output = frame_path(&args.output, f);
+        args.png = args.png.as_ref().map(|p| frame_path(p, f));
+    }
     if let Some(t) = args.time_limit {
         // Duration::from_secs_f64 panics on negative, NaN and huge values: refuse them here.
         if !(t.is_finite() && t > 0.0 && t <= MAX_TIME_LIMIT_S) {

@@ -19,12 +19,12 @@
 //! Colour temperature uses the CIE 1931 blackbody approximation normalised to luminance 1.
 //! A sphere light with radius 0 and normalize off is treated as normalized (it has no area).
 
-use crate::stage::Walker;
-use crate::value::layer_of_prim;
+use crate::value::{layer_of_prim, Reader};
+use crate::xform::StageUnits;
 use crate::Error;
 use glam::{DMat4, DVec3, Vec2, Vec3};
 use openusd::usd;
-use petzval_renderer::scene::{Light, Material, Mesh};
+use petzval_renderer::scene::{Light, Material, Mesh, Scene};
 
 /// One light as read (for reports).
 #[derive(Debug, Clone, serde::Serialize)]
@@ -67,11 +67,29 @@ pub fn blackbody_rgb(kelvin: f64) -> Vec3 {
     }
 }
 
+/// What a light prim adds to the scene besides lights, materials and the environment.
+pub struct LightOutput<'a> {
+    /// The scene (lights, materials and environment are added to it).
+    pub scene: &'a mut Scene,
+    /// Warnings.
+    pub warnings: &'a mut Vec<String>,
+    /// Lights read.
+    pub infos: &'a mut Vec<LightInfo>,
+    /// Emissive meshes of area lights to place at the light's stage-world transform.
+    pub meshes: Vec<(Mesh, DMat4, String)>,
+}
+
 /// Reads one light prim of type `ty` placed at `world` (stage world).
-pub fn read_light(w: &mut Walker, prim: &usd::Prim, ty: &str, world: DMat4) -> Result<(), Error> {
-    let r = &w.reader;
+pub fn read_light(
+    r: &Reader,
+    units: &StageUnits,
+    w: &mut LightOutput,
+    prim: &usd::Prim,
+    ty: &str,
+    world: DMat4,
+) -> Result<(), Error> {
     let path = prim.path().to_string();
-    let mpu = w.units.meters_per_unit;
+    let mpu = units.meters_per_unit;
     let intensity = r.f64_or(prim, "inputs:intensity", 1.0)?;
     let exposure = r.f64_or(prim, "inputs:exposure", 0.0)?;
     let color = r.vec3(prim, "inputs:color")?.unwrap_or(DVec3::ONE);
@@ -85,7 +103,7 @@ pub fn read_light(w: &mut Walker, prim: &usd::Prim, ty: &str, world: DMat4) -> R
         return Err(crate::value::attr_error(prim, "inputs:intensity", "intensity and color must be non-negative"));
     }
     let base = (color * intensity * 2f64.powf(exposure)).as_vec3() * tint;
-    let to_r = w.units.to_renderer() * world;
+    let to_r = units.to_renderer() * world;
     let rigid = crate::xform::rigid(to_r);
     let pos = rigid.transform_point3(DVec3::ZERO).as_vec3();
     let dir = rigid.transform_vector3(DVec3::NEG_Z).normalize_or_zero().as_vec3();
@@ -116,18 +134,18 @@ pub fn read_light(w: &mut Walker, prim: &usd::Prim, ty: &str, world: DMat4) -> R
                         outer_cone_rad: outer,
                         range: None,
                     });
-                    w.info.lights.push(info("spot (W/sr)", i));
+                    w.infos.push(info("spot (W/sr)", i));
                 }
                 _ => {
                     w.scene.lights.push(Light::Point { position: pos, intensity: i, range: None });
-                    w.info.lights.push(info("point (W/sr)", i));
+                    w.infos.push(info("point (W/sr)", i));
                 }
             }
         }
         "DistantLight" => {
             let e = base * 4.0;
             w.scene.lights.push(Light::Directional { direction: dir, irradiance: e });
-            w.info.lights.push(info("directional (W/m²)", e));
+            w.infos.push(info("directional (W/m²)", e));
         }
         "RectLight" | "DiskLight" => {
             let (mesh, area_units) = if ty == "RectLight" {
@@ -155,8 +173,8 @@ pub fn read_light(w: &mut Walker, prim: &usd::Prim, ty: &str, world: DMat4) -> R
             let mid = (w.scene.materials.len() - 1) as u32;
             let mut mesh = mesh;
             mesh.material_ids = vec![mid; mesh.indices.len()];
-            w.info.lights.push(info("emissive mesh (radiance)", l));
-            w.add_placed_mesh(mesh, world, path.clone());
+            w.infos.push(info("emissive mesh (radiance)", l));
+            w.meshes.push((mesh, world, path.clone()));
         }
         "DomeLight" | "DomeLight_1" => {
             let strength = (intensity * 2f64.powf(exposure)) as f32;
@@ -188,7 +206,7 @@ pub fn read_light(w: &mut Walker, prim: &usd::Prim, ty: &str, world: DMat4) -> R
                                 w.warnings.push(format!("{path}: inputs:color on a textured dome is ignored"));
                             }
                             std::mem::swap(&mut w.scene.environment, &mut env);
-                            w.info.lights.push(info("environment map (× strength)", Vec3::splat(strength)));
+                            w.infos.push(info("environment map (× strength)", Vec3::splat(strength)));
                             return Ok(());
                         }
                         Err(e) => {
@@ -203,7 +221,7 @@ pub fn read_light(w: &mut Walker, prim: &usd::Prim, ty: &str, world: DMat4) -> R
                 None => petzval_renderer::scene::Environment::Constant(c * strength),
             };
             if let petzval_renderer::scene::Environment::Constant(v) = &env {
-                w.info.lights.push(info("environment constant (radiance)", *v));
+                w.infos.push(info("environment constant (radiance)", *v));
             }
             w.scene.environment = env;
         }

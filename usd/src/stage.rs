@@ -187,7 +187,16 @@ impl<'a> Walker<'a> {
                 if in_proto {
                     self.warnings.push(format!("{path}: lights inside instance prototypes are not supported"));
                 } else {
-                    lights::read_light(self, prim, t, world)?;
+                    let mut o = lights::LightOutput {
+                        scene: &mut self.scene,
+                        warnings: &mut self.warnings,
+                        infos: &mut self.info.lights,
+                        meshes: Vec::new(),
+                    };
+                    lights::read_light(&self.reader, &self.units, &mut o, prim, t, world)?;
+                    for (mesh, xf, p) in o.meshes {
+                        self.add_placed_mesh(mesh, xf, p);
+                    }
                 }
             }
             "" | "Xform" | "Scope" => {}
