@@ -179,7 +179,8 @@ pub fn read_light(
         "DomeLight" | "DomeLight_1" => {
             let strength = (intensity * 2f64.powf(exposure)) as f32;
             let c = color.as_vec3() * tint;
-            let up = rigid.transform_vector3(DVec3::Y);
+            // The map's pole is the light's local stage-up axis (what Blender's exporter writes).
+            let up = rigid.transform_vector3(if units.up_axis_z { DVec3::Z } else { DVec3::Y });
             let x = rigid.transform_vector3(DVec3::X);
             // The light's yaw about +y (renderer), for the map.
             let yaw = (-x.z).atan2(x.x) as f32;
