@@ -22,7 +22,7 @@ pub struct RenderArgs {
     /// built-in demo is rendered.
     pub scene: Option<PathBuf>,
     /// Output EXR file.
-    #[arg(short, long, default_value = "render.exr")]
+    #[arg(short, long, default_value = DEFAULT_OUTPUT)]
     pub output: PathBuf,
     /// Also write a PNG preview (default: the EXR path with .png).
     #[arg(long)]
@@ -75,7 +75,7 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 64)]
     pub spp: u32,
     /// Resolution WxH.
-    #[arg(long, default_value = "960x640")]
+    #[arg(long, default_value = DEFAULT_RESOLUTION)]
     pub resolution: String,
     /// Seed.
     #[arg(long, default_value_t = 0)]
@@ -96,6 +96,11 @@ pub struct RenderArgs {
     /// frame with a run of `#` (`out.####.exr` → `out.1001.exr`).
     #[arg(long)]
     pub frames: Option<String>,
+    /// USD RenderSettings prim (default: the stage's renderSettingsPrimPath): its camera,
+    /// resolution and first product's productName, unless --camera, --resolution or -o say
+    /// otherwise.
+    #[arg(long)]
+    pub settings: Option<String>,
     /// Environment: R,G,B radiance or an equirectangular .exr.
     #[arg(long)]
     pub environment: Option<String>,
@@ -204,8 +209,57 @@ fn frame_path(path: &std::path::Path, frame: f64) -> PathBuf {
     PathBuf::from(format!("{}{}{}", &s[..start], f, &s[start + len..]))
 }
 
+/// The USD shot's RenderSettings applied to `args` where the command line left the defaults.
+fn apply_render_settings(args: &mut RenderArgs) -> Result<(), Error> {
+    let Some(path) = args.scene.clone().filter(|p| petzval_usd::is_usd_path(p)) else {
+        if args.settings.is_some() {
+            return Err(settings_err("settings", "--settings applies to USD shots only".into()));
+        }
+        return Ok(());
+    };
+    let time =
+        args.frame.or_else(|| args.frames.as_deref().and_then(|f| parse_frames(f).ok()?.first().map(|&f| f as f64)));
+    let rs = petzval_usd::render_settings::read(&path, time, args.settings.as_deref()).map_err(|e| match e {
+        petzval_usd::Error::Renderer(e) => e,
+        e => Error::scene(path.display().to_string(), "", e.to_string()),
+    })?;
+    let Some(rs) = rs else { return Ok(()) };
+    for w in &rs.warnings {
+        eprintln!("warning: {w}");
+    }
+    if args.camera.is_none() {
+        args.camera = rs.camera.clone();
+    }
+    if args.resolution == DEFAULT_RESOLUTION {
+        args.resolution = format!("{}x{}", rs.resolution.0, rs.resolution.1);
+    }
+    if let Some(name) = &rs.product_name {
+        if args.output == std::path::Path::new(DEFAULT_OUTPUT) {
+            args.output = PathBuf::from(name);
+        }
+    }
+    if !rs.vars.is_empty() {
+        eprintln!("note: render vars {} are not rendered as such; --aovs sets the EXR's channels", rs.vars.join(", "));
+    }
+    eprintln!(
+        "render settings {}: camera {}, {}, output {}",
+        rs.path,
+        args.camera.as_deref().unwrap_or("(first)"),
+        args.resolution,
+        args.output.display()
+    );
+    Ok(())
+}
+
+/// `--resolution`'s default.
+const DEFAULT_RESOLUTION: &str = "960x640";
+/// `-o`'s default.
+const DEFAULT_OUTPUT: &str = "render.exr";
+
 /// Runs `petzval render` (every frame of `--frames` in turn).
-pub fn run(args: RenderArgs) -> Result<(), Error> {
+pub fn run(mut args: RenderArgs) -> Result<(), Error> {
+    apply_render_settings(&mut args)?;
+    args.settings = None;
     if let Some(fr) = &args.frames {
         if args.frame.is_some() {
             return Err(settings_err("frames", "give --frame or --frames, not both".into()));

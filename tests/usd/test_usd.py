@@ -599,3 +599,46 @@ def test_schema_and_docs_example(petzval: Path, tmp_path: Path) -> None:
     run(petzval, "render", str(path), "-o", str(out), "--resolution", "32x24", "--spp", "1", "--no-png",
         "--lens-model", "thick")
     assert b"double-gauss" in out.read_bytes()[:8192]
+
+
+def test_render_settings_camera_resolution_product(petzval: Path, tmp_path: Path) -> None:
+    import OpenEXR
+    from pxr import UsdRender
+
+    path = tmp_path / "rs.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    q = quad(stage, "/Q")
+    q.AddTranslateOp().Set((-0.5, -0.5, -3))
+    UsdLux.DomeLight.Define(stage, "/Env")
+    for name in ("A", "B"):
+        c = UsdGeom.Camera.Define(stage, f"/{name}")
+        c.CreateFocalLengthAttr(0.5)
+        c.CreateHorizontalApertureAttr(0.36)
+        c.CreateVerticalApertureAttr(0.24)
+    rs = UsdRender.Settings.Define(stage, "/Render/Settings")
+    rs.CreateCameraRel().SetTargets(["/A"])
+    rs.CreateResolutionAttr(Gf.Vec2i(64, 48))
+    prod = UsdRender.Product.Define(stage, "/Render/Product")
+    prod.CreateCameraRel().SetTargets(["/B"])  # the product's camera wins
+    prod.CreateResolutionAttr(Gf.Vec2i(40, 30))
+    prod.CreateProductNameAttr(str(tmp_path / "beauty.####.exr"))
+    rs.CreateProductsRel().SetTargets([prod.GetPath()])
+    stage.SetMetadata("renderSettingsPrimPath", "/Render/Settings")
+    stage.GetRootLayer().Save()
+    r = run(petzval, "render", str(path), "--frame", "7", "--spp", "1", "--no-png")
+    out = tmp_path / "beauty.0007.exr"
+    assert out.is_file(), r.stderr
+    with OpenEXR.File(str(out)) as f:
+        h = f.header()
+        assert h["petzval/usdCamera"] == "/B"
+        dw = h["dataWindow"]
+        assert (dw[1][0] - dw[0][0] + 1, dw[1][1] - dw[0][1] + 1) == (40, 30)
+    # the command line overrides the settings; a settings path that is not a RenderSettings fails
+    out2 = tmp_path / "cli.exr"
+    run(petzval, "render", str(path), "--camera", "/A", "--resolution", "20x10", "--spp", "1", "--no-png",
+        "-o", str(out2))
+    with OpenEXR.File(str(out2)) as f:
+        assert f.header()["petzval/usdCamera"] == "/A"
+    r = run(petzval, "render", str(path), "--settings", "/Q", "--spp", "1", "-o", str(tmp_path / "x.exr"), ok=False)
+    assert r.returncode != 0 and "/Q" in r.stderr and "RenderSettings" in r.stderr

@@ -10,7 +10,7 @@
 //! Modules: [`value`] (typed reads, errors naming layer/prim/attribute), [`xform`] (xform ops,
 //! up axis, units), [`mesh`] (UsdGeomMesh), [`stage`] (the walk, instancing),
 //! [`camera`] (UsdGeomCamera + `PetzvalLensAPI`), [`lights`] (UsdLux), [`shading`]
-//! (UsdPreviewSurface), [`author`] (`set-lens`). What is and is not read: `docs/usd.md`.
+//! (UsdPreviewSurface), [`render_settings`] (UsdRender), [`author`] (`set-lens`). What is and is not read: `docs/usd.md`.
 //!
 //! Composition (sublayers, references, payloads, variants, native instancing) is openusd's;
 //! a reference or payload it cannot resolve is listed as a warning (openusd reports it as a
@@ -20,6 +20,7 @@ pub mod author;
 pub mod camera;
 pub mod lights;
 pub mod mesh;
+pub mod render_settings;
 pub mod shading;
 pub mod stage;
 pub mod value;
