@@ -470,6 +470,9 @@ def test_lights_in_blender_units(petzval: Path, tmp_path: Path) -> None:
 def test_set_lens_composes_in_pxr_and_is_read_back(petzval: Path, tmp_path: Path) -> None:
     shot = tmp_path / "shot.usda"
     stage = Usd.Stage.CreateNew(str(shot))
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    stage.SetStartTimeCode(1001)
     UsdGeom.Camera.Define(stage, "/Rig/Cam")
     stage.GetRootLayer().Save()
     lens = tmp_path / "fitted.toml"
@@ -478,6 +481,10 @@ def test_set_lens_composes_in_pxr_and_is_read_back(petzval: Path, tmp_path: Path
     run(petzval, "usd", "set-lens", str(shot), "--camera", "/Rig/Cam", "--lens", str(lens), "-o", str(out),
         "--tilt-x", "3", "--blades", "6")
     composed = Usd.Stage.Open(str(out))
+    # stage metadata lives on the root layer: set-lens carries the shot's over
+    assert UsdGeom.GetStageMetersPerUnit(composed) == 1.0
+    assert UsdGeom.GetStageUpAxis(composed) == UsdGeom.Tokens.z
+    assert composed.GetStartTimeCode() == 1001
     prim = composed.GetPrimAtPath("/Rig/Cam")
     assert prim.IsA(UsdGeom.Camera)
     assert "PetzvalLensAPI" in prim.GetPrimTypeInfo().GetAppliedAPISchemas() or "PetzvalLensAPI" in (
@@ -642,3 +649,56 @@ def test_render_settings_camera_resolution_product(petzval: Path, tmp_path: Path
         assert f.header()["petzval/usdCamera"] == "/A"
     r = run(petzval, "render", str(path), "--settings", "/Q", "--spp", "1", "-o", str(tmp_path / "x.exr"), ok=False)
     assert r.returncode != 0 and "/Q" in r.stderr and "RenderSettings" in r.stderr
+
+
+def test_petzval_lens_api_changes_the_render(petzval: Path, tmp_path: Path) -> None:
+    """Lens, tilt and blades authored on the camera (through set-lens layers) reach the render:
+    the EXR metadata reports them and the images differ from the plain thin-lens shot."""
+    import OpenEXR
+
+    path = tmp_path / "shot.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    for i in range(5):  # small bright squares at several depths, out of focus
+        q = quad(stage, f"/Q{i}")
+        q.AddTranslateOp().Set((-1.0 + 0.5 * i, -0.2 + 0.1 * i, -1.5 - 1.5 * i))
+        q.AddScaleOp().Set((0.08, 0.08, 1))
+        mat = UsdShade.Material.Define(stage, f"/Looks/E{i}")
+        sh = UsdShade.Shader.Define(stage, f"/Looks/E{i}/S")
+        sh.CreateIdAttr("UsdPreviewSurface")
+        sh.CreateInput("emissiveColor", Sdf.ValueTypeNames.Color3f).Set((20, 20, 20))
+        mat.CreateSurfaceOutput().ConnectToSource(sh.ConnectableAPI(), "surface")
+        UsdShade.MaterialBindingAPI.Apply(q.GetPrim()).Bind(mat)
+    cam = UsdGeom.Camera.Define(stage, "/Cam")
+    cam.CreateFocalLengthAttr(0.5)
+    cam.CreateHorizontalApertureAttr(0.36)
+    cam.CreateVerticalApertureAttr(0.24)
+    cam.CreateFStopAttr(2.8)
+    cam.CreateFocusDistanceAttr(1.0)
+    stage.GetRootLayer().Save()
+
+    def render(shot: Path, name: str) -> tuple[np.ndarray, dict]:
+        out = tmp_path / f"{name}.exr"
+        run(petzval, "render", str(shot), "-o", str(out), "--resolution", "64x48", "--spp", "16", "--no-png")
+        with OpenEXR.File(str(out), separate_channels=True) as f:
+            h = dict(f.header())
+            rgb = np.stack([np.asarray(f.channels()[c].pixels) for c in ("R", "G", "B")], axis=-1)
+        return rgb.astype(float), h
+
+    base, hb = render(path, "base")
+    variants = {
+        "lens": ["--lens", "double-gauss-50mm", "--lens-model", "thick"],
+        "tilt": ["--lens", "thin", "--tilt-x", "8"],
+        "blades": ["--lens", "thin", "--blades", "5"],
+    }
+    for name, extra in variants.items():
+        layer = tmp_path / f"{name}.usda"
+        run(petzval, "usd", "set-lens", str(path), "--camera", "/Cam", "-o", str(layer), *extra)
+        img, h = render(layer, name)
+        diff = np.abs(img - base).mean() / base.mean()
+        assert diff > 0.02, (name, diff)
+        if name == "lens":
+            assert "double-gauss" in h["petzval/lens"]
+        if name == "tilt":
+            assert float(h["petzval/tiltXDeg"]) == 8.0
+    assert float(hb["petzval/fNumber"]) == pytest.approx(2.8)

@@ -10,7 +10,9 @@
 //! | `out` | the new layer (`.usda`) |
 //!
 //! The layer holds `over` specs down to the camera, which prepends `PetzvalLensAPI` to its
-//! `apiSchemas` and authors `petzval:lens` (and the optional attributes).
+//! `apiSchemas` and authors `petzval:lens` (and the optional attributes). The shot's stage
+//! metadata (upAxis, metersPerUnit, time codes, defaultPrim, renderSettingsPrimPath) is
+//! copied, since a stage reads it from its root layer only.
 
 use crate::Error;
 use openusd::sdf::{self, ChildrenKey, FieldKey, SpecType, Specifier, Value};
@@ -30,6 +32,19 @@ pub struct LensAttrs {
     /// `petzval:aperture:rotation` (degrees).
     pub rotation_deg: Option<f64>,
 }
+
+/// The shot's root-layer metadata copied onto the lens layer.
+const STAGE_FIELDS: [&str; 9] = [
+    "upAxis",
+    "metersPerUnit",
+    "kilogramsPerUnit",
+    "startTimeCode",
+    "endTimeCode",
+    "timeCodesPerSecond",
+    "framesPerSecond",
+    "defaultPrim",
+    "renderSettingsPrimPath",
+];
 
 /// `path` as written in a layer at `layer_dir`: relative when beside it, else absolute.
 fn layer_relative(path: &Path, layer_dir: &Path) -> String {
@@ -76,6 +91,13 @@ pub fn set_lens(shot: &Path, camera: &str, lens: &str, attrs: &LensAttrs, out: &
         spec.add(FieldKey::SubLayers, Value::StringVec(vec![layer_relative(shot, &out_dir)]));
         spec.add(ChildrenKey::PrimChildren, Value::TokenVec(vec![names[0].as_str().into()]));
         spec.add(FieldKey::Documentation, Value::String(format!("petzval usd set-lens: {lens} on {camera}")));
+        // Stage metadata is read from the root layer only: carry the shot's over, or the new
+        // layer would compose with USD's fallbacks (metersPerUnit 0.01, upAxis Y, no frames).
+        for field in STAGE_FIELDS {
+            if let Ok(Some(v)) = stage.stage_metadata(field) {
+                spec.add(field, v);
+            }
+        }
     }
     let mut path = String::new();
     for (i, name) in names.iter().enumerate() {
