@@ -702,3 +702,28 @@ def test_petzval_lens_api_changes_the_render(petzval: Path, tmp_path: Path) -> N
         if name == "tilt":
             assert float(h["petzval/tiltXDeg"]) == 8.0
     assert float(hb["petzval/fNumber"]) == pytest.approx(2.8)
+
+
+def test_intrinsic_shapes_fill_pxr_extents(petzval: Path, tmp_path: Path) -> None:
+    path = tmp_path / "shapes.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.Cube.Define(stage, "/Cube").CreateSizeAttr(3.0)
+    UsdGeom.Sphere.Define(stage, "/Sphere")
+    for axis in ("X", "Y", "Z"):
+        c = UsdGeom.Cylinder.Define(stage, f"/Cyl{axis}")
+        c.CreateAxisAttr(axis)
+        c.CreateRadiusAttr(0.5)
+        c.CreateHeightAttr(3.0)
+        k = UsdGeom.Cone.Define(stage, f"/Cone{axis}")
+        k.CreateAxisAttr(axis)
+        k.CreateHeightAttr(1.5)
+        UsdGeom.Capsule.Define(stage, f"/Capsule{axis}").CreateAxisAttr(axis)
+        UsdGeom.Plane.Define(stage, f"/Plane{axis}").CreateAxisAttr(axis)
+    stage.GetRootLayer().Save()
+    rep = info(petzval, path)
+    assert not any("not supported" in w for w in rep["warnings"])
+    for m in rep["meshes"]:
+        prim = stage.GetPrimAtPath(m["prim"])
+        ext = UsdGeom.Boundable.ComputeExtentFromPlugins(UsdGeom.Boundable(prim), Usd.TimeCode.Default())
+        np.testing.assert_allclose(np.array(m["bounds"]), np.array(ext), atol=1e-5, err_msg=m["prim"])
+        assert m["triangles"] > 0

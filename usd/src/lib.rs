@@ -8,7 +8,7 @@
 //! | `time` | optional f64 | time code to read (`--frame`) | the stage's `startTimeCode` if authored, else the default values |
 //!
 //! Modules: [`value`] (typed reads, errors naming layer/prim/attribute), [`xform`] (xform ops,
-//! up axis, units), [`mesh`] (UsdGeomMesh), [`stage`] (the walk, instancing),
+//! up axis, units), [`mesh`] (UsdGeomMesh), [`shapes`] (intrinsic shapes), [`stage`] (the walk, instancing),
 //! [`camera`] (UsdGeomCamera + `PetzvalLensAPI`), [`lights`] (UsdLux), [`shading`]
 //! (UsdPreviewSurface), [`render_settings`] (UsdRender), [`author`] (`set-lens`). What is and is not read: `docs/usd.md`.
 //!
@@ -22,6 +22,7 @@ pub mod lights;
 pub mod mesh;
 pub mod render_settings;
 pub mod shading;
+pub mod shapes;
 pub mod stage;
 pub mod value;
 pub mod xform;

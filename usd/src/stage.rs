@@ -10,7 +10,8 @@
 //! | `PointInstancer` | the prototypes' meshes built once; instance i = instancer · T(positions[i]) · R(orientations[i]) · S(scales[i]) · prototype root; `invisibleIds` (against `ids`, else the index) skipped; the instancer's children are not rendered directly |
 //! | `Camera` | a [`UsdCamera`] (cameras in prototypes are ignored) |
 //! | UsdLux lights | see [`crate::lights`] |
-//! | other gprims (Cube, Sphere, curves, points…) | listed once as unsupported |
+//! | `Cube`, `Sphere`, `Cylinder`, `Cone`, `Capsule`, `Plane` | tessellated ([`crate::shapes`]), one instance |
+//! | other gprims (curves, points, volumes…) | listed once as unsupported |
 //!
 //! The renderer's world is metres with +y up: every instance transform is pre-multiplied by
 //! the stage's `upAxis`/`metersPerUnit` correction ([`StageUnits::to_renderer`]).
@@ -44,6 +45,18 @@ pub struct MeshInfo {
     pub hole_faces: usize,
     /// Instances placing it.
     pub instances: usize,
+    /// Object-space bounds (min, max) of its vertices.
+    pub bounds: [[f32; 3]; 2],
+}
+
+fn bounds(m: &petzval_renderer::scene::Mesh) -> [[f32; 3]; 2] {
+    let lo = m.positions.iter().fold(glam::Vec3::splat(f32::INFINITY), |a, &b| a.min(b));
+    let hi = m.positions.iter().fold(glam::Vec3::splat(f32::NEG_INFINITY), |a, &b| a.max(b));
+    if m.positions.is_empty() {
+        [[0.0; 3]; 2]
+    } else {
+        [lo.to_array(), hi.to_array()]
+    }
 }
 
 /// What the walk found besides the scene.
@@ -171,8 +184,8 @@ impl<'a> Walker<'a> {
             }
         }
         match ty.as_str() {
-            "Mesh" => {
-                let mesh = self.mesh(prim)?;
+            "Mesh" | "Cube" | "Sphere" | "Cylinder" | "Cone" | "Capsule" | "Plane" => {
+                let mesh = self.mesh(prim, &ty)?;
                 out.push((mesh, world, path.clone()));
             }
             "PointInstancer" => {
@@ -200,8 +213,7 @@ impl<'a> Walker<'a> {
                 }
             }
             "" | "Xform" | "Scope" => {}
-            "Cube" | "Sphere" | "Cylinder" | "Cone" | "Capsule" | "Plane" | "Points" | "BasisCurves"
-            | "NurbsCurves" | "NurbsPatch" | "HermiteCurves" | "TetMesh" | "Volume" => {
+            "Points" | "BasisCurves" | "NurbsCurves" | "NurbsPatch" | "HermiteCurves" | "TetMesh" | "Volume" => {
                 self.unsupported.insert(ty.clone());
             }
             _ => {}
@@ -241,7 +253,7 @@ impl<'a> Walker<'a> {
         Ok(out)
     }
 
-    fn mesh(&mut self, prim: &usd::Prim) -> Result<u32, Error> {
+    fn mesh(&mut self, prim: &usd::Prim, ty: &str) -> Result<u32, Error> {
         let path = prim.path().to_string();
         if let Some(&m) = self.meshes_by_prim.get(&path) {
             return Ok(m);
@@ -269,7 +281,14 @@ impl<'a> Walker<'a> {
                 self.materials.material_for(&self.reader, &mut self.scene, &child, double_sided, &mut self.warnings)?;
             subsets.push(Subset { faces, material: m, path: child.path().to_string() });
         }
-        let (mesh, report) = build_mesh(&self.reader, prim, material, &subsets)?;
+        let (mesh, report) = if ty == "Mesh" {
+            build_mesh(&self.reader, prim, material, &subsets)?
+        } else {
+            let mut m = crate::shapes::shape_mesh(&self.reader, prim, ty)?.unwrap_or_default();
+            m.material_ids = vec![material; m.indices.len()];
+            let faces = m.indices.len();
+            (m, crate::mesh::MeshReport { faces, ..Default::default() })
+        };
         if report.degenerate_faces > 0 {
             self.warnings.push(format!(
                 "{}: {path}: {} of {} faces have fewer than 3 vertices and were skipped",
@@ -286,6 +305,7 @@ impl<'a> Walker<'a> {
             degenerate_faces: report.degenerate_faces,
             hole_faces: report.hole_faces,
             instances: 0,
+            bounds: bounds(&mesh),
         });
         let id = self.scene.add_mesh(mesh);
         self.meshes_by_prim.insert(path, id);
@@ -371,6 +391,7 @@ impl<'a> Walker<'a> {
             degenerate_faces: 0,
             hole_faces: 0,
             instances: 1,
+            bounds: bounds(&mesh),
         });
         let id = self.scene.add_mesh(mesh);
         let m = self.units.to_renderer() * stage_xf;

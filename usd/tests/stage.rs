@@ -91,3 +91,26 @@ fn left_handed_flips_the_winding() {
     // smooth normals follow the winding
     assert!(r.normals[0].z > 0.99 && l.normals[0].z < -0.99);
 }
+
+#[test]
+fn shapes_wind_outwards_with_outward_normals() {
+    let p = write(
+        "shapes.usda",
+        "#usda 1.0\ndef Cube \"A\"\n{\n}\ndef Sphere \"B\"\n{\n}\ndef Cylinder \"C\"\n{\n uniform token axis = \"X\"\n}\ndef Cone \"D\"\n{\n uniform token axis = \"Y\"\n}\ndef Capsule \"E\"\n{\n}\n",
+    );
+    let shot = load(&p, None).unwrap();
+    assert_eq!(shot.scene.meshes.len(), 5);
+    for (k, m) in shot.scene.meshes.iter().enumerate() {
+        for t in &m.indices {
+            let [a, b, c] = t.map(|i| m.positions[i as usize]);
+            let n = (b - a).cross(c - a);
+            if n.length() < 1e-9 {
+                continue; // the poles' collapsed quads
+            }
+            let centroid = (a + b + c) / 3.0;
+            assert!(n.dot(centroid) > 0.0, "mesh {k}: triangle {t:?} winds inwards");
+            let vn = m.normals[t[0] as usize] + m.normals[t[1] as usize] + m.normals[t[2] as usize];
+            assert!(vn.dot(n) > 0.0, "mesh {k}: normals disagree with the winding");
+        }
+    }
+}
