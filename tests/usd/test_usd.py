@@ -727,3 +727,53 @@ def test_intrinsic_shapes_fill_pxr_extents(petzval: Path, tmp_path: Path) -> Non
         ext = UsdGeom.Boundable.ComputeExtentFromPlugins(UsdGeom.Boundable(prim), Usd.TimeCode.Default())
         np.testing.assert_allclose(np.array(m["bounds"]), np.array(ext), atol=1e-5, err_msg=m["prim"])
         assert m["triangles"] > 0
+
+
+def test_textures_from_files_and_usdz_packages(petzval: Path, tmp_path: Path) -> None:
+    import zlib
+
+    def png(path: Path, rgb: tuple[int, int, int]) -> None:
+        import struct
+
+        raw = b"".join(b"\x00" + bytes(rgb) * 2 for _ in range(2))
+
+        def chunk(t: bytes, d: bytes) -> bytes:
+            return struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d))
+
+        ihdr = struct.pack(">IIBBBBB", 2, 2, 8, 2, 0, 0, 0)
+        body = chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b"")
+        path.write_bytes(b"\x89PNG\r\n\x1a\n" + body)
+
+    (tmp_path / "tex").mkdir()
+    png(tmp_path / "tex" / "red.png", (255, 0, 0))
+    src = tmp_path / "tex.usda"
+    stage = Usd.Stage.CreateNew(str(src))
+    m = quad(stage, "/Q")
+    UsdGeom.PrimvarsAPI(m).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex).Set(
+        [(0, 0), (1, 0), (1, 1), (0, 1)]
+    )
+    mat = UsdShade.Material.Define(stage, "/Looks/M")
+    sh = UsdShade.Shader.Define(stage, "/Looks/M/S")
+    sh.CreateIdAttr("UsdPreviewSurface")
+    tex = UsdShade.Shader.Define(stage, "/Looks/M/Tex")
+    tex.CreateIdAttr("UsdUVTexture")
+    tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set("./tex/red.png")
+    tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("sRGB")
+    tex.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
+    sh.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(tex.ConnectableAPI(), "rgb")
+    mat.CreateSurfaceOutput().ConnectToSource(sh.ConnectableAPI(), "surface")
+    UsdShade.MaterialBindingAPI.Apply(m.GetPrim()).Bind(mat)
+    stage.GetRootLayer().Save()
+    from pxr import UsdUtils
+
+    usdz = tmp_path / "tex.usdz"
+    assert UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(str(src)), str(usdz))
+    for path in (src, usdz):
+        rep = info(petzval, path)
+        assert not rep["warnings"], (path, rep["warnings"])
+        (mat_rep,) = [x for x in rep["materials"] if x["name"] == "/Looks/M"]
+        assert mat_rep["base_color_texture"] and "red.png" in mat_rep["base_color_texture"]
+    # a missing texture: a warning naming the shader and the file, and magenta
+    (tmp_path / "tex" / "red.png").unlink()
+    rep = info(petzval, src)
+    assert any("/Looks/M/Tex" in w and "red.png" in w for w in rep["warnings"]), rep["warnings"]

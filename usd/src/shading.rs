@@ -223,16 +223,33 @@ impl Materials {
     }
 }
 
-fn load_image(path: &str, srgb: bool) -> Result<(u32, u32, Vec<Vec4>), String> {
-    if path.contains(".usdz[") {
-        return Err("textures inside a usdz package are not read yet".into());
+/// The bytes of `inner` in the usdz package `package` (a zip archive).
+fn read_packaged(package: &str, inner: &str) -> Result<Vec<u8>, String> {
+    use std::io::Read;
+    if openusd::ar::is_package_relative_path(inner) {
+        return Err("nested packages are not read".into());
     }
-    let img = image::ImageReader::open(path)
-        .map_err(|e| e.to_string())?
-        .with_guessed_format()
-        .map_err(|e| e.to_string())?
-        .decode()
-        .map_err(|e| e.to_string())?;
+    let file = std::fs::File::open(package).map_err(|e| format!("{package}: {e}"))?;
+    let mut zip = zip::ZipArchive::new(file).map_err(|e| format!("{package}: {e}"))?;
+    let mut entry = zip.by_name(inner).map_err(|e| format!("{package}[{inner}]: {e}"))?;
+    let mut bytes = Vec::new();
+    entry.read_to_end(&mut bytes).map_err(|e| format!("{package}[{inner}]: {e}"))?;
+    Ok(bytes)
+}
+
+fn load_image(path: &str, srgb: bool) -> Result<(u32, u32, Vec<Vec4>), String> {
+    let img = match openusd::ar::split_package_relative_path_outer(path) {
+        Some((package, inner)) => {
+            let bytes = read_packaged(&package, &inner)?;
+            image::load_from_memory(&bytes).map_err(|e| e.to_string())?
+        }
+        None => image::ImageReader::open(path)
+            .map_err(|e| e.to_string())?
+            .with_guessed_format()
+            .map_err(|e| e.to_string())?
+            .decode()
+            .map_err(|e| e.to_string())?,
+    };
     let rgba = img.to_rgba32f();
     let decode = |c: f32| if srgb { petzval_renderer::scene::texture::srgb_to_linear(c) } else { c };
     let texels = rgba.pixels().map(|p| Vec4::new(decode(p[0]), decode(p[1]), decode(p[2]), p[3])).collect();
