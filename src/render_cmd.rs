@@ -283,6 +283,10 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
     if let Some(f) = args.frame {
         args.output = frame_path(&args.output, f);
         args.png = args.png.as_ref().map(|p| frame_path(p, f));
+        // a farm's frame renders write into a shot folder that may not exist yet
+        if let Some(dir) = args.output.parent().filter(|d| !d.as_os_str().is_empty() && !d.exists()) {
+            std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+        }
     }
     if let Some(t) = args.time_limit {
         // Duration::from_secs_f64 panics on negative, NaN and huge values: refuse them here.
