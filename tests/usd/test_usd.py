@@ -773,6 +773,20 @@ def test_textures_from_files_and_usdz_packages(petzval: Path, tmp_path: Path) ->
         assert not rep["warnings"], (path, rep["warnings"])
         (mat_rep,) = [x for x in rep["materials"] if x["name"] == "/Looks/M"]
         assert mat_rep["base_color_texture"] and "red.png" in mat_rep["base_color_texture"]
+    # the texture's UsdPrimvarReader_float2 names the primvar the mesh's coordinates come from
+    stage = Usd.Stage.Open(str(src))
+    UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/Q")).CreatePrimvar(
+        "uvAlt", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex
+    ).Set([(0, 0), (2, 0), (2, 2), (0, 2)])
+    reader = UsdShade.Shader.Define(stage, "/Looks/M/Reader")
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.Token).Set("uvAlt")
+    reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+    UsdShade.Shader(stage.GetPrimAtPath("/Looks/M/Tex")).CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
+        reader.ConnectableAPI(), "result"
+    )
+    stage.GetRootLayer().Save()
+    assert info(petzval, src)["meshes"][0]["st_primvar"] == "primvars:uvAlt"
     # a missing texture: a warning naming the shader and the file, and magenta
     (tmp_path / "tex" / "red.png").unlink()
     rep = info(petzval, src)

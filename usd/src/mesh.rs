@@ -7,7 +7,7 @@
 //! | `holeIndices` | those faces are skipped | none |
 //! | `orientation` | `leftHanded` reverses every face's winding | `rightHanded` |
 //! | `primvars:normals` (else `normals`) | constant, uniform, vertex, varying or faceVarying; `:indices` honoured | smooth area-weighted vertex normals |
-//! | `primvars:st` (else the first `texCoord2f[]` primvar) | as normals; `t` is flipped to the renderer's top-left origin | none |
+//! | the material's `UsdPrimvarReader_float2` varname, else `primvars:st`, else the first `texCoord2f[]` primvar | as normals; `t` is flipped to the renderer's top-left origin | none |
 //! | `GeomSubset` children (`elementType = face`) | their `material:binding` sets the material of their faces | the mesh's binding |
 //!
 //! Vertices stay shared when every primvar is per point (vertex/varying/constant); a uniform
@@ -123,10 +123,16 @@ fn primvar<T>(
     Ok(Some(Primvar { values, interp, indices, name: name.to_string() }))
 }
 
-/// The name of the texture-coordinate primvar: `primvars:st`, else the first `texCoord2f[]`
-/// (or `float2[]`) primvar.
-fn st_name(prim: &usd::Prim) -> Option<String> {
-    if prim.attribute("primvars:st").get::<sdf::Value>().ok().flatten().is_some() {
+/// The name of the texture-coordinate primvar: the one the material's
+/// `UsdPrimvarReader_float2` names, else `primvars:st`, else the first `texCoord2f[]` primvar.
+fn st_name(prim: &usd::Prim, preferred: Option<&str>) -> Option<String> {
+    let authored = |n: &str| prim.attribute(n).get::<sdf::Value>().ok().flatten().is_some();
+    if let Some(p) = preferred.map(|p| format!("primvars:{p}")) {
+        if authored(&p) {
+            return Some(p);
+        }
+    }
+    if authored("primvars:st") {
         return Some("primvars:st".into());
     }
     let names = prim.property_names().ok()?;
@@ -151,6 +157,8 @@ pub struct MeshReport {
     pub degenerate_faces: usize,
     /// Faces skipped as holes.
     pub hole_faces: usize,
+    /// The texture-coordinate primvar read.
+    pub st_primvar: Option<String>,
 }
 
 /// A face subset: its faces and the material id the caller bound to it.
@@ -169,6 +177,7 @@ pub fn build_mesh(
     prim: &usd::Prim,
     material: u32,
     subsets: &[Subset],
+    st_preferred: Option<&str>,
 ) -> Result<(Mesh, MeshReport), Error> {
     let points = reader.vec3s(prim, "points")?.ok_or_else(|| attr_error(prim, "points", "a Mesh needs points"))?;
     let counts = reader.ints(prim, "faceVertexCounts")?.unwrap_or_default();
@@ -211,8 +220,9 @@ pub fn build_mesh(
         Some(n) => Some(n),
         None => primvar(reader, prim, "normals", Interp::Vertex, |r, p, n| r.vec3s(p, n))?,
     };
-    let st = match st_name(prim) {
-        Some(name) => primvar(reader, prim, &name, Interp::FaceVarying, |r, p, n| r.vec2s(p, n))?,
+    let st_primvar = st_name(prim, st_preferred);
+    let st = match &st_primvar {
+        Some(name) => primvar(reader, prim, name, Interp::FaceVarying, |r, p, n| r.vec2s(p, n))?,
         None => None,
     };
     if let Some(n) = &normals {
@@ -242,7 +252,7 @@ pub fn build_mesh(
         .flatten()
         .all(|i| matches!(i, Interp::Vertex | Interp::Constant));
 
-    let mut report = MeshReport { faces: nfaces, ..Default::default() };
+    let mut report = MeshReport { faces: nfaces, st_primvar: st_primvar.clone(), ..Default::default() };
     let mut mesh = Mesh::default();
     let to_v2 = |v: DVec2| Vec2::new(v.x as f32, 1.0 - v.y as f32);
     if welded {

@@ -33,6 +33,10 @@ const MAGENTA: Vec4 = Vec4::new(1.0, 0.0, 1.0, 1.0);
 pub struct Materials {
     by_key: HashMap<(String, bool), u32>,
     textures: HashMap<(String, bool), usize>,
+    /// The primvar a material's textures read (`UsdPrimvarReader_float2.varname`), by id.
+    st_names: HashMap<u32, String>,
+    /// The varname found while reading the current material.
+    pending_st: Option<String>,
 }
 
 /// The material bound to `prim` (its own `material:binding`, else its nearest ancestor's).
@@ -64,6 +68,12 @@ fn source_prim(stage: &usd::Stage, prim: &usd::Prim, input: &str) -> Option<(usd
 }
 
 impl Materials {
+    /// The texture-coordinate primvar (without `primvars:`) material `id` reads, when its
+    /// textures name one through a `UsdPrimvarReader_float2`.
+    pub fn st_name(&self, id: u32) -> Option<&str> {
+        self.st_names.get(&id).map(String::as_str)
+    }
+
     /// The material id for a gprim whose binding is `binding` (None: its display colour).
     pub fn material_for(
         &mut self,
@@ -84,6 +94,7 @@ impl Materials {
         if let Some(&id) = self.by_key.get(&(key.clone(), double_sided)) {
             return Ok(id);
         }
+        self.pending_st = None;
         let mut m = match &binding {
             Some(b) => self.read_material(reader, scene, &reader.stage.prim(b.clone()), warnings)?,
             None => preview_default(&key, display_color(reader, gprim)?),
@@ -91,6 +102,9 @@ impl Materials {
         m.double_sided = double_sided;
         scene.materials.push(m);
         let id = (scene.materials.len() - 1) as u32;
+        if let Some(st) = self.pending_st.take() {
+            self.st_names.insert(id, st);
+        }
         self.by_key.insert((key, double_sided), id);
         Ok(id)
     }
@@ -188,6 +202,28 @@ impl Materials {
             })
         };
         let (ws, wt) = (wrap("inputs:wrapS")?, wrap("inputs:wrapT")?);
+        // inputs:st ← [UsdTransform2d ←] UsdPrimvarReader_float2 (varname)
+        if let Some((mut src, _)) = source_prim(reader.stage, tex, "inputs:st") {
+            let mut reaches_reader = true;
+            if reader.token(&src, "info:id")?.as_deref() == Some("UsdTransform2d") {
+                let identity = reader.f64(&src, "inputs:rotation")?.unwrap_or(0.0) == 0.0
+                    && reader.vec2(&src, "inputs:scale")?.is_none_or(|s| s == glam::DVec2::ONE)
+                    && reader.vec2(&src, "inputs:translation")?.is_none_or(|t| t == glam::DVec2::ZERO);
+                if !identity {
+                    warnings
+                        .push(format!("{}: UsdTransform2d is not applied; the texture is untransformed", src.path()));
+                }
+                match source_prim(reader.stage, &src, "inputs:in") {
+                    Some((s, _)) => src = s,
+                    None => reaches_reader = false,
+                }
+            }
+            if reaches_reader && reader.token(&src, "info:id")?.as_deref() == Some("UsdPrimvarReader_float2") {
+                if let Some(v) = reader.token(&src, "inputs:varname")? {
+                    self.pending_st = Some(v);
+                }
+            }
+        }
         let path = match &file {
             Some((authored, Some(resolved))) if !resolved.is_empty() => (authored.clone(), resolved.clone()),
             Some((authored, _)) => (authored.clone(), authored.clone()),

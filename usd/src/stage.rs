@@ -47,6 +47,8 @@ pub struct MeshInfo {
     pub instances: usize,
     /// Object-space bounds (min, max) of its vertices.
     pub bounds: [[f32; 3]; 2],
+    /// The texture-coordinate primvar read.
+    pub st_primvar: Option<String>,
 }
 
 fn bounds(m: &petzval_renderer::scene::Mesh) -> [[f32; 3]; 2] {
@@ -282,7 +284,8 @@ impl<'a> Walker<'a> {
             subsets.push(Subset { faces, material: m, path: child.path().to_string() });
         }
         let (mesh, report) = if ty == "Mesh" {
-            build_mesh(&self.reader, prim, material, &subsets)?
+            let st = self.materials.st_name(material).map(str::to_string);
+            build_mesh(&self.reader, prim, material, &subsets, st.as_deref())?
         } else {
             let mut m = crate::shapes::shape_mesh(&self.reader, prim, ty)?.unwrap_or_default();
             m.material_ids = vec![material; m.indices.len()];
@@ -306,6 +309,7 @@ impl<'a> Walker<'a> {
             hole_faces: report.hole_faces,
             instances: 0,
             bounds: bounds(&mesh),
+            st_primvar: report.st_primvar.clone(),
         });
         let id = self.scene.add_mesh(mesh);
         self.meshes_by_prim.insert(path, id);
@@ -392,6 +396,7 @@ impl<'a> Walker<'a> {
             hole_faces: 0,
             instances: 1,
             bounds: bounds(&mesh),
+            st_primvar: None,
         });
         let id = self.scene.add_mesh(mesh);
         let m = self.units.to_renderer() * stage_xf;
