@@ -435,6 +435,10 @@ def test_time_samples(petzval: Path, tmp_path: Path) -> None:
     assert info(petzval, path)["time"] == 1
 
 
+def lights_of(rep: dict, prim: str) -> list[float]:
+    return next(li["value"] for li in rep["lights"] if li["prim"] == prim)
+
+
 def test_lights_in_blender_units(petzval: Path, tmp_path: Path) -> None:
     path = tmp_path / "lights.usda"
     stage = Usd.Stage.CreateNew(str(path))
@@ -456,8 +460,16 @@ def test_lights_in_blender_units(petzval: Path, tmp_path: Path) -> None:
     dome = UsdLux.DomeLight.Define(stage, "/Dome")
     dome.CreateIntensityAttr(2.0)
     dome.CreateColorAttr((0.2, 0.3, 0.4))
+    cyl = UsdLux.CylinderLight.Define(stage, "/Tube")
+    cyl.CreateIntensityAttr(10.0)
+    cyl.CreateRadiusAttr(0.1)
+    cyl.CreateLengthAttr(2.0)
+    cyl.CreateNormalizeAttr(True)
     stage.GetRootLayer().Save()
     rep = info(petzval, path)
+    assert lights_of(rep, "/Tube") == pytest.approx([10 / (2 * np.pi * 0.1 * 2)] * 3, rel=1e-5)
+    tube = next(m for m in rep["meshes"] if m["prim"] == "/Tube")
+    np.testing.assert_allclose(tube["bounds"], [[-1, -0.1, -0.1], [1, 0.1, 0.1]], atol=1e-6)
     lights = {li["prim"]: li for li in rep["lights"]}
     # a 1000 W Blender point light (exposure +1 doubles it): 2 · 1000 / 4π W/sr
     assert lights["/Point"]["value"] == pytest.approx([2000 / (4 * np.pi)] * 3, rel=1e-5)

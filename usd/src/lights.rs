@@ -14,7 +14,7 @@
 //! | `DiskLight` | a one-sided emissive 32-gon facing −z | radiance L | radius 0.5 |
 //! | `DistantLight` | directional light along −z | irradiance = 4 · intensity · 2^E · color W/m² (Blender's factor) | — |
 //! | `DomeLight` | environment: `texture:file` (EXR, latlong) × intensity · 2^E · color, or the constant colour; turned about +y by the light's yaw | — | — |
-//! | `CylinderLight` | listed as unsupported | — | — |
+//! | `CylinderLight` | the side of a one-sided emissive cylinder along x (48 sides), radiance L | radius 0.5, length 1 |
 //!
 //! Colour temperature uses the CIE 1931 blackbody approximation normalised to luminance 1.
 //! A sphere light with radius 0 and normalize off is treated as normalized (it has no area).
@@ -147,11 +147,15 @@ pub fn read_light(
             w.scene.lights.push(Light::Directional { direction: dir, irradiance: e });
             w.infos.push(info("directional (W/m²)", e));
         }
-        "RectLight" | "DiskLight" => {
+        "RectLight" | "DiskLight" | "CylinderLight" => {
             let (mesh, area_units) = if ty == "RectLight" {
                 let wd = r.f64_or(prim, "inputs:width", 1.0)?;
                 let ht = r.f64_or(prim, "inputs:height", 1.0)?;
                 (quad(wd as f32, ht as f32), wd * ht)
+            } else if ty == "CylinderLight" {
+                let rad = r.f64_or(prim, "inputs:radius", 0.5)?;
+                let len = r.f64_or(prim, "inputs:length", 1.0)?;
+                (crate::shapes::cylinder_side_x(rad as f32, len as f32), std::f64::consts::TAU * rad * len)
             } else {
                 let rad = r.f64_or(prim, "inputs:radius", 0.5)?;
                 (disk(rad as f32, 32), std::f64::consts::PI * rad * rad)

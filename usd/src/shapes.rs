@@ -176,6 +176,19 @@ pub fn shape_mesh(reader: &Reader, prim: &usd::Prim, ty: &str) -> Result<Option<
     Ok(Some(with_material(m)))
 }
 
+/// The side of a cylinder of `radius` and `length` along x (a `CylinderLight`'s emitter).
+pub fn cylinder_side_x(radius: f32, length: f32) -> Mesh {
+    let mut m = revolve(&[(radius, -length / 2.0, 1.0, 0.0), (radius, length / 2.0, 1.0, 0.0)]);
+    let rot = Mat3::from_cols(Vec3::Y, Vec3::Z, Vec3::X);
+    for p in &mut m.positions {
+        *p = rot * *p;
+    }
+    for n in &mut m.normals {
+        *n = rot * *n;
+    }
+    m
+}
+
 fn with_material(mut m: Mesh) -> Mesh {
     m.material_ids = vec![0; m.indices.len()];
     m
