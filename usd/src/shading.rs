@@ -10,6 +10,7 @@
 //! | `emissiveColor` | emitted radiance | 0 |
 //! | `opacity`, `opacityThreshold` | alpha; threshold > 0 = mask, else blend when < 1 | 1, 0 |
 //! | `ior` | dielectric F0 | 1.5 |
+//! | `specular` (Blender's Specular IOR Level, not in the spec) | specular strength × 2 (0.5 = F0 of the IOR) | 0.5 |
 //! | `normal` (UsdUVTexture, raw) | tangent-space normal map | none |
 //!
 //! An unbound gprim uses its `primvars:displayColor` (constant) or 18 % grey. A shader that
@@ -160,6 +161,12 @@ impl Materials {
                     m.roughness = v;
                 }
             }
+        }
+        // Not a UsdPreviewSurface input in the spec: Blender's exporter writes its Principled
+        // BSDF's Specular IOR Level here (0.5 = the dielectric F0 of the IOR), which is half of
+        // the renderer's (KHR_materials_specular) factor.
+        if let Some(level) = reader.f64(&shader, "inputs:specular")? {
+            m.specular = (2.0 * level).max(0.0) as f32;
         }
         if let Some(ior) = reader.f64(&shader, "inputs:ior")? {
             if ior >= 1.0 {
