@@ -31,7 +31,7 @@ pub struct LocalXform {
 }
 
 /// The op names in `xformOpOrder` (empty when unauthored).
-pub fn op_order(reader: &Reader, prim: &usd::Prim) -> Result<Vec<String>, Error> {
+pub fn op_order(prim: &usd::Prim) -> Result<Vec<String>, Error> {
     // xformOpOrder is uniform: read its default.
     let v = prim.attribute("xformOpOrder").get::<sdf::Value>();
     match v {
@@ -39,10 +39,7 @@ pub fn op_order(reader: &Reader, prim: &usd::Prim) -> Result<Vec<String>, Error>
         Ok(Some(sdf::Value::TokenVec(t))) => Ok(t.iter().map(|t| t.as_str().to_string()).collect()),
         Ok(Some(sdf::Value::StringVec(t))) => Ok(t),
         Ok(Some(_)) => Err(attr_error(prim, "xformOpOrder", "expected a token[]")),
-        Err(e) => {
-            let _ = reader;
-            Err(attr_error(prim, "xformOpOrder", format!("cannot be read: {e:#}")))
-        }
+        Err(e) => Err(attr_error(prim, "xformOpOrder", format!("cannot be read: {e:#}"))),
     }
 }
 
@@ -57,7 +54,7 @@ fn axis_rot(axis: char, deg: f64) -> DMat4 {
 
 /// The local transform of `prim` at the reader's time.
 pub fn local_xform(reader: &Reader, prim: &usd::Prim) -> Result<LocalXform, Error> {
-    let order = op_order(reader, prim)?;
+    let order = op_order(prim)?;
     let mut m = DMat4::IDENTITY;
     let mut resets = false;
     for (i, op) in order.iter().enumerate() {
