@@ -75,7 +75,7 @@ pub fn run(cmd: UsdCommand) -> Result<(), petzval_usd::Error> {
             );
             for c in &s.cameras {
                 println!(
-                    "  camera {}: {:.2} mm, aperture {:.3} × {:.3} mm, f/{}, focus {}{}",
+                    "  camera {}: {:.2} mm, aperture {:.3} × {:.3} mm, f/{:.2}, focus {}{}",
                     c.path,
                     c.focal_length_mm,
                     c.horizontal_aperture_mm,
