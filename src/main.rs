@@ -10,6 +10,7 @@ mod lens_cmd;
 mod lrtf_cmd;
 mod render_cmd;
 mod signals;
+mod usd_cmd;
 
 /// Command line.
 #[derive(Parser)]
@@ -31,8 +32,13 @@ enum Command {
         #[command(subcommand)]
         command: lrtf_cmd::LrtfCommand,
     },
-    /// Render a glTF scene (or the built-in demo) through a lens to EXR and PNG.
+    /// Render a glTF or USD scene (or the built-in demo) through a lens to EXR and PNG.
     Render(Box<render_cmd::RenderArgs>),
+    /// USD shots: what a shot loads as, and writing a lens onto a camera.
+    Usd {
+        #[command(subcommand)]
+        command: usd_cmd::UsdCommand,
+    },
     /// Benchmarks (print tables; see docs/performance.md).
     Bench {
         #[command(subcommand)]
@@ -51,11 +57,12 @@ fn main() -> ExitCode {
     // Interrupts are handled from the start (a Ctrl-C while the scene loads ends cleanly).
     signals::install();
     let cli = Cli::parse();
-    let result = match cli.command {
-        Command::Lens { command } => lens_cmd::run(command),
-        Command::Render(args) => render_cmd::run(*args),
-        Command::Lrtf { command } => lrtf_cmd::run(command),
-        Command::Bench { command } => bench::run(command),
+    let result: Result<(), Box<dyn std::error::Error>> = match cli.command {
+        Command::Lens { command } => lens_cmd::run(command).map_err(Into::into),
+        Command::Render(args) => render_cmd::run(*args).map_err(Into::into),
+        Command::Lrtf { command } => lrtf_cmd::run(command).map_err(Into::into),
+        Command::Usd { command } => usd_cmd::run(command).map_err(Into::into),
+        Command::Bench { command } => bench::run(command).map_err(Into::into),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

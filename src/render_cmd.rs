@@ -14,12 +14,13 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 /// Options of `petzval render`.
-#[derive(Args, Debug)]
+#[derive(Args, Debug, Clone)]
 pub struct RenderArgs {
-    /// Scene file (.gltf or .glb). Without one, the built-in demo is rendered.
+    /// Scene file (.gltf, .glb, or a USD shot: .usd, .usda, .usdc, .usdz). Without one, the
+    /// built-in demo is rendered.
     pub scene: Option<PathBuf>,
     /// Output EXR file.
-    #[arg(short, long, default_value = "render.exr")]
+    #[arg(short, long, default_value = DEFAULT_OUTPUT)]
     pub output: PathBuf,
     /// Also write a PNG preview (default: the EXR path with .png).
     #[arg(long)]
@@ -72,7 +73,7 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 64)]
     pub spp: u32,
     /// Resolution WxH.
-    #[arg(long, default_value = "960x640")]
+    #[arg(long, default_value = DEFAULT_RESOLUTION)]
     pub resolution: String,
     /// Seed.
     #[arg(long, default_value_t = 0)]
@@ -83,9 +84,21 @@ pub struct RenderArgs {
     /// Stop after this many seconds (the last pass finishes first).
     #[arg(long)]
     pub time_limit: Option<f64>,
-    /// Scene camera by name (default: the first).
+    /// Scene camera by name, or a USD camera prim path (default: the first).
     #[arg(long)]
     pub camera: Option<String>,
+    /// USD time code to render (default: the stage's startTimeCode, else the default values).
+    #[arg(long, allow_hyphen_values = true)]
+    pub frame: Option<f64>,
+    /// USD frames START-END[xSTEP] (inclusive), rendered one after another; `-o` names each
+    /// frame with a run of `#` (`out.####.exr` → `out.1001.exr`).
+    #[arg(long)]
+    pub frames: Option<String>,
+    /// USD RenderSettings prim (default: the stage's renderSettingsPrimPath): its camera,
+    /// resolution and first product's productName, unless --camera, --resolution or -o say
+    /// otherwise.
+    #[arg(long)]
+    pub settings: Option<String>,
     /// Environment: R,G,B radiance or an equirectangular .exr.
     #[arg(long)]
     pub environment: Option<String>,
@@ -237,8 +250,128 @@ const MAX_TIME_LIMIT_S: f64 = 365.0 * 86_400.0;
 /// The most `--threads` (as the Python module allows).
 const MAX_THREADS: usize = 1024;
 
-/// Runs `petzval render`.
-pub fn run(args: RenderArgs) -> Result<(), Error> {
+/// `START-END[xSTEP]` → the frames (at most 100 000).
+fn parse_frames(s: &str) -> Result<Vec<i64>, Error> {
+    let bad = || settings_err("frames", format!("expected START-END[xSTEP] such as 1001-1010 or 1-100x5, got '{s}'"));
+    let (range, step) = match s.split_once('x') {
+        Some((r, st)) => (r, st.trim().parse::<i64>().map_err(|_| bad())?),
+        None => (s, 1),
+    };
+    // a negative start: the '-' separating START and END is the last one after a digit
+    let cut = range.char_indices().skip(1).find(|&(i, c)| c == '-' && range.as_bytes()[i - 1].is_ascii_digit());
+    let (a, b) = match cut {
+        Some((i, _)) => (&range[..i], &range[i + 1..]),
+        None => (range, range),
+    };
+    let (a, b): (i64, i64) = (a.trim().parse().map_err(|_| bad())?, b.trim().parse().map_err(|_| bad())?);
+    if step <= 0 || b < a {
+        return Err(bad());
+    }
+    let n = (b - a) / step + 1;
+    if n > 100_000 {
+        return Err(settings_err("frames", format!("{n} frames is more than 100000")));
+    }
+    Ok((0..n).map(|k| a + k * step).collect())
+}
+
+/// `path` with its first run of `#` replaced by `frame`, zero-padded to the run's length.
+fn frame_path(path: &std::path::Path, frame: f64) -> PathBuf {
+    let s = path.to_string_lossy().to_string();
+    let Some(start) = s.find('#') else { return path.to_path_buf() };
+    let len = s[start..].chars().take_while(|&c| c == '#').count();
+    let f = if frame.fract() == 0.0 {
+        let w = len + usize::from(frame < 0.0);
+        format!("{:0w$}", frame as i64, w = w)
+    } else {
+        format!("{frame}")
+    };
+    PathBuf::from(format!("{}{}{}", &s[..start], f, &s[start + len..]))
+}
+
+/// The USD shot's RenderSettings applied to `args` where the command line left the defaults.
+fn apply_render_settings(args: &mut RenderArgs) -> Result<(), Error> {
+    let Some(path) = args.scene.clone().filter(|p| petzval_usd::is_usd_path(p)) else {
+        if args.settings.is_some() {
+            return Err(settings_err("settings", "--settings applies to USD shots only".into()));
+        }
+        return Ok(());
+    };
+    let time =
+        args.frame.or_else(|| args.frames.as_deref().and_then(|f| parse_frames(f).ok()?.first().map(|&f| f as f64)));
+    let rs = petzval_usd::render_settings::read(&path, time, args.settings.as_deref()).map_err(|e| match e {
+        petzval_usd::Error::Renderer(e) => e,
+        e => Error::scene(path.display().to_string(), "", e.to_string()),
+    })?;
+    let Some(rs) = rs else { return Ok(()) };
+    for w in &rs.warnings {
+        eprintln!("warning: {w}");
+    }
+    if args.camera.is_none() {
+        args.camera = rs.camera.clone();
+    }
+    if args.resolution == DEFAULT_RESOLUTION {
+        args.resolution = format!("{}x{}", rs.resolution.0, rs.resolution.1);
+    }
+    if let Some(name) = &rs.product_name {
+        if args.output == std::path::Path::new(DEFAULT_OUTPUT) {
+            args.output = PathBuf::from(name);
+        }
+    }
+    if !rs.vars.is_empty() {
+        eprintln!("note: render vars {} are not rendered as such; --aovs sets the EXR's channels", rs.vars.join(", "));
+    }
+    eprintln!(
+        "render settings {}: camera {}, {}, output {}",
+        rs.path,
+        args.camera.as_deref().unwrap_or("(first)"),
+        args.resolution,
+        args.output.display()
+    );
+    Ok(())
+}
+
+/// `--resolution`'s default.
+const DEFAULT_RESOLUTION: &str = "960x640";
+/// `-o`'s default.
+const DEFAULT_OUTPUT: &str = "render.exr";
+
+/// Runs `petzval render` (every frame of `--frames` in turn).
+pub fn run(mut args: RenderArgs) -> Result<(), Error> {
+    apply_render_settings(&mut args)?;
+    args.settings = None;
+    if let Some(fr) = &args.frames {
+        if args.frame.is_some() {
+            return Err(settings_err("frames", "give --frame or --frames, not both".into()));
+        }
+        if !args.output.to_string_lossy().contains('#') {
+            return Err(settings_err("frames", "-o must name the frame with #### (e.g. out.####.exr)".into()));
+        }
+        for f in parse_frames(fr)? {
+            let mut a = args.clone();
+            a.frames = None;
+            a.frame = Some(f as f64);
+            eprintln!("== frame {f}");
+            run_frame(a)?;
+            if crate::signals::interrupted() {
+                // the interrupted frame was written (complete=false); no further frame starts
+                eprintln!("interrupted: frames after {f} not rendered");
+                break;
+            }
+        }
+        return Ok(());
+    }
+    run_frame(args)
+}
+
+fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
+    if let Some(f) = args.frame {
+        args.output = frame_path(&args.output, f);
+        args.png = args.png.as_ref().map(|p| frame_path(p, f));
+        // a farm's frame renders write into a shot folder that may not exist yet
+        if let Some(dir) = args.output.parent().filter(|d| !d.as_os_str().is_empty() && !d.exists()) {
+            std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+        }
+    }
     if let Some(t) = args.time_limit {
         // Duration::from_secs_f64 panics on negative, NaN and huge values: refuse them here.
         if !(t.is_finite() && t > 0.0 && t <= MAX_TIME_LIMIT_S) {
@@ -264,8 +397,24 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     RenderSettings { width, height, spp: args.spp, max_depth: args.max_depth, ..RenderSettings::default() }
         .validate()?;
     // 1. Scene (file or demo) and the shot's defaults.
+    let mut usd_cam: Option<(String, petzval_usd::UsdCamera, Option<f64>)> = None;
     let (mut scene, demo_shot): (Scene, Option<demo::DemoShot>) = match &args.scene {
-        Some(path) => (gltf::load_gltf(path)?, None),
+        Some(path) if petzval_usd::is_usd_path(path) => {
+            let usd_err = |e: petzval_usd::Error| match e {
+                petzval_usd::Error::Renderer(e) => e,
+                e => Error::scene(path.display().to_string(), "", e.to_string()),
+            };
+            let shot = petzval_usd::load(path, args.frame).map_err(usd_err)?;
+            let cam = shot.camera(args.camera.as_deref()).map_err(usd_err)?.clone();
+            usd_cam = Some((shot.file.clone(), cam, shot.time));
+            (shot.scene, None)
+        }
+        Some(path) => {
+            if args.frame.is_some() {
+                return Err(settings_err("frame", "--frame applies to USD shots only".into()));
+            }
+            (gltf::load_gltf(path)?, None)
+        }
         None => {
             let (s, shot) = demo::demo_scene();
             (s, Some(shot))
@@ -277,18 +426,29 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     if let Some(env) = &args.environment {
         scene.environment = parse_environment(env, args.environment_strength)?;
     }
-    let scene_cam: SceneCamera = match &args.camera {
-        Some(name) => scene.cameras.iter().find(|c| &c.name == name).cloned().ok_or_else(|| {
+    let scene_cam: SceneCamera = match (&args.camera, &usd_cam) {
+        (_, Some((_, c, _))) => SceneCamera {
+            name: c.path.clone(),
+            to_world: glam::Affine3A::from_mat4(c.to_world.as_mat4()),
+            yfov_rad: 0.5,
+            aspect_ratio: None,
+            znear: c.clipping_range_m.0 as f32,
+            zfar: Some(c.clipping_range_m.1 as f32),
+        },
+        (Some(name), None) => scene.cameras.iter().find(|c| &c.name == name).cloned().ok_or_else(|| {
             let names: Vec<&str> = scene.cameras.iter().map(|c| c.name.as_str()).collect();
             let file = args.scene.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "the demo".into());
             camera_err(&file, format!("--camera: no camera named '{name}' (cameras: {})", names.join(", ")))
         })?,
-        None => scene.cameras.first().cloned().ok_or_else(|| {
+        (None, None) => scene.cameras.first().cloned().ok_or_else(|| {
             let file = args.scene.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "the demo".into());
             camera_err(&file, "the scene has no camera; add one in the scene file".into())
         })?,
     };
-    let to_world = DAffine3::from_cols_array(&scene_cam.to_world.to_cols_array().map(|v| v as f64));
+    let to_world = match &usd_cam {
+        Some((_, c, _)) => DAffine3::from_mat4(c.to_world),
+        None => DAffine3::from_cols_array(&scene_cam.to_world.to_cols_array().map(|v| v as f64)),
+    };
     let t0 = std::time::Instant::now();
     let render_scene = RenderScene::new(scene)?;
     eprintln!("scene: {} triangles, BVH built in {:.2} s", render_scene.triangle_count(), t0.elapsed().as_secs_f64());
@@ -321,6 +481,9 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         (Some(f), _) => Some(f),
         (None, _) if args.focus.is_some() => None,
         (None, Some(d)) => Some(d.focus_distance_m),
+        (None, None) if usd_cam.as_ref().is_some_and(|u| u.1.focus_distance_m.is_some()) => {
+            usd_cam.as_ref().and_then(|u| u.1.focus_distance_m)
+        }
         (None, None) => {
             let f = shot::autofocus_m(&render_scene, &to_world);
             match f {
@@ -344,20 +507,28 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         Some(f) => f,
         None => host::focal_length_from_yfov_mm(scene_cam.yfov_rad as f64, width, height, &sensor)?,
     };
-    let host_camera = HostCamera {
-        lens: lens_name.clone(),
-        lens_model: model,
-        tolerance_px: args.tolerance,
-        focal_length_mm,
-        film_back,
-        tilt_deg,
-        f_number: if lens_name == "thin" { Some(fstop.unwrap_or(2.8)) } else { fstop },
-        focus_distance_m: focus_m,
-        aperture: aperture.clone(),
-        clip_m: (0.0, f64::INFINITY),
-        natural_vignetting: vignetting,
-        lrtf_file: args.lrtf_file.clone(),
+    let usd_host = match &usd_cam {
+        Some((_, c, _)) => Some(usd_host_camera(c, &args, focus_m)?),
+        None => None,
     };
+    let host_camera = match usd_host {
+        Some(h) => h,
+        None => HostCamera {
+            lens: lens_name.clone(),
+            lens_model: model,
+            tolerance_px: args.tolerance,
+            focal_length_mm,
+            film_back,
+            tilt_deg,
+            f_number: if lens_name == "thin" { Some(fstop.unwrap_or(2.8)) } else { fstop },
+            focus_distance_m: focus_m,
+            aperture: aperture.clone(),
+            clip_m: (0.0, f64::INFINITY),
+            natural_vignetting: vignetting,
+            lrtf_file: args.lrtf_file.clone(),
+        },
+    };
+    let model = host_camera.lens_model;
     let spec = host_camera.camera_spec(width, height)?;
     // 4. The camera: auto picks the cheapest model within the error budget for this shot.
     let t0 = std::time::Instant::now();
@@ -416,6 +587,8 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         max_depth: args.max_depth,
         spectral,
         time_limit: args.time_limit.map(Duration::from_secs_f64),
+        clip_start_m: host_camera.clip_m.0,
+        clip_end_m: host_camera.clip_m.1,
         filter: if args.filter_width > 0.0 {
             PixelFilter::BlackmanHarris { width_px: 2.0 * args.filter_width }
         } else {
@@ -475,6 +648,12 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
         ),
         ("renderSeconds".into(), format!("{:.3}", result.seconds)),
     ];
+    let mut metadata = metadata;
+    if let Some((file, c, time)) = &usd_cam {
+        metadata.push(("usdShot".into(), file.clone()));
+        metadata.push(("usdCamera".into(), c.path.clone()));
+        metadata.push(("usdFrame".into(), time.map(|t| t.to_string()).unwrap_or_else(|| "default".into())));
+    }
     write_exr(&args.output, &result.image, outputs.layers, &metadata)?;
     eprintln!("wrote {}", args.output.display());
     if !args.no_png {
@@ -483,4 +662,48 @@ pub fn run(args: RenderArgs) -> Result<(), Error> {
     }
     crate::signals::finish_writing();
     Ok(())
+}
+
+/// The USD camera prim's host camera with the command line's explicit options on top
+/// (`--lens`, `--lens-model` other than auto, `--fstop`, `--focus`, `--focal-length`,
+/// non-zero `--tilt-*`/`--shift-*`, `--aperture`, `--lrtf-file`, `--tolerance` other than
+/// 0.25). Without a focus distance on the prim, `focus_m` (the autofocus) is used.
+fn usd_host_camera(c: &petzval_usd::UsdCamera, args: &RenderArgs, focus_m: Option<f64>) -> Result<HostCamera, Error> {
+    let mut h = c.host_camera().map_err(|e| match e {
+        petzval_usd::Error::Renderer(e) => e,
+        e => camera_err("usd", e.to_string()),
+    })?;
+    if let Some(l) = &args.lens {
+        h.lens = l.clone();
+    }
+    if args.lens_model != "auto" {
+        h.lens_model = args.lens_model.parse()?;
+    }
+    if args.lrtf_file.is_some() {
+        h.lrtf_file = args.lrtf_file.clone();
+        if h.lens_model == LensModel::Auto {
+            h.lens_model = LensModel::Lrtf { resolution: petzval_renderer::camera::DEFAULT_LRTF_RESOLUTION };
+        }
+    }
+    if args.tolerance != 0.25 {
+        h.tolerance_px = args.tolerance;
+    }
+    if args.fstop.is_some() {
+        h.f_number = args.fstop;
+    }
+    h.focus_distance_m = focus_m;
+    if let Some(f) = args.focal_length {
+        h.focal_length_mm = f;
+    }
+    if args.tilt_x != 0.0 || args.tilt_y != 0.0 {
+        h.tilt_deg = DVec2::new(args.tilt_x, args.tilt_y);
+    }
+    if args.shift_x != 0.0 || args.shift_y != 0.0 {
+        h.film_back.shift = Shift::Mm(DVec2::new(args.shift_x, args.shift_y));
+    }
+    if let Some(a) = &args.aperture {
+        h.aperture = Some(host::parse_aperture(a)?);
+    }
+    h.natural_vignetting = host::parse_on_off("natural_vignetting", &args.natural_vignetting)?;
+    Ok(h)
 }

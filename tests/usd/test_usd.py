@@ -1,0 +1,805 @@
+"""The USD stage (`usd/`, openusd 0.6) against Pixar's USD (`usd-core`, the `pxr` module).
+
+Stages are authored here with pxr (usda, usdc and usdz), then `petzval usd info --json
+--instances` reports what our loader made of them and pxr computes the same quantities
+independently:
+
+* world transforms of every mesh placement: `UsdGeom.XformCache` (every xform op type,
+  `!invert!`, `!resetXformStack!`), through references, payloads, variants, sublayers and
+  native instancing (instance proxies);
+* `UsdGeomPointInstancer.ComputeInstanceTransformsAtTime` for a 100 000-instance scatter
+  (with `invisibleIds`), which must not copy meshes;
+* triangle counts, visibility and purpose, `upAxis`/`metersPerUnit`;
+* camera parameters with the schema's fallbacks (`UsdGeom.Camera` attribute fallbacks);
+* time samples at several frames;
+* `petzval usd set-lens` output composes in pxr and carries `PetzvalLensAPI`;
+* bad input gives an error naming layer, prim and attribute, never a panic.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pxr = pytest.importorskip("pxr")
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[2]
+DEFAULT = Usd.TimeCode.Default()
+
+
+@pytest.fixture(scope="session")
+def petzval() -> Path:
+    env = os.environ.get("PETZVAL_BIN")
+    p = Path(env) if env else REPO / "target" / "release" / "petzval"
+    if not p.is_file():
+        r = subprocess.run(["cargo", "build", "--release", "-p", "petzval"], cwd=REPO, capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr[-4000:]
+    return p
+
+
+def run(petzval: Path, *args: str, ok: bool = True) -> subprocess.CompletedProcess:
+    r = subprocess.run([str(petzval), *args], capture_output=True, text=True, timeout=120)
+    assert "panicked" not in r.stderr, r.stderr
+    if ok:
+        assert r.returncode == 0, r.stderr
+    return r
+
+
+def info(petzval: Path, path: Path, frame: float | None = None) -> dict:
+    args = ["usd", "info", str(path), "--json", "--instances"]
+    if frame is not None:
+        args += ["--frame", str(frame)]
+    return json.loads(run(petzval, *args).stdout)
+
+
+def quad(stage: Usd.Stage, path: str) -> UsdGeom.Mesh:
+    m = UsdGeom.Mesh.Define(stage, path)
+    m.CreatePointsAttr([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)])
+    m.CreateFaceVertexCountsAttr([4])
+    m.CreateFaceVertexIndicesAttr([0, 1, 2, 3])
+    return m
+
+
+def pxr_mesh_placements(stage: Usd.Stage, time: Usd.TimeCode = DEFAULT) -> dict[str, np.ndarray]:
+    """Every renderable mesh prim (instance proxies included) → its world matrix (row-major)."""
+    cache = UsdGeom.XformCache(time)
+    out = {}
+    it = iter(Usd.PrimRange(stage.GetPseudoRoot(), Usd.TraverseInstanceProxies()))
+    for prim in it:
+        img = UsdGeom.Imageable(prim)
+        if prim.IsA(UsdGeom.PointInstancer):
+            it.PruneChildren()
+            continue
+        if img and (
+            img.ComputeVisibility(time) == UsdGeom.Tokens.invisible
+            or img.ComputePurpose() in (UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy)
+        ):
+            it.PruneChildren()
+            continue
+        if prim.IsA(UsdGeom.Mesh):
+            out[str(prim.GetPath())] = np.array(cache.GetLocalToWorldTransform(prim), dtype=float)
+    return out
+
+
+def ours_placements(rep: dict) -> dict[str, np.ndarray]:
+    return {i["path"]: np.array(i["stage_world"], dtype=float).reshape(4, 4) for i in rep["instances"]}
+
+
+def assert_same_placements(stage: Usd.Stage, rep: dict, time: Usd.TimeCode = DEFAULT) -> None:
+    ref = pxr_mesh_placements(stage, time)
+    ours = ours_placements(rep)
+    assert sorted(ours) == sorted(ref)
+    for k, m in ref.items():
+        np.testing.assert_allclose(ours[k], m, atol=1e-5, err_msg=k)
+
+
+def xform_stage(path: Path) -> Usd.Stage:
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    root = UsdGeom.Xform.Define(stage, "/World")
+    root.AddTranslateOp().Set((1, 2, 3))
+    root.AddRotateXYZOp().Set((10, 20, 30))
+    root.AddScaleOp().Set((2, 2, 2))
+    ops = [
+        ("RotX", lambda x: x.AddRotateXOp().Set(33)),
+        ("RotY", lambda x: x.AddRotateYOp().Set(-47)),
+        ("RotZ", lambda x: x.AddRotateZOp().Set(91)),
+        ("XZY", lambda x: x.AddRotateXZYOp().Set((10, 50, -20))),
+        ("YXZ", lambda x: x.AddRotateYXZOp().Set((15, -35, 60))),
+        ("YZX", lambda x: x.AddRotateYZXOp().Set((-5, 25, 45))),
+        ("ZXY", lambda x: x.AddRotateZXYOp().Set((70, 10, -30))),
+        ("ZYX", lambda x: x.AddRotateZYXOp().Set((12, 34, 56))),
+        ("Orient", lambda x: x.AddOrientOp().Set(Gf.Quatf(0.9, 0.1, 0.3, -0.2).GetNormalized())),
+        (
+            "Matrix",
+            lambda x: x.AddTransformOp().Set(Gf.Matrix4d(1, 0.2, 0, 0, 0, 1, 0.3, 0, 0.1, 0, 1, 0, 4, 5, 6, 1)),
+        ),
+        ("ScaleNonUniform", lambda x: x.AddScaleOp().Set((1, -2, 0.5))),
+    ]
+    for name, make in ops:
+        x = UsdGeom.Xform.Define(stage, f"/World/{name}")
+        x.AddTranslateOp().Set((0.5, 0, 0))
+        make(x)
+        quad(stage, f"/World/{name}/Quad")
+    # pivot with !invert!
+    piv = UsdGeom.Xform.Define(stage, "/World/Pivot")
+    t = piv.AddTranslateOp(opSuffix="pivot")
+    t.Set((1, 1, 0))
+    piv.AddRotateZOp().Set(45)
+    piv.AddTranslateOp(opSuffix="pivot", isInverseOp=True)
+    quad(stage, "/World/Pivot/Quad")
+    # !resetXformStack!
+    r = UsdGeom.Xform.Define(stage, "/World/Reset")
+    r.SetResetXformStack(True)
+    r.AddTranslateOp().Set((7, 8, 9))
+    quad(stage, "/World/Reset/Quad")
+    # invisible and guide subtrees are not rendered
+    inv = UsdGeom.Xform.Define(stage, "/World/Hidden")
+    inv.CreateVisibilityAttr(UsdGeom.Tokens.invisible)
+    quad(stage, "/World/Hidden/Quad")
+    g = quad(stage, "/World/Guide")
+    g.CreatePurposeAttr(UsdGeom.Tokens.guide)
+    p = quad(stage, "/World/Proxy")
+    p.CreatePurposeAttr(UsdGeom.Tokens.proxy)
+    rr = quad(stage, "/World/Render")
+    rr.CreatePurposeAttr(UsdGeom.Tokens.render)
+    stage.GetRootLayer().Save()
+    return stage
+
+
+@pytest.mark.parametrize("fmt", ["usda", "usdc", "usdz"])
+def test_xform_ops_match_pxr_xform_cache(petzval: Path, tmp_path: Path, fmt: str) -> None:
+    src = tmp_path / "xf.usda"
+    stage = xform_stage(src)
+    path = src
+    if fmt == "usdc":
+        path = tmp_path / "xf.usdc"
+        stage.GetRootLayer().Export(str(path))
+    elif fmt == "usdz":
+        path = tmp_path / "xf.usdz"
+        from pxr import UsdUtils
+
+        assert UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(str(src)), str(path))
+    rep = info(petzval, path)
+    assert_same_placements(Usd.Stage.Open(str(path)), rep)
+    assert rep["mesh_count"] == len(rep["instances"])  # one mesh per prim here
+    assert all(m["triangles"] == 2 for m in rep["meshes"])
+
+
+def test_up_axis_and_meters_per_unit(petzval: Path, tmp_path: Path) -> None:
+    path = tmp_path / "zup.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, 0.01)
+    x = UsdGeom.Xform.Define(stage, "/X")
+    x.AddTranslateOp().Set((100, 200, 300))
+    quad(stage, "/X/Q")
+    stage.GetRootLayer().Save()
+    rep = info(petzval, path)
+    assert rep["up_axis"] == "Z" and rep["meters_per_unit"] == 0.01
+    inst = rep["instances"][0]
+    world = np.array(inst["world"]).reshape(4, 4).T  # column-vector form
+    # stage (x, y, z) cm, z up → renderer (x, z, −y) m, y up
+    np.testing.assert_allclose(world @ [0, 0, 0, 1], [1.0, 3.0, -2.0, 1.0], atol=1e-6)
+    np.testing.assert_allclose(world @ [1, 0, 0, 1], [1.01, 3.0, -2.0, 1.0], atol=1e-6)
+    np.testing.assert_allclose(world @ [0, 1, 0, 1], [1.0, 3.0, -2.01, 1.0], atol=1e-6)
+
+
+def test_composition_references_payloads_variants_sublayers(petzval: Path, tmp_path: Path) -> None:
+    asset = Usd.Stage.CreateNew(str(tmp_path / "asset.usda"))
+    UsdGeom.Xform.Define(asset, "/Asset")
+    asset.SetDefaultPrim(asset.GetPrimAtPath("/Asset"))
+    m = quad(asset, "/Asset/Body")
+    m.AddTranslateOp().Set((0, 1, 0))
+    vs = asset.GetPrimAtPath("/Asset").GetVariantSets().AddVariantSet("size")
+    for name, s in [("small", 0.5), ("big", 3.0)]:
+        vs.AddVariant(name)
+        vs.SetVariantSelection(name)
+        with vs.GetVariantEditContext():
+            x = UsdGeom.Xform.Define(asset, f"/Asset/{name}")
+            x.AddScaleOp().Set((s, s, s))
+            quad(asset, f"/Asset/{name}/Part")
+    vs.SetVariantSelection("small")
+    asset.GetRootLayer().Save()
+
+    heavy = Usd.Stage.CreateNew(str(tmp_path / "heavy.usdc"))
+    h = UsdGeom.Xform.Define(heavy, "/Heavy")
+    heavy.SetDefaultPrim(h.GetPrim())
+    quad(heavy, "/Heavy/Q")
+    heavy.GetRootLayer().Save()
+
+    sub = Usd.Stage.CreateNew(str(tmp_path / "sub.usda"))
+    quad(sub, "/FromSub")
+    sub.GetRootLayer().Save()
+
+    shot = Usd.Stage.CreateNew(str(tmp_path / "shot.usda"))
+    shot.GetRootLayer().subLayerPaths.append("./sub.usda")
+    a = UsdGeom.Xform.Define(shot, "/A")
+    a.AddTranslateOp().Set((5, 0, 0))
+    a.GetPrim().GetReferences().AddReference("./asset.usda")
+    b = UsdGeom.Xform.Define(shot, "/B")
+    b.AddTranslateOp().Set((-5, 0, 0))
+    b.GetPrim().GetReferences().AddReference("./asset.usda")
+    b.GetPrim().GetVariantSets().GetVariantSet("size").SetVariantSelection("big")
+    p = UsdGeom.Xform.Define(shot, "/P")
+    p.GetPrim().GetPayloads().AddPayload("./heavy.usdc")
+    shot.GetRootLayer().Save()
+
+    stage = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    rep = info(petzval, tmp_path / "shot.usda")
+    assert_same_placements(stage, rep)
+    paths = sorted(ours_placements(rep))
+    assert "/A/small/Part" in paths and "/B/big/Part" in paths and "/P/Q" in paths and "/FromSub" in paths
+
+
+def test_native_instancing_shares_meshes(petzval: Path, tmp_path: Path) -> None:
+    asset = Usd.Stage.CreateNew(str(tmp_path / "tree.usda"))
+    t = UsdGeom.Xform.Define(asset, "/Tree")
+    asset.SetDefaultPrim(t.GetPrim())
+    trunk = quad(asset, "/Tree/Trunk")
+    trunk.AddScaleOp().Set((1, 3, 1))
+    quad(asset, "/Tree/Crown").AddTranslateOp().Set((0, 3, 0))
+    asset.GetRootLayer().Save()
+    shot = Usd.Stage.CreateNew(str(tmp_path / "forest.usda"))
+    for i in range(5):
+        x = UsdGeom.Xform.Define(shot, f"/Forest/T{i}")
+        x.AddTranslateOp().Set((i * 2.0, 0, -i))
+        x.AddRotateYOp().Set(i * 17.0)
+        x.GetPrim().GetReferences().AddReference("./tree.usda")
+        x.GetPrim().SetInstanceable(True)
+    shot.GetRootLayer().Save()
+    stage = Usd.Stage.Open(str(tmp_path / "forest.usda"))
+    assert len(stage.GetPrototypes()) == 1
+    rep = info(petzval, tmp_path / "forest.usda")
+    assert rep["mesh_count"] == 2, "the prototype's two meshes are stored once"
+    assert rep["instance_count"] == 10
+    assert len(rep["native_instances"]) == 5
+    assert_same_placements(stage, rep)
+
+
+def test_point_instancer_100k_does_not_copy_meshes(petzval: Path, tmp_path: Path) -> None:
+    n = 100_000
+    rng = np.random.default_rng(7)
+    path = tmp_path / "scatter.usdc"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    pi = UsdGeom.PointInstancer.Define(stage, "/Scatter")
+    pi.AddTranslateOp().Set((0, 1, 0))
+    protos = UsdGeom.Xform.Define(stage, "/Scatter/Protos")
+    _ = protos
+    a = quad(stage, "/Scatter/Protos/A")
+    a.AddScaleOp().Set((0.1, 0.1, 0.1))
+    b = UsdGeom.Xform.Define(stage, "/Scatter/Protos/B")
+    b.AddRotateXOp().Set(90)
+    quad(stage, "/Scatter/Protos/B/Q1")
+    quad(stage, "/Scatter/Protos/B/Q2").AddTranslateOp().Set((0, 0, 1))
+    pi.CreatePrototypesRel().SetTargets([a.GetPath(), b.GetPath()])
+    pi.CreateProtoIndicesAttr(rng.integers(0, 2, n).astype(np.int32))
+    pi.CreatePositionsAttr(rng.uniform(-100, 100, (n, 3)).astype(np.float32))
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    pi.CreateOrientationsAttr([Gf.Quath(*map(float, v)) for v in q[:1000]] * (n // 1000))
+    pi.CreateScalesAttr(rng.uniform(0.5, 2, (n, 3)).astype(np.float32))
+    pi.CreateIdsAttr(np.arange(n, dtype=np.int64) + 10)
+    pi.CreateInvisibleIdsAttr(np.array([10, 11, 500, 99_999 + 10], dtype=np.int64))
+    stage.GetRootLayer().Save()
+
+    rep = info(petzval, path)
+    # the prototypes' three meshes, each stored once
+    assert rep["mesh_count"] == 3
+    assert rep["stored_triangles"] == 6
+    stage = Usd.Stage.Open(str(path))
+    pi = UsdGeom.PointInstancer(stage.GetPrimAtPath("/Scatter"))
+    xfs = pi.ComputeInstanceTransformsAtTime(Usd.TimeCode.Default(), Usd.TimeCode.Default())
+    mask = pi.ComputeMaskAtTime(Usd.TimeCode.Default())
+    visible = [i for i in range(n) if mask[i]]
+    assert rep["point_instancers"] == [{"prim": "/Scatter", "instances": len(visible), "hidden": 4}]
+    proto_idx = np.array(pi.GetProtoIndicesAttr().Get())
+    expected = sum(1 if proto_idx[i] == 0 else 2 for i in visible)
+    assert rep["instance_count"] == expected
+    ours = ours_placements(rep)
+    world = np.array(UsdGeom.XformCache().GetLocalToWorldTransform(pi.GetPrim()))
+    # pxr applies invisibleIds (the mask) and includes each prototype root's own transform
+    assert len(xfs) == len(visible)
+    cache = UsdGeom.XformCache()
+    b_world = np.array(cache.GetLocalToWorldTransform(stage.GetPrimAtPath("/Scatter/Protos/B")))
+    below_root = {
+        0: {"": np.eye(4)},
+        1: {
+            f"/{q}": np.array(cache.GetLocalToWorldTransform(stage.GetPrimAtPath(f"/Scatter/Protos/B/{q}")))
+            @ np.linalg.inv(b_world)
+            for q in ("Q1", "Q2")
+        },
+    }
+    for k in range(0, len(visible), len(visible) // 300):
+        i = visible[k]
+        for sub, rel in below_root[int(proto_idx[i])].items():
+            ref = rel @ np.array(xfs[k]) @ world
+            np.testing.assert_allclose(ours[f"/Scatter[{i}]{sub}"], ref, atol=2e-3 * np.abs(ref).max(), err_msg=str(i))
+
+
+def test_mesh_triangulation_primvars_subsets(petzval: Path, tmp_path: Path) -> None:
+    path = tmp_path / "mesh.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    m = UsdGeom.Mesh.Define(stage, "/M")
+    pts = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (2, 0, 0), (2, 1, 0), (3, 0.5, 0), (3, 2, 0)]
+    m.CreatePointsAttr(pts)
+    counts = [4, 5, 3, 2, 3]  # a quad, a pentagon, a triangle, a degenerate face, a hole
+    idx = [0, 1, 2, 3, 1, 4, 6, 5, 2, 5, 6, 7, 0, 1, 2, 3, 4]
+    m.CreateFaceVertexCountsAttr(counts)
+    m.CreateFaceVertexIndicesAttr(idx)
+    m.CreateHoleIndicesAttr([4])
+    m.CreateOrientationAttr(UsdGeom.Tokens.leftHanded)
+    pv = UsdGeom.PrimvarsAPI(m)
+    st = pv.CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying)
+    st.Set([(0, 0), (1, 0), (1, 1), (0, 1)])
+    st.SetIndices([i % 4 for i in range(len(idx))])
+    nrm = pv.CreatePrimvar("normals", Sdf.ValueTypeNames.Normal3fArray, UsdGeom.Tokens.uniform)
+    nrm.Set([(0, 0, 1)] * 5)
+    mat_a = UsdShade.Material.Define(stage, "/Looks/A")
+    sh = UsdShade.Shader.Define(stage, "/Looks/A/S")
+    sh.CreateIdAttr("UsdPreviewSurface")
+    sh.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set((0.8, 0.1, 0.1))
+    sh.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.3)
+    mat_a.CreateSurfaceOutput().ConnectToSource(sh.ConnectableAPI(), "surface")
+    mat_b = UsdShade.Material.Define(stage, "/Looks/B")
+    shb = UsdShade.Shader.Define(stage, "/Looks/B/S")
+    shb.CreateIdAttr("UsdPreviewSurface")
+    shb.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(1.0)
+    mat_b.CreateSurfaceOutput().ConnectToSource(shb.ConnectableAPI(), "surface")
+    UsdShade.MaterialBindingAPI.Apply(m.GetPrim()).Bind(mat_a)
+    subset = UsdGeom.Subset.CreateGeomSubset(m, "pent", UsdGeom.Tokens.face, [1], "materialBind")
+    UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(mat_b)
+    stage.GetRootLayer().Save()
+    rep = info(petzval, path)
+    (mesh,) = rep["meshes"]
+    valid = [c for i, c in enumerate(counts) if c >= 3 and i != 4]
+    assert mesh["triangles"] == sum(c - 2 for c in valid) == 6
+    assert mesh["degenerate_faces"] == 1 and mesh["hole_faces"] == 1
+    assert mesh["vertices"] == sum(valid)  # uniform/faceVarying primvars: one vertex per corner
+    assert any("fewer than 3 vertices" in w for w in rep["warnings"])
+    names = {mat["name"]: mat for mat in rep["materials"]}
+    assert names["/Looks/A"]["base_color"][:3] == pytest.approx([0.8, 0.1, 0.1])
+    assert names["/Looks/A"]["roughness"] == pytest.approx(0.3)
+    assert names["/Looks/B"]["metallic"] == 1.0
+
+
+def test_camera_fallbacks_and_units(petzval: Path, tmp_path: Path) -> None:
+    path = tmp_path / "cam.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageMetersPerUnit(stage, 0.01)
+    UsdGeom.Camera.Define(stage, "/Fallback")
+    c = UsdGeom.Camera.Define(stage, "/Authored")
+    c.AddTranslateOp().Set((0, 100, 500))
+    c.CreateFocalLengthAttr(35.0)
+    c.CreateHorizontalApertureAttr(36.0)
+    c.CreateVerticalApertureAttr(24.0)
+    c.CreateHorizontalApertureOffsetAttr(2.0)
+    c.CreateFStopAttr(2.8)
+    c.CreateFocusDistanceAttr(250.0)
+    c.CreateClippingRangeAttr((10, 5000))
+    stage.GetRootLayer().Save()
+    rep = info(petzval, path)
+    cams = {c["path"]: c for c in rep["cameras"]}
+    stage = Usd.Stage.Open(str(path))
+    for p, ours in cams.items():
+        cam = UsdGeom.Camera(stage.GetPrimAtPath(p))
+        gf = cam.GetCamera(Usd.TimeCode.Default())  # pxr applies the schema fallbacks
+        mm = 100 * 0.01  # mm per tenth of a scene unit
+        assert ours["focal_length_mm"] == pytest.approx(gf.focalLength * mm)
+        assert ours["horizontal_aperture_mm"] == pytest.approx(gf.horizontalAperture * mm)
+        assert ours["vertical_aperture_mm"] == pytest.approx(gf.verticalAperture * mm)
+        assert ours["horizontal_aperture_offset_mm"] == pytest.approx(gf.horizontalApertureOffset * mm)
+        assert ours["f_stop"] == pytest.approx(gf.fStop)
+        fd = gf.focusDistance * 0.01
+        assert (ours["focus_distance_m"] or 0.0) == pytest.approx(fd)
+        cr = gf.clippingRange
+        assert ours["clipping_range_m"] == pytest.approx([cr.min * 0.01, cr.max * 0.01])
+        m = np.array(ours["to_world"]).reshape(4, 4).T
+        ref = np.array(UsdGeom.XformCache().GetLocalToWorldTransform(cam.GetPrim())).T
+        np.testing.assert_allclose(m[:3, 3], ref[:3, 3] * 0.01, atol=1e-6)
+
+
+def test_time_samples(petzval: Path, tmp_path: Path) -> None:
+    path = tmp_path / "anim.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    stage.SetStartTimeCode(1)
+    stage.SetEndTimeCode(10)
+    x = UsdGeom.Xform.Define(stage, "/X")
+    t = x.AddTranslateOp()
+    t.Set((0, 0, 0), 1)
+    t.Set((10, 0, 0), 10)
+    r = x.AddRotateYOp()
+    r.Set(0, 1)
+    r.Set(90, 10)
+    quad(stage, "/X/Q")
+    cam = UsdGeom.Camera.Define(stage, "/Cam")
+    cam.CreateFocusDistanceAttr().Set(100.0, 1)
+    cam.CreateFocusDistanceAttr().Set(300.0, 10)
+    stage.GetRootLayer().Save()
+    stage = Usd.Stage.Open(str(path))
+    for frame in [1, 4.5, 10]:
+        rep = info(petzval, path, frame)
+        assert rep["time"] == frame
+        assert_same_placements(stage, rep, Usd.TimeCode(frame))
+        fd = UsdGeom.Camera(stage.GetPrimAtPath("/Cam")).GetFocusDistanceAttr().Get(frame)
+        assert rep["cameras"][0]["focus_distance_m"] == pytest.approx(fd * 0.01)
+    # no --frame: the stage's startTimeCode
+    assert info(petzval, path)["time"] == 1
+
+
+def lights_of(rep: dict, prim: str) -> list[float]:
+    return next(li["value"] for li in rep["lights"] if li["prim"] == prim)
+
+
+def test_lights_in_blender_units(petzval: Path, tmp_path: Path) -> None:
+    path = tmp_path / "lights.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    s = UsdLux.SphereLight.Define(stage, "/Point")
+    s.CreateIntensityAttr(1000 / np.pi)
+    s.CreateRadiusAttr(0.1)
+    s.CreateNormalizeAttr(True)
+    s.CreateExposureAttr(1.0)
+    d = UsdLux.DistantLight.Define(stage, "/Sun")
+    d.CreateIntensityAttr(0.75)
+    d.CreateNormalizeAttr(True)
+    r = UsdLux.RectLight.Define(stage, "/Area")
+    r.CreateIntensityAttr(100 / np.pi)
+    r.CreateWidthAttr(2.0)
+    r.CreateHeightAttr(1.0)
+    r.CreateNormalizeAttr(True)
+    r.CreateColorAttr((1, 0.5, 0.25))
+    dome = UsdLux.DomeLight.Define(stage, "/Dome")
+    dome.CreateIntensityAttr(2.0)
+    dome.CreateColorAttr((0.2, 0.3, 0.4))
+    cyl = UsdLux.CylinderLight.Define(stage, "/Tube")
+    cyl.CreateIntensityAttr(10.0)
+    cyl.CreateRadiusAttr(0.1)
+    cyl.CreateLengthAttr(2.0)
+    cyl.CreateNormalizeAttr(True)
+    stage.GetRootLayer().Save()
+    rep = info(petzval, path)
+    assert lights_of(rep, "/Tube") == pytest.approx([10 / (2 * np.pi * 0.1 * 2)] * 3, rel=1e-5)
+    tube = next(m for m in rep["meshes"] if m["prim"] == "/Tube")
+    np.testing.assert_allclose(tube["bounds"], [[-1, -0.1, -0.1], [1, 0.1, 0.1]], atol=1e-6)
+    lights = {li["prim"]: li for li in rep["lights"]}
+    # a 1000 W Blender point light (exposure +1 doubles it): 2 · 1000 / 4π W/sr
+    assert lights["/Point"]["value"] == pytest.approx([2000 / (4 * np.pi)] * 3, rel=1e-5)
+    assert lights["/Sun"]["value"] == pytest.approx([3.0] * 3)
+    # a 100 W 2 m² area light: radiance 100 / (π · 2)
+    assert lights["/Area"]["value"] == pytest.approx([100 / (2 * np.pi) * c for c in (1, 0.5, 0.25)], rel=1e-5)
+    assert rep["environment"]["constant"] == pytest.approx([0.4, 0.6, 0.8])
+
+
+def test_set_lens_composes_in_pxr_and_is_read_back(petzval: Path, tmp_path: Path) -> None:
+    shot = tmp_path / "shot.usda"
+    stage = Usd.Stage.CreateNew(str(shot))
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    stage.SetStartTimeCode(1001)
+    UsdGeom.Camera.Define(stage, "/Rig/Cam")
+    stage.GetRootLayer().Save()
+    lens = tmp_path / "fitted.toml"
+    lens.write_text(run(petzval, "lens", "export", "double-gauss-50mm").stdout)
+    out = tmp_path / "lens.usda"
+    run(petzval, "usd", "set-lens", str(shot), "--camera", "/Rig/Cam", "--lens", str(lens), "-o", str(out),
+        "--tilt-x", "3", "--blades", "6")
+    composed = Usd.Stage.Open(str(out))
+    # stage metadata lives on the root layer: set-lens carries the shot's over
+    assert UsdGeom.GetStageMetersPerUnit(composed) == 1.0
+    assert UsdGeom.GetStageUpAxis(composed) == UsdGeom.Tokens.z
+    assert composed.GetStartTimeCode() == 1001
+    prim = composed.GetPrimAtPath("/Rig/Cam")
+    assert prim.IsA(UsdGeom.Camera)
+    assert "PetzvalLensAPI" in prim.GetPrimTypeInfo().GetAppliedAPISchemas() or "PetzvalLensAPI" in (
+        prim.GetMetadata("apiSchemas").GetAddedOrExplicitItems()
+    )
+    asset = prim.GetAttribute("petzval:lens").Get()
+    assert Path(asset.resolvedPath).resolve() == lens.resolve()
+    rep = info(petzval, out)
+    pz = rep["cameras"][0]["petzval"]
+    assert Path(pz["lens"]).resolve() == lens.resolve()
+    assert pz["tilt_x_deg"] == 3 and pz["blades"] == 6
+    # a camera that does not exist
+    r = run(petzval, "usd", "set-lens", str(shot), "--camera", "/Nope", "--lens", "thin", "-o",
+            str(tmp_path / "x.usda"), ok=False)
+    assert r.returncode != 0 and "/Nope" in r.stderr
+
+
+def test_bad_input_names_layer_prim_attribute(petzval: Path, tmp_path: Path) -> None:
+    path = tmp_path / "bad.usda"
+    path.write_text(
+        '#usda 1.0\n(\n metersPerUnit = 1\n)\ndef Mesh "M"\n{\n'
+        "    point3f[] points = [(0,0,0),(1,0,0),(1,1,0)]\n"
+        "    int[] faceVertexCounts = [3]\n"
+        '    string faceVertexIndices = "oops"\n}\n'
+    )
+    r = run(petzval, "usd", "info", str(path), ok=False)
+    assert r.returncode != 0
+    assert "bad.usda" in r.stderr and "/M.faceVertexIndices" in r.stderr
+    # out-of-range index
+    path.write_text(
+        '#usda 1.0\ndef Mesh "M"\n{\n    point3f[] points = [(0,0,0),(1,0,0),(1,1,0)]\n'
+        "    int[] faceVertexCounts = [3]\n    int[] faceVertexIndices = [0, 1, 7]\n}\n"
+    )
+    r = run(petzval, "usd", "info", str(path), ok=False)
+    assert "/M.faceVertexIndices" in r.stderr and "outside" in r.stderr
+    # a missing reference is a listed warning; the rest loads
+    path.write_text(
+        '#usda 1.0\ndef Xform "A" (references = @./missing.usda@)\n{\n}\n'
+        'def Mesh "M"\n{\n    point3f[] points = [(0,0,0),(1,0,0),(1,1,0)]\n'
+        "    int[] faceVertexCounts = [3]\n    int[] faceVertexIndices = [0, 1, 2]\n}\n"
+    )
+    rep = info(petzval, path)
+    assert rep["instance_count"] == 1
+    assert any("missing.usda" in w for w in rep["warnings"]), rep["warnings"]
+    # a file that is not USD, and one that does not exist
+    (tmp_path / "junk.usda").write_text("#usda 1.0\ndef Mesh (((\n")
+    r = run(petzval, "usd", "info", str(tmp_path / "junk.usda"), ok=False)
+    assert r.returncode != 0 and "junk.usda" in r.stderr
+    r = run(petzval, "usd", "info", str(tmp_path / "none.usdc"), ok=False)
+    assert r.returncode != 0 and "none.usdc" in r.stderr
+
+
+def test_render_usd_shot_through_petzval_lens_api(petzval: Path, tmp_path: Path) -> None:
+    path = tmp_path / "shot.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    g = quad(stage, "/Ground")
+    g.AddTranslateOp().Set((-2, -2, -3))
+    g.AddScaleOp().Set((4, 4, 1))
+    dome = UsdLux.DomeLight.Define(stage, "/Env")
+    dome.CreateIntensityAttr(1.0)
+    cam = UsdGeom.Camera.Define(stage, "/Cam")
+    cam.CreateFocalLengthAttr(0.5)  # 50 mm at metersPerUnit 1 (tenths of a metre)
+    cam.CreateHorizontalApertureAttr(0.36)
+    cam.CreateVerticalApertureAttr(0.24)
+    cam.CreateFStopAttr(2.8)
+    cam.CreateFocusDistanceAttr(3.0)
+    prim = cam.GetPrim()
+    prim.AddAppliedSchema("PetzvalLensAPI")
+    prim.CreateAttribute("petzval:lens", Sdf.ValueTypeNames.Asset).Set("double-gauss-50mm")
+    prim.CreateAttribute("petzval:lensModel", Sdf.ValueTypeNames.Token).Set("thick")
+    prim.CreateAttribute("petzval:aperture:blades", Sdf.ValueTypeNames.Int).Set(6)
+    stage.GetRootLayer().Save()
+    out = tmp_path / "f.exr"
+    r = run(petzval, "render", str(path), "--camera", "/Cam", "-o", str(out), "--resolution", "48x32", "--spp", "2",
+            "--no-png")
+    assert out.is_file()
+    head = out.read_bytes()[:8192]
+    assert b"usdCamera" in head and b"/Cam" in head and b"double-gauss" in head
+    assert "thick" in r.stderr or b"thick" in head
+    r = run(petzval, "render", str(path), "--camera", "/Missing", "-o", str(tmp_path / "g.exr"), ok=False)
+    assert r.returncode != 0 and "/Missing" in r.stderr and "/Cam" in r.stderr
+
+
+def test_schema_and_docs_example(petzval: Path, tmp_path: Path) -> None:
+    """usd/schema.usda parses in pxr and declares exactly the attributes (and fallbacks) the
+    loader reads; the usda example in docs/usd.md opens in pxr and in petzval."""
+    layer = Sdf.Layer.OpenAsAnonymous(str(REPO / "usd" / "schema.usda"))
+    api = layer.GetPrimAtPath("/PetzvalLensAPI")
+    declared = {p.name: p.default for p in api.properties}
+    assert declared == {
+        "petzval:lens": Sdf.AssetPath(""),
+        "petzval:lensModel": "auto",
+        "petzval:tolerancePx": 0.25,
+        "petzval:tiltX": 0.0,
+        "petzval:tiltY": 0.0,
+        "petzval:aperture:blades": 0,
+        "petzval:aperture:rotation": 0.0,
+        "petzval:aperture:curvature": 0.0,
+        "petzval:aperture:ratio": 1.0,
+        "petzval:aperture:image": Sdf.AssetPath(""),
+    }
+    assert api.customData["apiSchemaType"] == "singleApply"
+    doc = (REPO / "docs" / "usd.md").read_text()
+    example = doc.split("```usda\n", 1)[1].split("```", 1)[0]
+    path = tmp_path / "example.usda"
+    path.write_text(example)
+    stage = Usd.Stage.Open(str(path))
+    assert stage.GetPrimAtPath("/Cam").IsA(UsdGeom.Camera)
+    rep = info(petzval, path)
+    (cam,) = rep["cameras"]
+    assert cam["focal_length_mm"] == pytest.approx(50.0)
+    pz = cam["petzval"]
+    assert pz["lens"] == "double-gauss-50mm" and pz["blades"] == 6 and pz["tilt_x_deg"] == 4
+    assert pz["curvature"] == pytest.approx(0.3) and pz["rotation_deg"] == 15
+    assert not rep["warnings"], rep["warnings"]
+    out = tmp_path / "ex.exr"
+    run(petzval, "render", str(path), "-o", str(out), "--resolution", "32x24", "--spp", "1", "--no-png",
+        "--lens-model", "thick")
+    assert b"double-gauss" in out.read_bytes()[:8192]
+
+
+def test_render_settings_camera_resolution_product(petzval: Path, tmp_path: Path) -> None:
+    import OpenEXR
+    from pxr import UsdRender
+
+    path = tmp_path / "rs.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    q = quad(stage, "/Q")
+    q.AddTranslateOp().Set((-0.5, -0.5, -3))
+    UsdLux.DomeLight.Define(stage, "/Env")
+    for name in ("A", "B"):
+        c = UsdGeom.Camera.Define(stage, f"/{name}")
+        c.CreateFocalLengthAttr(0.5)
+        c.CreateHorizontalApertureAttr(0.36)
+        c.CreateVerticalApertureAttr(0.24)
+    rs = UsdRender.Settings.Define(stage, "/Render/Settings")
+    rs.CreateCameraRel().SetTargets(["/A"])
+    rs.CreateResolutionAttr(Gf.Vec2i(64, 48))
+    prod = UsdRender.Product.Define(stage, "/Render/Product")
+    prod.CreateCameraRel().SetTargets(["/B"])  # the product's camera wins
+    prod.CreateResolutionAttr(Gf.Vec2i(40, 30))
+    prod.CreateProductNameAttr(str(tmp_path / "beauty.####.exr"))
+    rs.CreateProductsRel().SetTargets([prod.GetPath()])
+    stage.SetMetadata("renderSettingsPrimPath", "/Render/Settings")
+    stage.GetRootLayer().Save()
+    r = run(petzval, "render", str(path), "--frame", "7", "--spp", "1", "--no-png")
+    out = tmp_path / "beauty.0007.exr"
+    assert out.is_file(), r.stderr
+    with OpenEXR.File(str(out)) as f:
+        h = f.header()
+        assert h["petzval/usdCamera"] == "/B"
+        dw = h["dataWindow"]
+        assert (dw[1][0] - dw[0][0] + 1, dw[1][1] - dw[0][1] + 1) == (40, 30)
+    # the command line overrides the settings; a settings path that is not a RenderSettings fails
+    out2 = tmp_path / "cli.exr"
+    run(petzval, "render", str(path), "--camera", "/A", "--resolution", "20x10", "--spp", "1", "--no-png",
+        "-o", str(out2))
+    with OpenEXR.File(str(out2)) as f:
+        assert f.header()["petzval/usdCamera"] == "/A"
+    r = run(petzval, "render", str(path), "--settings", "/Q", "--spp", "1", "-o", str(tmp_path / "x.exr"), ok=False)
+    assert r.returncode != 0 and "/Q" in r.stderr and "RenderSettings" in r.stderr
+
+
+def test_petzval_lens_api_changes_the_render(petzval: Path, tmp_path: Path) -> None:
+    """Lens, tilt and blades authored on the camera (through set-lens layers) reach the render:
+    the EXR metadata reports them and the images differ from the plain thin-lens shot."""
+    import OpenEXR
+
+    path = tmp_path / "shot.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    for i in range(5):  # small bright squares at several depths, out of focus
+        q = quad(stage, f"/Q{i}")
+        q.AddTranslateOp().Set((-1.0 + 0.5 * i, -0.2 + 0.1 * i, -1.5 - 1.5 * i))
+        q.AddScaleOp().Set((0.08, 0.08, 1))
+        mat = UsdShade.Material.Define(stage, f"/Looks/E{i}")
+        sh = UsdShade.Shader.Define(stage, f"/Looks/E{i}/S")
+        sh.CreateIdAttr("UsdPreviewSurface")
+        sh.CreateInput("emissiveColor", Sdf.ValueTypeNames.Color3f).Set((20, 20, 20))
+        mat.CreateSurfaceOutput().ConnectToSource(sh.ConnectableAPI(), "surface")
+        UsdShade.MaterialBindingAPI.Apply(q.GetPrim()).Bind(mat)
+    cam = UsdGeom.Camera.Define(stage, "/Cam")
+    cam.CreateFocalLengthAttr(0.5)
+    cam.CreateHorizontalApertureAttr(0.36)
+    cam.CreateVerticalApertureAttr(0.24)
+    cam.CreateFStopAttr(2.8)
+    cam.CreateFocusDistanceAttr(1.0)
+    stage.GetRootLayer().Save()
+
+    def render(shot: Path, name: str) -> tuple[np.ndarray, dict]:
+        out = tmp_path / f"{name}.exr"
+        run(petzval, "render", str(shot), "-o", str(out), "--resolution", "64x48", "--spp", "16", "--no-png")
+        with OpenEXR.File(str(out), separate_channels=True) as f:
+            h = dict(f.header())
+            rgb = np.stack([np.asarray(f.channels()[c].pixels) for c in ("R", "G", "B")], axis=-1)
+        return rgb.astype(float), h
+
+    base, hb = render(path, "base")
+    variants = {
+        "lens": ["--lens", "double-gauss-50mm", "--lens-model", "thick"],
+        "tilt": ["--lens", "thin", "--tilt-x", "8"],
+        "blades": ["--lens", "thin", "--blades", "5"],
+    }
+    for name, extra in variants.items():
+        layer = tmp_path / f"{name}.usda"
+        run(petzval, "usd", "set-lens", str(path), "--camera", "/Cam", "-o", str(layer), *extra)
+        img, h = render(layer, name)
+        diff = np.abs(img - base).mean() / base.mean()
+        assert diff > 0.02, (name, diff)
+        if name == "lens":
+            assert "double-gauss" in h["petzval/lens"]
+        if name == "tilt":
+            assert float(h["petzval/tiltXDeg"]) == 8.0
+    assert float(hb["petzval/fNumber"]) == pytest.approx(2.8)
+
+
+def test_intrinsic_shapes_fill_pxr_extents(petzval: Path, tmp_path: Path) -> None:
+    path = tmp_path / "shapes.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.Cube.Define(stage, "/Cube").CreateSizeAttr(3.0)
+    UsdGeom.Sphere.Define(stage, "/Sphere")
+    for axis in ("X", "Y", "Z"):
+        c = UsdGeom.Cylinder.Define(stage, f"/Cyl{axis}")
+        c.CreateAxisAttr(axis)
+        c.CreateRadiusAttr(0.5)
+        c.CreateHeightAttr(3.0)
+        k = UsdGeom.Cone.Define(stage, f"/Cone{axis}")
+        k.CreateAxisAttr(axis)
+        k.CreateHeightAttr(1.5)
+        UsdGeom.Capsule.Define(stage, f"/Capsule{axis}").CreateAxisAttr(axis)
+        UsdGeom.Plane.Define(stage, f"/Plane{axis}").CreateAxisAttr(axis)
+    stage.GetRootLayer().Save()
+    rep = info(petzval, path)
+    assert not any("not supported" in w for w in rep["warnings"])
+    for m in rep["meshes"]:
+        prim = stage.GetPrimAtPath(m["prim"])
+        ext = UsdGeom.Boundable.ComputeExtentFromPlugins(UsdGeom.Boundable(prim), Usd.TimeCode.Default())
+        np.testing.assert_allclose(np.array(m["bounds"]), np.array(ext), atol=1e-5, err_msg=m["prim"])
+        assert m["triangles"] > 0
+
+
+def test_textures_from_files_and_usdz_packages(petzval: Path, tmp_path: Path) -> None:
+    import zlib
+
+    def png(path: Path, rgb: tuple[int, int, int]) -> None:
+        import struct
+
+        raw = b"".join(b"\x00" + bytes(rgb) * 2 for _ in range(2))
+
+        def chunk(t: bytes, d: bytes) -> bytes:
+            return struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d))
+
+        ihdr = struct.pack(">IIBBBBB", 2, 2, 8, 2, 0, 0, 0)
+        body = chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b"")
+        path.write_bytes(b"\x89PNG\r\n\x1a\n" + body)
+
+    (tmp_path / "tex").mkdir()
+    png(tmp_path / "tex" / "red.png", (255, 0, 0))
+    src = tmp_path / "tex.usda"
+    stage = Usd.Stage.CreateNew(str(src))
+    m = quad(stage, "/Q")
+    UsdGeom.PrimvarsAPI(m).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex).Set(
+        [(0, 0), (1, 0), (1, 1), (0, 1)]
+    )
+    mat = UsdShade.Material.Define(stage, "/Looks/M")
+    sh = UsdShade.Shader.Define(stage, "/Looks/M/S")
+    sh.CreateIdAttr("UsdPreviewSurface")
+    tex = UsdShade.Shader.Define(stage, "/Looks/M/Tex")
+    tex.CreateIdAttr("UsdUVTexture")
+    tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set("./tex/red.png")
+    tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("sRGB")
+    tex.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
+    sh.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(tex.ConnectableAPI(), "rgb")
+    mat.CreateSurfaceOutput().ConnectToSource(sh.ConnectableAPI(), "surface")
+    UsdShade.MaterialBindingAPI.Apply(m.GetPrim()).Bind(mat)
+    stage.GetRootLayer().Save()
+    from pxr import UsdUtils
+
+    usdz = tmp_path / "tex.usdz"
+    assert UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(str(src)), str(usdz))
+    for path in (src, usdz):
+        rep = info(petzval, path)
+        assert not rep["warnings"], (path, rep["warnings"])
+        (mat_rep,) = [x for x in rep["materials"] if x["name"] == "/Looks/M"]
+        assert mat_rep["base_color_texture"] and "red.png" in mat_rep["base_color_texture"]
+    # the texture's UsdPrimvarReader_float2 names the primvar the mesh's coordinates come from
+    stage = Usd.Stage.Open(str(src))
+    UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/Q")).CreatePrimvar(
+        "uvAlt", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex
+    ).Set([(0, 0), (2, 0), (2, 2), (0, 2)])
+    reader = UsdShade.Shader.Define(stage, "/Looks/M/Reader")
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.Token).Set("uvAlt")
+    reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+    UsdShade.Shader(stage.GetPrimAtPath("/Looks/M/Tex")).CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
+        reader.ConnectableAPI(), "result"
+    )
+    stage.GetRootLayer().Save()
+    assert info(petzval, src)["meshes"][0]["st_primvar"] == "primvars:uvAlt"
+    # a missing texture: a warning naming the shader and the file, and magenta
+    (tmp_path / "tex" / "red.png").unlink()
+    rep = info(petzval, src)
+    assert any("/Looks/M/Tex" in w and "red.png" in w for w in rep["warnings"]), rep["warnings"]

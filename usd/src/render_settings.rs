@@ -1,0 +1,115 @@
+//! UsdRender: the RenderSettings prim a render uses (given, else the stage's
+//! `renderSettingsPrimPath` metadata) and its first RenderProduct.
+//!
+//! | attribute | on | meaning | fallback |
+//! |---|---|---|---|
+//! | `camera` (rel) | RenderSettings, overridden by the product's | the camera prim | the first camera |
+//! | `resolution` (int2) | RenderSettings, overridden by the product's | pixels | 2048 × 1080 |
+//! | `pixelAspectRatio` | RenderSettings / product | only 1 is supported (others are listed and ignored) | 1 |
+//! | `products` (rel) | RenderSettings | RenderProduct prims; the first is rendered | none |
+//! | `productName` | RenderProduct | the output file (`####` = frame) | — |
+//! | `orderedVars` (rel) | RenderProduct | RenderVar prims: listed (the EXR's AOVs come from `--aovs`) | — |
+
+use crate::value::{attr_error, Reader};
+use crate::Error;
+use openusd::sdf;
+use std::path::Path;
+
+/// What a RenderSettings prim asks for.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct RenderSettings {
+    /// Its prim path.
+    pub path: String,
+    /// Camera prim (the product's, else the settings').
+    pub camera: Option<String>,
+    /// Resolution (the product's, else the settings', else 2048 × 1080).
+    pub resolution: (u32, u32),
+    /// The first product's `productName`.
+    pub product_name: Option<String>,
+    /// The first product's RenderVar prims.
+    pub vars: Vec<String>,
+    /// What was ignored.
+    pub warnings: Vec<String>,
+}
+
+fn first_target(prim: &openusd::usd::Prim, rel: &str) -> Result<Option<sdf::Path>, Error> {
+    prim.relationship(rel)
+        .targets()
+        .map(|t| t.into_iter().next())
+        .map_err(|e| attr_error(prim, rel, format!("cannot be read: {e:#}")))
+}
+
+fn resolution(reader: &Reader, prim: &openusd::usd::Prim) -> Result<Option<(u32, u32)>, Error> {
+    match reader.raw(prim, "resolution")? {
+        None => Ok(None),
+        Some(sdf::Value::Vec2i(v)) if v.x > 0 && v.y > 0 => Ok(Some((v.x as u32, v.y as u32))),
+        Some(v) => Err(attr_error(prim, "resolution", format!("expected a positive int2, got {v:?}"))),
+    }
+}
+
+/// The render settings of the shot at `path`: the prim `settings`, else the one the stage's
+/// `renderSettingsPrimPath` names; None when neither is there.
+pub fn read(path: &Path, time: Option<f64>, settings: Option<&str>) -> Result<Option<RenderSettings>, Error> {
+    let stage = crate::open_stage(path)?;
+    let file = path.display().to_string();
+    let meta = match stage.stage_metadata("renderSettingsPrimPath") {
+        Ok(Some(sdf::Value::String(s))) => Some(s),
+        Ok(Some(sdf::Value::Token(t))) => Some(t.as_str().to_string()),
+        _ => None,
+    };
+    let Some(p) = settings.map(str::to_string).or(meta) else { return Ok(None) };
+    let bad = |m: String| Error::Prim { layer: file.clone(), prim: p.clone(), message: m };
+    let sp = sdf::path(&p).map_err(|e| bad(format!("not a prim path: {e:#}")))?;
+    let prim = stage.prim(sp);
+    let ty = prim.type_name().ok().flatten().map(|t| t.as_str().to_string()).unwrap_or_default();
+    if ty != "RenderSettings" {
+        return Err(bad(if ty.is_empty() {
+            "no RenderSettings prim at this path".into()
+        } else {
+            format!("is a {ty}, not a RenderSettings prim")
+        }));
+    }
+    let time = time.or(if stage.has_authored_time_code_range() { Some(stage.start_time_code()) } else { None });
+    let reader = Reader { stage: &stage, time };
+    let mut out = RenderSettings {
+        path: p.clone(),
+        camera: first_target(&prim, "camera")?.map(|c| c.to_string()),
+        resolution: resolution(&reader, &prim)?.unwrap_or((2048, 1080)),
+        product_name: None,
+        vars: Vec::new(),
+        warnings: Vec::new(),
+    };
+    let par = reader.f64_or(&prim, "pixelAspectRatio", 1.0)?;
+    if par != 1.0 {
+        out.warnings.push(format!("{p}.pixelAspectRatio {par}: only square pixels render; ignored"));
+    }
+    let products = prim
+        .relationship("products")
+        .targets()
+        .map_err(|e| attr_error(&prim, "products", format!("cannot be read: {e:#}")))?;
+    if products.len() > 1 {
+        out.warnings.push(format!(
+            "{p}.products: {} products; only the first ({}) renders",
+            products.len(),
+            products[0]
+        ));
+    }
+    if let Some(pp) = products.first() {
+        let product = stage.prim(pp.clone());
+        if let Some(c) = first_target(&product, "camera")? {
+            out.camera = Some(c.to_string());
+        }
+        if let Some(r) = resolution(&reader, &product)? {
+            out.resolution = r;
+        }
+        out.product_name = reader.token(&product, "productName")?.filter(|s| !s.is_empty());
+        out.vars = product
+            .relationship("orderedVars")
+            .targets()
+            .map_err(|e| attr_error(&product, "orderedVars", format!("cannot be read: {e:#}")))?
+            .iter()
+            .map(|v| v.to_string())
+            .collect();
+    }
+    Ok(Some(out))
+}

@@ -1,0 +1,318 @@
+//! UsdShade: `material:binding` (the prim's, else the nearest ancestor's) → a Material prim →
+//! its `outputs:surface` shader. `UsdPreviewSurface` maps onto the renderer's material; its
+//! inputs may be values or connections to a `UsdUVTexture`.
+//!
+//! | UsdPreviewSurface input | renderer | fallback |
+//! |---|---|---|
+//! | `diffuseColor` | base colour (texture: `rgb`, `sourceColorSpace` sRGB/raw/auto) | (0.18, 0.18, 0.18) |
+//! | `metallic` | metallic | 0 |
+//! | `roughness` | roughness | 0.5 |
+//! | `emissiveColor` | emitted radiance | 0 |
+//! | `opacity`, `opacityThreshold` | alpha; threshold > 0 = mask, else blend when < 1 | 1, 0 |
+//! | `ior` | dielectric F0 | 1.5 |
+//! | `specular` (Blender's Specular IOR Level, not in the spec) | specular strength × 2 (0.5 = F0 of the IOR) | 0.5 |
+//! | `normal` (UsdUVTexture, raw) | tangent-space normal map | none |
+//!
+//! An unbound gprim uses its `primvars:displayColor` (constant) or 18 % grey. A shader that
+//! is not UsdPreviewSurface, or a texture that cannot be read, is listed once as a warning and
+//! renders magenta (the project's visible fallback).
+
+use crate::value::Reader;
+use crate::Error;
+use glam::{Vec3, Vec4};
+use openusd::{sdf, usd};
+use petzval_renderer::scene::texture::Wrap;
+use petzval_renderer::scene::{AlphaMode, Material, Scene, Texture, TextureRef};
+use std::collections::HashMap;
+use std::sync::Arc;
+
+/// The visible fallback colour.
+const MAGENTA: Vec4 = Vec4::new(1.0, 0.0, 1.0, 1.0);
+
+/// Materials created so far, keyed by (binding, double-sided).
+#[derive(Default)]
+pub struct Materials {
+    by_key: HashMap<(String, bool), u32>,
+    textures: HashMap<(String, bool), usize>,
+    /// The primvar a material's textures read (`UsdPrimvarReader_float2.varname`), by id.
+    st_names: HashMap<u32, String>,
+    /// The varname found while reading the current material.
+    pending_st: Option<String>,
+}
+
+/// The material bound to `prim` (its own `material:binding`, else its nearest ancestor's).
+pub fn bound_material(prim: &usd::Prim) -> Option<sdf::Path> {
+    let stage = prim.stage();
+    let mut path = Some(prim.path().clone());
+    while let Some(p) = path {
+        if p.is_abs_root() {
+            break;
+        }
+        let here = stage.prim(p.clone());
+        for rel in ["material:binding:full", "material:binding"] {
+            if let Ok(t) = here.relationship(rel).targets() {
+                if let Some(first) = t.into_iter().next() {
+                    return Some(first);
+                }
+            }
+        }
+        path = p.parent();
+    }
+    None
+}
+
+fn source_prim(stage: &usd::Stage, prim: &usd::Prim, input: &str) -> Option<(usd::Prim, String)> {
+    let c = prim.attribute(input).connections().ok()?;
+    let first = c.into_iter().next()?;
+    let output = first.to_string().rsplit('.').next().unwrap_or("").to_string();
+    Some((stage.prim(first.prim_path()), output))
+}
+
+impl Materials {
+    /// The texture-coordinate primvar (without `primvars:`) material `id` reads, when its
+    /// textures name one through a `UsdPrimvarReader_float2`.
+    pub fn st_name(&self, id: u32) -> Option<&str> {
+        self.st_names.get(&id).map(String::as_str)
+    }
+
+    /// The material id for a gprim whose binding is `binding` (None: its display colour).
+    pub fn material_for(
+        &mut self,
+        reader: &Reader,
+        scene: &mut Scene,
+        gprim: &usd::Prim,
+        double_sided: bool,
+        warnings: &mut Vec<String>,
+    ) -> Result<u32, Error> {
+        let binding = bound_material(gprim);
+        let key = match &binding {
+            Some(b) => b.to_string(),
+            None => {
+                let c = display_color(reader, gprim)?;
+                format!("displayColor:{},{},{}", c.x, c.y, c.z)
+            }
+        };
+        if let Some(&id) = self.by_key.get(&(key.clone(), double_sided)) {
+            return Ok(id);
+        }
+        self.pending_st = None;
+        let mut m = match &binding {
+            Some(b) => self.read_material(reader, scene, &reader.stage.prim(b.clone()), warnings)?,
+            None => preview_default(&key, display_color(reader, gprim)?),
+        };
+        m.double_sided = double_sided;
+        scene.materials.push(m);
+        let id = (scene.materials.len() - 1) as u32;
+        if let Some(st) = self.pending_st.take() {
+            self.st_names.insert(id, st);
+        }
+        self.by_key.insert((key, double_sided), id);
+        Ok(id)
+    }
+
+    fn read_material(
+        &mut self,
+        reader: &Reader,
+        scene: &mut Scene,
+        material: &usd::Prim,
+        warnings: &mut Vec<String>,
+    ) -> Result<Material, Error> {
+        let stage = reader.stage;
+        let name = material.path().to_string();
+        let Some((shader, _)) = source_prim(stage, material, "outputs:surface") else {
+            warnings.push(format!("{name}: material has no outputs:surface connection; rendered magenta"));
+            return Ok(preview_default(&name, MAGENTA.truncate()));
+        };
+        let id = reader.token(&shader, "info:id")?.unwrap_or_default();
+        if id != "UsdPreviewSurface" {
+            warnings.push(format!(
+                "{}: shader '{}' is not supported (only UsdPreviewSurface); rendered magenta",
+                shader.path(),
+                if id.is_empty() { "(no info:id)" } else { &id }
+            ));
+            return Ok(preview_default(&name, MAGENTA.truncate()));
+        }
+        let mut m = preview_default(&name, Vec3::splat(0.18));
+        // colour inputs: value or texture
+        if let Some((tex, _)) = source_prim(stage, &shader, "inputs:diffuseColor") {
+            m.base_color_texture = self.texture(reader, scene, &tex, true, warnings)?;
+            m.base_color = Vec4::ONE;
+        } else if let Some(c) = reader.vec3(&shader, "inputs:diffuseColor")? {
+            m.base_color = c.as_vec3().extend(1.0);
+        }
+        if let Some((tex, _)) = source_prim(stage, &shader, "inputs:emissiveColor") {
+            m.emissive_texture = self.texture(reader, scene, &tex, true, warnings)?;
+            m.emissive = Vec3::ONE;
+        } else if let Some(c) = reader.vec3(&shader, "inputs:emissiveColor")? {
+            m.emissive = c.as_vec3();
+        }
+        if let Some((tex, _)) = source_prim(stage, &shader, "inputs:normal") {
+            m.normal_texture = self.texture(reader, scene, &tex, false, warnings)?;
+        }
+        for (input, slot) in [("inputs:metallic", 0), ("inputs:roughness", 1)] {
+            if source_prim(stage, &shader, input).is_some() {
+                warnings.push(format!("{}: {input} from a texture is not supported; its value is used", shader.path()));
+            }
+            if let Some(v) = reader.f64(&shader, input)? {
+                let v = (v as f32).clamp(0.0, 1.0);
+                if slot == 0 {
+                    m.metallic = v;
+                } else {
+                    m.roughness = v;
+                }
+            }
+        }
+        // Not a UsdPreviewSurface input in the spec: Blender's exporter writes its Principled
+        // BSDF's Specular IOR Level here (0.5 = the dielectric F0 of the IOR), which is half of
+        // the renderer's (KHR_materials_specular) factor.
+        if let Some(level) = reader.f64(&shader, "inputs:specular")? {
+            m.specular = (2.0 * level).max(0.0) as f32;
+        }
+        if let Some(ior) = reader.f64(&shader, "inputs:ior")? {
+            if ior >= 1.0 {
+                m.ior = ior as f32;
+            }
+        }
+        let opacity = reader.f64(&shader, "inputs:opacity")?.unwrap_or(1.0) as f32;
+        let threshold = reader.f64(&shader, "inputs:opacityThreshold")?.unwrap_or(0.0) as f32;
+        m.base_color.w = opacity.clamp(0.0, 1.0);
+        m.alpha_mode = if threshold > 0.0 {
+            AlphaMode::Mask(threshold)
+        } else if opacity < 1.0 {
+            AlphaMode::Blend
+        } else {
+            AlphaMode::Opaque
+        };
+        Ok(m)
+    }
+
+    fn texture(
+        &mut self,
+        reader: &Reader,
+        scene: &mut Scene,
+        tex: &usd::Prim,
+        color: bool,
+        warnings: &mut Vec<String>,
+    ) -> Result<Option<TextureRef>, Error> {
+        let id = reader.token(tex, "info:id")?.unwrap_or_default();
+        if id != "UsdUVTexture" {
+            warnings.push(format!("{}: shader '{id}' feeding a material input is not supported; ignored", tex.path()));
+            return Ok(None);
+        }
+        let file = reader.asset(tex, "inputs:file")?;
+        let space = reader.token(tex, "inputs:sourceColorSpace")?.unwrap_or_else(|| "auto".into());
+        let wrap = |name: &str| -> Result<Wrap, Error> {
+            Ok(match reader.token(tex, name)?.as_deref() {
+                Some("clamp") => Wrap::ClampToEdge,
+                Some("mirror") => Wrap::MirroredRepeat,
+                _ => Wrap::Repeat,
+            })
+        };
+        let (ws, wt) = (wrap("inputs:wrapS")?, wrap("inputs:wrapT")?);
+        // inputs:st ← [UsdTransform2d ←] UsdPrimvarReader_float2 (varname)
+        if let Some((mut src, _)) = source_prim(reader.stage, tex, "inputs:st") {
+            let mut reaches_reader = true;
+            if reader.token(&src, "info:id")?.as_deref() == Some("UsdTransform2d") {
+                let identity = reader.f64(&src, "inputs:rotation")?.unwrap_or(0.0) == 0.0
+                    && reader.vec2(&src, "inputs:scale")?.is_none_or(|s| s == glam::DVec2::ONE)
+                    && reader.vec2(&src, "inputs:translation")?.is_none_or(|t| t == glam::DVec2::ZERO);
+                if !identity {
+                    warnings
+                        .push(format!("{}: UsdTransform2d is not applied; the texture is untransformed", src.path()));
+                }
+                match source_prim(reader.stage, &src, "inputs:in") {
+                    Some((s, _)) => src = s,
+                    None => reaches_reader = false,
+                }
+            }
+            if reaches_reader && reader.token(&src, "info:id")?.as_deref() == Some("UsdPrimvarReader_float2") {
+                if let Some(v) = reader.token(&src, "inputs:varname")? {
+                    self.pending_st = Some(v);
+                }
+            }
+        }
+        let path = match &file {
+            Some((authored, Some(resolved))) if !resolved.is_empty() => (authored.clone(), resolved.clone()),
+            Some((authored, _)) => (authored.clone(), authored.clone()),
+            None => {
+                warnings.push(format!("{}: inputs:file is not authored; rendered magenta", tex.path()));
+                (String::new(), String::new())
+            }
+        };
+        let srgb = color && space != "raw";
+        let key = (path.1.clone(), srgb);
+        if let Some(&i) = self.textures.get(&key) {
+            return Ok(Some(TextureRef { index: i, uv_set: 0 }));
+        }
+        let t = match load_image(&path.1, srgb) {
+            Ok((w, h, texels)) => {
+                Texture { name: path.0.clone(), width: w, height: h, texels, wrap_s: ws, wrap_t: wt, bilinear: true }
+            }
+            Err(e) => {
+                if !path.1.is_empty() {
+                    warnings.push(format!(
+                        "{}: inputs:file '{}' cannot be read ({e}); rendered magenta",
+                        tex.path(),
+                        path.0
+                    ));
+                }
+                Texture::constant("missing", MAGENTA)
+            }
+        };
+        scene.textures.push(Arc::new(t));
+        let i = scene.textures.len() - 1;
+        self.textures.insert(key, i);
+        Ok(Some(TextureRef { index: i, uv_set: 0 }))
+    }
+}
+
+/// The bytes of `inner` in the usdz package `package` (a zip archive).
+fn read_packaged(package: &str, inner: &str) -> Result<Vec<u8>, String> {
+    use std::io::Read;
+    if openusd::ar::is_package_relative_path(inner) {
+        return Err("nested packages are not read".into());
+    }
+    let file = std::fs::File::open(package).map_err(|e| format!("{package}: {e}"))?;
+    let mut zip = zip::ZipArchive::new(file).map_err(|e| format!("{package}: {e}"))?;
+    let mut entry = zip.by_name(inner).map_err(|e| format!("{package}[{inner}]: {e}"))?;
+    let mut bytes = Vec::new();
+    entry.read_to_end(&mut bytes).map_err(|e| format!("{package}[{inner}]: {e}"))?;
+    Ok(bytes)
+}
+
+fn load_image(path: &str, srgb: bool) -> Result<(u32, u32, Vec<Vec4>), String> {
+    let img = match openusd::ar::split_package_relative_path_outer(path) {
+        Some((package, inner)) => {
+            let bytes = read_packaged(&package, &inner)?;
+            image::load_from_memory(&bytes).map_err(|e| e.to_string())?
+        }
+        None => image::ImageReader::open(path)
+            .map_err(|e| e.to_string())?
+            .with_guessed_format()
+            .map_err(|e| e.to_string())?
+            .decode()
+            .map_err(|e| e.to_string())?,
+    };
+    let rgba = img.to_rgba32f();
+    let decode = |c: f32| if srgb { petzval_renderer::scene::texture::srgb_to_linear(c) } else { c };
+    let texels = rgba.pixels().map(|p| Vec4::new(decode(p[0]), decode(p[1]), decode(p[2]), p[3])).collect();
+    Ok((img.width(), img.height(), texels))
+}
+
+fn display_color(reader: &Reader, prim: &usd::Prim) -> Result<Vec3, Error> {
+    Ok(match reader.vec3s(prim, "primvars:displayColor")? {
+        Some(c) if !c.is_empty() => c[0].as_vec3(),
+        _ => Vec3::splat(0.18),
+    })
+}
+
+/// UsdPreviewSurface's fallbacks with this base colour.
+fn preview_default(name: &str, color: Vec3) -> Material {
+    Material {
+        name: name.to_string(),
+        base_color: color.extend(1.0),
+        metallic: 0.0,
+        roughness: 0.5,
+        ..Material::default()
+    }
+}

@@ -1,0 +1,415 @@
+//! The composed stage → the renderer's instanced [`Scene`]: one walk over the prim tree at
+//! one time code, composing transforms (no transform cache in openusd 0.6), building each
+//! mesh once and placing it by instances.
+//!
+//! | prim | result |
+//! |---|---|
+//! | inactive, `visibility = invisible`, `purpose` guide or proxy | skipped with its subtree |
+//! | `Mesh` | one mesh, one instance |
+//! | native instance (`instanceable`) | the prototype's meshes built once, one instance each per instance prim |
+//! | `PointInstancer` | the prototypes' meshes built once; instance i = instancer · T(positions[i]) · R(orientations[i]) · S(scales[i]) · prototype root; `invisibleIds` (against `ids`, else the index) skipped; the instancer's children are not rendered directly |
+//! | `Camera` | a [`UsdCamera`] (cameras in prototypes are ignored) |
+//! | UsdLux lights | see [`crate::lights`] |
+//! | `Cube`, `Sphere`, `Cylinder`, `Cone`, `Capsule`, `Plane` | tessellated ([`crate::shapes`]), one instance |
+//! | other gprims (curves, points, volumes…) | listed once as unsupported |
+//!
+//! The renderer's world is metres with +y up: every instance transform is pre-multiplied by
+//! the stage's `upAxis`/`metersPerUnit` correction ([`StageUnits::to_renderer`]).
+
+use crate::camera::{read_camera, UsdCamera};
+use crate::lights;
+use crate::mesh::{build_mesh, Subset};
+use crate::shading::Materials;
+use crate::value::{attr_error, layer_of_prim, Reader};
+use crate::xform::{local_xform, StageUnits};
+use crate::Error;
+use glam::{Affine3A, DMat4, DQuat, DVec3};
+use openusd::{sdf, usd};
+use petzval_renderer::scene::Scene;
+use std::collections::{BTreeSet, HashMap};
+
+/// One mesh as loaded (for reports and tests).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct MeshInfo {
+    /// The prim it came from.
+    pub prim: String,
+    /// Triangles after triangulation.
+    pub triangles: usize,
+    /// Vertices stored.
+    pub vertices: usize,
+    /// Faces authored.
+    pub faces: usize,
+    /// Faces skipped with fewer than three vertices.
+    pub degenerate_faces: usize,
+    /// Faces skipped as holes.
+    pub hole_faces: usize,
+    /// Instances placing it.
+    pub instances: usize,
+    /// Object-space bounds (min, max) of its vertices.
+    pub bounds: [[f32; 3]; 2],
+    /// The texture-coordinate primvar read.
+    pub st_primvar: Option<String>,
+}
+
+fn bounds(m: &petzval_renderer::scene::Mesh) -> [[f32; 3]; 2] {
+    let lo = m.positions.iter().fold(glam::Vec3::splat(f32::INFINITY), |a, &b| a.min(b));
+    let hi = m.positions.iter().fold(glam::Vec3::splat(f32::NEG_INFINITY), |a, &b| a.max(b));
+    if m.positions.is_empty() {
+        [[0.0; 3]; 2]
+    } else {
+        [lo.to_array(), hi.to_array()]
+    }
+}
+
+/// What the walk found besides the scene.
+#[derive(Debug, Clone, Default)]
+pub struct StageInfo {
+    /// One entry per scene mesh (same index).
+    pub meshes: Vec<MeshInfo>,
+    /// The prim path each scene instance stands for (same index as `Scene::instances`;
+    /// point-instancer instances read `INSTANCER[i]/…`).
+    pub instance_paths: Vec<String>,
+    /// Stage world transform (stage units, stage up axis) of each instance.
+    pub instance_stage_xf: Vec<DMat4>,
+    /// Lights read.
+    pub lights: Vec<lights::LightInfo>,
+    /// Point instancers: (path, instances placed, instances hidden by invisibleIds).
+    pub point_instancers: Vec<(String, usize, usize)>,
+    /// Native instances: (instance prim, prototype path).
+    pub native_instances: Vec<(String, String)>,
+}
+
+/// A placement found by the walk: mesh, stage-world transform, path.
+type Placement = (u32, DMat4, String);
+
+/// Walks a stage.
+pub struct Walker<'a> {
+    /// Value reader.
+    pub reader: Reader<'a>,
+    /// Units.
+    pub units: StageUnits,
+    /// Scene built so far.
+    pub scene: Scene,
+    /// Cameras found.
+    pub cameras: Vec<UsdCamera>,
+    /// Report.
+    pub info: StageInfo,
+    /// Warnings (deduplicated at the end).
+    pub warnings: Vec<String>,
+    materials: Materials,
+    meshes_by_prim: HashMap<String, u32>,
+    prototypes: HashMap<String, Vec<Placement>>,
+    unsupported: BTreeSet<String>,
+}
+
+fn is_light(ty: &str) -> bool {
+    matches!(
+        ty,
+        "SphereLight" | "DiskLight" | "RectLight" | "CylinderLight" | "DistantLight" | "DomeLight" | "DomeLight_1"
+    )
+}
+
+impl<'a> Walker<'a> {
+    /// A walker over `stage` at `time`.
+    pub fn new(stage: &'a usd::Stage, time: Option<f64>) -> Result<Self, Error> {
+        Ok(Walker {
+            reader: Reader { stage, time },
+            units: StageUnits::read(stage)?,
+            scene: Scene::default(),
+            cameras: Vec::new(),
+            info: StageInfo::default(),
+            warnings: Vec::new(),
+            materials: Materials::default(),
+            meshes_by_prim: HashMap::new(),
+            prototypes: HashMap::new(),
+            unsupported: BTreeSet::new(),
+        })
+    }
+
+    /// Walks every root prim and fills the scene.
+    pub fn run(&mut self) -> Result<(), Error> {
+        let root = self.reader.stage.prim(sdf::Path::abs_root());
+        let mut out = Vec::new();
+        for child in children(&root)? {
+            self.walk(&child, DMat4::IDENTITY, &mut out, false)?;
+        }
+        let to_r = self.units.to_renderer();
+        for (mesh, xf, path) in out {
+            let m = to_r * xf;
+            self.scene.add_instance(mesh, Affine3A::from_mat4(m.as_mat4()));
+            self.info.meshes[mesh as usize].instances += 1;
+            self.info.instance_paths.push(path);
+            self.info.instance_stage_xf.push(xf);
+        }
+        for t in &self.unsupported {
+            self.warnings.push(format!("prims of type {t} are not supported and were skipped"));
+        }
+        let mut seen = BTreeSet::new();
+        self.warnings.retain(|w| seen.insert(w.clone()));
+        self.scene.warnings = self.warnings.clone();
+        Ok(())
+    }
+
+    fn walk(&mut self, prim: &usd::Prim, parent: DMat4, out: &mut Vec<Placement>, in_proto: bool) -> Result<(), Error> {
+        let path = prim.path().to_string();
+        let err = |e: anyhow::Error| Error::Prim {
+            layer: layer_of_prim(prim),
+            prim: path.clone(),
+            message: format!("{e:#}"),
+        };
+        if !prim.is_active().map_err(err)? {
+            return Ok(());
+        }
+        let ty = prim.type_name().map_err(err)?.map(|t| t.as_str().to_string()).unwrap_or_default();
+        if matches!(ty.as_str(), "Material" | "Shader" | "NodeGraph" | "GeomSubset") || ty.starts_with("Render") {
+            return Ok(());
+        }
+        if self.reader.token(prim, "visibility")?.as_deref() == Some("invisible") {
+            return Ok(());
+        }
+        if let Some(p) = self.reader.token(prim, "purpose")? {
+            if p == "guide" || p == "proxy" {
+                return Ok(());
+            }
+        }
+        let local = local_xform(&self.reader, prim)?;
+        let world = if local.resets { local.matrix } else { parent * local.matrix };
+        if prim.is_instance().map_err(err)? {
+            if let Some(proto) = prim.prototype().map_err(err)? {
+                let proto_s = proto.to_string();
+                self.info.native_instances.push((path.clone(), proto_s.clone()));
+                let placements = self.prototype_placements(&proto, false)?;
+                for (m, rel, sub) in placements {
+                    out.push((m, world * rel, format!("{path}{sub}")));
+                }
+                return Ok(());
+            }
+        }
+        match ty.as_str() {
+            "Mesh" | "Cube" | "Sphere" | "Cylinder" | "Cone" | "Capsule" | "Plane" => {
+                let mesh = self.mesh(prim, &ty)?;
+                out.push((mesh, world, path.clone()));
+            }
+            "PointInstancer" => {
+                self.point_instancer(prim, world, out)?;
+                return Ok(());
+            }
+            "Camera" if !in_proto => {
+                let cam = read_camera(&self.reader, prim, world, &self.units, &mut self.warnings)?;
+                self.cameras.push(cam);
+            }
+            t if is_light(t) => {
+                if in_proto {
+                    self.warnings.push(format!("{path}: lights inside instance prototypes are not supported"));
+                } else {
+                    let mut o = lights::LightOutput {
+                        scene: &mut self.scene,
+                        warnings: &mut self.warnings,
+                        infos: &mut self.info.lights,
+                        meshes: Vec::new(),
+                    };
+                    lights::read_light(&self.reader, &self.units, &mut o, prim, t, world)?;
+                    for (mesh, xf, p) in o.meshes {
+                        self.add_placed_mesh(mesh, xf, p);
+                    }
+                }
+            }
+            "" | "Xform" | "Scope" => {}
+            "Points" | "BasisCurves" | "NurbsCurves" | "NurbsPatch" | "HermiteCurves" | "TetMesh" | "Volume" => {
+                self.unsupported.insert(ty.clone());
+            }
+            _ => {}
+        }
+        for child in children(prim)? {
+            self.walk(&child, world, out, in_proto)?;
+        }
+        Ok(())
+    }
+
+    /// The meshes under a prototype with their transforms relative to it. A native prototype
+    /// (`/__Prototype_N`) contributes its descendants; a point-instancer prototype also its
+    /// own root transform (`include_root`).
+    fn prototype_placements(&mut self, proto: &sdf::Path, include_root: bool) -> Result<Vec<Placement>, Error> {
+        let key = format!("{proto}#{include_root}");
+        if let Some(p) = self.prototypes.get(&key) {
+            return Ok(p.clone());
+        }
+        let prim = self.reader.stage.prim(proto.clone());
+        let mut out = Vec::new();
+        if include_root {
+            self.walk(&prim, DMat4::IDENTITY, &mut out, true)?;
+            let root = proto.to_string();
+            for p in &mut out {
+                p.2 = p.2.strip_prefix(&root).unwrap_or(&p.2).to_string();
+            }
+        } else {
+            for child in children(&prim)? {
+                self.walk(&child, DMat4::IDENTITY, &mut out, true)?;
+            }
+            let root = proto.to_string();
+            for p in &mut out {
+                p.2 = p.2.strip_prefix(&root).unwrap_or(&p.2).to_string();
+            }
+        }
+        self.prototypes.insert(key, out.clone());
+        Ok(out)
+    }
+
+    fn mesh(&mut self, prim: &usd::Prim, ty: &str) -> Result<u32, Error> {
+        let path = prim.path().to_string();
+        if let Some(&m) = self.meshes_by_prim.get(&path) {
+            return Ok(m);
+        }
+        let double_sided = self.reader.bool(prim, "doubleSided")?.unwrap_or(false);
+        let material =
+            self.materials.material_for(&self.reader, &mut self.scene, prim, double_sided, &mut self.warnings)?;
+        let mut subsets = Vec::new();
+        for child in children(prim)? {
+            let ty = child.type_name().ok().flatten().map(|t| t.as_str().to_string()).unwrap_or_default();
+            if ty != "GeomSubset" {
+                continue;
+            }
+            let et = self.reader.token(&child, "elementType")?.unwrap_or_else(|| "face".into());
+            if et != "face" {
+                continue;
+            }
+            if crate::shading::bound_material(&child).is_none()
+                || crate::shading::bound_material(&child) == crate::shading::bound_material(prim)
+            {
+                continue;
+            }
+            let faces = self.reader.ints(&child, "indices")?.unwrap_or_default();
+            let m =
+                self.materials.material_for(&self.reader, &mut self.scene, &child, double_sided, &mut self.warnings)?;
+            subsets.push(Subset { faces, material: m, path: child.path().to_string() });
+        }
+        let (mesh, report) = if ty == "Mesh" {
+            let st = self.materials.st_name(material).map(str::to_string);
+            build_mesh(&self.reader, prim, material, &subsets, st.as_deref())?
+        } else {
+            let mut m = crate::shapes::shape_mesh(&self.reader, prim, ty)?.unwrap_or_default();
+            m.material_ids = vec![material; m.indices.len()];
+            let faces = m.indices.len();
+            (m, crate::mesh::MeshReport { faces, ..Default::default() })
+        };
+        if report.degenerate_faces > 0 {
+            self.warnings.push(format!(
+                "{}: {path}: {} of {} faces have fewer than 3 vertices and were skipped",
+                layer_of_prim(prim),
+                report.degenerate_faces,
+                report.faces
+            ));
+        }
+        self.info.meshes.push(MeshInfo {
+            prim: path.clone(),
+            triangles: mesh.triangle_count(),
+            vertices: mesh.positions.len(),
+            faces: report.faces,
+            degenerate_faces: report.degenerate_faces,
+            hole_faces: report.hole_faces,
+            instances: 0,
+            bounds: bounds(&mesh),
+            st_primvar: report.st_primvar.clone(),
+        });
+        let id = self.scene.add_mesh(mesh);
+        self.meshes_by_prim.insert(path, id);
+        Ok(id)
+    }
+
+    fn point_instancer(&mut self, prim: &usd::Prim, world: DMat4, out: &mut Vec<Placement>) -> Result<(), Error> {
+        let path = prim.path().to_string();
+        let r = &self.reader;
+        let protos = prim
+            .relationship("prototypes")
+            .targets()
+            .map_err(|e| attr_error(prim, "prototypes", format!("cannot be read: {e:#}")))?;
+        let proto_indices = r.ints(prim, "protoIndices")?.unwrap_or_default();
+        let n = proto_indices.len();
+        let positions = r.vec3s(prim, "positions")?.unwrap_or_default();
+        if positions.len() != n {
+            return Err(attr_error(
+                prim,
+                "positions",
+                format!("has {} entries, protoIndices has {n}", positions.len()),
+            ));
+        }
+        let orient = match r.quats(prim, "orientations")? {
+            Some(q) => Some(q),
+            None => r.quats(prim, "orientationsf")?,
+        };
+        let scales = r.vec3s(prim, "scales")?;
+        for (name, len) in [("orientations", orient.as_ref().map(Vec::len)), ("scales", scales.as_ref().map(Vec::len))]
+        {
+            if let Some(l) = len {
+                if l != n {
+                    return Err(attr_error(prim, name, format!("has {l} entries, protoIndices has {n}")));
+                }
+            }
+        }
+        let ids = r.ints(prim, "ids")?;
+        let invisible: std::collections::HashSet<i64> =
+            r.ints(prim, "invisibleIds")?.unwrap_or_default().into_iter().collect();
+        let mut proto_places = Vec::with_capacity(protos.len());
+        for p in &protos {
+            proto_places.push(self.prototype_placements(p, true)?);
+        }
+        let mut placed = 0;
+        let mut hidden = 0;
+        let mut bad_index = 0;
+        for i in 0..n {
+            let id = ids.as_ref().and_then(|v| v.get(i).copied()).unwrap_or(i as i64);
+            if invisible.contains(&id) {
+                hidden += 1;
+                continue;
+            }
+            let Some(places) = usize::try_from(proto_indices[i]).ok().and_then(|k| proto_places.get(k)) else {
+                bad_index += 1;
+                continue;
+            };
+            let q = orient.as_ref().map(|o| o[i]).unwrap_or(DQuat::IDENTITY);
+            let s = scales.as_ref().map(|s| s[i]).unwrap_or(DVec3::ONE);
+            let xf = world * DMat4::from_scale_rotation_translation(s, q, positions[i]);
+            for (m, rel, sub) in places {
+                out.push((*m, xf * *rel, format!("{path}[{i}]{sub}")));
+            }
+            placed += 1;
+        }
+        if bad_index > 0 {
+            self.warnings.push(format!(
+                "{}: {path}.protoIndices: {bad_index} instances name a prototype outside the {} prototypes and were skipped",
+                layer_of_prim(prim),
+                protos.len()
+            ));
+        }
+        self.info.point_instancers.push((path, placed, hidden));
+        Ok(())
+    }
+
+    /// Adds a mesh placed at `stage_xf` (for area lights).
+    pub fn add_placed_mesh(&mut self, mesh: petzval_renderer::scene::Mesh, stage_xf: DMat4, path: String) {
+        self.info.meshes.push(MeshInfo {
+            prim: path.clone(),
+            triangles: mesh.triangle_count(),
+            vertices: mesh.positions.len(),
+            faces: mesh.triangle_count(),
+            degenerate_faces: 0,
+            hole_faces: 0,
+            instances: 1,
+            bounds: bounds(&mesh),
+            st_primvar: None,
+        });
+        let id = self.scene.add_mesh(mesh);
+        let m = self.units.to_renderer() * stage_xf;
+        self.scene.add_instance(id, Affine3A::from_mat4(m.as_mat4()));
+        self.info.instance_paths.push(path);
+        self.info.instance_stage_xf.push(stage_xf);
+    }
+}
+
+fn children(prim: &usd::Prim) -> Result<Vec<usd::Prim>, Error> {
+    prim.children().map_err(|e| Error::Prim {
+        layer: layer_of_prim(prim),
+        prim: prim.path().to_string(),
+        message: format!("children cannot be composed: {e:#}"),
+    })
+}

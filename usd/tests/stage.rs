@@ -1,0 +1,116 @@
+//! The USD stage on small usda files written here (the pxr comparisons are in tests/usd).
+
+use glam::{DMat4, DVec3};
+use petzval_usd::{load, Error};
+use std::path::PathBuf;
+
+fn write(name: &str, text: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("petzval-usd-tests-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+const TRI: &str = "point3f[] points = [(0,0,0),(1,0,0),(0,1,0)]
+    int[] faceVertexCounts = [3]
+    int[] faceVertexIndices = [0, 1, 2]";
+
+#[test]
+fn rotate_xyz_applies_x_first() {
+    let p = write(
+        "rot.usda",
+        &format!(
+            "#usda 1.0\n(\n metersPerUnit = 1\n upAxis = \"Y\"\n)\ndef Mesh \"M\"\n{{\n {TRI}\n float3 xformOp:rotateXYZ = (90, 0, 90)\n uniform token[] xformOpOrder = [\"xformOp:rotateXYZ\"]\n}}\n"
+        ),
+    );
+    let shot = load(&p, None).unwrap();
+    let m = shot.info.instance_stage_xf[0];
+    let expect = DMat4::from_rotation_z(90f64.to_radians()) * DMat4::from_rotation_x(90f64.to_radians());
+    assert!(m.abs_diff_eq(expect, 1e-9), "{m:?}");
+    // +y → (x first) +z → (z) +z
+    assert!(m.transform_vector3(DVec3::Y).abs_diff_eq(DVec3::Z, 1e-9));
+}
+
+#[test]
+fn reset_xform_stack_drops_the_parent() {
+    let p = write(
+        "reset.usda",
+        &format!(
+            "#usda 1.0\n(\n metersPerUnit = 1\n)\ndef Xform \"P\"\n{{\n double3 xformOp:translate = (10, 0, 0)\n uniform token[] xformOpOrder = [\"xformOp:translate\"]\n def Mesh \"M\"\n {{\n {TRI}\n double3 xformOp:translate = (0, 1, 0)\n uniform token[] xformOpOrder = [\"!resetXformStack!\", \"xformOp:translate\"]\n }}\n}}\n"
+        ),
+    );
+    let shot = load(&p, None).unwrap();
+    let t = shot.info.instance_stage_xf[0].transform_point3(DVec3::ZERO);
+    assert!(t.abs_diff_eq(DVec3::new(0.0, 1.0, 0.0), 1e-12), "{t}");
+}
+
+#[test]
+fn an_op_without_a_value_names_layer_prim_and_attribute() {
+    let p = write(
+        "noval.usda",
+        &format!(
+            "#usda 1.0\ndef Mesh \"M\"\n{{\n {TRI}\n uniform token[] xformOpOrder = [\"xformOp:translate\"]\n}}\n"
+        ),
+    );
+    let e = load(&p, None).err().expect("an error");
+    let msg = e.to_string();
+    assert!(matches!(e, Error::Attribute { .. }), "{msg}");
+    assert!(msg.contains("noval.usda") && msg.contains("/M.xformOp:translate"), "{msg}");
+}
+
+#[test]
+fn camera_fallbacks_in_tenths_of_a_scene_unit() {
+    let p = write("cam.usda", "#usda 1.0\n(\n metersPerUnit = 1\n)\ndef Camera \"C\"\n{\n}\n");
+    let shot = load(&p, None).unwrap();
+    let c = shot.camera(Some("/C")).unwrap();
+    // fallbacks 50 and 20.955 tenths of a metre
+    assert!((c.focal_length_mm - 5000.0).abs() < 1e-9);
+    assert!((c.horizontal_aperture_mm - 2095.5).abs() < 1e-9);
+    assert_eq!(c.f_stop, 0.0);
+    assert_eq!(c.focus_distance_m, None);
+    assert_eq!(c.clipping_range_m, (1.0, 1_000_000.0));
+    let h = c.host_camera().unwrap();
+    assert_eq!(h.lens, "thin");
+    assert_eq!(h.f_number, None, "fStop 0 = no depth of field");
+    let e = shot.camera(Some("/Nope")).err().unwrap().to_string();
+    assert!(e.contains("/Nope") && e.contains("/C"), "{e}");
+}
+
+#[test]
+fn left_handed_flips_the_winding() {
+    let p = write(
+        "lh.usda",
+        &format!("#usda 1.0\ndef Mesh \"R\"\n{{\n {TRI}\n}}\ndef Mesh \"L\"\n{{\n {TRI}\n uniform token orientation = \"leftHanded\"\n}}\n"),
+    );
+    let shot = load(&p, None).unwrap();
+    let r = &shot.scene.meshes[0];
+    let l = &shot.scene.meshes[1];
+    assert_eq!(r.indices[0], [0, 1, 2]);
+    assert_eq!(l.indices[0], [0, 2, 1]);
+    // smooth normals follow the winding
+    assert!(r.normals[0].z > 0.99 && l.normals[0].z < -0.99);
+}
+
+#[test]
+fn shapes_wind_outwards_with_outward_normals() {
+    let p = write(
+        "shapes.usda",
+        "#usda 1.0\ndef Cube \"A\"\n{\n}\ndef Sphere \"B\"\n{\n}\ndef Cylinder \"C\"\n{\n uniform token axis = \"X\"\n}\ndef Cone \"D\"\n{\n uniform token axis = \"Y\"\n}\ndef Capsule \"E\"\n{\n}\n",
+    );
+    let shot = load(&p, None).unwrap();
+    assert_eq!(shot.scene.meshes.len(), 5);
+    for (k, m) in shot.scene.meshes.iter().enumerate() {
+        for t in &m.indices {
+            let [a, b, c] = t.map(|i| m.positions[i as usize]);
+            let n = (b - a).cross(c - a);
+            if n.length() < 1e-9 {
+                continue; // the poles' collapsed quads
+            }
+            let centroid = (a + b + c) / 3.0;
+            assert!(n.dot(centroid) > 0.0, "mesh {k}: triangle {t:?} winds inwards");
+            let vn = m.normals[t[0] as usize] + m.normals[t[1] as usize] + m.normals[t[2] as usize];
+            assert!(vn.dot(n) > 0.0, "mesh {k}: normals disagree with the winding");
+        }
+    }
+}
