@@ -3,7 +3,7 @@
 //! by stage.
 //!
 //! ```sh
-//! cargo run --release -p petzval-fit --example bench_fit [-- TIME_LIMIT_S [RAYS]]
+//! cargo run --release -p petzval-fit --example bench_fit [-- TIME_LIMIT_S [RAYS [MAX_EVALUATIONS [STARTS]]]]
 //! ```
 //!
 //! Prints the cost of one evaluation (all nine captures traced, splatted and fitted), of one
@@ -19,6 +19,8 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let time_limit: f64 = args.first().map(|a| a.parse().expect("TIME_LIMIT_S")).unwrap_or(20.0);
     let rays: usize = args.get(1).map(|a| a.parse().expect("RAYS")).unwrap_or(petzval_fit::forward::DEFAULT_RAYS);
+    let max_evaluations: usize = args.get(2).map(|a| a.parse().expect("MAX_EVALUATIONS")).unwrap_or(0);
+    let starts: usize = args.get(3).map(|a| a.parse().expect("STARTS")).unwrap_or(FitOptions::default().starts);
     let dir = std::env::temp_dir().join(format!("petzval-fit-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let lens = petzval_optics::library_lens("double-gauss-50mm").unwrap();
@@ -58,7 +60,7 @@ fn main() {
         write_captures(&dir, "double-gauss-50mm", &truth, &shots, &free, 128, &SynthOptions::default()).unwrap();
     println!("synthesis: 9 captures of 128² px in {:.2} s", t.elapsed().as_secs_f64());
     let manifest = Manifest::load(&manifest_path).unwrap();
-    let options = FitOptions { time_limit_s: time_limit, rays, ..Default::default() };
+    let options = FitOptions { time_limit_s: time_limit, rays, max_evaluations, starts, ..Default::default() };
     let t = Instant::now();
     let problem = Problem::new(&manifest, &options).unwrap();
     println!("prepare: {:.2} s", t.elapsed().as_secs_f64());
@@ -94,11 +96,14 @@ fn main() {
         println!("{:<24} {:>12.6} (truth {:>10.6}, start {:>10.6}) σ {:?}", p.name, p.value, tv, p.start, p.sigma);
     }
     println!("residuals {:?}", result.residuals.iter().map(|r| (r * 1e4).round() / 1e4).collect::<Vec<_>>());
-    println!("evaluations {:?}", result.evaluations);
+    println!("evaluations {:?}; Levenberg–Marquardt stopped on {:?}", result.evaluations, result.lm_stop);
     println!(
         "stage seconds {:?}",
         result.stage_seconds.iter().map(|(k, v)| (k.as_str(), (v * 100.0).round() / 100.0)).collect::<Vec<_>>()
     );
-    println!("fit: {total:.1} s (time limit {time_limit} s for CRS2 + BOBYQA, then Levenberg–Marquardt)");
+    println!(
+        "fit: {total:.1} s (time limit {time_limit} s, max evaluations {max_evaluations}, starts {starts}, load {})",
+        std::fs::read_to_string("/proc/loadavg").unwrap_or_default().trim()
+    );
     std::fs::remove_dir_all(&dir).ok();
 }

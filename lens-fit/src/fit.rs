@@ -10,9 +10,13 @@
 //! | `footprint_px` | ray footprint on the sensor (0: from the ray density) | px | 0 |
 //! | `global_share` | share of the time for the global stage (0 skips it) | — | 0.35 |
 //! | `global_rays` | rays per wavelength per capture in the global stage (0: `rays / 4`, at least 2048) | — | 0 |
+//! | `max_evaluations` | objective evaluations of the whole fit (0: no bound, the time limit alone) | — | 0 |
+//! | `starts` | local (BOBYQA) starts from the global stage's best mutually distinct points | — | 2 |
 //!
 //! The whole fit keeps to `time_limit_s`: CRS2 35 %, BOBYQA 30 %, Levenberg–Marquardt computes
-//! no Jacobian after the limit (but always one, for the uncertainties).
+//! no Jacobian after the limit (the uncertainty stage always computes one). `max_evaluations`
+//! is split over the stages by the same shares; with it (and a time limit that is not reached)
+//! a fit's end point does not depend on the machine's speed, load or thread count.
 //!
 //! Residuals: for every unmasked pixel k of capture c and channel, `(d_k − a·m_k − b) / ‖d − b‖`
 //! with the capture's fitted scale a and background b, so each capture weighs the same. During
@@ -43,6 +47,11 @@ pub struct FitOptions {
     pub global_share: f64,
     /// Rays of the global stage (0: from `rays`).
     pub global_rays: usize,
+    /// Objective evaluations of the whole fit, split over the stages by the time's shares
+    /// (0: unbounded).
+    pub max_evaluations: usize,
+    /// Local starts from the global stage's best mutually distinct points.
+    pub starts: usize,
 }
 
 impl FitOptions {
@@ -64,6 +73,8 @@ impl Default for FitOptions {
             footprint_px: 0.0,
             global_share: 0.35,
             global_rays: 0,
+            max_evaluations: 0,
+            starts: 2,
         }
     }
 }

@@ -54,7 +54,8 @@ fn clipped_highlights_are_masked_and_the_fit_recovers() {
     truth.camera.sensor_offset_mm = 0.05;
     let synth = SynthOptions { png16: true, peak_photons: 4.0 * 65535.0, ..Default::default() };
     let manifest = write_captures(&dir, "double-gauss-50mm", &truth, &few_shots(), OFFSET_FREE, 40, &synth).unwrap();
-    let options = FitOptions { time_limit_s: 8.0, rays: 8192, global_share: 0.0, ..Default::default() };
+    let options =
+        FitOptions { time_limit_s: 600.0, rays: 8192, global_share: 0.0, max_evaluations: 100, ..Default::default() };
     let (problem, result, json) = fit(&manifest, &options, &dir.join("report"));
     let offset = value(&result, "sensor.offset_mm");
     let clipped: Vec<usize> = problem.captures.iter().map(|p| p.image.clipped).collect();
@@ -87,7 +88,8 @@ fn hot_pixels_are_masked_and_do_not_bias_the_fit() {
     let mut truth = nominal();
     truth.camera.sensor_offset_mm = 0.05;
     let hot = vec![(4, 5, 30_000.0), (33, 6, 12_000.0), (7, 34, 50_000.0), (30, 31, 8_000.0)];
-    let options = FitOptions { time_limit_s: 5.0, rays: 8192, global_share: 0.0, ..Default::default() };
+    let options =
+        FitOptions { time_limit_s: 600.0, rays: 8192, global_share: 0.0, max_evaluations: 80, ..Default::default() };
     let mut offsets = Vec::new();
     for (label, pixels) in [("clean", vec![]), ("hot", hot.clone())] {
         let sub = dir.join(label);
@@ -185,7 +187,7 @@ fn a_parameter_the_captures_cannot_see_is_not_determined() {
     let manifest =
         write_captures(&dir, "double-gauss-50mm", &truth, &few_shots()[..2], &free, 40, &SynthOptions::default())
             .unwrap();
-    let options = FitOptions { time_limit_s: 4.0, rays: 8192, ..Default::default() };
+    let options = FitOptions { time_limit_s: 600.0, rays: 8192, max_evaluations: 100, ..Default::default() };
     let (_, result, json) = fit(&manifest, &options, &dir.join("report"));
     let (o, rot) = (value(&result, "sensor.offset_mm"), value(&result, "aperture.rotation_deg"));
     println!("blind: offset {} ± {:?}, rotation {} ± {:?}", o.value, o.sigma, rot.value, rot.sigma);
