@@ -92,6 +92,86 @@ fn stage_budgets(options: &FitOptions) -> [Option<usize>; 3] {
     [Some(global.min(total)), Some(local.min(total - global.min(total))), Some(lm)]
 }
 
+/// One capture's residuals (as in [`Problem::residual_vector`]) at a shift.
+fn capture_residuals(problem: &Problem, c: usize, landing: &[Landing], shift: DVec2) -> Vec<f64> {
+    let p = &problem.captures[c];
+    let f = problem.fit_capture(c, landing, shift);
+    let mut r = Vec::new();
+    for (ch, model) in f.model.iter().enumerate() {
+        for (k, dk) in p.image.channels[ch].iter().enumerate() {
+            if p.image.mask[k] {
+                r.push((dk - model[k]) / p.norms[ch]);
+            }
+        }
+    }
+    r
+}
+
+/// Gauss–Newton steps on one capture's (x, y) shift alone, from `shift` (the landing is fixed:
+/// each step re-splats, nothing is re-traced); returns the shift and its Σr².
+pub fn matched_shift(problem: &Problem, c: usize, landing: &[Landing], shift: DVec2, steps: usize) -> (DVec2, f64) {
+    let sq = |r: &[f64]| r.iter().map(|v| v * v).sum::<f64>();
+    let mut s = shift;
+    let mut r = capture_residuals(problem, c, landing, s);
+    let mut rr = sq(&r);
+    let h = 1e-3;
+    for _ in 0..steps {
+        let rx = capture_residuals(problem, c, landing, s + DVec2::new(h, 0.0));
+        let ry = capture_residuals(problem, c, landing, s + DVec2::new(0.0, h));
+        let (mut a11, mut a12, mut a22, mut g1, mut g2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for i in 0..r.len() {
+            let (jx, jy) = ((rx[i] - r[i]) / h, (ry[i] - r[i]) / h);
+            a11 += jx * jx;
+            a12 += jx * jy;
+            a22 += jy * jy;
+            g1 += jx * r[i];
+            g2 += jy * r[i];
+        }
+        // a little damping keeps the 2 × 2 step sane on a flat or one-dimensional spot
+        let (a11, a22) = (a11 * 1.001 + 1e-12, a22 * 1.001 + 1e-12);
+        let det = a11 * a22 - a12 * a12;
+        if !(det > 0.0) {
+            break;
+        }
+        let mut step = DVec2::new(-(a22 * g1 - a12 * g2) / det, -(a11 * g2 - a12 * g1) / det);
+        if step.length() > 2.0 {
+            step *= 2.0 / step.length();
+        }
+        let mut improved = false;
+        for _ in 0..3 {
+            let rn = capture_residuals(problem, c, landing, s + step);
+            let rrn = sq(&rn);
+            if rrn < rr {
+                s += step;
+                r = rn;
+                rr = rrn;
+                improved = true;
+                break;
+            }
+            step *= 0.5;
+        }
+        if !improved || step.length() < 1e-3 {
+            break;
+        }
+    }
+    (s, rr)
+}
+
+/// The objective of the global and local stages: Σ r² with each capture's shift matched to it
+/// (from the centroid-matching shift, [`matched_shift`]); captures in parallel, summed in order.
+/// The matched shifts are returned too.
+pub fn profiled_objective(problem: &Problem, scaled: &[f64], steps: usize) -> (f64, Option<Vec<DVec2>>) {
+    let failed = problem.captures.len() as f64 * 4.0;
+    let Ok(model) = problem.model_at(&unscale(&problem.free, scaled)) else { return (failed, None) };
+    let Some(landings) = problem.landings(&model) else { return (failed, None) };
+    let start = problem.centroid_shifts(&landings);
+    let matched: Vec<(DVec2, f64)> = (0..problem.captures.len())
+        .into_par_iter()
+        .map(|c| matched_shift(problem, c, &landings[c], start[c], steps))
+        .collect();
+    (matched.iter().map(|m| m.1).sum(), Some(matched.iter().map(|m| m.0).collect()))
+}
+
 struct Tracker<'a> {
     problem: &'a Problem,
     start: Instant,
@@ -109,6 +189,7 @@ struct Tracker<'a> {
     /// only between trials of several evaluations, so it is enforced here; the calls past it
     /// return +∞ without tracing.
     cap: usize,
+    shift_steps: usize,
 }
 
 impl Tracker<'_> {
@@ -116,7 +197,7 @@ impl Tracker<'_> {
         if self.evaluations >= self.cap {
             return f64::INFINITY;
         }
-        let f = self.problem.objective(x);
+        let f = profiled_objective(self.problem, x, self.shift_steps).0;
         self.evaluations += 1;
         if let Some(r) = &mut self.record {
             r.push((f, x.to_vec()));
@@ -165,7 +246,7 @@ pub fn distinct_best(points: &[(f64, Vec<f64>)], k: usize) -> Vec<(f64, Vec<f64>
 
 /// Global (CRS2, coarse rays) then local (BOBYQA from the `options.starts` best distinct global
 /// points, sharing the stage's time and evaluations) on the scaled parameters; returns the best
-/// point found at the fit's own rays.
+/// point found at the local stage's rays.
 #[allow(clippy::too_many_arguments)]
 fn nlopt_stages(
     problem: &Problem,
@@ -180,12 +261,15 @@ fn nlopt_stages(
     let n = x0.len();
     let budgets = stage_budgets(options);
     let total_budget = (options.max_evaluations > 0).then_some(options.max_evaluations);
-    let coarse_rays = options.global_rays();
-    let coarse = if coarse_rays < problem.pattern.len() {
-        Problem { pattern: crate::forward::disc_pattern(coarse_rays), ..problem.clone() }
-    } else {
-        problem.clone()
+    let with_rays = |rays: usize| {
+        if rays < problem.pattern.len() {
+            Problem { pattern: crate::forward::disc_pattern(rays), ..problem.clone() }
+        } else {
+            problem.clone()
+        }
     };
+    let coarse = with_rays(options.global_rays());
+    let local = with_rays(if options.local_rays > 0 { options.local_rays } else { options.rays });
     let mut t = Tracker {
         problem,
         start,
@@ -198,6 +282,7 @@ fn nlopt_stages(
         budget: total_budget,
         progress,
         cap: usize::MAX,
+        shift_steps: options.shift_steps,
     };
     if n == 0 {
         *history = t.history;
@@ -234,15 +319,16 @@ fn nlopt_stages(
         candidates = distinct_best(t.record.as_deref().unwrap_or(&[]), options.starts.max(1));
         t.record = None;
         t.cap = usize::MAX;
-        t.problem = problem;
+        t.problem = &local;
         evals.push(("global (CRS2)".to_string(), t.evaluations - before));
         stage_seconds.push(("global (CRS2)".to_string(), elapsed_s(stage_start)));
     }
     if candidates.is_empty() {
         candidates.push((f64::NAN, x0.to_vec()));
     }
-    // 2. Local: BOBYQA from each candidate at the fit's own rays; the best end point wins.
+    // 2. Local: BOBYQA from each candidate at the local stage's rays; the best end point wins.
     t.best = f64::INFINITY;
+    t.problem = &local;
     let local_time = options.time_limit_s * LOCAL_SHARE;
     let before = t.evaluations;
     let stage_start = Instant::now();
@@ -615,11 +701,8 @@ pub fn run_with_progress(problem: &Problem, options: &FitOptions, progress: Prog
     let lm_start = Instant::now();
     // 3. Levenberg–Marquardt on parameters and shifts together; its budget is what the
     // earlier stages left of the whole (they may stop early).
-    let model = problem.model_at(&unscale(&problem.free, &best)).ok();
-    let landings = model.as_ref().and_then(|m| problem.landings(m));
-    let shifts = landings
-        .as_ref()
-        .map(|l| problem.centroid_shifts(l))
+    let shifts = profiled_objective(problem, &best, options.shift_steps)
+        .1
         .unwrap_or_else(|| vec![DVec2::ZERO; problem.captures.len()]);
     let mut x = best.clone();
     for s in &shifts {
@@ -766,6 +849,44 @@ mod tests {
 
     fn jacobian(cols: &[Vec<f64>]) -> DMatrix<f64> {
         DMatrix::from_fn(cols[0].len(), cols.len(), |i, c| cols[c][i])
+    }
+
+    #[test]
+    fn distinct_best_skips_points_close_to_a_better_one() {
+        let pts = vec![
+            (3.0, vec![0.9, 0.9]),
+            (1.0, vec![0.5, 0.5]),
+            (1.5, vec![0.52, 0.5]), // within 0.05 (rms) of the best: skipped
+            (2.0, vec![0.1, 0.2]),
+            (f64::NAN, vec![0.0, 0.0]),
+        ];
+        let best = distinct_best(&pts, 3);
+        assert_eq!(best.iter().map(|p| p.0).collect::<Vec<_>>(), vec![1.0, 2.0, 3.0]);
+        assert_eq!(distinct_best(&pts, 1)[0].1, vec![0.5, 0.5]);
+    }
+
+    #[test]
+    fn normal_equations_from_sparse_columns_match_the_dense_product() {
+        let m = 40;
+        let dense = |k: usize| (0..m).map(|i| ((i * (k + 3)) as f64 * 0.17).sin()).collect::<Vec<f64>>();
+        let cols = vec![
+            Column { offset: 0, values: dense(0) },
+            Column { offset: 0, values: dense(1) },
+            Column { offset: 5, values: dense(2)[5..20].to_vec() },
+            Column { offset: 20, values: dense(3)[20..40].to_vec() },
+        ];
+        let r: Vec<f64> = (0..m).map(|i| (i as f64 * 0.3).cos()).collect();
+        let j = DMatrix::from_fn(m, cols.len(), |i, c| {
+            let col = &cols[c];
+            if i >= col.offset && i < col.offset + col.values.len() {
+                col.values[i - col.offset]
+            } else {
+                0.0
+            }
+        });
+        let (a, g) = normal_equations(&cols, &r);
+        let (a2, g2) = (j.transpose() * &j, j.transpose() * DVector::from_vec(r.clone()));
+        assert!((a - a2).amax() < 1e-12 && (g - g2).amax() < 1e-12);
     }
 
     #[test]

@@ -149,8 +149,16 @@ fn a_start_five_percent_off_on_four_radii_comes_back() {
     shots.push(Shot { source_m: [0.2, 0.0, 3.0], focus_m: 2.0, f_number: 4.0 });
     let manifest =
         write_captures(&dir, "double-gauss-50mm", &truth, &shots, &free, 48, &SynthOptions::default()).unwrap();
-    let share = std::env::var("FIT_SHARE").ok().and_then(|v| v.parse().ok()).unwrap_or(0.35);
-    let options = FitOptions { time_limit_s: 20.0, rays: 16_384, global_share: share, ..Default::default() };
+    let env = |k: &str, d: f64| std::env::var(k).ok().and_then(|v| v.parse().ok()).unwrap_or(d);
+    // an evaluation budget (FIT_BUDGET) ends the fit, the time limit is only a cap
+    let options = FitOptions {
+        time_limit_s: 600.0,
+        rays: 16_384,
+        global_share: env("FIT_SHARE", 0.35),
+        max_evaluations: env("FIT_BUDGET", 600.0) as usize,
+        starts: env("FIT_STARTS", 3.0) as usize,
+        ..Default::default()
+    };
     let (_, result, _) = fit(&manifest, &options, &dir.join("report"));
     let mut worst: f64 = 0.0;
     for (s, r) in surfaces.iter().zip(&nominal_r) {
