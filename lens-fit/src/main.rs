@@ -75,9 +75,9 @@ fn progress_bar(quiet: bool, budget: usize) -> indicatif::ProgressBar {
         bar.set_draw_target(ProgressDrawTarget::stderr());
     }
     let template = if budget > 0 {
-        "{elapsed_precise} [{bar:30}] {pos}/{len} evaluations  {msg}"
+        "{elapsed_precise} [{bar:20}] {pos}/{len} evaluations {msg}"
     } else {
-        "{elapsed_precise} {spinner} {pos} evaluations  {msg}"
+        "{elapsed_precise} {spinner} {pos} evaluations {msg}"
     };
     if let Ok(style) = ProgressStyle::with_template(template) {
         bar.set_style(style.progress_chars("=> "));
@@ -181,7 +181,8 @@ fn run(args: &Args) -> petzval_fit::Result<()> {
             bar.set_length(b as u64);
         }
         bar.set_position(p.evaluations as u64);
-        bar.set_message(format!("{}  best {:.6e}", p.stage, p.best));
+        let best = if p.best.is_finite() { format!("{:.3e}", p.best) } else { "–".to_string() };
+        bar.set_message(format!("{} best {best}", p.stage));
     };
     let result = solve::run_with_progress(&fit_problem, &options, &update);
     bar.finish_and_clear();

@@ -103,7 +103,20 @@ fn the_command_line_fits_reports_and_evaluates() {
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    // stderr is a pipe here, not a terminal: no progress bar
+    assert!(!stderr.contains("evaluations"), "a progress bar on a pipe: {stderr}");
+    // bad budgets and start counts are refused, naming the option
+    for (flag, value) in [("--max-evaluations", "0"), ("--starts", "0"), ("--starts", "65")] {
+        let bad = std::process::Command::new(bin)
+            .args([manifest.to_str().unwrap(), "-o", lens_out.to_str().unwrap(), "--report", report.to_str().unwrap()])
+            .args([flag, value])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&bad.stderr);
+        assert!(!bad.status.success() && err.contains(flag), "{flag} {value}: {err}");
+    }
     let fit: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(report.join("fit.json")).unwrap()).unwrap();
     let offset = fit["params"]["sensor.offset_mm"]["value"].as_f64().unwrap();
