@@ -10,6 +10,7 @@
 //! | `footprint_px` | ray footprint on the sensor (0: from the ray density) | px | 0 |
 //! | `global_share` | share of the time for the global stage (0 skips it) | — | 0.35 |
 //! | `global_rays` | rays per wavelength per capture in the global stage (0: `rays / 4`, at least 2048) | — | 0 |
+//! | `global_footprint_px` | ray footprint of the global stage (0: as the fit's) | px | 0 |
 //! | `local_rays` | rays per wavelength per capture in the local stage (0: `rays`) | — | 0 |
 //! | `shift_steps` | Gauss–Newton steps on each capture's shift in every global/local evaluation (0: the centroid-matching shift) | — | 2 |
 //! | `max_evaluations` | objective evaluations of the whole fit (0: no bound, the time limit alone) | — | 0 |
@@ -49,6 +50,8 @@ pub struct FitOptions {
     pub global_share: f64,
     /// Rays of the global stage (0: from `rays`).
     pub global_rays: usize,
+    /// Ray footprint of the global stage (0: as the fit's).
+    pub global_footprint_px: f64,
     /// Rays of the local stage (0: `rays`).
     pub local_rays: usize,
     /// Gauss–Newton steps on each capture's shift per global/local evaluation.
@@ -79,6 +82,7 @@ impl Default for FitOptions {
             footprint_px: 0.0,
             global_share: 0.35,
             global_rays: 0,
+            global_footprint_px: 0.0,
             local_rays: 0,
             shift_steps: 2,
             max_evaluations: 0,

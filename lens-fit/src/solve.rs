@@ -268,7 +268,11 @@ fn nlopt_stages(
             problem.clone()
         }
     };
-    let coarse = with_rays(options.global_rays());
+    let mut coarse = with_rays(options.global_rays());
+    if options.global_footprint_px > 0.0 {
+        // coarse to fine: the global stage sees every spot blurred (a smoother landscape)
+        coarse.footprint_px = options.global_footprint_px;
+    }
     let local = with_rays(if options.local_rays > 0 { options.local_rays } else { options.rays });
     let mut t = Tracker {
         problem,
@@ -367,7 +371,7 @@ fn nlopt_stages(
         }
         t.cap = usize::MAX;
     } else {
-        // no local stage: the best candidate counts only if it is better at the fit's rays
+        // no local stage: the best candidate counts only if it is better at the local stage's rays
         t.eval(x0);
         if candidates[0].1 != x0 {
             t.eval(&candidates[0].1.clone());

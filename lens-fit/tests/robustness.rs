@@ -118,11 +118,12 @@ fn hot_pixels_are_masked_and_do_not_bias_the_fit() {
 /// (c) Four radii of double-gauss-50mm free (surfaces 1, 3, 7, 9), the truth nominal, the fit
 /// starting 5 % off on every one (alternating signs; `FIT_START_OFF` sets the fraction,
 /// `FIT_SHARE` the global stage's share, `FIT_BUDGET` the evaluations (600), `FIT_STARTS` the
-/// local starts (3)). Measured (docs/lens-fit.md), this version: budget 1 200, 3 starts: worst
+/// local starts (3), `FIT_GLOBAL_FOOTPRINT` the global stage's footprint in px (0: the fit's)). Measured (docs/lens-fit.md), this version: budget 1 200, 3 starts: worst
 /// radius 7.4 % off; 1 200 / 5 and 2 000 / 5: 3.65 %, residuals 4.1–6.9 % (110 s). With the
 /// earlier median + 5σ centroid rule (which failed the recovery test's defocused disc):
 /// 600 / 3: 5.2 %, residuals 3.4–8.5 %; 2 000 / 5 came back (worst 0.16 %, residuals 1.0–1.6 %,
-/// 87 s). Not reliably, and not in 60 s, so this stays ignored.
+/// 87 s). With the global stage's spots blurred to 2 px (`FIT_GLOBAL_FOOTPRINT=2`): 1 200 / 3:
+/// 2.73 %, 1 200 / 5: 3.27 %. Not reliably, and not in 60 s, so this stays ignored.
 #[test]
 #[ignore = "four radii started 5 % off do not come back reliably within a 60 s budget (measured; issue 10)"]
 fn a_start_five_percent_off_on_four_radii_comes_back() {
@@ -160,6 +161,7 @@ fn a_start_five_percent_off_on_four_radii_comes_back() {
         global_share: env("FIT_SHARE", 0.35),
         max_evaluations: env("FIT_BUDGET", 600.0) as usize,
         starts: env("FIT_STARTS", 3.0) as usize,
+        global_footprint_px: env("FIT_GLOBAL_FOOTPRINT", 0.0),
         ..Default::default()
     };
     let (_, result, _) = fit(&manifest, &options, &dir.join("report"));
