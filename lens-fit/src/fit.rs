@@ -23,8 +23,10 @@
 //!
 //! Residuals: for every unmasked pixel k of capture c and channel, `(d_k − a·m_k − b) / ‖d − b‖`
 //! with the capture's fitted scale a and background b, so each capture weighs the same. During
-//! the global and local stages each capture's shift is the one that puts the model's centroid
-//! on the measured one; Levenberg–Marquardt then fits the shifts with the parameters.
+//! the global and local stages each capture's shift starts as the one that puts the model's
+//! centroid on the measured one and takes `shift_steps` Gauss–Newton steps (`solve::
+//! profiled_objective`; [`Problem::objective`] is the centroid-only form);
+//! Levenberg–Marquardt then fits the shifts with the parameters.
 
 use crate::captures::{self, CaptureImage};
 use crate::error::{Error, Result};

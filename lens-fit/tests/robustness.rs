@@ -123,7 +123,7 @@ fn hot_pixels_are_masked_and_do_not_bias_the_fit() {
 /// earlier median + 5σ centroid rule (which failed the recovery test's defocused disc):
 /// 600 / 3: 5.2 %, residuals 3.4–8.5 %; 2 000 / 5 came back (worst 0.16 %, residuals 1.0–1.6 %,
 /// 87 s). With the global stage's spots blurred to 2 px (`FIT_GLOBAL_FOOTPRINT=2`): 1 200 / 3:
-/// 2.73 %, 1 200 / 5: 3.27 %. Not reliably, and not in 60 s, so this stays ignored.
+/// 2.73 %, 1 200 / 5: 3.27 %, 2 000 / 3: 2.42 % (1 px: 7.17 %). Not reliably, and not in 60 s, so this stays ignored.
 #[test]
 #[ignore = "four radii started 5 % off do not come back reliably within a 60 s budget (measured; issue 10)"]
 fn a_start_five_percent_off_on_four_radii_comes_back() {
