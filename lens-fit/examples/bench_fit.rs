@@ -3,7 +3,7 @@
 //! by stage.
 //!
 //! ```sh
-//! cargo run --release -p petzval-fit --example bench_fit [-- TIME_LIMIT_S [RAYS]]
+//! cargo run --release -p petzval-fit --example bench_fit [-- TIME_LIMIT_S [RAYS [MAX_EVALUATIONS [STARTS]]]]
 //! ```
 //!
 //! Prints the cost of one evaluation (all nine captures traced, splatted and fitted), of one
@@ -19,6 +19,8 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let time_limit: f64 = args.first().map(|a| a.parse().expect("TIME_LIMIT_S")).unwrap_or(20.0);
     let rays: usize = args.get(1).map(|a| a.parse().expect("RAYS")).unwrap_or(petzval_fit::forward::DEFAULT_RAYS);
+    let max_evaluations: usize = args.get(2).map(|a| a.parse().expect("MAX_EVALUATIONS")).unwrap_or(0);
+    let starts: usize = args.get(3).map(|a| a.parse().expect("STARTS")).unwrap_or(FitOptions::default().starts);
     let dir = std::env::temp_dir().join(format!("petzval-fit-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let lens = petzval_optics::library_lens("double-gauss-50mm").unwrap();
@@ -58,10 +60,39 @@ fn main() {
         write_captures(&dir, "double-gauss-50mm", &truth, &shots, &free, 128, &SynthOptions::default()).unwrap();
     println!("synthesis: 9 captures of 128² px in {:.2} s", t.elapsed().as_secs_f64());
     let manifest = Manifest::load(&manifest_path).unwrap();
-    let options = FitOptions { time_limit_s: time_limit, rays, ..Default::default() };
+    // BENCH_GLOBAL_RAYS, BENCH_LOCAL_RAYS: the stages' ray counts (else the defaults)
+    let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse().ok()).unwrap_or(0);
+    let options = FitOptions {
+        time_limit_s: time_limit,
+        rays,
+        max_evaluations,
+        starts,
+        global_rays: env("BENCH_GLOBAL_RAYS"),
+        local_rays: env("BENCH_LOCAL_RAYS"),
+        shift_steps: std::env::var("BENCH_SHIFT_STEPS").ok().and_then(|v| v.parse().ok()).unwrap_or(2),
+        global_share: std::env::var("BENCH_GLOBAL_SHARE").ok().and_then(|v| v.parse().ok()).unwrap_or(0.35),
+        ..Default::default()
+    };
+    println!(
+        "rays: global {}, local {}, Levenberg–Marquardt {rays}",
+        options.global_rays(),
+        if options.local_rays > 0 { options.local_rays } else { rays }
+    );
     let t = Instant::now();
     let problem = Problem::new(&manifest, &options).unwrap();
     println!("prepare: {:.2} s", t.elapsed().as_secs_f64());
+    // the residual photon noise alone would leave: √(Σ d) / ‖d − median‖ (Poisson, the images
+    // are in photons over a dark level of 100)
+    let floor: Vec<f64> = problem
+        .captures
+        .iter()
+        .map(|p| {
+            let sum: f64 =
+                p.image.channels[0].iter().zip(&p.image.mask).filter(|(_, m)| **m).map(|(v, _)| v.max(0.0)).sum();
+            (sum.sqrt() / p.norms[0] * 1e4).round() / 1e4
+        })
+        .collect();
+    println!("noise floor of the residuals: {floor:?}");
     let x0 = vec![0.5; problem.free.len()];
     let t = Instant::now();
     let reps = 5;
@@ -86,19 +117,37 @@ fn main() {
         t.elapsed().as_secs_f64() * 1e3,
         r.len()
     );
+    let truth_values = [radii[0].1 * 1.03, radii[1].1 * 0.98, 0.4, -0.3, 0.05];
+    if std::env::var_os("BENCH_FROM_TRUTH").is_some() {
+        // the floor: the local stages alone, started at the truth
+        let mut p = problem.clone();
+        for (f, v) in p.free.clone().iter().zip(truth_values) {
+            p.start.set(&f.param, v).unwrap();
+        }
+        let o = FitOptions { global_share: 0.0, ..options };
+        let r = solve::run(&p, &o);
+        println!(
+            "from the truth: residuals {:?}, values {:?}, {:?}",
+            r.residuals.iter().map(|r| (r * 1e4).round() / 1e4).collect::<Vec<_>>(),
+            r.params.iter().map(|p| p.value).collect::<Vec<_>>(),
+            r.evaluations
+        );
+    }
     let t = Instant::now();
     let result = solve::run(&problem, &options);
     let total = t.elapsed().as_secs_f64();
-    let truth_values = [radii[0].1 * 1.03, radii[1].1 * 0.98, 0.4, -0.3, 0.05];
     for (p, tv) in result.params.iter().zip(truth_values) {
         println!("{:<24} {:>12.6} (truth {:>10.6}, start {:>10.6}) σ {:?}", p.name, p.value, tv, p.start, p.sigma);
     }
     println!("residuals {:?}", result.residuals.iter().map(|r| (r * 1e4).round() / 1e4).collect::<Vec<_>>());
-    println!("evaluations {:?}", result.evaluations);
+    println!("evaluations {:?}; Levenberg–Marquardt stopped on {:?}", result.evaluations, result.lm_stop);
     println!(
         "stage seconds {:?}",
         result.stage_seconds.iter().map(|(k, v)| (k.as_str(), (v * 100.0).round() / 100.0)).collect::<Vec<_>>()
     );
-    println!("fit: {total:.1} s (time limit {time_limit} s for CRS2 + BOBYQA, then Levenberg–Marquardt)");
+    println!(
+        "fit: {total:.1} s (time limit {time_limit} s, max evaluations {max_evaluations}, starts {starts}, load {})",
+        std::fs::read_to_string("/proc/loadavg").unwrap_or_default().trim()
+    );
     std::fs::remove_dir_all(&dir).ok();
 }

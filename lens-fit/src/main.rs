@@ -2,6 +2,7 @@
 //!
 //! ```text
 //! petzval-fit MANIFEST -o FITTED.toml [--lrtf FITTED.lrtf] --report DIR [--time-limit S]
+//!             [--max-evaluations N] [--starts K] [--rays N] [--quiet]
 //! petzval-fit MANIFEST --evaluate DIR --report DIR2
 //! petzval-fit MANIFEST --check
 //! ```
@@ -31,9 +32,19 @@ struct Args {
     /// Wall-clock budget of the fit in seconds.
     #[arg(long, default_value_t = 60.0)]
     time_limit: f64,
+    /// Bound on the fit's objective evaluations (split over the stages as the time is): with
+    /// it, the end point does not depend on the machine's speed (the time limit stays a cap).
+    #[arg(long)]
+    max_evaluations: Option<usize>,
+    /// Local (BOBYQA) starts from the global stage's best mutually distinct points.
+    #[arg(long, default_value_t = FitOptions::default().starts)]
+    starts: usize,
     /// Rays per wavelength per capture.
     #[arg(long, default_value_t = petzval_fit::forward::DEFAULT_RAYS)]
     rays: usize,
+    /// No progress bar (it is drawn on stderr only when stderr is a terminal).
+    #[arg(long, short = 'q')]
+    quiet: bool,
     /// Fit nothing but each capture's position, scale and background, through the lens and
     /// camera of an earlier fit's report folder.
     #[arg(long)]
@@ -54,6 +65,27 @@ fn main() -> ExitCode {
     }
 }
 
+/// The fit's progress on stderr: stage, evaluations (of the budget, if any), best objective,
+/// elapsed time; hidden with `--quiet` or when stderr is not a terminal.
+fn progress_bar(quiet: bool, budget: usize) -> indicatif::ProgressBar {
+    use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+    let bar = if budget > 0 { ProgressBar::new(budget as u64) } else { ProgressBar::no_length() };
+    if quiet || !std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        bar.set_draw_target(ProgressDrawTarget::hidden());
+    } else {
+        bar.set_draw_target(ProgressDrawTarget::stderr());
+    }
+    let template = if budget > 0 {
+        "{elapsed_precise} [{bar:20}] {pos}/{len} evaluations {msg}"
+    } else {
+        "{elapsed_precise} {spinner} {pos} evaluations {msg}"
+    };
+    if let Ok(style) = ProgressStyle::with_template(template) {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar
+}
+
 fn run(args: &Args) -> petzval_fit::Result<()> {
     let manifest = Manifest::load(&args.manifest)?;
     let file = manifest.file.display().to_string();
@@ -64,7 +96,19 @@ fn run(args: &Args) -> petzval_fit::Result<()> {
     if !(64..=1 << 22).contains(&args.rays) {
         return Err(usage("--rays must be in 64..=4194304"));
     }
-    let mut options = FitOptions { time_limit_s: args.time_limit, rays: args.rays, ..Default::default() };
+    if args.max_evaluations.is_some_and(|n| !(1..=100_000_000).contains(&n)) {
+        return Err(usage("--max-evaluations must be in 1..=100000000"));
+    }
+    if !(1..=64).contains(&args.starts) {
+        return Err(usage("--starts must be in 1..=64"));
+    }
+    let mut options = FitOptions {
+        time_limit_s: args.time_limit,
+        rays: args.rays,
+        max_evaluations: args.max_evaluations.unwrap_or(0),
+        starts: args.starts,
+        ..Default::default()
+    };
     let mut manifest = manifest;
     if let Some(earlier) = &args.evaluate {
         // The earlier fit's values become the start, and nothing but the nuisance is fitted.
@@ -132,7 +176,17 @@ fn run(args: &Args) -> petzval_fit::Result<()> {
     } else {
         problem.clone()
     };
-    let result = petzval_fit::staged::run(&fit_problem, &options);
+    let bar = progress_bar(args.quiet, options.max_evaluations);
+    let update = |p: &solve::Progress| {
+        if let Some(b) = p.budget {
+            bar.set_length(b as u64);
+        }
+        bar.set_position(p.evaluations as u64);
+        let best = if p.best.is_finite() { format!("{:.3e}", p.best) } else { "–".to_string() };
+        bar.set_message(format!("{} best {best}", p.stage));
+    };
+    let result = petzval_fit::staged::run_with_progress(&fit_problem, &options, &update);
+    bar.finish_and_clear();
     let values: Vec<f64> = result.params.iter().map(|p| p.value).collect();
     let model = fit_problem.model_at(&values).map_err(|m| usage(&m))?;
     let mut result = result;

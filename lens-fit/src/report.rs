@@ -4,7 +4,8 @@
 //! `fit.json` keys: `params` (name → `{value, sigma, start, determined}`; `sigma` is null for
 //! a parameter the captures cannot determine), `captures` (list of `{image, residual,
 //! shift_px, scale, background, clipped_pixels, hot_pixels}`), `seconds`, `iterations`
-//! (objective evaluations per stage), `stage_seconds` (wall-clock per stage), `correlations` (`{names, matrix}`), `history`
+//! (objective evaluations per stage; a Jacobian counts one per parameter), `stage_seconds`
+//! (wall-clock per stage), `lm_stop` (`{reason, iterations}` of Levenberg–Marquardt), `correlations` (`{names, matrix}`), `history`
 //! (`[seconds, objective]` after each improvement), `camera` (the fitted camera parameters),
 //! `start_lens`, `manifest`.
 
@@ -79,6 +80,7 @@ pub fn write_report(dir: &Path, problem: &Problem, result: &FitResult, model: &M
         "seconds": result.seconds,
         "iterations": iterations,
         "stage_seconds": stage_seconds,
+        "lm_stop": { "reason": result.lm_stop.0, "iterations": result.lm_stop.1 },
         "history": result.history,
     });
     let text = serde_json::to_string_pretty(&report).unwrap_or_default();

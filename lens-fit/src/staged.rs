@@ -20,8 +20,14 @@ pub fn is_correction_mode(problem: &Problem) -> bool {
 
 /// Runs the fit with the stages its free parameters call for.
 pub fn run(problem: &Problem, options: &FitOptions) -> FitResult {
+    run_with_progress(problem, options, &|_| {})
+}
+
+/// [`run`] reporting progress.
+pub fn run_with_progress(problem: &Problem, options: &FitOptions, progress: solve::ProgressFn) -> FitResult {
     if is_correction_mode(problem) {
-        return solve::run(problem, &FitOptions { global_share: 0.0, local_share: 0.0, ..*options });
+        let lm_only = FitOptions { global_share: 0.0, local_share: 0.0, ..*options };
+        return solve::run_with_progress(problem, &lm_only, progress);
     }
-    solve::run(problem, options)
+    solve::run_with_progress(problem, options, progress)
 }

@@ -38,7 +38,9 @@ fn recovers_a_radius_a_sensor_tilt_and_offset() {
     );
     let manifest_path = write_captures(&dir, &truth, &shots, &free, 48);
     let manifest = Manifest::load(&manifest_path).unwrap();
-    let options = FitOptions { time_limit_s: 25.0, rays: 32_768, ..Default::default() };
+    // an evaluation budget ends the fit (the time limit is only a cap far beyond it), so the
+    // end point does not depend on the machine's load
+    let options = FitOptions { time_limit_s: 600.0, rays: 32_768, max_evaluations: 400, ..Default::default() };
     let problem = Problem::new(&manifest, &options).unwrap();
     let result = solve::run(&problem, &options);
     let values: Vec<f64> = result.params.iter().map(|p| p.value).collect();
@@ -97,11 +99,24 @@ fn the_command_line_fits_reports_and_evaluates() {
     let report = dir.join("report");
     let out = std::process::Command::new(bin)
         .args([manifest.to_str().unwrap(), "-o", lens_out.to_str().unwrap(), "--report", report.to_str().unwrap()])
-        .args(["--time-limit", "6", "--rays", "8192"])
+        .args(["--time-limit", "600", "--max-evaluations", "100", "--rays", "8192"])
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    // stderr is a pipe here, not a terminal: no progress bar
+    assert!(!stderr.contains("evaluations"), "a progress bar on a pipe: {stderr}");
+    // bad budgets and start counts are refused, naming the option
+    for (flag, value) in [("--max-evaluations", "0"), ("--starts", "0"), ("--starts", "65")] {
+        let bad = std::process::Command::new(bin)
+            .args([manifest.to_str().unwrap(), "-o", lens_out.to_str().unwrap(), "--report", report.to_str().unwrap()])
+            .args([flag, value])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&bad.stderr);
+        assert!(!bad.status.success() && err.contains(flag), "{flag} {value}: {err}");
+    }
     let fit: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(report.join("fit.json")).unwrap()).unwrap();
     let offset = fit["params"]["sensor.offset_mm"]["value"].as_f64().unwrap();
@@ -118,7 +133,7 @@ fn the_command_line_fits_reports_and_evaluates() {
     let report2 = dir.join("report2");
     let out = std::process::Command::new(bin)
         .args([other.to_str().unwrap(), "--evaluate", report.to_str().unwrap(), "--report", report2.to_str().unwrap()])
-        .args(["--time-limit", "4", "--rays", "8192"])
+        .args(["--time-limit", "600", "--max-evaluations", "40", "--rays", "8192"])
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));

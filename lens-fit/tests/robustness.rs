@@ -54,7 +54,8 @@ fn clipped_highlights_are_masked_and_the_fit_recovers() {
     truth.camera.sensor_offset_mm = 0.05;
     let synth = SynthOptions { png16: true, peak_photons: 4.0 * 65535.0, ..Default::default() };
     let manifest = write_captures(&dir, "double-gauss-50mm", &truth, &few_shots(), OFFSET_FREE, 40, &synth).unwrap();
-    let options = FitOptions { time_limit_s: 8.0, rays: 8192, global_share: 0.0, ..Default::default() };
+    let options =
+        FitOptions { time_limit_s: 600.0, rays: 8192, global_share: 0.0, max_evaluations: 100, ..Default::default() };
     let (problem, result, json) = fit(&manifest, &options, &dir.join("report"));
     let offset = value(&result, "sensor.offset_mm");
     let clipped: Vec<usize> = problem.captures.iter().map(|p| p.image.clipped).collect();
@@ -87,7 +88,8 @@ fn hot_pixels_are_masked_and_do_not_bias_the_fit() {
     let mut truth = nominal();
     truth.camera.sensor_offset_mm = 0.05;
     let hot = vec![(4, 5, 30_000.0), (33, 6, 12_000.0), (7, 34, 50_000.0), (30, 31, 8_000.0)];
-    let options = FitOptions { time_limit_s: 5.0, rays: 8192, global_share: 0.0, ..Default::default() };
+    let options =
+        FitOptions { time_limit_s: 600.0, rays: 8192, global_share: 0.0, max_evaluations: 80, ..Default::default() };
     let mut offsets = Vec::new();
     for (label, pixels) in [("clean", vec![]), ("hot", hot.clone())] {
         let sub = dir.join(label);
@@ -115,11 +117,15 @@ fn hot_pixels_are_masked_and_do_not_bias_the_fit() {
 
 /// (c) Four radii of double-gauss-50mm free (surfaces 1, 3, 7, 9), the truth nominal, the fit
 /// starting 5 % off on every one (alternating signs; `FIT_START_OFF` sets the fraction,
-/// `FIT_SHARE` the global stage's share of the 20 s). Measured (docs/lens-fit.md): from the
-/// truth it stays within 0.014 %; from 1 % off it ends 1.5 % off with 3–6 % residuals, from 5 %
-/// off 6.9 % off with 38–97 % residuals. The fit does not come back yet, so this is ignored.
+/// `FIT_SHARE` the global stage's share, `FIT_BUDGET` the evaluations (600), `FIT_STARTS` the
+/// local starts (3), `FIT_GLOBAL_FOOTPRINT` the global stage's footprint in px (0: the fit's)). Measured (docs/lens-fit.md), this version: budget 1 200, 3 starts: worst
+/// radius 7.4 % off; 1 200 / 5 and 2 000 / 5: 3.65 %, residuals 4.1–6.9 % (110 s). With the
+/// earlier median + 5σ centroid rule (which failed the recovery test's defocused disc):
+/// 600 / 3: 5.2 %, residuals 3.4–8.5 %; 2 000 / 5 came back (worst 0.16 %, residuals 1.0–1.6 %,
+/// 87 s). With the global stage's spots blurred to 2 px (`FIT_GLOBAL_FOOTPRINT=2`): 1 200 / 3:
+/// 2.73 %, 1 200 / 5: 3.27 %, 2 000 / 3: 2.42 % (1 px: 7.17 %). Not reliably, and not in 60 s, so this stays ignored.
 #[test]
-#[ignore = "the fit does not recover four radii started 1-5 % off within 20 s (measured; issue 10)"]
+#[ignore = "four radii started 5 % off do not come back reliably within a 60 s budget (measured; issue 10)"]
 fn a_start_five_percent_off_on_four_radii_comes_back() {
     let dir = temp_dir("radii");
     let truth = nominal();
@@ -147,8 +153,17 @@ fn a_start_five_percent_off_on_four_radii_comes_back() {
     shots.push(Shot { source_m: [0.2, 0.0, 3.0], focus_m: 2.0, f_number: 4.0 });
     let manifest =
         write_captures(&dir, "double-gauss-50mm", &truth, &shots, &free, 48, &SynthOptions::default()).unwrap();
-    let share = std::env::var("FIT_SHARE").ok().and_then(|v| v.parse().ok()).unwrap_or(0.35);
-    let options = FitOptions { time_limit_s: 20.0, rays: 16_384, global_share: share, ..Default::default() };
+    let env = |k: &str, d: f64| std::env::var(k).ok().and_then(|v| v.parse().ok()).unwrap_or(d);
+    // an evaluation budget (FIT_BUDGET) ends the fit, the time limit is only a cap
+    let options = FitOptions {
+        time_limit_s: 600.0,
+        rays: 16_384,
+        global_share: env("FIT_SHARE", 0.35),
+        max_evaluations: env("FIT_BUDGET", 600.0) as usize,
+        starts: env("FIT_STARTS", 3.0) as usize,
+        global_footprint_px: env("FIT_GLOBAL_FOOTPRINT", 0.0),
+        ..Default::default()
+    };
     let (_, result, _) = fit(&manifest, &options, &dir.join("report"));
     let mut worst: f64 = 0.0;
     for (s, r) in surfaces.iter().zip(&nominal_r) {
@@ -185,7 +200,7 @@ fn a_parameter_the_captures_cannot_see_is_not_determined() {
     let manifest =
         write_captures(&dir, "double-gauss-50mm", &truth, &few_shots()[..2], &free, 40, &SynthOptions::default())
             .unwrap();
-    let options = FitOptions { time_limit_s: 4.0, rays: 8192, ..Default::default() };
+    let options = FitOptions { time_limit_s: 600.0, rays: 8192, max_evaluations: 100, ..Default::default() };
     let (_, result, json) = fit(&manifest, &options, &dir.join("report"));
     let (o, rot) = (value(&result, "sensor.offset_mm"), value(&result, "aperture.rotation_deg"));
     println!("blind: offset {} ± {:?}, rotation {} ± {:?}", o.value, o.sigma, rot.value, rot.sigma);
