@@ -6,7 +6,8 @@
 //! over the coefficients' box mostly samples wild corrections. Measured on nine synthetic
 //! captures (double-gauss-50mm with surface 3's radius +0.5 % and the sensor 0.05 mm back,
 //! eight correction terms, 30 s): CRS2 + BOBYQA + LM ended at 15–37 % residuals, LM alone at
-//! 1.7–2.5 % in focus and 7–8 % on the two defocused captures. Every other fit runs the stages of
+//! 1.8–2.3 % in focus and 6.9–7.8 % on the two defocused captures (time-limited, before the
+//! evaluation budgets). Every other fit runs the stages of
 //! [`solve::run`] as its options say.
 
 use crate::fit::{FitOptions, Problem};
