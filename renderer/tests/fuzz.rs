@@ -226,3 +226,21 @@ fn lrtf_tables_never_panic() {
     });
     let _ = std::fs::remove_file(&seed);
 }
+
+/// Inputs the campaign found that crashed, kept as regression cases (`tests/data/fuzz/`): each
+/// loads or is refused without a panic.
+#[test]
+fn kept_crash_cases_do_not_panic() {
+    let dir = data("tests/data/fuzz");
+    let mut cases = 0;
+    for e in std::fs::read_dir(&dir).unwrap().flatten() {
+        let p = e.path();
+        if !matches!(p.extension().and_then(|e| e.to_str()), Some("gltf" | "glb")) {
+            continue;
+        }
+        cases += 1;
+        let outcome = catch_unwind(AssertUnwindSafe(|| load_gltf(&p).map(|s| RenderScene::new(s).map(|_| ()))));
+        assert!(outcome.is_ok(), "{} panics", p.display());
+    }
+    assert!(cases >= 2);
+}

@@ -83,6 +83,16 @@ impl BvhQuality {
 /// Flag in [`PackedTri::prim`]: the triangle's material needs an alpha test.
 const ALPHA_BIT: u32 = 1 << 31;
 
+/// The largest coordinate a triangle may have, in scene units (metres): beyond it the BVH's
+/// box arithmetic (surface areas, extents) overflows f32 and the builder panics (found by the
+/// fuzzing in `renderer/tests/fuzz.rs`: mutated buffers decoding to about 10³⁸).
+pub const MAX_COORD: f32 = 1e12;
+
+/// Whether a position is finite and within [`MAX_COORD`].
+fn in_range(p: Vec3) -> bool {
+    p.is_finite() && p.abs().max_element() <= MAX_COORD
+}
+
 /// A triangle in leaf order: its three vertices and its mesh triangle index (| [`ALPHA_BIT`]).
 #[derive(Debug, Clone, Copy)]
 #[repr(C)]
@@ -532,8 +542,7 @@ impl RenderScene {
                 let nv = m.positions.len();
                 let mut v = Vec::with_capacity(m.indices.len());
                 for (i, idx) in m.indices.iter().enumerate() {
-                    if idx.iter().any(|&k| k as usize >= nv)
-                        || !idx.iter().all(|&k| m.positions[k as usize].is_finite())
+                    if idx.iter().any(|&k| k as usize >= nv) || !idx.iter().all(|&k| in_range(m.positions[k as usize]))
                     {
                         invalid += 1;
                         continue;
@@ -546,7 +555,9 @@ impl RenderScene {
         if invalid > 0 {
             scene
                 .warnings
-                .push(format!("{invalid} triangles with bad vertex indices or non-finite positions were skipped"));
+                .push(format!(
+                "{invalid} triangles with bad vertex indices or non-finite or out-of-range positions (beyond {MAX_COORD:e}) were skipped"
+            ));
         }
 
         // Instances: validate transforms; count placements per mesh.
@@ -607,8 +618,8 @@ impl RenderScene {
                     }
                 });
                 let area2 = (v[1] - v[0]).cross(v[2] - v[0]).length_squared();
-                if !(area2 > 0.0) || !area2.is_finite() {
-                    continue; // degenerate (or overflowing): can never be hit
+                if !(area2 > 0.0) || !area2.is_finite() || !v.iter().all(|p| in_range(*p)) {
+                    continue; // degenerate, or placed out of range by its transform: never hit
                 }
                 for p in v {
                     bounds_min = bounds_min.min(p);
@@ -682,7 +693,7 @@ impl RenderScene {
                 wlo = wlo.min(p);
                 whi = whi.max(p);
             }
-            if !(wlo.is_finite() && whi.is_finite()) {
+            if !(in_range(wlo) && in_range(whi)) {
                 continue;
             }
             bounds_min = bounds_min.min(wlo);
