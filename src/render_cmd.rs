@@ -117,9 +117,10 @@ pub struct RenderArgs {
     /// PNG tone mapping.
     #[arg(long, default_value = "srgb")]
     pub tonemap: String,
-    /// Extra EXR channels: comma-separated depth,normal,albedo.
-    #[arg(long, default_value = "depth")]
-    pub aovs: String,
+    /// Extra EXR channels: comma-separated depth,normal,albedo (default: depth, or what a USD
+    /// shot's RenderVars ask for).
+    #[arg(long)]
+    pub aovs: Option<String>,
     /// Natural vignetting (cos⁴) for thin and pinhole cameras: on (physical) or off (as Cycles).
     #[arg(long, default_value = "on")]
     pub natural_vignetting: String,
@@ -214,7 +215,7 @@ fn check_outputs(args: &RenderArgs) -> Result<Outputs, Error> {
         t => return Err(settings_err("tonemap", format!("expected srgb or filmic, got '{t}'"))),
     };
     let mut layers = ExrLayers { depth: false, normal: false, albedo: false };
-    for a in args.aovs.split(',').map(str::trim).filter(|a| !a.is_empty()) {
+    for a in args.aovs.as_deref().unwrap_or(DEFAULT_AOVS).split(',').map(str::trim).filter(|a| !a.is_empty()) {
         match a {
             "depth" => layers.depth = true,
             "normal" => layers.normal = true,
@@ -317,8 +318,9 @@ fn apply_render_settings(args: &mut RenderArgs) -> Result<(), Error> {
             args.output = PathBuf::from(name);
         }
     }
-    if !rs.vars.is_empty() {
-        eprintln!("note: render vars {} are not rendered as such; --aovs sets the EXR's channels", rs.vars.join(", "));
+    if !rs.vars.is_empty() && args.aovs.is_none() {
+        // the RenderVars choose the EXR's channels unless --aovs was given
+        args.aovs = Some(rs.aovs.join(","));
     }
     eprintln!(
         "render settings {}: camera {}, {}, output {}",
@@ -334,6 +336,8 @@ fn apply_render_settings(args: &mut RenderArgs) -> Result<(), Error> {
 const DEFAULT_RESOLUTION: &str = "960x640";
 /// `-o`'s default.
 const DEFAULT_OUTPUT: &str = "render.exr";
+/// `--aovs`'s default.
+const DEFAULT_AOVS: &str = "depth";
 
 /// Runs `petzval render` (every frame of `--frames` in turn).
 pub fn run(mut args: RenderArgs) -> Result<(), Error> {

@@ -13,6 +13,8 @@ out = sys.argv[-1]
 bpy.ops.wm.read_factory_settings(use_empty=True)
 s = bpy.context.scene
 s.render.resolution_x, s.render.resolution_y = 96, 64
+
+
 def mat(name, color, rough, metal=0.0):
     m = bpy.data.materials.new(name)
     bsdf = m.node_tree.nodes["Principled BSDF"]
@@ -20,6 +22,8 @@ def mat(name, color, rough, metal=0.0):
     bsdf.inputs["Roughness"].default_value = rough
     bsdf.inputs["Metallic"].default_value = metal
     return m
+
+
 bpy.ops.mesh.primitive_plane_add(size=10)
 bpy.context.object.data.materials.append(mat("Ground", (0.5, 0.5, 0.5), 0.8))
 bpy.ops.mesh.primitive_cube_add(size=1, location=(0, 0, 0.5), rotation=(0, 0, 0.4))

@@ -120,11 +120,30 @@ def test_opencue_outline_command(monkeypatch: pytest.MonkeyPatch) -> None:
     import opencue_outline
 
     args = opencue_outline.argparse.Namespace(
-        shot="/s/shot.usd", frames="1001-1010", output="/r/shot.####.exr", chunk=2, camera="/Cam",
-        petzval="petzval", name="shot", show=None, shot_name=None,
+        shot="/s/shot.usd",
+        frames="1001-1010",
+        output="/r/shot.####.exr",
+        chunk=2,
+        camera="/Cam",
+        petzval="petzval",
+        name="shot",
+        show=None,
+        shot_name=None,
     )
     opencue_outline.build_outline(args, ["--spp", "64"])
     name, kw = made["layer"]
     assert name == "render" and kw["range"] == "1001-1010" and kw["chunk"] == 2
-    assert kw["command"] == ["petzval", "render", "/s/shot.usd", "--frame", "#IFRAME#", "-o", "/r/shot.####.exr",
-                             "--no-png", "--camera", "/Cam", "--spp", "64"]
+    assert kw["command"] == [
+        "petzval",
+        "render",
+        "/s/shot.usd",
+        "--frame",
+        "#IFRAME#",
+        "-o",
+        "/r/shot.####.exr",
+        "--no-png",
+        "--camera",
+        "/Cam",
+        "--spp",
+        "64",
+    ]

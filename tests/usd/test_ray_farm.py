@@ -49,10 +49,30 @@ def test_six_frames_with_a_killed_frame_retried(tmp_path: Path) -> None:
     marker = tmp_path / "killed"
     env = dict(os.environ, PETZVAL_FARM_KILL_ONCE=f"3:{marker}", RAY_USAGE_STATS_ENABLED="0")
     r = subprocess.run(
-        [sys.executable, str(SCRIPT), str(shot), "--frames", "1-6", "-o", str(out / "f.####.exr"),
-         "--retries", "2", "--petzval", str(petzval()), "--",
-         "--resolution", "48x32", "--spp", "1500", "--threads", "1"],
-        capture_output=True, text=True, timeout=300, env=env,
+        [
+            sys.executable,
+            str(SCRIPT),
+            str(shot),
+            "--frames",
+            "1-6",
+            "-o",
+            str(out / "f.####.exr"),
+            "--retries",
+            "2",
+            "--petzval",
+            str(petzval()),
+            "--",
+            "--resolution",
+            "48x32",
+            "--spp",
+            "1500",
+            "--threads",
+            "1",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=env,
     )
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-4000:]
     assert marker.exists(), "frame 3's first attempt was killed"

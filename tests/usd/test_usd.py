@@ -490,8 +490,22 @@ def test_set_lens_composes_in_pxr_and_is_read_back(petzval: Path, tmp_path: Path
     lens = tmp_path / "fitted.toml"
     lens.write_text(run(petzval, "lens", "export", "double-gauss-50mm").stdout)
     out = tmp_path / "lens.usda"
-    run(petzval, "usd", "set-lens", str(shot), "--camera", "/Rig/Cam", "--lens", str(lens), "-o", str(out),
-        "--tilt-x", "3", "--blades", "6")
+    run(
+        petzval,
+        "usd",
+        "set-lens",
+        str(shot),
+        "--camera",
+        "/Rig/Cam",
+        "--lens",
+        str(lens),
+        "-o",
+        str(out),
+        "--tilt-x",
+        "3",
+        "--blades",
+        "6",
+    )
     composed = Usd.Stage.Open(str(out))
     # stage metadata lives on the root layer: set-lens carries the shot's over
     assert UsdGeom.GetStageMetersPerUnit(composed) == 1.0
@@ -509,8 +523,19 @@ def test_set_lens_composes_in_pxr_and_is_read_back(petzval: Path, tmp_path: Path
     assert Path(pz["lens"]).resolve() == lens.resolve()
     assert pz["tilt_x_deg"] == 3 and pz["blades"] == 6
     # a camera that does not exist
-    r = run(petzval, "usd", "set-lens", str(shot), "--camera", "/Nope", "--lens", "thin", "-o",
-            str(tmp_path / "x.usda"), ok=False)
+    r = run(
+        petzval,
+        "usd",
+        "set-lens",
+        str(shot),
+        "--camera",
+        "/Nope",
+        "--lens",
+        "thin",
+        "-o",
+        str(tmp_path / "x.usda"),
+        ok=False,
+    )
     assert r.returncode != 0 and "/Nope" in r.stderr
 
 
@@ -572,8 +597,20 @@ def test_render_usd_shot_through_petzval_lens_api(petzval: Path, tmp_path: Path)
     prim.CreateAttribute("petzval:aperture:blades", Sdf.ValueTypeNames.Int).Set(6)
     stage.GetRootLayer().Save()
     out = tmp_path / "f.exr"
-    r = run(petzval, "render", str(path), "--camera", "/Cam", "-o", str(out), "--resolution", "48x32", "--spp", "2",
-            "--no-png")
+    r = run(
+        petzval,
+        "render",
+        str(path),
+        "--camera",
+        "/Cam",
+        "-o",
+        str(out),
+        "--resolution",
+        "48x32",
+        "--spp",
+        "2",
+        "--no-png",
+    )
     assert out.is_file()
     head = out.read_bytes()[:8192]
     assert b"usdCamera" in head and b"/Cam" in head and b"double-gauss" in head
@@ -615,8 +652,20 @@ def test_schema_and_docs_example(petzval: Path, tmp_path: Path) -> None:
     assert pz["curvature"] == pytest.approx(0.3) and pz["rotation_deg"] == 15
     assert not rep["warnings"], rep["warnings"]
     out = tmp_path / "ex.exr"
-    run(petzval, "render", str(path), "-o", str(out), "--resolution", "32x24", "--spp", "1", "--no-png",
-        "--lens-model", "thick")
+    run(
+        petzval,
+        "render",
+        str(path),
+        "-o",
+        str(out),
+        "--resolution",
+        "32x24",
+        "--spp",
+        "1",
+        "--no-png",
+        "--lens-model",
+        "thick",
+    )
     assert b"double-gauss" in out.read_bytes()[:8192]
 
 
@@ -655,12 +704,73 @@ def test_render_settings_camera_resolution_product(petzval: Path, tmp_path: Path
         assert (dw[1][0] - dw[0][0] + 1, dw[1][1] - dw[0][1] + 1) == (40, 30)
     # the command line overrides the settings; a settings path that is not a RenderSettings fails
     out2 = tmp_path / "cli.exr"
-    run(petzval, "render", str(path), "--camera", "/A", "--resolution", "20x10", "--spp", "1", "--no-png",
-        "-o", str(out2))
+    run(
+        petzval,
+        "render",
+        str(path),
+        "--camera",
+        "/A",
+        "--resolution",
+        "20x10",
+        "--spp",
+        "1",
+        "--no-png",
+        "-o",
+        str(out2),
+    )
     with OpenEXR.File(str(out2)) as f:
         assert f.header()["petzval/usdCamera"] == "/A"
     r = run(petzval, "render", str(path), "--settings", "/Q", "--spp", "1", "-o", str(tmp_path / "x.exr"), ok=False)
     assert r.returncode != 0 and "/Q" in r.stderr and "RenderSettings" in r.stderr
+
+
+def test_render_vars_choose_the_exr_channels(petzval: Path, tmp_path: Path) -> None:
+    """RenderVars' sourceName picks the EXR's channels (colour always; normal, albedo; an unknown
+    one is listed as skipped); --aovs overrides them."""
+    import OpenEXR
+    from pxr import UsdRender
+
+    path = tmp_path / "vars.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    q = quad(stage, "/Q")
+    q.AddTranslateOp().Set((-0.5, -0.5, -3))
+    UsdLux.DomeLight.Define(stage, "/Env")
+    UsdGeom.Camera.Define(stage, "/Cam")
+    rs = UsdRender.Settings.Define(stage, "/Render/Settings")
+    rs.CreateCameraRel().SetTargets(["/Cam"])
+    rs.CreateResolutionAttr(Gf.Vec2i(24, 16))
+    prod = UsdRender.Product.Define(stage, "/Render/Product")
+    prod.CreateProductNameAttr(str(tmp_path / "vars.exr"))
+    names = []
+    for name, source in (("beauty", "Ci"), ("n", "normal"), ("alb", "albedo"), ("crypto", "cryptomatte")):
+        v = UsdRender.Var.Define(stage, f"/Render/Vars/{name}")
+        v.CreateSourceNameAttr(source)
+        names.append(v.GetPath())
+    prod.CreateOrderedVarsRel().SetTargets(names)
+    rs.CreateProductsRel().SetTargets([prod.GetPath()])
+    stage.SetMetadata("renderSettingsPrimPath", "/Render/Settings")
+    stage.GetRootLayer().Save()
+
+    def channels(exr: Path) -> set[str]:
+        with OpenEXR.File(str(exr)) as f:
+            return (
+                set(f.header()["channels"].keys())
+                if isinstance(f.header()["channels"], dict)
+                else {c.name for c in f.header()["channels"]}
+            )
+
+    r = run(petzval, "render", str(path), "--spp", "1", "--no-png")
+    assert "cryptomatte" in r.stderr and "skipped" in r.stderr, r.stderr
+    got = channels(tmp_path / "vars.exr")
+    assert {"R", "G", "B"} <= got, got
+    assert any("normal" in c.lower() or c.startswith("N.") for c in got), got
+    assert any("albedo" in c.lower() for c in got), got
+    assert not any("depth" in c.lower() or c == "Z" for c in got), got
+    # --aovs overrides the RenderVars
+    run(petzval, "render", str(path), "--spp", "1", "--no-png", "--aovs", "depth", "-o", str(tmp_path / "d.exr"))
+    got = channels(tmp_path / "d.exr")
+    assert not any("albedo" in c.lower() for c in got), got
 
 
 def test_petzval_lens_api_changes_the_render(petzval: Path, tmp_path: Path) -> None:

@@ -8,7 +8,7 @@
 //! | `pixelAspectRatio` | RenderSettings / product | only 1 is supported (others are listed and ignored) | 1 |
 //! | `products` (rel) | RenderSettings | RenderProduct prims; the first is rendered | none |
 //! | `productName` | RenderProduct | the output file (`####` = frame) | — |
-//! | `orderedVars` (rel) | RenderProduct | RenderVar prims: listed (the EXR's AOVs come from `--aovs`) | — |
+//! | `orderedVars` (rel) | RenderProduct | RenderVar prims: their `sourceName` picks the EXR's channels (color/Ci/rgba always; depth/z, normal/N, albedo/diffuseColor; others listed as skipped) unless `--aovs` is given | — |
 
 use crate::value::{attr_error, Reader};
 use crate::Error;
@@ -28,6 +28,9 @@ pub struct RenderSettings {
     pub product_name: Option<String>,
     /// The first product's RenderVar prims.
     pub vars: Vec<String>,
+    /// The EXR channels the RenderVars ask for (`depth`, `normal`, `albedo`; colour is always
+    /// written).
+    pub aovs: Vec<String>,
     /// What was ignored.
     pub warnings: Vec<String>,
 }
@@ -77,6 +80,7 @@ pub fn read(path: &Path, time: Option<f64>, settings: Option<&str>) -> Result<Op
         resolution: resolution(&reader, &prim)?.unwrap_or((2048, 1080)),
         product_name: None,
         vars: Vec::new(),
+        aovs: Vec::new(),
         warnings: Vec::new(),
     };
     let par = reader.f64_or(&prim, "pixelAspectRatio", 1.0)?;
@@ -103,13 +107,41 @@ pub fn read(path: &Path, time: Option<f64>, settings: Option<&str>) -> Result<Op
             out.resolution = r;
         }
         out.product_name = reader.token(&product, "productName")?.filter(|s| !s.is_empty());
-        out.vars = product
+        let targets = product
             .relationship("orderedVars")
             .targets()
-            .map_err(|e| attr_error(&product, "orderedVars", format!("cannot be read: {e:#}")))?
-            .iter()
-            .map(|v| v.to_string())
-            .collect();
+            .map_err(|e| attr_error(&product, "orderedVars", format!("cannot be read: {e:#}")))?;
+        out.vars = targets.iter().map(|v| v.to_string()).collect();
+        // 3. RenderVars: their sourceName picks the EXR's channels.
+        for t in &targets {
+            let v = t.to_string();
+            let var = stage.prim(t.clone());
+            let source = reader.token(&var, "sourceName")?.unwrap_or_default();
+            match aov_of_source(&source) {
+                Some("") => {}
+                Some(a) => {
+                    if !out.aovs.iter().any(|x| x == a) {
+                        out.aovs.push(a.to_string());
+                    }
+                }
+                None => out.warnings.push(format!(
+                    "{v}: RenderVar sourceName '{source}' is not a channel petzval renders (color, depth, normal, albedo); skipped"
+                )),
+            }
+        }
     }
     Ok(Some(out))
+}
+
+/// The channel a RenderVar's `sourceName` names: `Some("")` for the colour (always written),
+/// `Some(aov)` for one of ours, `None` for one we do not render. Names as Pixar's, Karma's,
+/// Cycles' and RenderMan's exporters write them.
+fn aov_of_source(source: &str) -> Option<&'static str> {
+    match source.to_ascii_lowercase().as_str() {
+        "color" | "ci" | "rgba" | "rgb" | "beauty" | "combined" => Some(""),
+        "depth" | "z" | "distance" => Some("depth"),
+        "normal" | "n" | "nn" | "normals" => Some("normal"),
+        "albedo" | "diffusecolor" | "diffuse_color" | "basecolor" | "base_color" => Some("albedo"),
+        _ => None,
+    }
 }
