@@ -91,7 +91,7 @@ impl PyScene {
     fn texture_ref(&self, name: &str, field: &str, index: Option<usize>) -> PyResult<Option<TextureRef>> {
         match index {
             None => Ok(None),
-            Some(i) if i < self.scene.textures.len() => Ok(Some(TextureRef { index: i, uv_set: 0 })),
+            Some(i) if i < self.scene.textures.len() => Ok(Some(TextureRef { index: i, uv_set: 0, transform: None })),
             Some(i) => Err(scene_err(
                 name,
                 field,

@@ -153,7 +153,8 @@ fn normal_map_tilts_shading_normal() {
     let q = quad(Vec3::new(-1.0, -1.0, 0.0), Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 2.0, 0.0), 0);
     let tn = Vec3::new(1.0, 0.0, 1.0).normalize();
     let tex = Texture::constant("n", (tn * 0.5 + Vec3::splat(0.5)).extend(1.0));
-    let mat = Material { normal_texture: Some(TextureRef { index: 0, uv_set: 0 }), ..diffuse(Vec3::ONE) };
+    let mat =
+        Material { normal_texture: Some(TextureRef { index: 0, uv_set: 0, transform: None }), ..diffuse(Vec3::ONE) };
     let mut scene = scene_of(&[q], vec![mat]);
     scene.textures.push(Arc::new(tex));
     let rs = RenderScene::new(scene).unwrap();
@@ -208,7 +209,7 @@ fn alpha_quads(mode: AlphaMode, factor: f32, texture: bool) -> RenderScene {
     m.base_color.w = factor;
     m.alpha_mode = mode;
     if texture {
-        m.base_color_texture = Some(TextureRef { index: 0, uv_set: 0 });
+        m.base_color_texture = Some(TextureRef { index: 0, uv_set: 0, transform: None });
     }
     let mut scene = scene_of(&[front, back], vec![m, diffuse(Vec3::splat(0.5))]);
     scene.textures.push(Arc::new(Texture {

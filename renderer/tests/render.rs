@@ -698,8 +698,11 @@ fn striped_ground(h: f64, cam_to_world: &DAffine3, stripes_per_radian: f64) -> R
         }
         z0 = z1;
     }
-    let mat =
-        Material { emissive: Vec3::ONE, emissive_texture: Some(TextureRef { index: 0, uv_set: 0 }), ..emitter(1.0) };
+    let mat = Material {
+        emissive: Vec3::ONE,
+        emissive_texture: Some(TextureRef { index: 0, uv_set: 0, transform: None }),
+        ..emitter(1.0)
+    };
     RenderScene::new(Scene { materials: vec![mat], textures: vec![Arc::new(texture)], ..Scene::world(mesh) }).unwrap()
 }
 

@@ -909,6 +909,28 @@ def test_textures_from_files_and_usdz_packages(petzval: Path, tmp_path: Path) ->
     )
     stage.GetRootLayer().Save()
     assert info(petzval, src)["meshes"][0]["st_primvar"] == "primvars:uvAlt"
+    # UsdTransform2d between the reader and the texture: applied (st' = R·(st⊙scale) + t, as the
+    # UsdPreviewSurface spec defines it), in the renderer's top-left coordinates (v = 1 − t)
+    xf = UsdShade.Shader.Define(stage, "/Looks/M/Xf")
+    xf.CreateIdAttr("UsdTransform2d")
+    xf.CreateInput("in", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+    xf.CreateInput("rotation", Sdf.ValueTypeNames.Float).Set(30.0)
+    xf.CreateInput("scale", Sdf.ValueTypeNames.Float2).Set((2.0, 0.5))
+    xf.CreateInput("translation", Sdf.ValueTypeNames.Float2).Set((0.25, -0.1))
+    xf.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+    UsdShade.Shader(stage.GetPrimAtPath("/Looks/M/Tex")).GetInput("st").ConnectToSource(xf.ConnectableAPI(), "result")
+    stage.GetRootLayer().Save()
+    rep = info(petzval, src)
+    assert not [w for w in rep["warnings"] if "Transform2d" in w], rep["warnings"]
+    (mat_rep,) = [x for x in rep["materials"] if x["name"] == "/Looks/M"]
+    m00, m01, m10, m11, ox, oy = mat_rep["base_color_uv_transform"]
+    th = np.radians(30.0)
+    rot = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    for st in ([0.0, 0.0], [1.0, 0.0], [0.3, 0.8]):
+        st2 = rot @ (np.array(st) * [2.0, 0.5]) + [0.25, -0.1]
+        uv = np.array([st[0], 1.0 - st[1]])
+        uv2 = np.array([[m00, m01], [m10, m11]]) @ uv + [ox, oy]
+        assert np.allclose(uv2, [st2[0], 1.0 - st2[1]], atol=1e-5), (st, uv2, st2)
     # a missing texture: a warning naming the shader and the file, and magenta
     (tmp_path / "tex" / "red.png").unlink()
     rep = info(petzval, src)

@@ -233,6 +233,9 @@ impl UsdShot {
                 "ior": m.ior,
                 "double_sided": m.double_sided,
                 "base_color_texture": m.base_color_texture.map(|t| self.scene.textures[t.index].name.clone()),
+                "base_color_uv_transform": m.base_color_texture.and_then(|t| t.transform).map(|t| {
+                    [t.m.x_axis.x, t.m.y_axis.x, t.m.x_axis.y, t.m.y_axis.y, t.offset.x, t.offset.y]
+                }),
             })).collect::<Vec<_>>(),
             "point_instancers": self.info.point_instancers.iter().map(|(p, n, h)| json!({"prim": p, "instances": n, "hidden": h})).collect::<Vec<_>>(),
             "native_instances": self.info.native_instances.iter().map(|(p, q)| json!({"prim": p, "prototype": q})).collect::<Vec<_>>(),

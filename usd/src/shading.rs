@@ -22,7 +22,7 @@ use crate::Error;
 use glam::{Vec3, Vec4};
 use openusd::{sdf, usd};
 use petzval_renderer::scene::texture::Wrap;
-use petzval_renderer::scene::{AlphaMode, Material, Scene, Texture, TextureRef};
+use petzval_renderer::scene::{AlphaMode, Material, Scene, Texture, TextureRef, UvTransform};
 use std::collections::HashMap;
 use std::sync::Arc;
 
@@ -210,15 +210,18 @@ impl Materials {
         };
         let (ws, wt) = (wrap("inputs:wrapS")?, wrap("inputs:wrapT")?);
         // inputs:st ← [UsdTransform2d ←] UsdPrimvarReader_float2 (varname)
+        let mut transform = None;
         if let Some((mut src, _)) = source_prim(reader.stage, tex, "inputs:st") {
             let mut reaches_reader = true;
             if reader.token(&src, "info:id")?.as_deref() == Some("UsdTransform2d") {
-                let identity = reader.f64(&src, "inputs:rotation")?.unwrap_or(0.0) == 0.0
-                    && reader.vec2(&src, "inputs:scale")?.is_none_or(|s| s == glam::DVec2::ONE)
-                    && reader.vec2(&src, "inputs:translation")?.is_none_or(|t| t == glam::DVec2::ZERO);
-                if !identity {
-                    warnings
-                        .push(format!("{}: UsdTransform2d is not applied; the texture is untransformed", src.path()));
+                let rotation_deg = reader.f64(&src, "inputs:rotation")?.unwrap_or(0.0);
+                let scale = reader.vec2(&src, "inputs:scale")?.unwrap_or(glam::DVec2::ONE);
+                let translation = reader.vec2(&src, "inputs:translation")?.unwrap_or(glam::DVec2::ZERO);
+                let finite = rotation_deg.is_finite() && scale.is_finite() && translation.is_finite();
+                if !finite {
+                    warnings.push(format!("{}: UsdTransform2d has non-finite inputs; not applied", src.path()));
+                } else if rotation_deg != 0.0 || scale != glam::DVec2::ONE || translation != glam::DVec2::ZERO {
+                    transform = Some(uv_transform(rotation_deg, scale, translation));
                 }
                 match source_prim(reader.stage, &src, "inputs:in") {
                     Some((s, _)) => src = s,
@@ -242,7 +245,7 @@ impl Materials {
         let srgb = color && space != "raw";
         let key = (path.1.clone(), srgb);
         if let Some(&i) = self.textures.get(&key) {
-            return Ok(Some(TextureRef { index: i, uv_set: 0 }));
+            return Ok(Some(TextureRef { index: i, uv_set: 0, transform }));
         }
         let t = match load_image(&path.1, srgb) {
             Ok((w, h, texels)) => {
@@ -262,7 +265,7 @@ impl Materials {
         scene.textures.push(Arc::new(t));
         let i = scene.textures.len() - 1;
         self.textures.insert(key, i);
-        Ok(Some(TextureRef { index: i, uv_set: 0 }))
+        Ok(Some(TextureRef { index: i, uv_set: 0, transform }))
     }
 }
 
@@ -315,4 +318,17 @@ fn preview_default(name: &str, color: Vec3) -> Material {
         roughness: 0.5,
         ..Material::default()
     }
+}
+
+/// UsdTransform2d (`st' = R(rotation) · (st ⊙ scale) + translation`, rotation counter-clockwise
+/// in degrees, as the UsdPreviewSurface spec defines it) in the renderer's texture coordinates,
+/// whose v runs down from the top (`v = 1 − t`): `m = D A D`, `offset = D (A e + b) + e` with
+/// `D = diag(1, −1)`, `e = (0, 1)`.
+fn uv_transform(rotation_deg: f64, scale: glam::DVec2, translation: glam::DVec2) -> UvTransform {
+    let a = glam::DMat2::from_angle(rotation_deg.to_radians()) * glam::DMat2::from_diagonal(scale);
+    let d = glam::DMat2::from_diagonal(glam::DVec2::new(1.0, -1.0));
+    let e = glam::DVec2::new(0.0, 1.0);
+    let m = d * a * d;
+    let offset = d * (a * e + translation) + e;
+    UvTransform { m: m.as_mat2(), offset: offset.as_vec2() }
 }

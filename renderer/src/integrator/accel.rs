@@ -838,7 +838,8 @@ impl RenderScene {
     pub(crate) fn texture(&self, r: Option<TextureRef>, uv0: Vec2, uv1: Vec2) -> Option<Vec4> {
         let r = r?;
         let tex = self.scene.textures.get(r.index)?;
-        Some(tex.sample(if r.uv_set == 1 { uv1 } else { uv0 }))
+        let uv = if r.uv_set == 1 { uv1 } else { uv0 };
+        Some(tex.sample(r.transform.map_or(uv, |t| t.apply(uv))))
     }
 
     /// The mesh instance `inst` places.

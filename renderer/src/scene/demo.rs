@@ -143,7 +143,7 @@ pub fn demo_scene() -> (Scene, DemoShot) {
     };
     scene.textures.push(Arc::new(checker));
     let mut table = diffuse("table", Vec3::ONE, 0.6);
-    table.base_color_texture = Some(TextureRef { index: 0, uv_set: 0 });
+    table.base_color_texture = Some(TextureRef { index: 0, uv_set: 0, transform: None });
     scene.materials.push(table); // 0
     scene.materials.push(diffuse("street", Vec3::new(0.08, 0.08, 0.09), 0.9)); // 1
     let house_colours = [

@@ -42,6 +42,25 @@ pub struct TextureRef {
     pub index: usize,
     /// UV set (glTF `texCoord`; 0 or 1).
     pub uv_set: u32,
+    /// A transform of the texture coordinates before the lookup (USD's `UsdTransform2d`).
+    pub transform: Option<UvTransform>,
+}
+
+/// An affine map of texture coordinates (the renderer's top-left origin): `uv' = m · uv + offset`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct UvTransform {
+    /// Linear part.
+    pub m: glam::Mat2,
+    /// Translation.
+    pub offset: Vec2,
+}
+
+impl UvTransform {
+    /// Applies the map.
+    #[inline]
+    pub fn apply(&self, uv: Vec2) -> Vec2 {
+        self.m * uv + self.offset
+    }
 }
 
 /// How alpha is used.

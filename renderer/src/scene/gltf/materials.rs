@@ -97,7 +97,7 @@ impl Loader<'_> {
         } else {
             tex_coord
         };
-        TextureRef { index: self.texture(tex, kind, used_by), uv_set }
+        TextureRef { index: self.texture(tex, kind, used_by), uv_set, transform: None }
     }
 
     pub(super) fn info_ref(
