@@ -699,3 +699,42 @@ fn toml_bad_input_names_file_line_and_field() {
         }
     }
 }
+
+/// Issue 12: every text format reads UTF-8 with a BOM and UTF-16 (as Windows tools write them),
+/// with the same result as plain UTF-8; before, JSON with a BOM was refused and UTF-16 TOML gave
+/// an error without a line.
+#[test]
+fn every_text_format_reads_bom_and_utf16() {
+    let dir = std::env::temp_dir().join(format!("petzval-encodings-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let toml = std::fs::read_to_string(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("lenses/double-gauss-50mm.toml"))
+        .unwrap();
+    let dat = read("pbrt/dgauss.50mm.dat");
+    let json = read(LENTIL);
+    let utf16le = |t: &str| -> Vec<u8> {
+        let mut b = vec![0xFF, 0xFE];
+        b.extend(t.encode_utf16().flat_map(|u| u.to_le_bytes()));
+        b
+    };
+    let utf16be = |t: &str| -> Vec<u8> {
+        let mut b = vec![0xFE, 0xFF];
+        b.extend(t.encode_utf16().flat_map(|u| u.to_be_bytes()));
+        b
+    };
+    let bom = |t: &str| -> Vec<u8> { [&[0xEF, 0xBB, 0xBF][..], t.as_bytes()].concat() };
+    for (name, text) in [("lens.toml", &toml), ("lens.dat", &dat), ("lenses.json", &json)] {
+        let plain = dir.join(format!("plain-{name}"));
+        std::fs::write(&plain, text.as_bytes()).unwrap();
+        let id = if name.ends_with(".json") { "#0001" } else { "" };
+        let expected = read_prescription(&PathBuf::from(format!("{}{id}", plain.display()))).unwrap().0;
+        for (enc, bytes) in [("bom", bom(text)), ("utf16le", utf16le(text)), ("utf16be", utf16be(text))] {
+            let path = dir.join(format!("{enc}-{name}"));
+            std::fs::write(&path, bytes).unwrap();
+            let got = read_prescription(&PathBuf::from(format!("{}{id}", path.display())))
+                .unwrap_or_else(|e| panic!("{name} as {enc}: {e}"))
+                .0;
+            assert_eq!(got.surfaces, expected.surfaces, "{name} as {enc}");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -15,8 +15,29 @@ pub use lentil::import_lentil;
 pub use pbrt::{import_pbrt, import_pbrt_axpos};
 pub use zemax::import_zemax;
 
+/// Decodes the bytes of a text lens file, whatever wrote it: UTF-16 LE/BE (with a byte-order mark
+/// or by its zero-byte pattern) or UTF-8 with or without a BOM (lossy, so Latin-1 bytes become
+/// U+FFFD rather than an error; TOML's own parser then names the line).
+pub(crate) fn decode_text(bytes: &[u8]) -> String {
+    let utf16 = |b: &[u8], le: bool| -> String {
+        let units =
+            b.chunks_exact(2)
+                .map(|c| if le { u16::from_le_bytes([c[0], c[1]]) } else { u16::from_be_bytes([c[0], c[1]]) });
+        char::decode_utf16(units).map(|r| r.unwrap_or(char::REPLACEMENT_CHARACTER)).collect()
+    };
+    match bytes {
+        [0xFF, 0xFE, rest @ ..] => utf16(rest, true),
+        [0xFE, 0xFF, rest @ ..] => utf16(rest, false),
+        [0xEF, 0xBB, 0xBF, rest @ ..] => String::from_utf8_lossy(rest).into_owned(),
+        [a, 0, ..] if *a != 0 => utf16(bytes, true),
+        [0, b, ..] if *b != 0 => utf16(bytes, false),
+        _ => String::from_utf8_lossy(bytes).into_owned(),
+    }
+}
+
 /// Reads a lens file of any supported format, chosen by extension: `.toml` (ours), `.dat`
-/// (pbrt), `.zmx` (Zemax, ASCII or UTF-16). A lentil database entry is `FILE.json#ID`.
+/// (pbrt), `.zmx` (Zemax); each as UTF-8 (with or without a BOM) or UTF-16. A lentil database
+/// entry is `FILE.json#ID`.
 pub fn load_lens_file(path: &Path) -> Result<Lens> {
     let (p, map) = read_prescription(path)?;
     Lens::new(p, &map, path.parent())
@@ -27,7 +48,7 @@ pub fn read_prescription(path: &Path) -> Result<(Prescription, SourceMap)> {
     let s = path.to_string_lossy();
     if let Some((file, id)) = s.rsplit_once('#') {
         if file.ends_with(".json") {
-            let text = std::fs::read_to_string(file).map_err(|e| Error::io(file, e))?;
+            let text = decode_text(&std::fs::read(file).map_err(|e| Error::io(file, e))?);
             return import_lentil(&text, file, id);
         }
     }
@@ -35,12 +56,9 @@ pub fn read_prescription(path: &Path) -> Result<(Prescription, SourceMap)> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     match ext.as_str() {
-        "toml" => {
-            let text = String::from_utf8(bytes).map_err(|_| Error::lens_file(&file, 0, "file", "not UTF-8 text"))?;
-            prescription::parse_toml(&text, &file)
-        }
+        "toml" => prescription::parse_toml(&decode_text(&bytes), &file),
         "dat" => {
-            let text = String::from_utf8_lossy(&bytes).into_owned();
+            let text = decode_text(&bytes);
             let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("lens").to_string();
             import_pbrt(&text, &file, &name)
         }

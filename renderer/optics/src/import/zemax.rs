@@ -66,28 +66,9 @@ enum GlassRef {
     Named { name: String, nd: Option<f64>, vd: Option<f64> },
 }
 
-/// Decodes the bytes of a `.zmx` file: UTF-16 LE/BE (BOM or zero-byte pattern) or UTF-8
-/// (lossy, so Latin-1 bytes become U+FFFD rather than an error).
-fn decode(bytes: &[u8]) -> String {
-    let utf16 = |b: &[u8], le: bool| -> String {
-        let units =
-            b.chunks_exact(2)
-                .map(|c| if le { u16::from_le_bytes([c[0], c[1]]) } else { u16::from_be_bytes([c[0], c[1]]) });
-        char::decode_utf16(units).map(|r| r.unwrap_or(char::REPLACEMENT_CHARACTER)).collect()
-    };
-    match bytes {
-        [0xFF, 0xFE, rest @ ..] => utf16(rest, true),
-        [0xFE, 0xFF, rest @ ..] => utf16(rest, false),
-        [0xEF, 0xBB, 0xBF, rest @ ..] => String::from_utf8_lossy(rest).into_owned(),
-        [a, 0, ..] if *a != 0 => utf16(bytes, true),
-        [0, b, ..] if *b != 0 => utf16(bytes, false),
-        _ => String::from_utf8_lossy(bytes).into_owned(),
-    }
-}
-
 /// Imports a Zemax sequential file from its raw bytes. `file` names the file in errors.
 pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap)> {
-    let text = decode(bytes);
+    let text = super::decode_text(bytes);
     let mut unit_mm = 1.0;
     let mut name = String::new();
     let mut notes_in_file: Vec<String> = Vec::new();
