@@ -197,6 +197,8 @@ stop = true
         # the same limits as the .dat importer, and a sane Abbe number
         pytest.param(("1e12", "60.0", "-50.0"), ["lens", "info"], ["thickness_mm", "implausibly"], id="huge-thickness"),
         pytest.param(("5.0", "1e-300", "-50.0"), ["lens", "info"], ["vd"], id="tiny-abbe"),
+        # a diverging lens was reported as "closer than the front focal point (-0.0967 m)"
+        pytest.param(("5.0", "60.0", "50.0"), ["render", "--lens"], ["diverging"], id="render-diverging"),
         pytest.param(
             ("5.0", "60.0", "-50.0"), ["lens", "info", "--wavelength=-1"], ["wavelength"], id="bad-wavelength"
         ),

@@ -601,6 +601,14 @@ impl Lens {
     /// Paraxial image distance from the last vertex for an object `distance_mm` in front of
     /// the entrance pupil (`None` = infinity). Errors when no real image forms.
     pub fn focus_image_distance_mm(&self, distance_mm: Option<f64>) -> Result<f64> {
+        let px = self.paraxial();
+        if px.efl_mm < 0.0 && !(px.efl_x_mm > 0.0) {
+            return Err(Error::Optics(format!(
+                "'{}' is a diverging lens (focal length {:.3} mm): it forms no real image to focus on a sensor",
+                self.name(),
+                px.efl_mm
+            )));
+        }
         match distance_mm {
             None => Ok(self.paraxial().bfl_mm),
             Some(d) => {
@@ -615,11 +623,16 @@ impl Lens {
                     )));
                 }
                 paraxial::image_distance_mm(self, object_z, self.primary_wavelength_nm).map_err(|_| {
-                    Error::Optics(format!(
-                        "cannot focus at {:.4} m: closer than the lens's front focal point ({:.4} m from the entrance pupil)",
-                        d * 1e-3,
-                        (self.paraxial().entrance_pupil_z_mm - self.paraxial().front_focal_z_mm) * 1e-3
-                    ))
+                    let front_m = (self.paraxial().entrance_pupil_z_mm - self.paraxial().front_focal_z_mm) * 1e-3;
+                    Error::Optics(if front_m.is_finite() {
+                        format!(
+                            "cannot focus at {:.4} m: closer than the lens's front focal point ({front_m:.4} m from the entrance pupil)",
+                            d * 1e-3
+                        )
+                    } else {
+                        // no finite focal point (no power): say so instead of printing NaN
+                        format!("cannot focus at {:.4} m: the lens forms no real image of it", d * 1e-3)
+                    })
                 })
             }
         }

@@ -230,6 +230,18 @@ pub enum LrtfLookup {
     Uncertain,
 }
 
+/// FNV-1a 64 of table entries as stored (little-endian f32s).
+fn data_checksum(data: &[f32]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for v in data {
+        for b in v.to_le_bytes() {
+            h ^= b as u64;
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+    h
+}
+
 /// FNV-1a 64-bit hash (stable across builds, unlike `std`'s hasher).
 pub fn fnv1a64(bytes: &[u8]) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
@@ -353,7 +365,9 @@ impl Default for BakeOptions {
 impl LrtfTable {
     /// Builds the in-memory table from entries laid out as in the file (per wavelength, u, σx,
     /// σy, then the channels).
-    fn from_entries(header: LrtfHeader, data: &[f32]) -> Self {
+    fn from_entries(mut header: LrtfHeader, data: &[f32]) -> Self {
+        // the checksum of the data as stored, so a table in memory and its file agree
+        header.data_checksum = data_checksum(data);
         let key = Key::new(&header);
         let (n, ny) = (key.n, key.ny);
         let nw = header.wavelengths_nm.len();
@@ -793,6 +807,7 @@ impl LrtfTable {
             bytes.extend_from_slice(&v.to_le_bytes());
         }
         let header = LrtfHeader { data_checksum: fnv1a64(&bytes), ..self.header.clone() };
+        debug_assert_eq!(header.data_checksum, data_checksum(&data));
         let header = serde_json::to_vec(&header).map_err(|e| Error::io(path, std::io::Error::other(e)))?;
         let mut buf = Vec::with_capacity(16 + header.len() + bytes.len());
         buf.extend_from_slice(MAGIC);

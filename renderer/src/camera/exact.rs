@@ -38,6 +38,18 @@ impl ExactCamera {
         let film_z_mm = lens.last_vertex_z_mm() + image_distance;
         let (r_max, dz) = sensor.extent();
         if film_z_mm - dz <= lens.last_vertex_z_mm() {
+            // without tilt the image itself falls inside the lens: say that, not "tilt"
+            if dz < 1e-9 {
+                return Err(Error::camera(
+                    "lens",
+                    format!(
+                        "'{}' forms its image {:.3} mm inside its rear element (image distance {:.3} mm): no sensor fits there",
+                        lens.name(),
+                        lens.last_vertex_z_mm() - film_z_mm,
+                        image_distance
+                    ),
+                ));
+            }
             return Err(Error::camera("tilt", "the tilted sensor would cut into the rear element"));
         }
         let pupil = ExitPupilBounds::compute(&lens, film_z_mm, dz, r_max * 1.001);
