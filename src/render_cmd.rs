@@ -66,6 +66,10 @@ pub struct RenderArgs {
     /// Focal length for thin/pinhole (default: from the scene camera's field of view).
     #[arg(long)]
     pub focal_length: Option<f64>,
+    /// Pixel aspect ratio, width over height of one pixel (default 1, or a USD shot's
+    /// RenderSettings `pixelAspectRatio`).
+    #[arg(long)]
+    pub pixel_aspect: Option<f64>,
     /// Sensor width (mm); spans the larger image dimension.
     #[arg(long, default_value_t = 36.0)]
     pub sensor_width: f64,
@@ -318,6 +322,9 @@ fn apply_render_settings(args: &mut RenderArgs) -> Result<(), Error> {
             args.output = PathBuf::from(name);
         }
     }
+    if args.pixel_aspect.is_none() {
+        args.pixel_aspect = Some(rs.pixel_aspect);
+    }
     if !rs.vars.is_empty() && args.aovs.is_none() {
         // the RenderVars choose the EXR's channels unless --aovs was given
         args.aovs = Some(rs.aovs.join(","));
@@ -464,6 +471,7 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
         height_mm: args.sensor_width,
         fit: SensorFit::Auto,
         shift: Shift::Mm(DVec2::new(args.shift_x, args.shift_y)),
+        pixel_aspect: args.pixel_aspect.unwrap_or(1.0),
     };
     let tilt_deg = DVec2::new(tilt_x, args.tilt_y);
     let sensor = film_back.sensor(width, height, tilt_deg)?;
@@ -642,6 +650,7 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
         ("shiftXMM".into(), format!("{}", s.shift_mm.x)),
         ("shiftYMM".into(), format!("{}", s.shift_mm.y)),
         ("sensorMM".into(), format!("{:.3}x{:.3}", s.width_mm, s.height_mm)),
+        ("pixelAspectRatio".into(), format!("{}", args.pixel_aspect.unwrap_or(1.0))),
         ("spp".into(), format!("{}", result.spp_done)),
         ("sppRequested".into(), format!("{}", args.spp)),
         ("seed".into(), format!("{}", args.seed)),
@@ -677,6 +686,7 @@ fn usd_host_camera(c: &petzval_usd::UsdCamera, args: &RenderArgs, focus_m: Optio
         petzval_usd::Error::Renderer(e) => e,
         e => camera_err("usd", e.to_string()),
     })?;
+    h.film_back.pixel_aspect = args.pixel_aspect.unwrap_or(1.0);
     if let Some(l) = &args.lens {
         h.lens = l.clone();
     }

@@ -109,6 +109,7 @@ impl PyCamera {
                     height_mm: sensor_height_mm,
                     fit,
                     shift: Shift::FitFraction(DVec2::new(shift_x, shift_y)),
+                    pixel_aspect: 1.0,
                 },
                 tilt_deg: DVec2::new(tilt_x_deg, tilt_y_deg),
                 f_number: fstop,

@@ -158,7 +158,7 @@ mod host_conventions {
     use petzval_renderer::{ApertureShape, Error};
 
     fn back(fit: SensorFit, shift: Shift) -> FilmBack {
-        FilmBack { width_mm: 36.0, height_mm: 24.0, fit, shift }
+        FilmBack { width_mm: 36.0, height_mm: 24.0, fit, shift, pixel_aspect: 1.0 }
     }
 
     #[test]

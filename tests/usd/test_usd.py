@@ -724,6 +724,40 @@ def test_render_settings_camera_resolution_product(petzval: Path, tmp_path: Path
     assert r.returncode != 0 and "/Q" in r.stderr and "RenderSettings" in r.stderr
 
 
+def test_pixel_aspect_ratio_widens_the_frame_on_the_film(petzval: Path, tmp_path: Path) -> None:
+    """RenderSettings pixelAspectRatio: a 40×30 frame of 2:1 pixels covers a 80:30 part of the
+    film back (expandAperture: 36 × 24 mm grows to 64 × 24 mm), square pixels 36 × 27 mm."""
+    import OpenEXR
+    from pxr import UsdRender
+
+    path = tmp_path / "par.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    q = quad(stage, "/Q")
+    q.AddTranslateOp().Set((-0.5, -0.5, -3))
+    UsdLux.DomeLight.Define(stage, "/Env")
+    c = UsdGeom.Camera.Define(stage, "/Cam")
+    c.CreateFocalLengthAttr(0.5)
+    c.CreateHorizontalApertureAttr(0.36)
+    c.CreateVerticalApertureAttr(0.24)
+    rs = UsdRender.Settings.Define(stage, "/Render/Settings")
+    rs.CreateCameraRel().SetTargets(["/Cam"])
+    rs.CreateResolutionAttr(Gf.Vec2i(40, 30))
+    rs.CreatePixelAspectRatioAttr(2.0)
+    stage.SetMetadata("renderSettingsPrimPath", "/Render/Settings")
+    stage.GetRootLayer().Save()
+
+    def sensor(*extra: str) -> tuple[float, float]:
+        out = tmp_path / f"par{len(extra)}.exr"
+        run(petzval, "render", str(path), "--spp", "1", "--no-png", "-o", str(out), *extra)
+        with OpenEXR.File(str(out)) as f:
+            w, h = f.header()["petzval/sensorMM"].split("x")
+        return float(w), float(h)
+
+    assert sensor() == pytest.approx((64.0, 24.0), abs=1e-3)
+    assert sensor("--pixel-aspect", "1") == pytest.approx((36.0, 27.0), abs=1e-3)
+
+
 def test_render_vars_choose_the_exr_channels(petzval: Path, tmp_path: Path) -> None:
     """RenderVars' sourceName picks the EXR's channels (colour always; normal, albedo; an unknown
     one is listed as skipped); --aovs overrides them."""

@@ -5,7 +5,7 @@
 //! |---|---|---|---|
 //! | `camera` (rel) | RenderSettings, overridden by the product's | the camera prim | the first camera |
 //! | `resolution` (int2) | RenderSettings, overridden by the product's | pixels | 2048 × 1080 |
-//! | `pixelAspectRatio` | RenderSettings / product | only 1 is supported (others are listed and ignored) | 1 |
+//! | `pixelAspectRatio` | RenderSettings | non-square pixels: the frame covers `columns × ratio / rows` of the film back (`--pixel-aspect` overrides) | 1 |
 //! | `products` (rel) | RenderSettings | RenderProduct prims; the first is rendered | none |
 //! | `productName` | RenderProduct | the output file (`####` = frame) | — |
 //! | `orderedVars` (rel) | RenderProduct | RenderVar prims: their `sourceName` picks the EXR's channels (color/Ci/rgba always; depth/z, normal/N, albedo/diffuseColor; others listed as skipped) unless `--aovs` is given | — |
@@ -31,6 +31,8 @@ pub struct RenderSettings {
     /// The EXR channels the RenderVars ask for (`depth`, `normal`, `albedo`; colour is always
     /// written).
     pub aovs: Vec<String>,
+    /// Width over height of one pixel (`pixelAspectRatio`).
+    pub pixel_aspect: f64,
     /// What was ignored.
     pub warnings: Vec<String>,
 }
@@ -81,12 +83,14 @@ pub fn read(path: &Path, time: Option<f64>, settings: Option<&str>) -> Result<Op
         product_name: None,
         vars: Vec::new(),
         aovs: Vec::new(),
+        pixel_aspect: 1.0,
         warnings: Vec::new(),
     };
     let par = reader.f64_or(&prim, "pixelAspectRatio", 1.0)?;
-    if par != 1.0 {
-        out.warnings.push(format!("{p}.pixelAspectRatio {par}: only square pixels render; ignored"));
+    if !(par.is_finite() && par > 0.0) {
+        return Err(attr_error(&prim, "pixelAspectRatio", format!("must be positive, got {par}")));
     }
+    out.pixel_aspect = par;
     let products = prim
         .relationship("products")
         .targets()

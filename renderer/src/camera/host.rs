@@ -82,11 +82,20 @@ pub struct FilmBack {
     pub fit: SensorFit,
     /// Shift in the sensor plane.
     pub shift: Shift,
+    /// Width over height of one pixel (1 = square; USD's `pixelAspectRatio`): the frame's
+    /// aspect on the sensor is `columns × pixel_aspect / rows`.
+    pub pixel_aspect: f64,
 }
 
 impl Default for FilmBack {
     fn default() -> Self {
-        FilmBack { width_mm: 36.0, height_mm: 24.0, fit: SensorFit::Auto, shift: Shift::Mm(DVec2::ZERO) }
+        FilmBack {
+            width_mm: 36.0,
+            height_mm: 24.0,
+            fit: SensorFit::Auto,
+            shift: Shift::Mm(DVec2::ZERO),
+            pixel_aspect: 1.0,
+        }
     }
 }
 
@@ -99,6 +108,7 @@ impl FilmBack {
             height_mm: vertical_mm,
             fit: SensorFit::Expand,
             shift: Shift::Mm(DVec2::new(horizontal_offset_mm, vertical_offset_mm)),
+            pixel_aspect: 1.0,
         }
     }
 
@@ -109,7 +119,8 @@ impl FilmBack {
         }
         check_positive("sensor_width_mm", self.width_mm)?;
         check_positive("sensor_height_mm", self.height_mm)?;
-        let aspect = width as f64 / height as f64;
+        check_positive("pixel_aspect", self.pixel_aspect)?;
+        let aspect = width as f64 * self.pixel_aspect / height as f64;
         let (sw, sh, fitted) = match self.fit {
             SensorFit::Auto if width >= height => (self.width_mm, self.width_mm / aspect, self.width_mm),
             SensorFit::Auto => (self.width_mm * aspect, self.width_mm, self.width_mm),
