@@ -294,12 +294,12 @@ fn frame_path(path: &std::path::Path, frame: f64) -> PathBuf {
 }
 
 /// The USD shot's RenderSettings applied to `args` where the command line left the defaults.
-fn apply_render_settings(args: &mut RenderArgs) -> Result<(), Error> {
+fn apply_render_settings(args: &mut RenderArgs) -> Result<Vec<RenderArgs>, Error> {
     let Some(path) = args.scene.clone().filter(|p| petzval_usd::is_usd_path(p)) else {
         if args.settings.is_some() {
             return Err(settings_err("settings", "--settings applies to USD shots only".into()));
         }
-        return Ok(());
+        return Ok(Vec::new());
     };
     let time =
         args.frame.or_else(|| args.frames.as_deref().and_then(|f| parse_frames(f).ok()?.first().map(|&f| f as f64)));
@@ -307,10 +307,26 @@ fn apply_render_settings(args: &mut RenderArgs) -> Result<(), Error> {
         petzval_usd::Error::Renderer(e) => e,
         e => Error::scene(path.display().to_string(), "", e.to_string()),
     })?;
-    let Some(rs) = rs else { return Ok(()) };
+    let Some(rs) = rs else { return Ok(Vec::new()) };
     for w in &rs.warnings {
         eprintln!("warning: {w}");
     }
+    // further products: each its own render of the same shot, with the command line's options
+    let others: Vec<RenderArgs> = rs
+        .others
+        .iter()
+        .map(|o| {
+            let mut a = args.clone();
+            apply_settings(&mut a, o);
+            a
+        })
+        .collect();
+    apply_settings(args, &rs);
+    Ok(others)
+}
+
+/// One product's settings onto the options the command line left at their defaults.
+fn apply_settings(args: &mut RenderArgs, rs: &petzval_usd::render_settings::RenderSettings) {
     if args.camera.is_none() {
         args.camera = rs.camera.clone();
     }
@@ -330,13 +346,13 @@ fn apply_render_settings(args: &mut RenderArgs) -> Result<(), Error> {
         args.aovs = Some(rs.aovs.join(","));
     }
     eprintln!(
-        "render settings {}: camera {}, {}, output {}",
+        "render settings {}{}: camera {}, {}, output {}",
         rs.path,
+        rs.product_path.as_deref().map(|p| format!(" ({p})")).unwrap_or_default(),
         args.camera.as_deref().unwrap_or("(first)"),
         args.resolution,
         args.output.display()
     );
-    Ok(())
 }
 
 /// `--resolution`'s default.
@@ -348,8 +364,22 @@ const DEFAULT_AOVS: &str = "depth";
 
 /// Runs `petzval render` (every frame of `--frames` in turn).
 pub fn run(mut args: RenderArgs) -> Result<(), Error> {
-    apply_render_settings(&mut args)?;
+    let others = apply_render_settings(&mut args)?;
     args.settings = None;
+    run_product(args)?;
+    for mut a in others {
+        if crate::signals::interrupted() {
+            break;
+        }
+        // a further RenderProduct of the shot: its settings are applied already
+        a.settings = None;
+        run_product(a)?;
+    }
+    Ok(())
+}
+
+/// Renders one product of the shot (every frame of `--frames` in turn).
+fn run_product(args: RenderArgs) -> Result<(), Error> {
     if let Some(fr) = &args.frames {
         if args.frame.is_some() {
             return Err(settings_err("frames", "give --frame or --frames, not both".into()));

@@ -724,6 +724,41 @@ def test_render_settings_camera_resolution_product(petzval: Path, tmp_path: Path
     assert r.returncode != 0 and "/Q" in r.stderr and "RenderSettings" in r.stderr
 
 
+def test_every_render_product_renders(petzval: Path, tmp_path: Path) -> None:
+    """Two RenderProducts with their own cameras, resolutions and productNames: two EXRs."""
+    import OpenEXR
+    from pxr import UsdRender
+
+    path = tmp_path / "products.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    q = quad(stage, "/Q")
+    q.AddTranslateOp().Set((-0.5, -0.5, -3))
+    UsdLux.DomeLight.Define(stage, "/Env")
+    for name in ("A", "B"):
+        UsdGeom.Camera.Define(stage, f"/{name}")
+    rs = UsdRender.Settings.Define(stage, "/Render/Settings")
+    rs.CreateCameraRel().SetTargets(["/A"])
+    rs.CreateResolutionAttr(Gf.Vec2i(32, 24))
+    products = []
+    for name, cam, res in (("main", "/A", (32, 24)), ("witness", "/B", (20, 10))):
+        prod = UsdRender.Product.Define(stage, f"/Render/{name}")
+        prod.CreateCameraRel().SetTargets([cam])
+        prod.CreateResolutionAttr(Gf.Vec2i(*res))
+        prod.CreateProductNameAttr(str(tmp_path / f"{name}.exr"))
+        products.append(prod.GetPath())
+    rs.CreateProductsRel().SetTargets(products)
+    stage.SetMetadata("renderSettingsPrimPath", "/Render/Settings")
+    stage.GetRootLayer().Save()
+    run(petzval, "render", str(path), "--spp", "1", "--no-png")
+    for name, cam, res in (("main", "/A", (32, 24)), ("witness", "/B", (20, 10))):
+        with OpenEXR.File(str(tmp_path / f"{name}.exr")) as f:
+            h = f.header()
+            assert h["petzval/usdCamera"] == cam, name
+            dw = h["dataWindow"]
+            assert (dw[1][0] - dw[0][0] + 1, dw[1][1] - dw[0][1] + 1) == res, name
+
+
 def test_pixel_aspect_ratio_widens_the_frame_on_the_film(petzval: Path, tmp_path: Path) -> None:
     """RenderSettings pixelAspectRatio: a 40×30 frame of 2:1 pixels covers a 80:30 part of the
     film back (expandAperture: 36 × 24 mm grows to 64 × 24 mm), square pixels 36 × 27 mm."""

@@ -24,9 +24,9 @@ pub struct RenderSettings {
     pub camera: Option<String>,
     /// Resolution (the product's, else the settings', else 2048 × 1080).
     pub resolution: (u32, u32),
-    /// The first product's `productName`.
+    /// The product's `productName`.
     pub product_name: Option<String>,
-    /// The first product's RenderVar prims.
+    /// The product's RenderVar prims.
     pub vars: Vec<String>,
     /// The EXR channels the RenderVars ask for (`depth`, `normal`, `albedo`; colour is always
     /// written).
@@ -35,6 +35,10 @@ pub struct RenderSettings {
     pub pixel_aspect: f64,
     /// What was ignored.
     pub warnings: Vec<String>,
+    /// The RenderProduct these values come from (None: the settings alone).
+    pub product_path: Option<String>,
+    /// The further products, each rendered in turn with its own camera, resolution and output.
+    pub others: Vec<RenderSettings>,
 }
 
 fn first_target(prim: &openusd::usd::Prim, rel: &str) -> Result<Option<sdf::Path>, Error> {
@@ -85,6 +89,8 @@ pub fn read(path: &Path, time: Option<f64>, settings: Option<&str>) -> Result<Op
         aovs: Vec::new(),
         pixel_aspect: 1.0,
         warnings: Vec::new(),
+        product_path: None,
+        others: Vec::new(),
     };
     let par = reader.f64_or(&prim, "pixelAspectRatio", 1.0)?;
     if !(par.is_finite() && par > 0.0) {
@@ -95,46 +101,63 @@ pub fn read(path: &Path, time: Option<f64>, settings: Option<&str>) -> Result<Op
         .relationship("products")
         .targets()
         .map_err(|e| attr_error(&prim, "products", format!("cannot be read: {e:#}")))?;
-    if products.len() > 1 {
-        out.warnings.push(format!(
-            "{p}.products: {} products; only the first ({}) renders",
-            products.len(),
-            products[0]
-        ));
+    // 2. Each product: its camera, resolution, output and RenderVars over the settings'.
+    let base = out.clone();
+    for (k, pp) in products.iter().enumerate() {
+        let mut o = base.clone();
+        o.warnings.clear();
+        apply_product(&mut o, &stage, &reader, pp)?;
+        if k == 0 {
+            out = RenderSettings { warnings: [out.warnings, o.warnings.clone()].concat(), ..o };
+        } else {
+            out.others.push(o);
+        }
     }
-    if let Some(pp) = products.first() {
-        let product = stage.prim(pp.clone());
-        if let Some(c) = first_target(&product, "camera")? {
-            out.camera = Some(c.to_string());
-        }
-        if let Some(r) = resolution(&reader, &product)? {
-            out.resolution = r;
-        }
-        out.product_name = reader.token(&product, "productName")?.filter(|s| !s.is_empty());
-        let targets = product
-            .relationship("orderedVars")
-            .targets()
-            .map_err(|e| attr_error(&product, "orderedVars", format!("cannot be read: {e:#}")))?;
-        out.vars = targets.iter().map(|v| v.to_string()).collect();
-        // 3. RenderVars: their sourceName picks the EXR's channels.
-        for t in &targets {
-            let v = t.to_string();
-            let var = stage.prim(t.clone());
-            let source = reader.token(&var, "sourceName")?.unwrap_or_default();
-            match aov_of_source(&source) {
-                Some("") => {}
-                Some(a) => {
-                    if !out.aovs.iter().any(|x| x == a) {
-                        out.aovs.push(a.to_string());
-                    }
-                }
-                None => out.warnings.push(format!(
-                    "{v}: RenderVar sourceName '{source}' is not a channel petzval renders (color, depth, normal, albedo); skipped"
-                )),
-            }
-        }
+    if out.others.iter().any(|o| o.product_name.is_none() || o.product_name == out.product_name) {
+        out.warnings.push(format!("{p}.products: products without their own productName share the first's output"));
     }
     Ok(Some(out))
+}
+
+/// One RenderProduct over the settings: its camera, resolution, productName and RenderVars.
+fn apply_product(
+    out: &mut RenderSettings,
+    stage: &openusd::usd::Stage,
+    reader: &Reader,
+    pp: &sdf::Path,
+) -> Result<(), Error> {
+    let product = stage.prim(pp.clone());
+    out.product_path = Some(pp.to_string());
+    if let Some(c) = first_target(&product, "camera")? {
+        out.camera = Some(c.to_string());
+    }
+    if let Some(r) = resolution(reader, &product)? {
+        out.resolution = r;
+    }
+    out.product_name = reader.token(&product, "productName")?.filter(|s| !s.is_empty());
+    let targets = product
+        .relationship("orderedVars")
+        .targets()
+        .map_err(|e| attr_error(&product, "orderedVars", format!("cannot be read: {e:#}")))?;
+    out.vars = targets.iter().map(|v| v.to_string()).collect();
+    // RenderVars: their sourceName picks the EXR's channels.
+    for t in &targets {
+        let v = t.to_string();
+        let var = stage.prim(t.clone());
+        let source = reader.token(&var, "sourceName")?.unwrap_or_default();
+        match aov_of_source(&source) {
+            Some("") => {}
+            Some(a) => {
+                if !out.aovs.iter().any(|x| x == a) {
+                    out.aovs.push(a.to_string());
+                }
+            }
+            None => out.warnings.push(format!(
+                "{v}: RenderVar sourceName '{source}' is not a channel petzval renders (color, depth, normal, albedo); skipped"
+            )),
+        }
+    }
+    Ok(())
 }
 
 /// The channel a RenderVar's `sourceName` names: `Some("")` for the colour (always written),
