@@ -1,5 +1,5 @@
 //! UsdRender: the RenderSettings prim a render uses (given, else the stage's
-//! `renderSettingsPrimPath` metadata) and its first RenderProduct.
+//! `renderSettingsPrimPath` metadata) and its RenderProducts (each rendered in turn).
 //!
 //! | attribute | on | meaning | fallback |
 //! |---|---|---|---|
