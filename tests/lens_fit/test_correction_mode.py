@@ -14,12 +14,12 @@ import subprocess
 import tomllib
 from pathlib import Path
 
-from conftest import FIT_ARGS, OUT, RADIUS_SURFACE, REPO
+from conftest import OUT, RADIUS_SURFACE, REPO
 
 from optiland_captures import manifest
 
 TERMS = ["defocus", "spherical", "coma", "astigmatism", "field_curvature", "pupil_scale"]
-# measured (docs/lens-fit.md): 0.8–1.5 % (the parametric fit: 0.1–0.4 %); stated bound
+# measured (docs/lens-fit.md): 0.9–2.1 % with 160 evaluations (the parametric fit: 0.1–0.4 %); stated bound
 RESIDUAL_MAX = 0.03
 RENDER_ARGS = ["--resolution", "64x48", "--spp", "2"]
 
@@ -47,7 +47,9 @@ def test_correction_mode_fits_a_wrong_start_lens_and_renders(optiland_fit, petzv
     (OUT / "correction.toml").write_text(manifest("cooke_wrong.zmx", free, train["capture"]))
     lens, table, report = OUT / "corrected.toml", OUT / "corrected.lrtf", OUT / "correction"
     cmd = [str(petzval_fit_bin), str(OUT / "correction.toml"), "-o", str(lens), "--lrtf", str(table)]
-    p = subprocess.run([*cmd, "--report", str(report), *FIT_ARGS], capture_output=True, text=True)
+    # an evaluation budget (deterministic on any machine; the time limit is only a cap)
+    budget = ["--max-evaluations", "160", "--rays", "16384", "--time-limit", "120"]
+    p = subprocess.run([*cmd, "--report", str(report), *budget], capture_output=True, text=True)
     assert p.returncode == 0, p.stdout + p.stderr
     fit = json.loads((report / "fit.json").read_text())
     residuals = [c["residual"] for c in fit["captures"]]
