@@ -232,24 +232,17 @@ pub enum LrtfLookup {
 
 /// FNV-1a 64 of table entries as stored (little-endian f32s).
 fn data_checksum(data: &[f32]) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for v in data {
-        for b in v.to_le_bytes() {
-            h ^= b as u64;
-            h = h.wrapping_mul(0x0100_0000_01b3);
-        }
-    }
-    h
+    fnv1a64_bytes(data.iter().flat_map(|v| v.to_le_bytes()))
 }
 
 /// FNV-1a 64-bit hash (stable across builds, unlike `std`'s hasher).
 pub fn fnv1a64(bytes: &[u8]) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in bytes {
-        h ^= *b as u64;
-        h = h.wrapping_mul(0x0100_0000_01b3);
-    }
-    h
+    fnv1a64_bytes(bytes.iter().copied())
+}
+
+/// FNV-1a 64 over a byte stream.
+fn fnv1a64_bytes(bytes: impl Iterator<Item = u8>) -> u64 {
+    bytes.fold(0xcbf2_9ce4_8422_2325, |h, b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3))
 }
 
 /// The hash identifying a lens's optics (its prescription).
@@ -807,7 +800,6 @@ impl LrtfTable {
             bytes.extend_from_slice(&v.to_le_bytes());
         }
         let header = LrtfHeader { data_checksum: fnv1a64(&bytes), ..self.header.clone() };
-        debug_assert_eq!(header.data_checksum, data_checksum(&data));
         let header = serde_json::to_vec(&header).map_err(|e| Error::io(path, std::io::Error::other(e)))?;
         let mut buf = Vec::with_capacity(16 + header.len() + bytes.len());
         buf.extend_from_slice(MAGIC);
