@@ -9,6 +9,7 @@
 mod error;
 pub mod film;
 pub mod integrator;
+pub mod limits;
 pub mod render;
 pub mod sampler;
 pub mod scene;

@@ -18,6 +18,7 @@ use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::film::{Film, FilterSampler, Image, PixelFilter};
 use crate::integrator::{PathTracer, RenderScene};
+use crate::limits;
 use crate::sampler::PixelSampler;
 use crate::spectral;
 use glam::{DAffine3, DVec2, Vec3};
@@ -83,16 +84,33 @@ impl RenderSettings {
     /// Checks the settings.
     pub fn validate(&self) -> Result<()> {
         let bad = |f: &str, m: String| Err(Error::settings(f, m));
-        if self.width == 0 || self.height == 0 || self.width > 16384 || self.height > 16384 {
+        let side = limits::MAX_SIDE_PX;
+        if self.width == 0 || self.height == 0 || self.width > side || self.height > side {
             return bad("resolution", format!("{}x{} is outside 1..16384 per side", self.width, self.height));
         }
-        if (self.width as u64) * (self.height as u64) > 100_000_000 {
+        if (self.width as u64) * (self.height as u64) > limits::MAX_PIXELS {
             return bad("resolution", format!("{}x{} is more than 100 megapixels", self.width, self.height));
         }
-        if self.spp == 0 || self.spp > 1 << 20 {
+        let [x0, y0, x1, y1] = self.crop.unwrap_or([0, 0, self.width, self.height]);
+        let film_px = (x1.saturating_sub(x0) as u64) * (y1.saturating_sub(y0) as u64);
+        let film_bytes = film_px * limits::FILM_BYTES_PER_PIXEL;
+        if let Err(budget) = limits::check_memory(film_bytes) {
+            return bad(
+                "resolution",
+                format!(
+                    "{}x{} needs about {} for the film ({} bytes per pixel), {}",
+                    self.width,
+                    self.height,
+                    limits::format_bytes(film_bytes),
+                    limits::FILM_BYTES_PER_PIXEL,
+                    limits::over_budget(budget)
+                ),
+            );
+        }
+        if self.spp == 0 || self.spp > limits::MAX_SPP {
             return bad("spp", format!("{} must be in 1..=1048576", self.spp));
         }
-        if self.max_depth == 0 || self.max_depth > 1024 {
+        if self.max_depth == 0 || self.max_depth > limits::MAX_DEPTH {
             return bad("max_depth", format!("{} must be in 1..=1024", self.max_depth));
         }
         if !(self.clip_start_m >= 0.0 && self.clip_start_m.is_finite())

@@ -1027,3 +1027,38 @@ fn light_tree_pmf_consistent() {
     }
     eprintln!("light tree: worst |pick pmf − light_pmf|/pmf {worst_pick:.2e}, worst |Σ pmf − 1| {worst_sum:.2e}");
 }
+
+// ------------------------------------------------------------------------------------------
+// Value limits (issue 12): an emitter the film cannot sum is refused, naming it.
+
+#[test]
+fn emitted_values_beyond_the_limit_are_refused_by_name() {
+    use petzval_renderer::limits::MAX_RADIANCE;
+    use petzval_renderer::scene::environment::EnvironmentMap;
+    let q = quad(Vec3::new(-1.0, -1.0, 0.0), Vec3::X * 2.0, Vec3::Y * 2.0, 0);
+    let build = |materials: Vec<Material>, lights: Vec<Light>, environment: Environment| {
+        let scene =
+            Scene { lights, environment, source: "lamps.gltf".into(), ..scene_of(std::slice::from_ref(&q), materials) };
+        RenderScene::new(scene).map(|_| ()).map_err(|e| e.to_string())
+    };
+    let lamp = |le: f32| Material { name: "Lamp".into(), ..emitter(Vec3::splat(le), false) };
+    // at the limit: accepted; beyond it, non-finite or negative: refused, naming file and emitter
+    assert!(build(vec![lamp(MAX_RADIANCE)], vec![], Environment::Black).is_ok());
+    for le in [MAX_RADIANCE * 2.0, f32::INFINITY, f32::NAN, -1.0] {
+        let e = build(vec![lamp(le)], vec![], Environment::Black).unwrap_err();
+        assert!(e.contains("lamps.gltf") && e.contains("material 0 'Lamp'") && e.contains("emission"), "{e}");
+    }
+    let sun = Light::Directional { direction: -Vec3::Y, irradiance: Vec3::new(1.0, f32::NAN, 1.0) };
+    let e = build(vec![diffuse(Vec3::ONE)], vec![sun], Environment::Black).unwrap_err();
+    assert!(e.contains("light 0 (directional)") && e.contains("irradiance"), "{e}");
+    let e = build(vec![diffuse(Vec3::ONE)], vec![], Environment::Constant(Vec3::splat(1e20))).unwrap_err();
+    assert!(e.contains("environment") && e.contains("radiance"), "{e}");
+    let map = |texel: f32, strength: f32| {
+        let texels = vec![Vec3::splat(0.5), Vec3::splat(texel), Vec3::splat(0.5), Vec3::splat(0.5)];
+        Environment::Map(EnvironmentMap::new("sky.exr", 2, 2, texels, strength, 0.0).unwrap())
+    };
+    assert!(build(vec![diffuse(Vec3::ONE)], vec![], map(1e6, 1.0)).is_ok());
+    // a bright texel times the strength, not either alone, is what the film sums
+    let e = build(vec![diffuse(Vec3::ONE)], vec![], map(1e6, 1e10)).unwrap_err();
+    assert!(e.contains("sky.exr") && e.contains("brightest texel"), "{e}");
+}

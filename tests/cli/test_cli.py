@@ -222,6 +222,79 @@ def test_bad_lens_files_and_lens_flags_fail_cleanly(petzval, tmp_path, values, a
     assert_clean_failure(r, tmp_path, *words)
 
 
+# A one-triangle glTF with an emissive material, a point light and a camera; the values are
+# substituted per case.
+ABSURD_GLTF = """{"asset":{"version":"2.0"},
+"extensionsUsed":["KHR_materials_emissive_strength","KHR_lights_punctual"],
+"extensions":{"KHR_lights_punctual":{"lights":[{"type":"point","intensity":INTENSITY}]}},
+"materials":[{"name":"Lamp","emissiveFactor":[1,1,1],
+  "extensions":{"KHR_materials_emissive_strength":{"emissiveStrength":STRENGTH}}}],
+"buffers":[{"byteLength":BYTES,
+  "uri":"data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA"}],
+"bufferViews":[{"buffer":0,"byteLength":36}],
+"accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}],
+"meshes":[{"primitives":[{"attributes":{"POSITION":0},"material":0}]}],
+"nodes":[{"mesh":0},{"camera":0,"translation":[0,0,3]},{"extensions":{"KHR_lights_punctual":{"light":0}},
+  "translation":[0,0,1]}],
+"cameras":[{"type":"perspective","perspective":{"yfov":0.8,"znear":0.01}}],
+"scenes":[{"nodes":[0,1,2]}],"scene":0}"""
+
+
+@pytest.mark.parametrize(
+    "values,words",
+    [
+        # issue 12: an emissive strength of 1e38 rendered +Inf with exit code 0
+        pytest.param(("1e38", "10", "36"), ["corrupt.glb", "material 0 'lamp'", "emission", "1e15"], id="emission"),
+        pytest.param(("1", "1e30", "36"), ["corrupt.glb", "light 0 (point)", "intensity"], id="light"),
+    ],
+)
+def test_absurd_scene_values_fail_cleanly(petzval, tmp_path, values, words):
+    strength, intensity, nbytes = values
+    text = ABSURD_GLTF.replace("STRENGTH", strength).replace("INTENSITY", intensity).replace("BYTES", nbytes)
+    # .gltf text under an INPUTS name (the loader sniffs the content, not the extension)
+    (tmp_path / "corrupt.glb").write_text(text)
+    r = run(petzval, ["render", "corrupt.glb", "--resolution", "24x16", "--spp", "1"], tmp_path)
+    assert_clean_failure(r, tmp_path, *words)
+
+
+def test_sane_scene_values_render(petzval, tmp_path):
+    """The negative control of the case above: the same file with sane values renders."""
+    (tmp_path / "lamp.gltf").write_text(
+        ABSURD_GLTF.replace("STRENGTH", "10").replace("INTENSITY", "10").replace("BYTES", "36")
+    )
+    r = run(petzval, ["render", "lamp.gltf", "--resolution", "24x16", "--spp", "1", "-o", "x.exr"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "x.exr").is_file()
+
+
+@pytest.mark.parametrize(
+    "args,budget,words",
+    [
+        # the film's estimate (208 B per pixel) against a 100 MB budget: 1000x1000 needs ~200 MB
+        pytest.param(["--resolution", "1000x1000"], 100_000_000, ["resolution", "film", "memory"], id="film"),
+        # the negative control: 200x200 (~8 MB) fits the same budget
+        pytest.param(["--resolution", "200x200"], 100_000_000, None, id="fits"),
+    ],
+)
+def test_memory_budget_checked_before_rendering(petzval, tmp_path, args, budget, words):
+    env = dict(os.environ, RUST_BACKTRACE="0", PETZVAL_MEMORY_BYTES=str(budget))
+    cmd = [str(petzval), "render", *args, "--spp", "1", "--lens", "thin", "-o", "x.exr"]
+    r = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=120, env=env)
+    if words is None:
+        assert r.returncode == 0, r.stderr
+    else:
+        assert_clean_failure(r, tmp_path, *words)
+        assert "took" not in r.stderr and "rendered" not in r.stderr, "the check must come before the render"
+
+
+def test_gltf_buffers_larger_than_memory_fail_before_reading(petzval, tmp_path):
+    """A glTF whose buffers declare more bytes than the memory budget is refused up front."""
+    text = ABSURD_GLTF.replace("STRENGTH", "1").replace("INTENSITY", "1").replace("BYTES", str(10**12))
+    (tmp_path / "corrupt.glb").write_text(text)
+    r = run(petzval, ["render", "corrupt.glb", "--resolution", "24x16", "--spp", "1"], tmp_path)
+    assert_clean_failure(r, tmp_path, "corrupt.glb", "buffers", "byteLength")
+
+
 # ------------------------------------------------------------------------------------------
 # OpenEXR reading (single-part scan-line files, as the `exr` crate writes them).
 

@@ -167,6 +167,7 @@ pub fn load(path: &Path, time: Option<f64>) -> Result<UsdShot, Error> {
     warnings.retain(|w| seen.insert(w.clone()));
     let mut scene = walker.scene;
     scene.warnings = warnings;
+    scene.source = path.display().to_string();
     Ok(UsdShot { file, scene, cameras: walker.cameras, units: walker.units, time, info: walker.info, frame_range })
 }
 

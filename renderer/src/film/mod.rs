@@ -119,6 +119,9 @@ pub struct PixelSums {
     pub dropped: u32,
 }
 
+// The memory estimate of `limits` counts these bytes per pixel.
+const _: () = assert!(std::mem::size_of::<PixelSums>() as u64 == crate::limits::PIXEL_SUMS_BYTES);
+
 /// The film.
 #[derive(Debug, Clone)]
 pub struct Film {

@@ -86,7 +86,37 @@ const ALPHA_BIT: u32 = 1 << 31;
 /// The largest coordinate a triangle may have, in scene units (metres): beyond it the BVH's
 /// box arithmetic (surface areas, extents) overflows f32 and the builder panics (found by the
 /// fuzzing in `renderer/tests/fuzz.rs`: mutated buffers decoding to about 10³⁸).
-pub const MAX_COORD: f32 = 1e12;
+pub use crate::limits::MAX_COORD;
+
+/// Refuses a scene whose stored triangles exceed [`crate::limits::MAX_STORED_TRIANGLES`] or whose
+/// BVH build would need more memory than is available.
+fn check_geometry_size(scene: &Scene) -> Result<()> {
+    use crate::limits::{check_memory, format_bytes, over_budget, BVH_BYTES_PER_TRIANGLE, MAX_STORED_TRIANGLES};
+    let file = if scene.source.is_empty() { "scene" } else { scene.source.as_str() };
+    let stored: usize = scene.meshes.iter().map(Mesh::triangle_count).sum();
+    if stored > MAX_STORED_TRIANGLES {
+        return Err(crate::Error::scene(
+            file,
+            "",
+            format!(
+                "{stored} stored triangles are more than the {MAX_STORED_TRIANGLES} the BVH can index (use instancing)"
+            ),
+        ));
+    }
+    let need = stored as u64 * BVH_BYTES_PER_TRIANGLE + scene.instances.len() as u64 * 256;
+    check_memory(need).map_err(|budget| {
+        crate::Error::scene(
+            file,
+            "",
+            format!(
+                "building the BVH for {stored} triangles and {} instances needs about {}, {}",
+                scene.instances.len(),
+                format_bytes(need),
+                over_budget(budget)
+            ),
+        )
+    })
+}
 
 /// Whether a position is finite and within [`MAX_COORD`].
 fn in_range(p: Vec3) -> bool {
@@ -471,6 +501,9 @@ impl RenderScene {
 
     /// [`RenderScene::new`] with a chosen BVH build quality.
     pub fn with_quality(mut scene: Scene, quality: BvhQuality) -> Result<RenderScene> {
+        // Limits first: emitted values, stored triangles, the BVH build's memory.
+        scene.check_values()?;
+        check_geometry_size(&scene)?;
         // Materials: make every id valid.
         let n_mat = scene.materials.len() as u32;
         let needs_fallback = scene.materials.is_empty()

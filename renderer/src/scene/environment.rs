@@ -205,6 +205,8 @@ pub struct EnvironmentMap {
     /// cos and sin of the rotation.
     rot: (f32, f32),
     distribution: Arc<Distribution2D>,
+    /// Largest texel component × strength.
+    peak: f32,
 }
 
 impl std::fmt::Debug for EnvironmentMap {
@@ -264,6 +266,7 @@ impl EnvironmentMap {
             }
         }
         let distribution = Arc::new(Distribution2D::new(&weights, width, height));
+        let peak = texels.iter().fold(0.0f32, |m, t| m.max(t.max_element())) * strength;
         Ok(EnvironmentMap {
             name: name.to_string(),
             width,
@@ -273,6 +276,7 @@ impl EnvironmentMap {
             rotation_rad,
             rot: (rotation_rad.cos(), rotation_rad.sin()),
             distribution,
+            peak,
         })
     }
 
@@ -289,6 +293,11 @@ impl EnvironmentMap {
     /// Height in texels.
     pub fn height(&self) -> usize {
         self.height
+    }
+
+    /// The largest radiance in the map (its brightest texel component × strength).
+    pub fn peak_radiance(&self) -> f32 {
+        self.peak
     }
 
     /// Strength multiplier.

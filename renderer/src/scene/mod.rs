@@ -314,6 +314,8 @@ pub struct Scene {
     pub cameras: Vec<SceneCamera>,
     /// Warnings collected while loading (shown to the user once).
     pub warnings: Vec<String>,
+    /// The file the scene came from, for messages (empty: built in memory).
+    pub source: String,
 }
 
 impl Scene {
@@ -322,6 +324,55 @@ impl Scene {
         let mut s = Scene::default();
         s.add_world_mesh(mesh);
         s
+    }
+
+    /// Checks every emitted value against [`crate::limits::MAX_RADIANCE`]: an emissive material,
+    /// a light or the environment brighter than that (or non-finite) is an error naming it, not an
+    /// image of +Inf or black.
+    pub fn check_values(&self) -> crate::Result<()> {
+        let file = if self.source.is_empty() { "scene" } else { self.source.as_str() };
+        let limit = crate::limits::MAX_RADIANCE;
+        let check = |location: String, field: &str, v: Vec3| -> crate::Result<()> {
+            if v.is_finite() && v.min_element() >= 0.0 && v.max_element() <= limit {
+                return Ok(());
+            }
+            let worst = if v.is_nan() {
+                f32::NAN
+            } else if v.min_element() < 0.0 {
+                v.min_element()
+            } else {
+                v.max_element()
+            };
+            Err(crate::Error::scene(
+                file,
+                location,
+                format!(
+                    "{field} {worst:e} is outside 0…{limit:e} (the brightest value petzval renders; the film would overflow)"
+                ),
+            ))
+        };
+        for (k, m) in self.materials.iter().enumerate() {
+            check(format!("material {k} '{}'", m.name), "emission (factor × strength)", m.emissive)?;
+        }
+        for (k, l) in self.lights.iter().enumerate() {
+            match l {
+                Light::Point { intensity, .. } => check(format!("light {k} (point)"), "intensity (W/sr)", *intensity)?,
+                Light::Spot { intensity, .. } => check(format!("light {k} (spot)"), "intensity (W/sr)", *intensity)?,
+                Light::Directional { irradiance, .. } => {
+                    check(format!("light {k} (directional)"), "irradiance (W/m²)", *irradiance)?
+                }
+            }
+        }
+        match &self.environment {
+            Environment::Black => {}
+            Environment::Constant(c) => check("environment".into(), "radiance", *c)?,
+            Environment::Map(m) => check(
+                format!("environment '{}'", m.name()),
+                "brightest texel × strength",
+                Vec3::splat(m.peak_radiance()),
+            )?,
+        }
+        Ok(())
     }
 
     /// Stores a mesh (without placing it) and returns its index for [`Scene::add_instance`].

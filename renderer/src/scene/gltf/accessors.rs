@@ -6,7 +6,7 @@ use gltf::accessor::{DataType, Dimensions};
 use std::path::PathBuf;
 
 /// The largest image file a glTF scene may reference (the decoder's own limits guard the pixels).
-pub(super) const MAX_IMAGE_FILE_BYTES: u64 = 1 << 30;
+pub(super) const MAX_IMAGE_FILE_BYTES: u64 = crate::limits::MAX_FILE_BYTES;
 
 impl Loader<'_> {
     // ---------------------------------------------------------------- buffers and images
@@ -50,6 +50,18 @@ impl Loader<'_> {
     pub(super) fn load_buffers(&mut self, mut blob: Option<Vec<u8>>) -> Result<()> {
         let doc = self.doc;
         let buffers: Vec<_> = doc.buffers().collect();
+        // Up front: the declared buffer sizes must fit the memory available.
+        let declared: u64 = buffers.iter().map(|b| b.length() as u64).sum();
+        if let Err(budget) = crate::limits::check_memory(declared) {
+            return Err(self.error(
+                "buffers",
+                format!(
+                    "declare {} in all (byteLength), {}",
+                    crate::limits::format_bytes(declared),
+                    crate::limits::over_budget(budget)
+                ),
+            ));
+        }
         for b in buffers {
             let loc = named("buffer", b.index(), b.name());
             let mut data = match b.source() {

@@ -64,10 +64,6 @@ use std::sync::Arc;
 /// Luminous efficacy (lm/W) Blender's glTF exporter uses to convert watts to lumens.
 pub const WATTS_TO_LUMENS: f32 = 683.0;
 
-/// Most node instances one file may expand to (a node shared by several parents is instanced
-/// once per path; this bounds that).
-const MAX_NODE_INSTANCES: usize = 10_000_000;
-
 /// Loads a `.gltf` or `.glb` file into a [`Scene`].
 ///
 /// Fails (naming the file and, where it applies, the glTF object) on an unreadable, corrupt or
@@ -199,7 +195,7 @@ impl<'a> Loader<'a> {
             base,
             doc: &doc,
             buffers: Vec::new(),
-            scene: Scene::default(),
+            scene: Scene { source: file.to_string(), ..Scene::default() },
             textures: HashMap::new(),
             images: HashMap::new(),
             mesh_ids: HashMap::new(),

@@ -1,7 +1,8 @@
 //! The node hierarchy: transforms, meshes and their primitives, lights and cameras.
 
 use super::accessors::read_accessor;
-use super::{named, Loader, MAX_NODE_INSTANCES, WATTS_TO_LUMENS};
+use super::{named, Loader, WATTS_TO_LUMENS};
+use crate::limits::MAX_NODE_INSTANCES;
 use crate::scene::{Light, Mesh, SceneCamera};
 use crate::Result;
 use glam::{Affine3A, Mat3, Mat4, Quat, Vec2, Vec3, Vec4};
