@@ -55,8 +55,8 @@ pub(crate) fn render(
 ) -> PyResult<Py<PyDict>> {
     guard(|| {
         // 1. Settings, checked before any work.
-        if !(filter_width_px.is_finite() && filter_width_px >= 0.0) {
-            return Err(settings_err("filter_width_px", format!("must be ≥ 0, got {filter_width_px}")));
+        if !(filter_width_px.is_finite() && (0.0..=16.0).contains(&filter_width_px)) {
+            return Err(settings_err("filter_width_px", format!("must be in [0, 16] px, got {filter_width_px}")));
         }
         let (clip_start_m, clip_end_m) = camera.host.clip_m;
         let settings = RenderSettings {

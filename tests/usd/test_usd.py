@@ -572,6 +572,14 @@ def test_bad_input_names_layer_prim_attribute(petzval: Path, tmp_path: Path) -> 
     assert r.returncode != 0 and "junk.usda" in r.stderr
     r = run(petzval, "usd", "info", str(tmp_path / "none.usdc"), ok=False)
     assert r.returncode != 0 and "none.usdc" in r.stderr
+    # issue 12: a light beyond the brightest value the film can sum names its prim and attribute
+    (tmp_path / "sun.usda").write_text(
+        '#usda 1.0\ndef SphereLight "Lamp"\n{\n    float inputs:intensity = 1e30\n'
+        "    float inputs:exposure = 40\n}\n"
+    )
+    r = run(petzval, "usd", "info", str(tmp_path / "sun.usda"), ok=False)
+    assert r.returncode != 0 and "/Lamp" in r.stderr and "inputs:intensity" in r.stderr, r.stderr
+    assert "panicked" not in r.stderr
 
 
 def test_render_usd_shot_through_petzval_lens_api(petzval: Path, tmp_path: Path) -> None:

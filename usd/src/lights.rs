@@ -103,6 +103,17 @@ pub fn read_light(
         return Err(crate::value::attr_error(prim, "inputs:intensity", "intensity and color must be non-negative"));
     }
     let base = (color * intensity * 2f64.powf(exposure)).as_vec3() * tint;
+    let limit = petzval_renderer::limits::MAX_RADIANCE;
+    if !(base.is_finite() && base.max_element() <= limit) {
+        return Err(crate::value::attr_error(
+            prim,
+            "inputs:intensity",
+            format!(
+                "intensity × 2^exposure × color = {:e} is beyond {limit:e}, the brightest value petzval renders",
+                base.max_element()
+            ),
+        ));
+    }
     let to_r = units.to_renderer() * world;
     let rigid = crate::xform::rigid(to_r);
     let pos = rigid.transform_point3(DVec3::ZERO).as_vec3();
