@@ -3,9 +3,17 @@
 //!
 //! For a film point at radius r, the rays from it that pass the lens cross the plane of the
 //! rear vertex inside a small region. We bound that region per radial interval of the film
-//! (for a film point on +x; other points rotate the box), found by tracing a grid of rays and
+//! (for a film point on +x; other points rotate the bounds), found by tracing a grid of rays and
 //! enlarging the box by two grid cells. Lenses or stops that are not rotationally symmetric
 //! use one box valid for every film point (the union), which is still conservative.
+//!
+//! Rotationally symmetric lenses also get the region's **outline** per interval (issue 14: the
+//! boxes let 36–61 % of the sampled rays be absorbed): a star-shaped polygon about a point inside
+//! the region, whose radius at each of [`OUTLINE_ANGLES`] angles is the farthest passing point
+//! along that direction over the interval's film points (a coarse march, then bisection to the
+//! failing side), grown by [`OUTLINE_GROWTH`] of the region's size. Rays are sampled uniformly in
+//! the polygon (a triangle picked by area, then a point in it). Where the region is not
+//! star-shaped about its centre for some film point of the interval, that interval keeps its box.
 //!
 //! | name | type | unit | default |
 //! |---|---|---|---|
@@ -54,6 +62,85 @@ impl Box2 {
     }
 }
 
+/// Directions of an outline (the polygon's vertices).
+pub const OUTLINE_ANGLES: usize = 64;
+
+/// How much an outline is grown, as a share of its largest radius (covers the chords between
+/// vertices, film points between the sampled ones, and the region's shift with wavelength).
+pub const OUTLINE_GROWTH: f64 = 0.03;
+
+/// A star-shaped polygon about `centre` (film point on +x), sampled uniformly.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Outline {
+    /// A point inside the region, on the x axis.
+    pub centre: DVec2,
+    /// Radius of vertex k at angle 2πk/[`OUTLINE_ANGLES`] about `centre`.
+    pub radii: Vec<f64>,
+    /// Cumulative triangle areas, normalised (len `OUTLINE_ANGLES + 1`, last = 1).
+    cdf: Vec<f64>,
+    /// Polygon area (mm²).
+    pub area: f64,
+}
+
+impl Outline {
+    fn new(centre: DVec2, radii: Vec<f64>) -> Option<Outline> {
+        let n = radii.len();
+        let half_sin = (std::f64::consts::TAU / n as f64).sin() * 0.5;
+        let tri: Vec<f64> = (0..n).map(|k| half_sin * radii[k] * radii[(k + 1) % n]).collect();
+        let area: f64 = tri.iter().sum();
+        if !(area > 0.0 && area.is_finite()) {
+            return None;
+        }
+        let mut cdf = Vec::with_capacity(n + 1);
+        let mut acc = 0.0;
+        cdf.push(0.0);
+        for t in &tri {
+            acc += t / area;
+            cdf.push(acc);
+        }
+        cdf[n] = 1.0;
+        Some(Outline { centre, radii, cdf, area })
+    }
+
+    fn vertex(&self, k: usize) -> DVec2 {
+        let n = self.radii.len();
+        let phi = std::f64::consts::TAU * (k % n) as f64 / n as f64;
+        self.centre + DVec2::new(phi.cos(), phi.sin()) * self.radii[k % n]
+    }
+
+    /// Whether `p` (film point on +x frame) is inside.
+    pub fn contains(&self, p: DVec2) -> bool {
+        let d = p - self.centre;
+        let n = self.radii.len();
+        let a = d.y.atan2(d.x).rem_euclid(std::f64::consts::TAU);
+        let k = ((a / std::f64::consts::TAU * n as f64) as usize).min(n - 1);
+        // inside the triangle (centre, v_k, v_k+1): on the centre's side of the outer edge
+        let (v0, v1) = (self.vertex(k), self.vertex(k + 1));
+        let edge = v1 - v0;
+        let side = |q: DVec2| edge.perp_dot(q - v0);
+        side(p) * side(self.centre) >= 0.0
+    }
+
+    /// A uniform point in the polygon from `u` in [0,1)²: `u` goes to the unit disc by the
+    /// concentric map (so (0.5, 0.5) is the centre and a stratified `u` stays stratified), the
+    /// disc point's angle picks a triangle by area and the place along its outer edge, and its
+    /// radius scales the way out to that edge.
+    pub fn sample(&self, u: DVec2) -> DVec2 {
+        // 1. The unit disc: radius ρ (density 2ρ) and the angle as a fraction a of a turn.
+        let d = super::aperture::concentric_disk(u);
+        let rho = d.length().min(1.0);
+        let a = (d.y.atan2(d.x) / std::f64::consts::TAU).rem_euclid(1.0);
+        // 2. The triangle, by area, and the place t along its outer edge.
+        let k = self.cdf.partition_point(|&c| c <= a).saturating_sub(1).min(self.radii.len() - 1);
+        let span = self.cdf[k + 1] - self.cdf[k];
+        let t = if span > 0.0 { ((a - self.cdf[k]) / span).clamp(0.0, 1.0) } else { 0.5 };
+        // 3. Uniform in the triangle (centre, v_k, v_k+1): ρ of the way to the edge point.
+        let (v0, v1) = (self.vertex(k), self.vertex(k + 1));
+        let edge_point = v0 + (v1 - v0) * t;
+        self.centre + (edge_point - self.centre) * rho
+    }
+}
+
 /// Per-radius bounds of the rays leaving the film that pass the lens.
 #[derive(Debug, Clone)]
 pub struct ExitPupilBounds {
@@ -67,6 +154,9 @@ pub struct ExitPupilBounds {
     pub boxes: Vec<Box2>,
     /// True when the boxes hold for any film azimuth without rotation (asymmetric lenses).
     pub union_only: bool,
+    /// The region's outline per interval (film point on +x), where one was found; sampling
+    /// uses it instead of the box.
+    pub outlines: Vec<Option<Outline>>,
 }
 
 /// A sampled point on the rear plane.
@@ -118,12 +208,14 @@ impl ExitPupilBounds {
             vec![film_z_mm]
         };
         // 1. For each radial interval, trace a grid from film points in it.
-        let boxes: Vec<Box2> = (0..intervals)
+        let traced: Vec<(Box2, Vec<DVec3>, DVec2)> = (0..intervals)
             .into_par_iter()
             .map(|k| {
                 let r0 = max_film_radius_mm * k as f64 / intervals as f64;
                 let r1 = max_film_radius_mm * (k + 1) as f64 / intervals as f64;
                 let mut b = Box2::EMPTY;
+                let mut all_pts = Vec::new();
+                let (mut sum, mut count) = (DVec2::ZERO, 0usize);
                 for &fz in &z_levels {
                     for f in 0..film_samples {
                         let r = r0 + (r1 - r0) * (f as f64 + 0.5) / film_samples as f64;
@@ -142,6 +234,7 @@ impl ExitPupilBounds {
                             }
                         }
                         for fp in film_pts {
+                            all_pts.push(fp);
                             for i in 0..grid {
                                 for j in 0..grid {
                                     let p = DVec3::new(
@@ -155,15 +248,18 @@ impl ExitPupilBounds {
                                         .is_ok()
                                     {
                                         b.grow(DVec2::new(p.x, p.y));
+                                        sum += DVec2::new(p.x, p.y);
+                                        count += 1;
                                     }
                                 }
                             }
                         }
                     }
                 }
-                b
+                (b, all_pts, if count > 0 { sum / count as f64 } else { DVec2::ZERO })
             })
             .collect();
+        let boxes: Vec<Box2> = traced.iter().map(|t| t.0).collect();
         // 2. Enlarge by two cells (rays between grid points) and, for asymmetric systems, use
         //    the union for every interval.
         let margin = DVec2::splat(2.0 * cell);
@@ -178,46 +274,166 @@ impl ExitPupilBounds {
             let m = DVec2::splat(m.x.max(m.y));
             boxes = boxes.iter().map(|_| Box2 { min: -m, max: m }).collect();
         }
-        ExitPupilBounds { film_z_mm, rear_z_mm: rear_z, max_film_radius_mm, boxes, union_only: !symmetric }
+        // 3. Outlines (symmetric lenses): the region's polygon per interval.
+        let outlines: Vec<Option<Outline>> = if symmetric {
+            traced
+                .par_iter()
+                .zip(boxes.par_iter())
+                .map(|((_, pts, centroid), b)| {
+                    if b.is_empty() {
+                        None
+                    } else {
+                        outline_of(lens, wl, rear_z, *b, pts, DVec2::new(centroid.x, 0.0))
+                    }
+                })
+                .collect()
+        } else {
+            vec![None; boxes.len()]
+        };
+        ExitPupilBounds { film_z_mm, rear_z_mm: rear_z, max_film_radius_mm, boxes, union_only: !symmetric, outlines }
+    }
+
+    /// The interval index of film radius `r` (None beyond the covered radius).
+    fn interval(&self, r: f64) -> Option<usize> {
+        if !(r >= 0.0) || r > self.max_film_radius_mm * (1.0 + 1e-9) {
+            return None;
+        }
+        let k = ((r / self.max_film_radius_mm) * self.boxes.len() as f64) as usize;
+        Some(k.min(self.boxes.len() - 1))
+    }
+
+    /// The sampling domain's area for a film point at radius `r` (mm²; 0 outside the bounds).
+    pub fn domain_area(&self, r: f64) -> f64 {
+        match self.interval(r) {
+            None => 0.0,
+            Some(k) => self.outlines[k].as_ref().map_or(self.boxes[k].area(), |o| o.area),
+        }
     }
 
     /// The box for a film point at radius `r` on +x (empty beyond the covered radius).
     pub fn box_for_radius(&self, r: f64) -> Box2 {
-        if !(r >= 0.0) || r > self.max_film_radius_mm * (1.0 + 1e-9) {
-            return Box2::EMPTY;
-        }
-        let k = ((r / self.max_film_radius_mm) * self.boxes.len() as f64) as usize;
-        self.boxes[k.min(self.boxes.len() - 1)]
+        self.interval(r).map_or(Box2::EMPTY, |k| self.boxes[k])
     }
 
-    /// Whether the rear-plane point `p` lies in the bounds for film point `film`.
+    /// Whether the rear-plane point `p` lies in the sampling domain for film point `film`.
     pub fn contains(&self, film: DVec2, p: DVec2) -> bool {
         let r = film.length();
-        let b = self.box_for_radius(r);
-        if self.union_only || r == 0.0 {
+        let Some(k) = self.interval(r) else { return false };
+        let b = self.boxes[k];
+        if self.union_only {
             return b.contains(p);
         }
         // rotate p into the frame where the film point lies on +x
-        let (s, c) = (film.y / r, film.x / r);
-        b.contains(DVec2::new(c * p.x + s * p.y, -s * p.x + c * p.y))
+        let (s, c) = if r > 0.0 { (film.y / r, film.x / r) } else { (0.0, 1.0) };
+        let q = DVec2::new(c * p.x + s * p.y, -s * p.x + c * p.y);
+        match &self.outlines[k] {
+            Some(o) => o.contains(q),
+            None => b.contains(q),
+        }
     }
 
     /// Samples a rear-plane point for the film point `film` (x, y) from `u` in [0,1)².
     pub fn sample(&self, film: DVec2, u: DVec2) -> Option<PupilSample> {
         let r = film.length();
-        let b = self.box_for_radius(r);
+        let k = self.interval(r)?;
+        let b = self.boxes[k];
         if b.is_empty() {
             return None;
         }
-        let q = b.min + (b.max - b.min) * u;
+        let (q, area) = match (&self.outlines[k], self.union_only) {
+            (Some(o), false) => (o.sample(u), o.area),
+            _ => (b.min + (b.max - b.min) * u, b.area()),
+        };
         let p = if self.union_only || r == 0.0 {
             q
         } else {
             let (s, c) = (film.y / r, film.x / r);
             DVec2::new(c * q.x - s * q.y, s * q.x + c * q.y)
         };
-        Some(PupilSample { point: DVec3::new(p.x, p.y, self.rear_z_mm), pdf_area: 1.0 / b.area() })
+        Some(PupilSample { point: DVec3::new(p.x, p.y, self.rear_z_mm), pdf_area: 1.0 / area })
     }
+}
+
+/// The outline of the passing region over film points `film_pts` (on the +x half-plane's axis),
+/// about `centre`, inside the box `b`; None when the region is not star-shaped about `centre`
+/// for some film point (the centre does not pass), or degenerate.
+fn outline_of(lens: &Lens, wl: f64, rear_z: f64, b: Box2, film_pts: &[DVec3], centre: DVec2) -> Option<Outline> {
+    const MARCH: usize = 8;
+    const BISECT: usize = 10;
+    let passes = |fp: DVec3, q: DVec2| {
+        let p = DVec3::new(q.x, q.y, rear_z);
+        lens.trace_detailed(&Ray::new(fp, p - fp), wl, TraceDirection::FilmToScene, StopMode::Apply).is_ok()
+    };
+    if !film_pts.iter().all(|&fp| passes(fp, centre)) {
+        return None;
+    }
+    // Every fourth film point and the last (the interval's ends are first and last): the region
+    // moves smoothly with the film radius, and the growth covers the points between.
+    let stride = (film_pts.len() / 4).max(1);
+    let mut chosen: Vec<DVec3> = film_pts.iter().step_by(stride).copied().collect();
+    if !(film_pts.len() - 1).is_multiple_of(stride) {
+        chosen.extend(film_pts.last());
+    }
+    let film_pts = chosen;
+    let n = OUTLINE_ANGLES;
+    // The region is mirror-symmetric about the x axis: angles 0..=n/2, mirrored.
+    let half: Vec<f64> = (0..=n / 2)
+        .map(|k| {
+            let phi = std::f64::consts::TAU * k as f64 / n as f64;
+            let dir = DVec2::new(phi.cos(), phi.sin());
+            // distance from the centre to the box's edge along dir
+            let t_x = if dir.x > 1e-12 {
+                (b.max.x - centre.x) / dir.x
+            } else if dir.x < -1e-12 {
+                (b.min.x - centre.x) / dir.x
+            } else {
+                f64::INFINITY
+            };
+            let t_y = if dir.y > 1e-12 {
+                (b.max.y - centre.y) / dir.y
+            } else if dir.y < -1e-12 {
+                (b.min.y - centre.y) / dir.y
+            } else {
+                f64::INFINITY
+            };
+            let t_far = t_x.min(t_y).max(0.0);
+            let mut r_max = 0.0f64;
+            for &fp in &film_pts {
+                // 1. March out to the last passing step; 2. bisect towards the failing side.
+                let mut last = 0usize;
+                for i in 1..=MARCH {
+                    if passes(fp, centre + dir * (t_far * i as f64 / MARCH as f64)) {
+                        last = i;
+                    }
+                }
+                let r = if last == MARCH {
+                    t_far
+                } else {
+                    let (mut lo, mut hi) =
+                        (t_far * last as f64 / MARCH as f64, t_far * (last + 1) as f64 / MARCH as f64);
+                    for _ in 0..BISECT {
+                        let mid = 0.5 * (lo + hi);
+                        if passes(fp, centre + dir * mid) {
+                            lo = mid;
+                        } else {
+                            hi = mid;
+                        }
+                    }
+                    hi
+                };
+                r_max = r_max.max(r);
+            }
+            r_max
+        })
+        .collect();
+    let radii: Vec<f64> = (0..n).map(|k| half[if k <= n / 2 { k } else { n - k }]).collect();
+    // Grown: each vertex takes its neighbours' radius too (a chord cannot cut the region), plus
+    // a share of the largest radius.
+    let largest = radii.iter().cloned().fold(0.0, f64::max);
+    let grown: Vec<f64> = (0..n)
+        .map(|k| radii[(k + n - 1) % n].max(radii[k]).max(radii[(k + 1) % n]) + OUTLINE_GROWTH * largest)
+        .collect();
+    Outline::new(centre, grown)
 }
 
 /// The chief ray from film point `film` (lens frame, x, y, z): the ray through the centre of
