@@ -43,7 +43,7 @@ pub const MAX_RADIANCE: f32 = 1e15;
 /// Largest number of stored (not instanced) triangles: the BVH indexes them with 32 bits.
 pub const MAX_STORED_TRIANGLES: usize = i32::MAX as usize;
 
-/// Largest number of instances a glTF node graph may expand to.
+/// Largest number of instances a glTF node graph or a USD stage's instancing may expand to.
 pub const MAX_NODE_INSTANCES: usize = 10_000_000;
 
 /// Largest glTF buffer or image file read.

@@ -580,6 +580,20 @@ def test_bad_input_names_layer_prim_attribute(petzval: Path, tmp_path: Path) -> 
     r = run(petzval, "usd", "info", str(tmp_path / "sun.usda"), ok=False)
     assert r.returncode != 0 and "/Lamp" in r.stderr and "inputs:intensity" in r.stderr, r.stderr
     assert "panicked" not in r.stderr
+    # nested point instancers that expand to 16 M placed meshes from a 100 kB file: refused up front
+    n = 4000
+    pos = ",".join(f"({i % 100},{i // 100},0)" for i in range(n))
+    idx = ",".join("0" for _ in range(n))
+    (tmp_path / "nest.usda").write_text(
+        f'#usda 1.0\ndef PointInstancer "Outer"\n{{\n rel prototypes = </Outer/Protos/Inner>\n'
+        f" int[] protoIndices = [{idx}]\n point3f[] positions = [{pos}]\n"
+        f' def Scope "Protos"\n {{\n  def PointInstancer "Inner"\n  {{\n'
+        f"   rel prototypes = </Outer/Protos/Inner/P/Cube>\n   int[] protoIndices = [{idx}]\n"
+        f'   point3f[] positions = [{pos}]\n   def Scope "P"\n   {{\n    def Cube "Cube"\n    {{\n    }}\n'
+        "   }\n  }\n }\n}\n"
+    )
+    r = run(petzval, "usd", "info", str(tmp_path / "nest.usda"), ok=False)
+    assert r.returncode != 0 and "/Outer.protoIndices" in r.stderr and "10000000" in r.stderr, r.stderr
 
 
 def test_render_usd_shot_through_petzval_lens_api(petzval: Path, tmp_path: Path) -> None:

@@ -102,6 +102,20 @@ pub struct Walker<'a> {
     unsupported: BTreeSet<String>,
 }
 
+/// Refuses a stage whose instancing (nested point instancers, instanceable prims) expands to
+/// more than [`petzval_renderer::limits::MAX_NODE_INSTANCES`] placed meshes, before they are made.
+fn check_expansion(prim: &usd::Prim, attr: &str, count: usize) -> Result<(), Error> {
+    let limit = petzval_renderer::limits::MAX_NODE_INSTANCES;
+    if count > limit {
+        return Err(attr_error(
+            prim,
+            attr,
+            format!("the stage expands to more than {limit} placed meshes here (nested instancing); the limit keeps a small file from exhausting memory"),
+        ));
+    }
+    Ok(())
+}
+
 fn is_light(ty: &str) -> bool {
     matches!(
         ty,
@@ -179,6 +193,7 @@ impl<'a> Walker<'a> {
                 let proto_s = proto.to_string();
                 self.info.native_instances.push((path.clone(), proto_s.clone()));
                 let placements = self.prototype_placements(&proto, false)?;
+                check_expansion(prim, "instanceable", out.len() + placements.len())?;
                 for (m, rel, sub) in placements {
                     out.push((m, world * rel, format!("{path}{sub}")));
                 }
@@ -353,6 +368,13 @@ impl<'a> Walker<'a> {
         for p in &protos {
             proto_places.push(self.prototype_placements(p, true)?);
         }
+        // Up front: what this instancer adds (before any is made).
+        let adds: usize = proto_indices
+            .iter()
+            .filter_map(|&k| usize::try_from(k).ok().and_then(|k| proto_places.get(k)))
+            .map(Vec::len)
+            .fold(0usize, usize::saturating_add);
+        check_expansion(prim, "protoIndices", out.len().saturating_add(adds))?;
         let mut placed = 0;
         let mut hidden = 0;
         let mut bad_index = 0;
