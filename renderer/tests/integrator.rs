@@ -966,7 +966,7 @@ fn light_tree_pmf_consistent() {
     let mut worst_sum = 0.0f32;
     let mut rng = Rng(31);
     for (name, scene) in [("grid+punctual", scene), ("mixed", mixed)] {
-        let mut rs = RenderScene::new(scene).unwrap();
+        let rs = RenderScene::new(scene).unwrap();
         assert_eq!(rs.light_selection(), petzval_renderer::integrator::LightSelection::Tree); // spots too
         let nl = rs.light_count();
         for trial in 0..60 {
