@@ -386,3 +386,30 @@ fn buffer_uris_naming_devices_or_folders_are_refused() {
     assert_eq!(scene.meshes.iter().map(|m| m.indices.len()).sum::<usize>(), 1, "one triangle");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn gltf_spot_inner_equal_to_outer_is_a_hard_edge() {
+    // Blender's exporter writes a blend-0 spot as innerConeAngle = outerConeAngle (the spec asks
+    // for inner < outer): kept as it is, without a warning; inner > outer is clamped with one.
+    let doc = r#"{"asset": {"version": "2.0"}, "extensionsUsed": ["KHR_lights_punctual"],
+        "extensions": {"KHR_lights_punctual": {"lights": [
+            {"name": "Hard", "type": "spot", "intensity": 683,
+             "spot": {"innerConeAngle": 0.43633232, "outerConeAngle": 0.43633232}},
+            {"name": "Inverted", "type": "spot", "intensity": 683,
+             "spot": {"innerConeAngle": 0.6, "outerConeAngle": 0.5}}]}},
+        "scenes": [{"nodes": [0, 1]}],
+        "nodes": [{"name": "A", "extensions": {"KHR_lights_punctual": {"light": 0}}},
+                  {"name": "B", "extensions": {"KHR_lights_punctual": {"light": 1}}}]}"#;
+    let s = load_gltf_slice(doc.as_bytes(), None, "spots.gltf").unwrap();
+    let cones: Vec<(f32, f32)> = s
+        .lights
+        .iter()
+        .map(|l| match *l {
+            Light::Spot { inner_cone_rad, outer_cone_rad, .. } => (inner_cone_rad, outer_cone_rad),
+            ref other => panic!("{other:?}"),
+        })
+        .collect();
+    assert_eq!(cones, vec![(0.43633232, 0.43633232), (0.5, 0.5)]);
+    assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
+    assert!(s.warnings[0].contains("Inverted") && s.warnings[0].contains("innerConeAngle"), "{:?}", s.warnings);
+}

@@ -22,12 +22,23 @@ fn range_window(d: f32, range: Option<f32>) -> f32 {
     }
 }
 
-/// KHR_lights_punctual spot attenuation for `cd` = cos(angle to the axis).
+/// KHR_lights_punctual spot attenuation for `cd` = cos(angle to the axis): the squared linear
+/// ramp in `cd` from 0 at the outer cone to 1 at the inner cone, and a hard edge (1 inside the
+/// outer cone, 0 outside) when there is no ramp (inner ≥ outer, e.g. Blender's blend 0, which
+/// its exporter writes as inner = outer; also when the cosines round to the same f32).
+///
+/// The spec's sample code divides by `max(0.001, cos inner − cos outer)`: with inner = outer
+/// that is a ramp 0.001 wide in `cd` inside the outer cone, i.e. 0.001/sin(outer) rad (2.4 mrad
+/// for a 25° cone, all of a cone narrower than 2.6°) dimmed where the light should be at full
+/// intensity up to the edge: the dark band of docs/cycles-comparison.md, disagreement 2.
 #[inline]
 pub fn spot_attenuation(cd: f32, inner: f32, outer: f32) -> f32 {
     let cos_outer = outer.cos();
-    let scale = 1.0 / (inner.cos() - cos_outer).max(0.001);
-    let a = ((cd - cos_outer) * scale).clamp(0.0, 1.0);
+    let width = inner.cos() - cos_outer;
+    if !(width > 0.0) {
+        return if cd > cos_outer { 1.0 } else { 0.0 };
+    }
+    let a = ((cd - cos_outer) / width).clamp(0.0, 1.0);
     a * a
 }
 
@@ -37,8 +48,7 @@ impl RenderScene {
         self.lights.selection
     }
 
-    /// Switches the light selection strategy (the tree is the default, except in scenes with spot
-    /// lights, see `LightSet::build`).
+    /// Switches the light selection strategy (the tree is the default).
     pub fn set_light_selection(&mut self, selection: LightSelection) {
         self.lights.selection = selection;
     }

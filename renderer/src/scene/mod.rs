@@ -155,7 +155,7 @@ pub enum Light {
         direction: Vec3,
         /// Radiant intensity on the axis (W/sr).
         intensity: Vec3,
-        /// Full intensity inside this angle.
+        /// Full intensity inside this angle (≥ `outer_cone_rad`: a hard edge at the outer angle).
         inner_cone_rad: f32,
         /// Zero outside this angle.
         outer_cone_rad: f32,

@@ -43,7 +43,9 @@
 //!
 //! Punctual lights follow KHR_lights_punctual: range window `clamp(1 − (d/range)⁴, 0, 1)²`, spot
 //! attenuation `clamp((cd − cos outer)/(cos inner − cos outer), 0, 1)²` with cd the cosine to the
-//! axis (Blender's spot blend is a smoothstep on a different variable; glTF is followed here).
+//! axis, and a hard edge at the outer cone when inner ≥ outer (no 0.001 floor on the
+//! denominator, unlike the spec's sample code: see [`spot_attenuation`](crate::integrator::spot_attenuation)).
+//! Blender's spot blend is a smoothstep on a different variable; glTF is followed here.
 //! Emissive triangles emit from their front side (counter-clockwise winding) only, unless the
 //! material is double sided.
 //!

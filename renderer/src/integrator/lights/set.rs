@@ -91,7 +91,8 @@ impl LightSet {
                         Some(point(position, intensity, Vec3::Z, -1.0, cos_half_pi))
                     } else {
                         // Zero beyond the outer cone whatever the inner one (see
-                        // spot_attenuation); θe > 0 so that the cone's inside counts.
+                        // spot_attenuation, a step at the outer cone when inner = outer); the
+                        // θe floor is a margin for rounding in the importance's cone test.
                         let outer = outer_cone_rad.clamp(0.0, PI);
                         let theta_o = inner_cone_rad.clamp(0.0, outer);
                         let theta_e = (outer - theta_o).max(1e-3);
@@ -198,13 +199,16 @@ impl LightSet {
             cdf.clear();
         }
         let tree = LightTree::build(bounded, infinite, kinds.len());
-        // Known problem: with the tree, the band just inside a hard-edged spot cone renders
-        // 15–20 % too dark against Cycles (tests/blender, docs/cycles-comparison.md); until that
-        // is fixed, scenes with spot lights use power-proportional selection (unbiased, noisier
-        // with many small emitters).
-        let has_spot = scene.lights.iter().any(|l| matches!(l, Light::Spot { .. }));
-        let selection = if has_spot { LightSelection::Power } else { LightSelection::default() };
-        LightSet { kinds, cdf, tri_light_base, tri_light, env_light, scene_radius: radius, tree, selection }
+        LightSet {
+            kinds,
+            cdf,
+            tri_light_base,
+            tri_light,
+            env_light,
+            scene_radius: radius,
+            tree,
+            selection: LightSelection::default(),
+        }
     }
 
     /// Number of lights.

@@ -39,7 +39,12 @@
 //! radiant intensity is `I_cd / 683` W/sr for both, and a sun's irradiance is `lux / 683`
 //! W/m²: dividing by 683 is the exact inverse of the exporter. Spot cones: the exporter writes
 //! `outerConeAngle = spot_size / 2` and `innerConeAngle = outer × (1 − spot_blend)`
-//! (`blender/exp/light_spots.py`, lines 28–47); they are kept as glTF angles.
+//! (`blender/exp/light_spots.py`, lines 28–47); they are kept as glTF angles. So a hard spot
+//! (blend 0) arrives as inner = outer, which the spec excludes (inner < outer); it is taken as a
+//! hard edge without a warning. A soft spot's fade follows KHR_lights_punctual (squared ramp in
+//! cos θ from the outer to the inner cone), not Blender's smoothstep in cos θ over
+//! `[cos θo, cos θo + (1 − cos θo)·blend]`: both are 1 inside `min(inner, Blender's)` and 0
+//! beyond the outer cone, and differ in between (tests/blender/test_spot_lights_cycles.py).
 
 //!
 //! | file | contents |

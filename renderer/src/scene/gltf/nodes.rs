@@ -165,8 +165,11 @@ impl Loader<'_> {
                         std::f32::consts::FRAC_PI_4
                     };
                 }
-                if !inner.is_finite() || inner < 0.0 || inner >= outer {
-                    self.warn(&loc, format!("innerConeAngle {inner} is outside [0, outerConeAngle); clamped"));
+                // inner = outer (outside the spec's [0, outer)) is what Blender's exporter writes
+                // for a hard-edged spot (blend 0): taken as that, a step at the outer cone
+                // (see integrator::spot_attenuation), without a warning.
+                if !inner.is_finite() || inner < 0.0 || inner > outer {
+                    self.warn(&loc, format!("innerConeAngle {inner} is outside [0, outerConeAngle]; clamped"));
                     inner = if inner.is_finite() { inner.clamp(0.0, outer) } else { 0.0 };
                 }
                 Light::Spot {
