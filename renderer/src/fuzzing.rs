@@ -450,8 +450,12 @@ pub struct Report {
     pub loaded: usize,
     /// Inputs the loader refused.
     pub refused: usize,
-    /// Inputs that panicked.
+    /// Inputs that panicked out of the entry point (a crash of the program): must be 0.
     pub panics: usize,
+    /// Inputs whose panic a loader's own guard caught and reported as an error (the glTF and USD
+    /// loaders guard their dependencies so): not a crash, but a dependency bug, and a crash under
+    /// libFuzzer, whose panic hook aborts.
+    pub contained_panics: usize,
     /// Inputs slower than the time limit.
     pub hangs: usize,
     /// Inputs that loaded and gave non-finite or implausible output.
@@ -470,12 +474,13 @@ impl std::fmt::Display for Report {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "fuzz {}: {} inputs, {} loaded, {} refused, {} panics, {} hangs (> {:.1} s), {} non-finite/implausible outputs; slowest input {:.1} ms, {:.1} s in all",
+            "fuzz {}: {} inputs, {} loaded, {} refused, {} panics ({} more contained by a loader's guard), {} hangs (> {:.1} s), {} non-finite/implausible outputs; slowest input {:.1} ms, {:.1} s in all",
             self.name,
             self.inputs,
             self.loaded,
             self.refused,
             self.panics,
+            self.contained_panics,
             self.hangs,
             self.time_limit.as_secs_f64(),
             self.bugs,
@@ -521,7 +526,10 @@ pub fn failure_dir(name: &str) -> PathBuf {
 /// Runs `count` inputs made by `next_input` through `entry`, catching panics and timing each
 /// input against `limit`. A watchdog ends the process (after keeping the input) when one input
 /// runs for ten times the limit (at least a minute): a real hang would otherwise never return.
-/// Failing inputs are written to [`failure_dir`] with the extension `ext`.
+/// Failing inputs are written to [`failure_dir`] with the extension `ext`; with
+/// `PETZVAL_FUZZ_KEEP_IN_FLIGHT` set, every input is written there (`in-flight.EXT`) before it
+/// runs, so the one that aborted the process (an allocation failure) is kept too; with
+/// `PETZVAL_FUZZ_DUMP_REFUSED=TEXT`, refused inputs whose message contains TEXT are kept.
 pub fn run_campaign(
     name: &str,
     count: usize,
@@ -535,6 +543,13 @@ pub fn run_campaign(
     let mut rng = Rng(0x5EED ^ fnv(name.as_bytes()));
     let mut report = Report { name: name.to_string(), time_limit: limit, ..Report::default() };
     let keep_dir = failure_dir(name);
+    let keep_in_flight = std::env::var_os("PETZVAL_FUZZ_KEEP_IN_FLIGHT").is_some();
+    // refused inputs whose message contains this are kept too (to find the input behind a class)
+    let dump = std::env::var("PETZVAL_FUZZ_DUMP_REFUSED").ok().filter(|d| !d.is_empty());
+    let in_flight = keep_dir.join(format!("in-flight.{ext}"));
+    if keep_in_flight {
+        let _ = std::fs::create_dir_all(&keep_dir);
+    }
     // watchdog: the current input and when it started (ms since `start`, u64::MAX = idle)
     let current: Arc<Mutex<Vec<u8>>> = Arc::new(Mutex::new(Vec::new()));
     let started_ms = Arc::new(AtomicU64::new(u64::MAX));
@@ -565,6 +580,10 @@ pub fn run_campaign(
             c.clear();
             c.extend_from_slice(&input);
         }
+        if keep_in_flight {
+            // an abort (allocation failure) ends the process before anything can be kept
+            let _ = std::fs::write(&in_flight, &input);
+        }
         let t0 = Instant::now();
         started_ms.store(start.elapsed().as_millis() as u64, Ordering::SeqCst);
         CAPTURING.with(|c| c.set(true));
@@ -583,15 +602,23 @@ pub fn run_campaign(
                 Some(format!("panic: {}", msg.unwrap_or_else(|| "(on another thread: see stderr)".into())))
             }
             (Ok(_), Some(msg)) => {
-                report.panics += 1;
-                Some(format!("panic (caught inside the loader): {msg}"))
+                report.contained_panics += 1;
+                if report.contained_panics <= 20 {
+                    eprintln!("fuzz {name}: input {i}: a loader's guard caught a panic: {msg}");
+                }
+                None
             }
             (Ok(Ok(Outcome::Loaded)), None) => {
                 report.loaded += 1;
                 None
             }
-            (Ok(Ok(Outcome::Refused(_))), None) => {
+            (Ok(Ok(Outcome::Refused(m))), None) => {
                 report.refused += 1;
+                if dump.as_deref().is_some_and(|d| m.contains(d)) {
+                    let _ = std::fs::create_dir_all(&keep_dir);
+                    let _ = std::fs::write(keep_dir.join(format!("refused-{i}.{ext}")), &input);
+                    eprintln!("fuzz {name}: input {i} refused: {m}");
+                }
                 None
             }
             (Ok(Err(bug)), None) => {
