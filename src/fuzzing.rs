@@ -114,20 +114,88 @@ const INTS: &[&str] = &["0", "1", "2", "3", "4", "8", "16", "64", "255", "256", 
 
 /// Values no flag should take quietly.
 const EXTREMES: &[&str] = &[
-    "nan", "NaN", "inf", "-inf", "infinity", "-0", "0", "1e300", "-1e300", "1e-300", "5e-324", "1e39", "-1e39",
-    "3.4e38", "4294967295", "4294967296", "18446744073709551615", "18446744073709551616", "-1", "-2147483649", "",
-    "1e", " 2", "2 ", "+2", "0x10", "1_0", "2,8", "٣", "1e-7", "-1e-7", "9007199254740993",
+    "nan",
+    "NaN",
+    "inf",
+    "-inf",
+    "infinity",
+    "-0",
+    "0",
+    "1e300",
+    "-1e300",
+    "1e-300",
+    "5e-324",
+    "1e39",
+    "-1e39",
+    "3.4e38",
+    "4294967295",
+    "4294967296",
+    "18446744073709551615",
+    "18446744073709551616",
+    "-1",
+    "-2147483649",
+    "",
+    "1e",
+    " 2",
+    "2 ",
+    "+2",
+    "0x10",
+    "1_0",
+    "2,8",
+    "٣",
+    "1e-7",
+    "-1e-7",
+    "9007199254740993",
 ];
 
 const RESOLUTIONS: &[&str] = &[
-    "16x12", "24x16", "1x1", "2x1", "1x2", "32x32", "12x24", "960x640", "0x0", "0x10", "10x0", "x", "16", "16x", "x16",
-    "16x12x3", "-1x5", "16X12", " 16 x 12 ", "4294967295x1", "4294967296x1", "100000x100000", "10001x10000",
-    "65536x65536", "1x100000000", "１６x１２",
+    "16x12",
+    "24x16",
+    "1x1",
+    "2x1",
+    "1x2",
+    "32x32",
+    "12x24",
+    "960x640",
+    "0x0",
+    "0x10",
+    "10x0",
+    "x",
+    "16",
+    "16x",
+    "x16",
+    "16x12x3",
+    "-1x5",
+    "16X12",
+    " 16 x 12 ",
+    "4294967295x1",
+    "4294967296x1",
+    "100000x100000",
+    "10001x10000",
+    "65536x65536",
+    "1x100000000",
+    "１６x１２",
 ];
 
 const LENS_MODELS: &[&str] = &[
-    "auto", "exact", "thick", "thin", "pinhole", "lrtf:8", "lrtf:16", "lrtf", "lrtf:32", "lrtf:7", "lrtf:257", "lrtf:0",
-    "lrtf:-1", "lrtf:", "lrtf:4294967296", "AUTO", "", "lrtf:nan",
+    "auto",
+    "exact",
+    "thick",
+    "thin",
+    "pinhole",
+    "lrtf:8",
+    "lrtf:16",
+    "lrtf",
+    "lrtf:32",
+    "lrtf:7",
+    "lrtf:257",
+    "lrtf:0",
+    "lrtf:-1",
+    "lrtf:",
+    "lrtf:4294967296",
+    "AUTO",
+    "",
+    "lrtf:nan",
 ];
 
 const TONEMAPS: &[&str] = &["srgb", "filmic", "SRGB", "", "aces"];
@@ -298,18 +366,33 @@ fn values(kind: Kind) -> Vec<String> {
             v
         }
         Kind::OutPng => {
-            let mut v: Vec<String> =
-                ["out.png", "out.exr", "sub", "missing/x.png", "é.png", "out.####.png"].iter().map(|r| f.path(r)).collect();
+            let mut v: Vec<String> = ["out.png", "out.exr", "sub", "missing/x.png", "é.png", "out.####.png"]
+                .iter()
+                .map(|r| f.path(r))
+                .collect();
             v.extend(s(&["", "/dev/null", "/"]));
             v
         }
         Kind::LrtfFile => {
-            let mut v: Vec<String> = ["dg.lrtf", "missing.lrtf", "existing.exr", "sub"].iter().map(|r| f.path(r)).collect();
+            let mut v: Vec<String> =
+                ["dg.lrtf", "missing.lrtf", "existing.exr", "sub"].iter().map(|r| f.path(r)).collect();
             v.extend(s(&["/dev/zero", ""]));
             v
         }
         Kind::Environment => {
-            let mut v = s(&["0.5", "1,1,1", "0.2,0.3,0.4", "-1", "nan", "inf,0,0", "1,2", "1e39", "1,1,1,1", "", "/dev/zero.exr"]);
+            let mut v = s(&[
+                "0.5",
+                "1,1,1",
+                "0.2,0.3,0.4",
+                "-1",
+                "nan",
+                "inf,0,0",
+                "1,2",
+                "1e39",
+                "1,1,1,1",
+                "",
+                "/dev/zero.exr",
+            ]);
             v.extend(["env.exr", "missing.exr", "existing.exr", "sub.exr"].iter().map(|r| f.path(r)));
             v
         }

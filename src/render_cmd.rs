@@ -794,7 +794,8 @@ pub fn preflight(args: &RenderArgs) -> Result<Preflight, Error> {
     if args.frame.is_some_and(|f| !f.is_finite()) {
         return Err(settings_err("frame", format!("must be a finite time code, got {}", args.frame.unwrap_or(0.0))));
     }
-    let environment = args.environment.as_deref().map(|e| parse_environment(e, args.environment_strength)).transpose()?;
+    let environment =
+        args.environment.as_deref().map(|e| parse_environment(e, args.environment_strength)).transpose()?;
     // The camera: the demo's focus for the demo; a scene's autofocus is not known yet (infinity
     // stands in).
     let demo_shot = args.scene.is_none().then(demo::demo_shot);

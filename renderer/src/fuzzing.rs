@@ -147,7 +147,8 @@ pub fn use_lens(lens: &Lens) -> std::result::Result<(), Bug> {
     let forms_image = lens.check_forms_image().is_ok();
     if forms_image {
         let p = lens.paraxial();
-        for (name, v) in [("efl", p.efl_mm), ("f-number", p.f_number), ("entrance pupil diameter", p.entrance_pupil_diameter_mm)]
+        for (name, v) in
+            [("efl", p.efl_mm), ("f-number", p.f_number), ("entrance pupil diameter", p.entrance_pupil_diameter_mm)]
         {
             bug_if(!v.is_finite(), || format!("{name} {v} of a lens that forms an image"))?;
         }
@@ -266,7 +267,9 @@ pub fn check_scene_values(scene: &Scene) -> std::result::Result<(), Bug> {
         bug_if(!ok, || format!("light with non-finite values: {l:?}"))?;
     }
     for c in &scene.cameras {
-        bug_if(!(c.to_world.is_finite() && c.yfov_rad.is_finite()), || format!("camera '{}' is non-finite: {c:?}", c.name))?;
+        bug_if(!(c.to_world.is_finite() && c.yfov_rad.is_finite()), || {
+            format!("camera '{}' is non-finite: {c:?}", c.name)
+        })?;
     }
     for (i, inst) in scene.instances.iter().enumerate() {
         bug_if(!inst.object_to_world.is_finite(), || format!("instance {i} has a non-finite transform"))?;
@@ -301,7 +304,10 @@ pub fn lrtf(data: &[u8]) -> Verdict {
         for wl in [lens.primary_wavelength_nm(), 450.0, 650.0] {
             if let LrtfLookup::Hit(h) = table.lookup(&Ray::new(o, d), wl) {
                 bug_if(
-                    !(h.ray.origin.is_finite() && h.ray.direction.is_finite() && h.stop_point.is_finite() && h.margin.is_finite()),
+                    !(h.ray.origin.is_finite()
+                        && h.ray.direction.is_finite()
+                        && h.stop_point.is_finite()
+                        && h.margin.is_finite()),
                     || format!("non-finite lookup {h:?}"),
                 )?;
             }
@@ -358,8 +364,28 @@ impl Rng {
 
 /// Values a number in a text input is replaced by.
 pub const EXTREMES: [&str; 22] = [
-    "nan", "inf", "-inf", "1e308", "-1e308", "1e-300", "0", "-0", "1e12", "-1", "4294967296", "", "1e", "--",
-    "1e39", "3.4e38", "-2147483649", "18446744073709551616", "0.5", "2", "100", "1e-7",
+    "nan",
+    "inf",
+    "-inf",
+    "1e308",
+    "-1e308",
+    "1e-300",
+    "0",
+    "-0",
+    "1e12",
+    "-1",
+    "4294967296",
+    "",
+    "1e",
+    "--",
+    "1e39",
+    "3.4e38",
+    "-2147483649",
+    "18446744073709551616",
+    "0.5",
+    "2",
+    "100",
+    "1e-7",
 ];
 
 /// One mutation of `seed`: 1–4 of bit flips, byte insertions and deletions, duplicated chunks,
@@ -568,7 +594,11 @@ pub fn run_campaign(
                     if let Ok(input) = current.lock() {
                         let _ = std::fs::write(&kept, &*input);
                     }
-                    eprintln!("fuzz {name}: an input ran for over {} s (kept in {}): ending", hard.as_secs(), kept.display());
+                    eprintln!(
+                        "fuzz {name}: an input ran for over {} s (kept in {}): ending",
+                        hard.as_secs(),
+                        kept.display()
+                    );
                     std::process::abort();
                 }
             }
