@@ -142,7 +142,8 @@ fn camera_err(field: &str, message: String) -> Error {
     Error::camera(field, message)
 }
 
-fn parse_resolution(s: &str) -> Result<(u32, u32), Error> {
+/// `--resolution`'s `WxH`.
+pub fn parse_resolution(s: &str) -> Result<(u32, u32), Error> {
     let bad = || settings_err("resolution", format!("expected WxH such as 1920x1080, got '{s}'"));
     let (w, h) = s.split_once('x').ok_or_else(bad)?;
     Ok((w.trim().parse().map_err(|_| bad())?, h.trim().parse().map_err(|_| bad())?))
@@ -380,14 +381,8 @@ pub fn run(mut args: RenderArgs) -> Result<(), Error> {
 
 /// Renders one product of the shot (every frame of `--frames` in turn).
 fn run_product(args: RenderArgs) -> Result<(), Error> {
-    if let Some(fr) = &args.frames {
-        if args.frame.is_some() {
-            return Err(settings_err("frames", "give --frame or --frames, not both".into()));
-        }
-        if !args.output.to_string_lossy().contains('#') {
-            return Err(settings_err("frames", "-o must name the frame with #### (e.g. out.####.exr)".into()));
-        }
-        for f in parse_frames(fr)? {
+    if let Some(frames) = check_frames(&args)? {
+        for f in frames {
             let mut a = args.clone();
             a.frames = None;
             a.frame = Some(f as f64);
@@ -413,30 +408,11 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
             std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
         }
     }
-    if let Some(t) = args.time_limit {
-        // Duration::from_secs_f64 panics on negative, NaN and huge values: refuse them here.
-        if !(t.is_finite() && t > 0.0 && t <= MAX_TIME_LIMIT_S) {
-            return Err(settings_err(
-                "time-limit",
-                format!("must be a number of seconds in (0, {MAX_TIME_LIMIT_S}], got {t}"),
-            ));
-        }
-    }
+    // Check every flag before loading anything.
+    let Preflight { width, height, outputs, environment } = preflight(&args)?;
     if let Some(t) = args.threads {
-        if t == 0 {
-            return Err(settings_err("threads", "must be at least 1".into()));
-        }
-        if t > MAX_THREADS {
-            return Err(settings_err("threads", format!("{t} is more than the {MAX_THREADS} a render may use")));
-        }
         let _ = rayon::ThreadPoolBuilder::new().num_threads(t).build_global();
     }
-    let (width, height) = parse_resolution(&args.resolution)?;
-    // Check the settings and outputs before loading anything.
-    let outputs = check_outputs(&args)?;
-    check_numbers(&args)?;
-    RenderSettings { width, height, spp: args.spp, max_depth: args.max_depth, ..RenderSettings::default() }
-        .validate()?;
     // 1. Scene (file or demo) and the shot's defaults.
     let mut usd_cam: Option<(String, petzval_usd::UsdCamera, Option<f64>)> = None;
     let (mut scene, demo_shot): (Scene, Option<demo::DemoShot>) = match &args.scene {
@@ -464,8 +440,8 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
     for w in &scene.warnings {
         eprintln!("warning: {w}");
     }
-    if let Some(env) = &args.environment {
-        scene.environment = parse_environment(env, args.environment_strength)?;
+    if let Some(env) = environment {
+        scene.environment = env;
     }
     let scene_cam: SceneCamera = match (&args.camera, &usd_cam) {
         (_, Some((_, c, _))) => SceneCamera {
@@ -493,32 +469,9 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
     let t0 = std::time::Instant::now();
     let render_scene = RenderScene::new(scene)?;
     eprintln!("scene: {} triangles, BVH built in {:.2} s", render_scene.triangle_count(), t0.elapsed().as_secs_f64());
-    // 2. The camera as the host conventions describe it: the sensor width spans the larger
-    //    image dimension (Blender's automatic fit), shift in mm.
-    let tilt_x = if args.tilt_x == 0.0 { demo_shot.as_ref().map(|d| d.tilt_x_deg).unwrap_or(0.0) } else { args.tilt_x };
-    let film_back = FilmBack {
-        width_mm: args.sensor_width,
-        height_mm: args.sensor_width,
-        fit: SensorFit::Auto,
-        shift: Shift::Mm(DVec2::new(args.shift_x, args.shift_y)),
-        pixel_aspect: args.pixel_aspect.unwrap_or(1.0),
-    };
-    let tilt_deg = DVec2::new(tilt_x, args.tilt_y);
-    let sensor = film_back.sensor(width, height, tilt_deg)?;
-    let lens_name =
-        args.lens.clone().or_else(|| demo_shot.as_ref().map(|d| d.lens.to_string())).unwrap_or_else(|| "thin".into());
-    let aperture = match (&args.aperture, &demo_shot) {
-        (Some(a), _) => Some(host::parse_aperture(a)?),
-        (None, Some(d)) => Some(Aperture {
-            shape: ApertureShape::Blades { count: d.blades, curvature: 0.0 },
-            rotation_rad: d.blade_rotation_deg.to_radians(),
-            anamorphic_ratio: 1.0,
-        }),
-        (None, None) => None,
-    };
-    // The demo's f-number belongs to its lens; another lens opens to its own.
-    let fstop = args.fstop.or_else(|| demo_shot.as_ref().filter(|_| args.lens.is_none()).map(|d| d.f_number));
-    // 3. Focus: given, the demo's, or autofocus on what the image centre sees.
+    // 2. The camera as the host conventions describe it (the sensor width spans the larger
+    //    image dimension, Blender's automatic fit; shift in mm), focused as given, the demo's
+    //    focus, or autofocus on what the image centre sees.
     let focus_m = match (host::focus_distance_m(args.focus)?, &demo_shot) {
         (Some(f), _) => Some(f),
         (None, _) if args.focus.is_some() => None,
@@ -535,40 +488,22 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
             f
         }
     };
-    let vignetting = host::parse_on_off("natural_vignetting", &args.natural_vignetting)?;
-    let ideal = lens_name == "thin" || lens_name == "pinhole";
-    if !ideal && args.focal_length.is_some() {
-        eprintln!("note: --focal-length is ignored for a real lens; '{lens_name}' brings its own focal length");
-    }
-    let mut model: LensModel = args.lens_model.parse()?;
-    if args.lrtf_file.is_some() && model == LensModel::Auto {
-        model = LensModel::Lrtf { resolution: petzval_renderer::camera::DEFAULT_LRTF_RESOLUTION };
+    let mut flags_camera = flags_host_camera(&args, demo_shot.as_ref(), focus_m)?;
+    if !matches!(flags_camera.lens.as_str(), "thin" | "pinhole") && args.focal_length.is_some() {
+        eprintln!(
+            "note: --focal-length is ignored for a real lens; '{}' brings its own focal length",
+            flags_camera.lens
+        );
     }
     // Focal length for thin/pinhole: given, else from the scene camera's field of view.
-    let focal_length_mm = match args.focal_length {
-        Some(f) => f,
-        None => host::focal_length_from_yfov_mm(scene_cam.yfov_rad as f64, width, height, &sensor)?,
-    };
-    let usd_host = match &usd_cam {
-        Some((_, c, _)) => Some(usd_host_camera(c, &args, focus_m)?),
-        None => None,
-    };
-    let host_camera = match usd_host {
-        Some(h) => h,
-        None => HostCamera {
-            lens: lens_name.clone(),
-            lens_model: model,
-            tolerance_px: args.tolerance,
-            focal_length_mm,
-            film_back,
-            tilt_deg,
-            f_number: if lens_name == "thin" { Some(fstop.unwrap_or(2.8)) } else { fstop },
-            focus_distance_m: focus_m,
-            aperture: aperture.clone(),
-            clip_m: (0.0, f64::INFINITY),
-            natural_vignetting: vignetting,
-            lrtf_file: args.lrtf_file.clone(),
-        },
+    if args.focal_length.is_none() {
+        let sensor = flags_camera.film_back.sensor(width, height, flags_camera.tilt_deg)?;
+        flags_camera.focal_length_mm =
+            host::focal_length_from_yfov_mm(scene_cam.yfov_rad as f64, width, height, &sensor)?;
+    }
+    let host_camera = match &usd_cam {
+        Some((_, c, _)) => usd_host_camera(c, &args, focus_m)?,
+        None => flags_camera,
     };
     let model = host_camera.lens_model;
     let spec = host_camera.camera_spec(width, height)?;
@@ -750,4 +685,143 @@ fn usd_host_camera(c: &petzval_usd::UsdCamera, args: &RenderArgs, focus_m: Optio
     }
     h.natural_vignetting = host::parse_on_off("natural_vignetting", &args.natural_vignetting)?;
     Ok(h)
+}
+
+/// `--frames`, checked: not with `--frame`, `-o` names the frame with `#`, the range parses.
+fn check_frames(args: &RenderArgs) -> Result<Option<Vec<i64>>, Error> {
+    let Some(fr) = &args.frames else { return Ok(None) };
+    if args.frame.is_some() {
+        return Err(settings_err("frames", "give --frame or --frames, not both".into()));
+    }
+    if !args.output.to_string_lossy().contains('#') {
+        return Err(settings_err("frames", "-o must name the frame with #### (e.g. out.####.exr)".into()));
+    }
+    parse_frames(fr).map(Some)
+}
+
+/// The host camera the flags describe (with the demo's lens, f-number, tilt and blades for the
+/// demo where the flags leave them), focused at `focus_m`; thin and pinhole get `--focal-length`
+/// or 50 mm (the render replaces the latter by the scene camera's field of view).
+fn flags_host_camera(
+    args: &RenderArgs,
+    demo_shot: Option<&demo::DemoShot>,
+    focus_m: Option<f64>,
+) -> Result<HostCamera, Error> {
+    let tilt_x = if args.tilt_x == 0.0 { demo_shot.map(|d| d.tilt_x_deg).unwrap_or(0.0) } else { args.tilt_x };
+    let film_back = FilmBack {
+        width_mm: args.sensor_width,
+        height_mm: args.sensor_width,
+        fit: SensorFit::Auto,
+        shift: Shift::Mm(DVec2::new(args.shift_x, args.shift_y)),
+        pixel_aspect: args.pixel_aspect.unwrap_or(1.0),
+    };
+    let lens = args.lens.clone().or_else(|| demo_shot.map(|d| d.lens.to_string())).unwrap_or_else(|| "thin".into());
+    let aperture = match (&args.aperture, demo_shot) {
+        (Some(a), _) => Some(host::parse_aperture(a)?),
+        (None, Some(d)) => Some(Aperture {
+            shape: ApertureShape::Blades { count: d.blades, curvature: 0.0 },
+            rotation_rad: d.blade_rotation_deg.to_radians(),
+            anamorphic_ratio: 1.0,
+        }),
+        (None, None) => None,
+    };
+    // The demo's f-number belongs to its lens; another lens opens to its own.
+    let fstop = args.fstop.or_else(|| demo_shot.filter(|_| args.lens.is_none()).map(|d| d.f_number));
+    let mut model: LensModel = args.lens_model.parse()?;
+    if args.lrtf_file.is_some() && model == LensModel::Auto {
+        model = LensModel::Lrtf { resolution: petzval_renderer::camera::DEFAULT_LRTF_RESOLUTION };
+    }
+    Ok(HostCamera {
+        f_number: if lens == "thin" { Some(fstop.unwrap_or(2.8)) } else { fstop },
+        lens,
+        lens_model: model,
+        tolerance_px: args.tolerance,
+        focal_length_mm: args.focal_length.unwrap_or(50.0),
+        film_back,
+        tilt_deg: DVec2::new(tilt_x, args.tilt_y),
+        focus_distance_m: focus_m,
+        aperture,
+        clip_m: (0.0, f64::INFINITY),
+        natural_vignetting: host::parse_on_off("natural_vignetting", &args.natural_vignetting)?,
+        lrtf_file: args.lrtf_file.clone(),
+    })
+}
+
+/// What [`preflight`] checked and made.
+pub struct Preflight {
+    /// Frame width (px).
+    pub width: u32,
+    /// Frame height (px).
+    pub height: u32,
+    /// Where the outputs go.
+    outputs: Outputs,
+    /// `--environment`, loaded (None: the scene's own).
+    environment: Option<Environment>,
+}
+
+/// Every check of the flags that needs no scene, run before anything is loaded (`run_frame`
+/// starts with it; the flag fuzzer calls it alone): numbers finite and in range, the output
+/// paths, `--frames`, the environment, and the camera the flags describe — its numbers, the
+/// lens, mask and table files it names, and [`petzval_renderer::CameraSpec::check`] (a focus the
+/// lens cannot reach, a tilted sensor cutting into the rear element, a table of another lens),
+/// so these are refused here, not after the scene has loaded.
+/// What needs the scene is checked when it loads: the scene file, `--camera`, a USD shot's own
+/// camera, and autofocus.
+pub fn preflight(args: &RenderArgs) -> Result<Preflight, Error> {
+    check_frames(args)?;
+    if let Some(t) = args.time_limit {
+        // Duration::from_secs_f64 panics on negative, NaN and huge values: refuse them here.
+        if !(t.is_finite() && t > 0.0 && t <= MAX_TIME_LIMIT_S) {
+            return Err(settings_err(
+                "time-limit",
+                format!("must be a number of seconds in (0, {MAX_TIME_LIMIT_S}], got {t}"),
+            ));
+        }
+    }
+    if let Some(t) = args.threads {
+        if t == 0 {
+            return Err(settings_err("threads", "must be at least 1".into()));
+        }
+        if t > MAX_THREADS {
+            return Err(settings_err("threads", format!("{t} is more than the {MAX_THREADS} a render may use")));
+        }
+    }
+    let (width, height) = parse_resolution(&args.resolution)?;
+    let outputs = check_outputs(args)?;
+    check_numbers(args)?;
+    RenderSettings { width, height, spp: args.spp, max_depth: args.max_depth, ..RenderSettings::default() }
+        .validate()?;
+    if args.frame.is_some_and(|f| !f.is_finite()) {
+        return Err(settings_err("frame", format!("must be a finite time code, got {}", args.frame.unwrap_or(0.0))));
+    }
+    let environment =
+        args.environment.as_deref().map(|e| parse_environment(e, args.environment_strength)).transpose()?;
+    // The camera: the demo's focus for the demo; a scene's autofocus is not known yet (infinity
+    // stands in).
+    let demo_shot = args.scene.is_none().then(demo::demo_shot);
+    let focus_m = match host::focus_distance_m(args.focus)? {
+        Some(f) => Some(f),
+        None if args.focus.is_some() => None,
+        None => demo_shot.as_ref().map(|d| d.focus_distance_m),
+    };
+    flags_host_camera(args, demo_shot.as_ref(), focus_m)?.camera_spec(width, height)?.check()?;
+    Ok(Preflight { width, height, outputs, environment })
+}
+
+/// Every check `petzval render` makes before loading anything, without rendering (the flag
+/// fuzzer's entry point): a USD shot's RenderSettings applied, `--frames`, then [`preflight`]
+/// for the first frame. (A frame render creates a missing output folder before its checks; this
+/// creates nothing, so it refuses that folder.)
+pub fn check_flags(mut args: RenderArgs) -> Result<(), Error> {
+    apply_render_settings(&mut args)?;
+    args.settings = None;
+    if let Some(frames) = check_frames(&args)? {
+        args.frames = None;
+        args.frame = frames.first().map(|&f| f as f64);
+    }
+    if let Some(f) = args.frame {
+        args.output = frame_path(&args.output, f);
+        args.png = args.png.as_ref().map(|p| frame_path(p, f));
+    }
+    preflight(&args).map(|_| ())
 }

@@ -8,6 +8,8 @@
 
 mod error;
 pub mod film;
+#[doc(hidden)]
+pub mod fuzzing;
 pub mod integrator;
 pub mod limits;
 pub mod render;

@@ -18,6 +18,8 @@
 
 pub mod author;
 pub mod camera;
+#[doc(hidden)]
+pub mod fuzzing;
 pub mod lights;
 pub mod mesh;
 pub mod render_settings;

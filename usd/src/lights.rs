@@ -118,6 +118,17 @@ pub fn read_light(
     let rigid = crate::xform::rigid(to_r);
     let pos = rigid.transform_point3(DVec3::ZERO).as_vec3();
     let dir = rigid.transform_vector3(DVec3::NEG_Z).normalize_or_zero().as_vec3();
+    // finite in single precision, as the renderer takes them (a 1e39 or inf would reach it as inf)
+    if !(pos.is_finite() && dir.is_finite()) {
+        return Err(crate::value::attr_error(prim, "xformOpOrder", "the light's world transform is not finite"));
+    }
+    if !base.is_finite() {
+        return Err(crate::value::attr_error(
+            prim,
+            "inputs:intensity",
+            "intensity × color × 2^exposure is not finite in single precision",
+        ));
+    }
     let info = |renderer: &str, v: Vec3| LightInfo {
         prim: path.clone(),
         kind: ty.to_string(),

@@ -101,6 +101,24 @@ impl Materials {
             None => preview_default(&key, display_color(reader, gprim)?),
         };
         m.double_sided = double_sided;
+        // the values as the renderer takes them (f32): a 1e39 or inf would reach shading as inf
+        let finite = m.base_color.is_finite()
+            && m.emissive.is_finite()
+            && [m.metallic, m.roughness, m.normal_scale, m.specular, m.ior].iter().all(|v| v.is_finite());
+        if !finite {
+            return Err(Error::Prim {
+                layer: String::new(),
+                prim: m.name.clone(),
+                message: format!(
+                    "material values are not finite in single precision (base colour {:?}, emission {:?}, metallic {}, roughness {}, ior {})",
+                    m.base_color.to_array(),
+                    m.emissive.to_array(),
+                    m.metallic,
+                    m.roughness,
+                    m.ior
+                ),
+            });
+        }
         scene.materials.push(m);
         let id = (scene.materials.len() - 1) as u32;
         if let Some(st) = self.pending_st.take() {

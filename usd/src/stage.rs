@@ -25,7 +25,7 @@ use crate::xform::{local_xform, StageUnits};
 use crate::Error;
 use glam::{Affine3A, DMat4, DQuat, DVec3};
 use openusd::{sdf, usd};
-use petzval_renderer::scene::Scene;
+use petzval_renderer::scene::{Light, Scene};
 use std::collections::{BTreeSet, HashMap};
 
 /// One mesh as loaded (for reports and tests).
@@ -150,10 +150,33 @@ impl<'a> Walker<'a> {
         let to_r = self.units.to_renderer();
         for (mesh, xf, path) in out {
             let m = to_r * xf;
+            check_placement(&path, &m)?;
             self.scene.add_instance(mesh, Affine3A::from_mat4(m.as_mat4()));
             self.info.meshes[mesh as usize].instances += 1;
             self.info.instance_paths.push(path);
             self.info.instance_stage_xf.push(xf);
+        }
+        // every light as the renderer takes it (a finite intensity times a huge area is not)
+        for (k, l) in self.scene.lights.iter().enumerate() {
+            let finite = match *l {
+                Light::Point { position, intensity, .. } => position.is_finite() && intensity.is_finite(),
+                Light::Spot { position, direction, intensity, inner_cone_rad, outer_cone_rad, .. } => {
+                    position.is_finite()
+                        && direction.is_finite()
+                        && intensity.is_finite()
+                        && inner_cone_rad.is_finite()
+                        && outer_cone_rad.is_finite()
+                }
+                Light::Directional { direction, irradiance } => direction.is_finite() && irradiance.is_finite(),
+            };
+            if !finite {
+                let prim = self.info.lights.get(k).map(|i| i.prim.clone()).unwrap_or_else(|| format!("light {k}"));
+                return Err(Error::Prim {
+                    layer: String::new(),
+                    prim,
+                    message: "the light's position, direction or power is not finite in single precision".into(),
+                });
+            }
         }
         for t in &self.unsupported {
             self.warnings.push(format!("prims of type {t} are not supported and were skipped"));
@@ -409,6 +432,11 @@ impl<'a> Walker<'a> {
 
     /// Adds a mesh placed at `stage_xf` (for area lights).
     pub fn add_placed_mesh(&mut self, mesh: petzval_renderer::scene::Mesh, stage_xf: DMat4, path: String) {
+        let m = self.units.to_renderer() * stage_xf;
+        if let Err(e) = check_placement(&path, &m) {
+            self.warnings.push(format!("{e}: skipped"));
+            return;
+        }
         self.info.meshes.push(MeshInfo {
             prim: path.clone(),
             triangles: mesh.triangle_count(),
@@ -421,11 +449,23 @@ impl<'a> Walker<'a> {
             st_primvar: None,
         });
         let id = self.scene.add_mesh(mesh);
-        let m = self.units.to_renderer() * stage_xf;
         self.scene.add_instance(id, Affine3A::from_mat4(m.as_mat4()));
         self.info.instance_paths.push(path);
         self.info.instance_stage_xf.push(stage_xf);
     }
+}
+
+/// A placement the renderer can use: finite in single precision (`1e39` or `inf` in an xform op
+/// would otherwise reach the BVH and the shading as infinities).
+fn check_placement(path: &str, world: &DMat4) -> Result<(), Error> {
+    if world.as_mat4().is_finite() {
+        return Ok(());
+    }
+    Err(Error::Prim {
+        layer: String::new(),
+        prim: path.to_string(),
+        message: "its world transform is not finite in single precision (an xform op or a PointInstancer value is too large or not a number)".into(),
+    })
 }
 
 fn children(prim: &usd::Prim) -> Result<Vec<usd::Prim>, Error> {

@@ -31,6 +31,9 @@ impl ApertureMask {
     /// Loads a PNG (luminance, or alpha when present and not opaque) or EXR (luminance) mask.
     pub fn load(path: &Path) -> Result<Self> {
         let err = |m: String| Error::ApertureImage { path: path.to_path_buf(), message: m };
+        if !path.is_file() {
+            return Err(err("not a regular file (missing, or a folder, device or pipe)".into()));
+        }
         let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
         let (width, height, transmission) = if ext == "exr" {
             let img = exr::prelude::read_first_rgba_layer_from_file(

@@ -30,7 +30,7 @@ pub use aperture::{Aperture, ApertureMask, ApertureShape};
 pub use error::{Error, Result};
 pub use glass::Material;
 pub use import::{load_lens_file, read_prescription};
-pub use io::write_atomic;
+pub use io::{read_input_file, write_atomic, MAX_LENS_FILE_BYTES};
 pub use lens::{Absorbed, Lens, LensSurface, Ray, StopMode, TraceDirection, Traced};
 pub use library::{library_lens, load_lens, LIBRARY};
 pub use paraxial::ParaxialData;

@@ -89,6 +89,10 @@ pub struct LrtfHeader {
     pub data_checksum: u64,
 }
 
+/// The largest LRTF file read (8 GiB; a 256³ table of one wavelength is 0.5 GiB): only regular
+/// files are read, so a device or pipe named as a table is refused instead of read without bound.
+pub const MAX_TABLE_FILE_BYTES: u64 = 8 << 30;
+
 impl LrtfHeader {
     /// The checks every table passes before it is written and after it is read: sizes in range,
     /// geometry finite and positive where it must be, wavelengths visible.
@@ -812,8 +816,14 @@ impl LrtfTable {
 
     /// Reads a table and checks that it belongs to `lens` (same prescription hash).
     pub fn load(path: &Path, lens: &Lens) -> Result<LrtfTable> {
-        let bad = |m: String| Error::Optics(format!("{}: {m}", path.display()));
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let bytes = crate::io::read_input_file(path, MAX_TABLE_FILE_BYTES, "LRTF table")?;
+        LrtfTable::from_bytes(&bytes, lens, &path.display().to_string())
+    }
+
+    /// A table from the bytes of an LRTF file (see [`LrtfTable::load`]); `file` names it in
+    /// errors.
+    pub fn from_bytes(bytes: &[u8], lens: &Lens, file: &str) -> Result<LrtfTable> {
+        let bad = |m: String| Error::Optics(format!("{file}: {m}"));
         if bytes.len() < 16 || &bytes[..8] != MAGIC {
             return Err(bad("not a Petzval LRTF file (bad magic)".into()));
         }

@@ -11,8 +11,9 @@
 use super::model::build_model;
 use super::model_choice::{choose_model, ModelChoice, ShotContext};
 use super::spec::{CameraSpec, LensModel, SpecLens};
-use super::Camera;
+use super::{Camera, ExactCamera, LrtfCamera};
 use crate::error::Result;
+use crate::optics::lrtf::LrtfTable;
 
 /// A camera built from a [`CameraSpec`], with what was decided.
 #[derive(Debug, Clone)]
@@ -36,6 +37,38 @@ impl CameraSpec {
     pub fn build(&self, shot: &ShotContext) -> Result<BuiltCamera> {
         self.validate()?;
         self.build_loaded(self.load_lens()?, shot)
+    }
+
+    /// The checks of [`CameraSpec::build`] that cost no tracing, for a front end to run before it
+    /// loads a scene: the numbers, the lens (it loads and forms an image), the model fits the
+    /// lens, the focus is reachable and the sensor clears the rear element, and a baked table
+    /// (`lrtf_file`) belongs to the lens and covers the sensor. Left to the build: the exact
+    /// camera's exit-pupil bounds and whether light reaches the sensor's centre, LRTF bakes and
+    /// `auto`'s comparison.
+    pub fn check(&self) -> Result<()> {
+        self.validate()?;
+        let lens = self.load_lens()?;
+        let SpecLens::Real(l) = &lens else {
+            // ideal lenses build at no cost
+            let model = if self.model == LensModel::Auto { LensModel::Thin } else { self.model };
+            return build_model(self, &lens, model, None).map(|_| ());
+        };
+        l.check_forms_image()?;
+        match self.model {
+            LensModel::Auto | LensModel::Exact => {
+                ExactCamera::film_position_mm(&self.sensor, l, self.focus_distance_m)?;
+            }
+            LensModel::Lrtf { .. } => {
+                let film_z = ExactCamera::film_position_mm(&self.sensor, l, self.focus_distance_m)?;
+                if let Some(path) = &self.lrtf_file {
+                    LrtfCamera::check_coverage(&LrtfTable::load(path, l)?, &self.sensor, film_z)?;
+                }
+            }
+            m @ (LensModel::Thick | LensModel::Thin | LensModel::Pinhole) => {
+                build_model(self, &lens, m, None)?;
+            }
+        }
+        Ok(())
     }
 
     /// Builds the camera with the lens already loaded by [`CameraSpec::load_lens`].

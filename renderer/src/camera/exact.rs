@@ -30,13 +30,33 @@ impl ExactCamera {
     /// A camera tracing `lens` (already stopped down), focused at `focus_distance_m` from the
     /// entrance pupil.
     pub fn new(sensor: Sensor, lens: Lens, focus_distance_m: Option<f64>) -> Result<Self> {
+        let film_z_mm = Self::film_position_mm(&sensor, &lens, focus_distance_m)?;
+        let (r_max, dz) = sensor.extent();
+        let pupil = ExitPupilBounds::compute(&lens, film_z_mm, dz, r_max * 1.001);
+        let mut cam = ExactCamera { sensor, lens, focus_distance_m, film_z_mm, pupil, exposure: 1.0 };
+        let centre = cam.sensor.axis_film_coord();
+        let mean = centre_mean(|u| cam.raw_ray(centre, u, cam.lens.primary_wavelength_nm()).map(|r| r.weight));
+        if !(mean > 0.0) {
+            return Err(Error::camera(
+                "lens",
+                format!("no light reaches the centre of the sensor through '{}'", cam.lens.name()),
+            ));
+        }
+        cam.exposure = 1.0 / mean;
+        Ok(cam)
+    }
+
+    /// The film pivot's z for `lens` focused at `focus_distance_m`, with the checks of
+    /// [`ExactCamera::new`] that need no tracing: the focus is reachable, and the image and the
+    /// tilted sensor clear the rear element.
+    pub(super) fn film_position_mm(sensor: &Sensor, lens: &Lens, focus_distance_m: Option<f64>) -> Result<f64> {
         sensor.validate()?;
         if let Some(d) = focus_distance_m {
             check_positive("focus_distance_m", d)?;
         }
         let image_distance = lens.focus_image_distance_mm(focus_distance_m.map(|m| m * 1e3))?;
         let film_z_mm = lens.last_vertex_z_mm() + image_distance;
-        let (r_max, dz) = sensor.extent();
+        let (_, dz) = sensor.extent();
         if film_z_mm - dz <= lens.last_vertex_z_mm() {
             // without tilt the image itself falls inside the lens: say that, not "tilt"
             if dz < 1e-9 {
@@ -52,18 +72,7 @@ impl ExactCamera {
             }
             return Err(Error::camera("tilt", "the tilted sensor would cut into the rear element"));
         }
-        let pupil = ExitPupilBounds::compute(&lens, film_z_mm, dz, r_max * 1.001);
-        let mut cam = ExactCamera { sensor, lens, focus_distance_m, film_z_mm, pupil, exposure: 1.0 };
-        let centre = cam.sensor.axis_film_coord();
-        let mean = centre_mean(|u| cam.raw_ray(centre, u, cam.lens.primary_wavelength_nm()).map(|r| r.weight));
-        if !(mean > 0.0) {
-            return Err(Error::camera(
-                "lens",
-                format!("no light reaches the centre of the sensor through '{}'", cam.lens.name()),
-            ));
-        }
-        cam.exposure = 1.0 / mean;
-        Ok(cam)
+        Ok(film_z_mm)
     }
 
     /// Sensor.

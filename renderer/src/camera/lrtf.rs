@@ -31,21 +31,27 @@ impl LrtfCamera {
     /// A camera through `table` for an exact camera already built (its pupil bounds and
     /// exposure are reused).
     pub fn with_exact(exact: ExactCamera, table: Arc<LrtfTable>) -> Result<Self> {
+        Self::check_coverage(&table, exact.sensor(), exact.film_z_mm())?;
+        Ok(LrtfCamera { exact, table })
+    }
+
+    /// The table covers the sensor with its film pivot at `film_z_mm`.
+    pub(super) fn check_coverage(table: &LrtfTable, sensor: &Sensor, film_z_mm: f64) -> Result<()> {
         let h = &table.header;
-        let (r, dz) = exact.sensor().extent();
+        let (r, dz) = sensor.extent();
         if r > h.max_film_radius_mm {
             return Err(Error::camera(
                 "lens_model",
                 format!("the LRTF table covers film points up to {:.1} mm from the axis; this sensor reaches {r:.1} mm: re-bake with a larger --max-film-radius", h.max_film_radius_mm),
             ));
         }
-        if exact.film_z_mm() - dz - h.in_base_z_mm < h.min_film_distance_mm - 1e-9 {
+        if film_z_mm - dz - h.in_base_z_mm < h.min_film_distance_mm - 1e-9 {
             return Err(Error::camera(
                 "lens_model",
                 "the sensor comes closer to the lens than the LRTF table covers: re-bake it",
             ));
         }
-        Ok(LrtfCamera { exact, table })
+        Ok(())
     }
 
     /// The same camera traced exactly (sensor, lens, focus, pupil bounds, exposure).

@@ -277,13 +277,18 @@ pub fn demo_scene() -> (Scene, DemoShot) {
         znear: 0.01,
         zfar: None,
     });
-    let shot = DemoShot {
+    (scene, demo_shot())
+}
+
+/// How the demo wants to be photographed, without building it (the command line checks its
+/// flags against these before loading anything).
+pub fn demo_shot() -> DemoShot {
+    DemoShot {
         lens: "double-gauss-50mm",
         f_number: 2.1,
         focus_distance_m: 0.55,
         tilt_x_deg: -6.0,
         blades: 7,
         blade_rotation_deg: 10.0,
-    };
-    (scene, shot)
+    }
 }

@@ -5,6 +5,7 @@
 use super::lens::Lens;
 use super::prescription::{self, Prescription, SourceMap};
 use crate::error::{Error, Result};
+use crate::io::{read_input_file, MAX_LENS_FILE_BYTES};
 use std::path::Path;
 
 mod lentil;
@@ -44,30 +45,59 @@ pub fn load_lens_file(path: &Path) -> Result<Lens> {
 }
 
 /// Reads a lens file of any supported format into a prescription (see [`load_lens_file`]).
+/// Only regular files of at most [`MAX_LENS_FILE_BYTES`] are read.
 pub fn read_prescription(path: &Path) -> Result<(Prescription, SourceMap)> {
+    let read = |p: &Path| read_input_file(p, MAX_LENS_FILE_BYTES, "lens file");
     let s = path.to_string_lossy();
     if let Some((file, id)) = s.rsplit_once('#') {
         if file.ends_with(".json") {
-            let text = decode_text(&std::fs::read(file).map_err(|e| Error::io(file, e))?);
-            return import_lentil(&text, file, id);
+            return read_prescription_bytes(&read(Path::new(file))?, LensFormat::Lentil { id }, file);
         }
     }
     let file = path.display().to_string();
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    match ext.as_str() {
-        "toml" => prescription::parse_toml(&decode_text(&bytes), &file),
-        "dat" => {
-            let text = decode_text(&bytes);
-            let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("lens").to_string();
-            import_pbrt(&text, &file, &name)
+    let format = match ext.as_str() {
+        "toml" => LensFormat::Toml,
+        "dat" => LensFormat::Pbrt { name: path.file_stem().and_then(|s| s.to_str()).unwrap_or("lens") },
+        "zmx" => LensFormat::Zemax,
+        _ => {
+            return Err(Error::lens_file(
+                &file,
+                0,
+                "file",
+                "unknown lens format: expected .toml, .dat (pbrt), .zmx (Zemax) or FILE.json#ID (lentil)",
+            ))
         }
-        "zmx" => import_zemax(&bytes, &file),
-        _ => Err(Error::lens_file(
-            &file,
-            0,
-            "file",
-            "unknown lens format: expected .toml, .dat (pbrt), .zmx (Zemax) or FILE.json#ID (lentil)",
-        )),
+    };
+    read_prescription_bytes(&read(path)?, format, &file)
+}
+
+/// The format of a lens file's bytes (chosen by extension in [`read_prescription`]).
+#[derive(Debug, Clone, Copy)]
+pub enum LensFormat<'a> {
+    /// Our TOML.
+    Toml,
+    /// A pbrt `.dat` table; `name` becomes the lens's name (pbrt files have none).
+    Pbrt {
+        /// The lens's name (the file's stem).
+        name: &'a str,
+    },
+    /// A Zemax `.zmx` file.
+    Zemax,
+    /// Entry `id` of a lentil JSON database.
+    Lentil {
+        /// The entry's key, e.g. `"0001"`.
+        id: &'a str,
+    },
+}
+
+/// A lens file's bytes (UTF-8 with or without a BOM, or UTF-16) into a prescription; `file`
+/// names it in errors.
+pub fn read_prescription_bytes(bytes: &[u8], format: LensFormat, file: &str) -> Result<(Prescription, SourceMap)> {
+    match format {
+        LensFormat::Toml => prescription::parse_toml(&decode_text(bytes), file),
+        LensFormat::Pbrt { name } => import_pbrt(&decode_text(bytes), file, name),
+        LensFormat::Zemax => import_zemax(bytes, file),
+        LensFormat::Lentil { id } => import_lentil(&decode_text(bytes), file, id),
     }
 }

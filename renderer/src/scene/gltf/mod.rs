@@ -69,6 +69,9 @@ use std::sync::Arc;
 /// Luminous efficacy (lm/W) Blender's glTF exporter uses to convert watts to lumens.
 pub const WATTS_TO_LUMENS: f32 = 683.0;
 
+/// The largest `.gltf`/`.glb` file read (4 GiB; its external buffers have their own limit).
+const MAX_FILE_BYTES: u64 = 4 << 30;
+
 /// Loads a `.gltf` or `.glb` file into a [`Scene`].
 ///
 /// Fails (naming the file and, where it applies, the glTF object) on an unreadable, corrupt or
@@ -77,7 +80,8 @@ pub const WATTS_TO_LUMENS: f32 = 683.0;
 /// mode or camera type, ignored extensions, dropped non-finite triangles) are reported in
 /// [`Scene::warnings`].
 pub fn load_gltf(path: &Path) -> Result<Scene> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    // a regular file only: a device or pipe named as the scene is refused, not read without bound
+    let bytes = crate::optics::read_input_file(path, MAX_FILE_BYTES, "glTF file")?;
     let base = path.parent().map(|p| if p.as_os_str().is_empty() { Path::new(".") } else { p });
     load_gltf_slice(&bytes, base, &path.display().to_string())
 }

@@ -142,6 +142,11 @@ impl Loader<'_> {
             return;
         }
         let radiometric = color * intensity / WATTS_TO_LUMENS;
+        if !radiometric.is_finite() {
+            // each finite, their product not (found by the fuzzing of issue 12)
+            self.warn(&loc, "colour × intensity is not finite; light skipped");
+            return;
+        }
         let position = world.w_axis.truncate();
         let dir = world.transform_vector3(Vec3::NEG_Z);
         let range = light.range().filter(|r| r.is_finite() && *r > 0.0);
@@ -242,6 +247,14 @@ impl Loader<'_> {
             }
         };
         if let Some(id) = id {
+            if !world.is_finite() {
+                // a chain of finite node transforms can still overflow f32 (issue 12's fuzzing)
+                self.warn(
+                    &named("mesh", mesh.index(), mesh.name()),
+                    "its node's world transform is not finite; skipped",
+                );
+                return Ok(());
+            }
             self.scene.add_instance(id, Affine3A::from_mat4(*world));
         }
         Ok(())

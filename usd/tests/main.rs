@@ -1,0 +1,4 @@
+//! Integration tests of the USD crate (one binary; modules per area).
+
+mod fuzz;
+mod stage;
