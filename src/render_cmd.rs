@@ -804,7 +804,11 @@ pub fn preflight(args: &RenderArgs) -> Result<Preflight, Error> {
         None if args.focus.is_some() => None,
         None => demo_shot.as_ref().map(|d| d.focus_distance_m),
     };
-    flags_host_camera(args, demo_shot.as_ref(), focus_m)?.camera_spec(width, height)?.check()?;
+    // A USD shot's camera may carry its own lens (PetzvalLensAPI): it is checked once the stage
+    // is read, still before rendering.
+    if !args.scene.as_deref().is_some_and(petzval_usd::is_usd_path) {
+        flags_host_camera(args, demo_shot.as_ref(), focus_m)?.camera_spec(width, height)?.check()?;
+    }
     Ok(Preflight { width, height, outputs, environment })
 }
 
