@@ -48,6 +48,11 @@ const BOUNDARY_BAND: f32 = 0.1;
 /// Channels per entry: w.x, w.y, e.x, e.y, stop.x, stop.y, margin, validity.
 const CHANNELS: usize = 8;
 
+/// Largest magnitude of a stored table value. Baked tables stay below ~2·10¹¹ (extrapolated
+/// entries of failed traces; double-gauss-50mm 1.3·10¹⁰, wide-22mm 1.8·10¹¹); the lookup squares
+/// stereographic coordinates in f32, which overflows past ~10¹⁹ and turns lookups into NaN.
+const MAX_ENTRY: f32 = 1e15;
+
 /// Everything about a table except its data.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -796,8 +801,8 @@ impl LrtfTable {
         let bad = |m: String| Error::Optics(format!("{}: not written: {m}", path.display()));
         self.header.check().map_err(bad)?;
         let data = self.entries();
-        if data.iter().any(|v| !v.is_finite()) {
-            return Err(bad("non-finite values in the table".into()));
+        if let Some(v) = data.iter().find(|v| !(v.abs() <= MAX_ENTRY)) {
+            return Err(bad(format!("table value {v:e} is non-finite or beyond {MAX_ENTRY:e}")));
         }
         let mut bytes = Vec::with_capacity(data.len() * 4);
         for v in &data {
@@ -861,8 +866,10 @@ impl LrtfTable {
         }
         let data: Vec<f32> =
             bytes[hend..].chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
-        if data.iter().any(|v| !v.is_finite()) {
-            return Err(bad("non-finite values in the table".into()));
+        if let Some(v) = data.iter().find(|v| !(v.abs() <= MAX_ENTRY)) {
+            return Err(bad(format!(
+                "table value {v:e} is non-finite or beyond {MAX_ENTRY:e} (the file is corrupted: baked tables stay below 1e12, and larger values overflow the lookup)"
+            )));
         }
         Ok(LrtfTable::from_entries(header, &data))
     }
