@@ -539,10 +539,15 @@ impl RenderScene {
         let mut mesh_info = Vec::with_capacity(scene.meshes.len());
         for (k, m) in scene.meshes.iter().enumerate() {
             let nv = m.positions.len();
+            let finite_uv0 = m.uv0.iter().all(|t| t.is_finite());
+            let finite_uv1 = m.uv1.iter().all(|t| t.is_finite());
+            if !finite_uv0 || !finite_uv1 {
+                scene.warnings.push(format!("mesh {k}: non-finite texture coordinates; ignoring that UV set"));
+            }
             let info = MeshInfo {
                 has_normals: m.normals.len() == nv,
-                has_uv0: m.uv0.len() == nv,
-                has_uv1: m.uv1.len() == nv && m.uv0.len() == nv,
+                has_uv0: m.uv0.len() == nv && finite_uv0,
+                has_uv1: m.uv1.len() == nv && m.uv0.len() == nv && finite_uv0 && finite_uv1,
                 has_tangents: m.tangents.len() == nv,
             };
             if !info.has_normals && !m.normals.is_empty() {
@@ -550,7 +555,7 @@ impl RenderScene {
                     .warnings
                     .push(format!("mesh {k}: normal count differs from the vertex count; using geometric normals"));
             }
-            if !info.has_uv0 && !m.uv0.is_empty() {
+            if m.uv0.len() != nv && !m.uv0.is_empty() {
                 scene.warnings.push(format!("mesh {k}: uv0 count differs from the vertex count; ignoring UVs"));
             }
             mesh_info.push(info);
