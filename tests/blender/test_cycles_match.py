@@ -71,8 +71,9 @@ def _glb_json(path):
     return json.loads(data[20 : 20 + chunk_len])
 
 
-def _block_verdict(cmp: B.BlockComparison) -> dict:
-    z = cmp.z
+def _block_verdict(cmp: B.BlockComparison, keep_blocks=None) -> dict:
+    """The block z-scores' summary, over the blocks `keep_blocks` selects (all by default)."""
+    z = cmp.z if keep_blocks is None else cmp.z[keep_blocks]
     return {
         "mean_z2": float(np.mean(z**2)),
         "max_abs_z": float(np.max(np.abs(z))),

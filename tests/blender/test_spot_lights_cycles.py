@@ -40,7 +40,7 @@ try:
 except Exception as e:  # ImportError, or a broken install
     pytest.skip(f"Blender's Python module cannot be imported ({type(e).__name__}: {e})", allow_module_level=True)
 
-from test_cycles_match import MAX_ABS_Z, MEAN_TOL, _fmt_verdict, _passes
+from test_cycles_match import MAX_ABS_Z, MEAN_TOL, _block_verdict, _fmt_verdict, _passes
 
 import blender_compare as B
 import blender_scenes as S
@@ -155,17 +155,7 @@ def _region_z(cyc, pz, mask, var_single=None):
 
 
 def _block_comparison(cyc, pz, keep_blocks):
-    cmp = B.compare_blocks(cyc[0], cyc[1], pz[0], pz[1])
-    z = cmp.z[keep_blocks]
-    return {
-        "mean_z2": float(np.mean(z**2)),
-        "max_abs_z": float(np.max(np.abs(z))),
-        "n_over_4": int(np.sum(np.abs(z) > 4)),
-        "n_over_5": int(np.sum(np.abs(z) > 5)),
-        "n_blocks": int(z.size),
-        "rel_noise_c": cmp.rel_noise_c,
-        "rel_noise_p": cmp.rel_noise_p,
-    }
+    return _block_verdict(B.compare_blocks(cyc[0], cyc[1], pz[0], pz[1]), keep_blocks)
 
 
 def test_spot_export_cones(spot_run, report):
