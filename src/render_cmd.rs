@@ -6,7 +6,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use petzval_renderer::camera::host::{self, FilmBack, HostCamera, SensorFit, Shift};
 use petzval_renderer::film::{write_exr, write_png, ExrLayers, Metadata, PixelFilter, ToneMap};
 use petzval_renderer::integrator::RenderScene;
-use petzval_renderer::render::{render, CameraRig, RenderSettings};
+use petzval_renderer::dof;
+use petzval_renderer::render::{CameraRig, RenderSettings};
 use petzval_renderer::scene::{demo, gltf, Environment, Scene, SceneCamera};
 use petzval_renderer::shot;
 use petzval_renderer::{Aperture, ApertureShape, Camera, Error, LensModel};
@@ -132,6 +133,34 @@ pub struct RenderArgs {
     /// this many pixels, as Cycles does (0 = a 1-pixel box).
     #[arg(long, default_value_t = 1.5)]
     pub filter_width: f32,
+    /// Depth-of-field method: mc (Monte Carlo through the lens, the reference), multiview
+    /// (pinhole views through pupil samples), ibrt (rays traced against depth-peeled layers) or
+    /// spread (PSFs spread from the layers). --spp stays the camera rays per pixel.
+    #[arg(long, default_value = "mc")]
+    pub method: String,
+    /// Depth-peeled layers of the preview methods (ibrt, spread, multiview's shading).
+    #[arg(long, default_value_t = 4)]
+    pub layers: usize,
+    /// Path samples per texel and layer when the preview methods shade their layers.
+    #[arg(long, default_value_t = 16)]
+    pub layer_spp: u32,
+    /// Extra layer frame on each side, as a fraction of the image's (room for blur from outside
+    /// the frame).
+    #[arg(long, default_value_t = 0.15)]
+    pub layer_margin: f64,
+}
+
+/// The depth-of-field method and its preview settings, checked.
+fn method_settings(args: &RenderArgs) -> Result<(dof::Method, dof::PreviewSettings), Error> {
+    let method: dof::Method = args.method.parse()?;
+    let layers = dof::LayerSettings {
+        count: args.layers,
+        spp: args.layer_spp,
+        margin: args.layer_margin,
+        ..dof::LayerSettings::default()
+    };
+    layers.validate()?;
+    Ok((method, dof::PreviewSettings { layers }))
 }
 
 fn settings_err(field: &str, message: String) -> Error {
@@ -574,6 +603,7 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
         ..RenderSettings::default()
     };
     settings.validate()?;
+    let (method, preview) = method_settings(&args)?;
     crate::signals::enter(crate::signals::Phase::Rendering);
     let bar = ProgressBar::new(1000);
     bar.set_style(
@@ -584,7 +614,7 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
         bar.set_position((f * 1000.0) as u64);
         !crate::signals::interrupted()
     };
-    let result = render(&render_scene, &rig, &settings, &progress)?;
+    let result = dof::render_method(method, &render_scene, &rig, &settings, &preview, &progress, &|_, _| {})?;
     bar.finish_and_clear();
     crate::signals::enter(crate::signals::Phase::Writing);
     eprintln!(
@@ -625,6 +655,7 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
             if result.complete { "true".into() } else { "false: stopped early, partially converged".into() },
         ),
         ("renderSeconds".into(), format!("{:.3}", result.seconds)),
+        ("dofMethod".into(), method.to_string()),
     ];
     let mut metadata = metadata;
     if let Some((file, c, time)) = &usd_cam {
@@ -827,5 +858,6 @@ pub fn check_flags(mut args: RenderArgs) -> Result<(), Error> {
         args.output = frame_path(&args.output, f);
         args.png = args.png.as_ref().map(|p| frame_path(p, f));
     }
+    method_settings(&args)?;
     preflight(&args).map(|_| ())
 }

@@ -7,6 +7,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 mod error;
+pub mod dof;
 pub mod film;
 #[doc(hidden)]
 pub mod fuzzing;

@@ -14,10 +14,10 @@
 //! | `clip_start_m`, `clip_end_m` | f64: clipping planes perpendicular to the view axis (Cycles) | m | 0, ∞ |
 //! | `crop` | optional `[x0, y0, x1, y1)` window of the frame to render (row 0 = top) | px | whole frame |
 
-use crate::camera::Camera;
+use crate::camera::{Camera, CameraRay};
 use crate::error::{Error, Result};
 use crate::film::{Film, FilterSampler, Image, PixelFilter};
-use crate::integrator::{PathTracer, RenderScene};
+use crate::integrator::{PathSample, PathTracer, RenderScene};
 use crate::limits;
 use crate::sampler::PixelSampler;
 use crate::spectral;
@@ -178,6 +178,46 @@ pub fn render_observed(
     progress: Progress,
     on_pass: PassObserver,
 ) -> Result<RenderResult> {
+    let tracer = PathTracer { max_depth: settings.max_depth, ..PathTracer::default() };
+    render_samples(rig, settings, progress, on_pass, &PathShader { tracer, scene })
+}
+
+/// What a render method does with each camera sample (Monte Carlo traces a path; the preview
+/// methods of [`crate::dof`] look the ray up in layers or share lens samples between pixels).
+pub(crate) trait SampleShader: Sync {
+    /// The lens sample of sample index `s`, given the pixel's own Sobol lens sample `own`.
+    fn lens_sample(&self, _s: u32, own: DVec2) -> DVec2 {
+        own
+    }
+
+    /// The radiance (and first-hit AOVs) along camera ray `ray` (camera space), whose world ray
+    /// is `origin` + t·`dir` seen between `clip.0` and `clip.1`.
+    fn shade(&self, ray: &CameraRay, origin: Vec3, dir: Vec3, clip: (f32, f32), sampler: &mut PixelSampler)
+        -> PathSample;
+}
+
+/// Monte Carlo: every camera ray is path traced.
+struct PathShader<'a> {
+    tracer: PathTracer,
+    scene: &'a RenderScene,
+}
+
+impl SampleShader for PathShader<'_> {
+    fn shade(&self, _ray: &CameraRay, origin: Vec3, dir: Vec3, clip: (f32, f32), sampler: &mut PixelSampler)
+        -> PathSample {
+        self.tracer.trace_clipped(self.scene, origin, dir, clip, sampler)
+    }
+}
+
+/// The progressive render loop shared by every method: pixel samples (filter offset, lens
+/// sample, wavelength) → camera ray → `shader` → film.
+pub(crate) fn render_samples(
+    rig: &CameraRig,
+    settings: &RenderSettings,
+    progress: Progress,
+    on_pass: PassObserver,
+    shader: &dyn SampleShader,
+) -> Result<RenderResult> {
     settings.validate()?;
     let start = Instant::now();
     let (w, h) = (settings.width, settings.height);
@@ -186,7 +226,6 @@ pub fn render_observed(
     let mut film = Film::new(cw, ch);
     let (clip_near, clip_far) = (settings.clip_start_m, settings.clip_end_m);
     let filter = FilterSampler::new(settings.filter);
-    let tracer = PathTracer { max_depth: settings.max_depth, ..PathTracer::default() };
     let cancelled = AtomicBool::new(false);
     let camera_rays = AtomicU64::new(0);
     let dropped = AtomicU64::new(0);
@@ -215,7 +254,7 @@ pub fn render_observed(
                         (x as f64 + 0.5 + off.x as f64) / w as f64,
                         (y as f64 + 0.5 + off.y as f64) / h as f64,
                     );
-                    let lens_u = sampler.next_2d();
+                    let lens_u = shader.lens_sample(s, sampler.next_2d().as_dvec2());
                     let u_lambda = sampler.next_1d();
                     let (lambda, lambda_weight) = if settings.spectral {
                         spectral::sample_wavelength(u_lambda)
@@ -223,7 +262,7 @@ pub fn render_observed(
                         (wavelength_primary as f32, Vec3::ONE)
                     };
                     px.samples += 1;
-                    let Some(ray) = rig.camera.generate_ray(film_uv, lens_u.as_dvec2(), lambda as f64) else {
+                    let Some(ray) = rig.camera.generate_ray(film_uv, lens_u, lambda as f64) else {
                         continue;
                     };
                     // 3. World ray, clipping planes (along the view axis) and the path.
@@ -231,7 +270,7 @@ pub fn render_observed(
                     let d = rig.to_world.transform_vector3(ray.direction).normalize().as_vec3();
                     let axial = (-ray.direction.z / ray.direction.length()).max(1e-6);
                     let clip = ((clip_near / axial) as f32, (clip_far / axial) as f32);
-                    let sample = tracer.trace_clipped(scene, o, d, clip, &mut sampler);
+                    let sample = shader.shade(&ray, o, d, clip, &mut sampler);
                     let value = sample.radiance * lambda_weight * ray.weight as f32;
                     if !value.is_finite() || sample.dropped {
                         px.dropped += 1;

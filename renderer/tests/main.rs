@@ -4,6 +4,7 @@ mod architecture;
 mod auto_model;
 mod camera;
 mod common;
+mod dof;
 mod fuzz;
 mod gltf;
 mod instances;
