@@ -142,8 +142,11 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 4)]
     pub layers: usize,
     /// Path samples per texel and layer when the preview methods shade their layers.
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, default_value_t = 4)]
     pub layer_spp: u32,
+    /// Layer texels across one image pixel (1..=4).
+    #[arg(long, default_value_t = 2)]
+    pub layer_texels: u32,
     /// Extra layer frame on each side, as a fraction of the image's (room for blur from outside
     /// the frame).
     #[arg(long, default_value_t = 0.15)]
@@ -157,6 +160,7 @@ fn method_settings(args: &RenderArgs) -> Result<(dof::Method, dof::PreviewSettin
         count: args.layers,
         spp: args.layer_spp,
         margin: args.layer_margin,
+        texels_per_pixel: args.layer_texels,
         ..dof::LayerSettings::default()
     };
     layers.validate()?;

@@ -20,7 +20,7 @@ fn debug_layers_pinhole() {
     let (rs, rig) = demo_pinhole();
     let st = RenderSettings { width: 60, height: 40, spp: 64, ..RenderSettings::default() };
     let mc = render(&rs, &rig, &st, &|_| true).unwrap().image;
-    let frame = LayerFrame::covering(&rig.camera, 60, 40, 0.0).unwrap();
+    let frame = LayerFrame::covering(&rig.camera, 60, 40, 0.0, 1).unwrap();
     eprintln!("{frame:?}");
     let layers = Layers::trace(&rs, rig.to_world, frame, &LayerSettings { spp: 64, ..LayerSettings::default() }).unwrap();
     for (x, y) in [(5usize, 30usize), (10, 35), (30, 20), (55, 30), (50, 15)] {

@@ -7,6 +7,7 @@ mod common;
 mod dof;
 mod fuzz;
 mod gltf;
+mod ibrt;
 mod instances;
 mod integrator;
 mod render;

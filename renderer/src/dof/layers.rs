@@ -11,12 +11,12 @@
 //! | name | type | unit | default |
 //! |---|---|---|---|
 //! | `count` | usize: layers K | — | 4 |
-//! | `spp` | u32: path samples per texel and layer (filter-jittered, Blackman–Harris 3 px) | — | 16 |
+//! | `spp` | u32: path samples per texel and layer (jittered over the texel) | — | 4 |
+//! | `texels_per_pixel` | u32: layer texels across one image pixel (in-focus detail survives the resampling) | — | 2 |
 //! | `margin` | f64: extra frame on each side, as a fraction of the chief rays' extent | — | 0.15 |
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
-use crate::film::{FilterSampler, PixelFilter};
 use crate::integrator::{PathTracer, RenderScene};
 use crate::sampler::PixelSampler;
 use glam::{DAffine3, DVec2, DVec3, Vec3};
@@ -41,8 +41,8 @@ pub struct LayerFrame {
 impl LayerFrame {
     /// The frame that covers every chief ray of `camera` (lens sample at the pupil centre) for
     /// an image of `width` × `height` pixels, widened by `margin` of its extent on each side; its
-    /// texels are about the size of the image's pixels.
-    pub fn covering(camera: &Camera, width: u32, height: u32, margin: f64) -> Result<LayerFrame> {
+    /// texels are `texels_per_pixel` across one of the image's pixels.
+    pub fn covering(camera: &Camera, width: u32, height: u32, margin: f64, texels_per_pixel: u32) -> Result<LayerFrame> {
         // 1. Chief rays on a 33 × 33 grid over the frame (edges included).
         let n = 33;
         let (mut lo, mut hi) = (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY));
@@ -61,7 +61,7 @@ impl LayerFrame {
         // 2. Texels the size of the image's pixels across the chief rays' extent (on a
         //    rectilinear image they coincide), and a whole number of them of margin on each
         //    side, within what one pinhole image can hold.
-        let size = DVec2::new(width as f64, height as f64);
+        let size = DVec2::new(width as f64, height as f64) * texels_per_pixel.max(1) as f64;
         let texel = (hi - lo) / size;
         let room_lo = ((lo + DVec2::splat(MAX_TAN)) / texel).floor();
         let room_hi = ((DVec2::splat(MAX_TAN) - hi) / texel).floor();
@@ -121,6 +121,8 @@ pub struct LayerSettings {
     pub spp: u32,
     /// Frame margin on each side, as a fraction of the chief rays' extent.
     pub margin: f64,
+    /// Layer texels across one image pixel.
+    pub texels_per_pixel: u32,
     /// Maximum path depth of the shading.
     pub max_depth: u32,
     /// Seed.
@@ -129,7 +131,7 @@ pub struct LayerSettings {
 
 impl Default for LayerSettings {
     fn default() -> Self {
-        LayerSettings { count: 4, spp: 16, margin: 0.15, max_depth: 8, seed: 0 }
+        LayerSettings { count: 4, spp: 4, margin: 0.15, texels_per_pixel: 2, max_depth: 8, seed: 0 }
     }
 }
 
@@ -141,6 +143,9 @@ impl LayerSettings {
         }
         if !(1..=65536).contains(&self.spp) {
             return Err(Error::settings("layer_spp", format!("{} must be in 1..=65536", self.spp)));
+        }
+        if !(1..=4).contains(&self.texels_per_pixel) {
+            return Err(Error::settings("layer_texels", format!("{} must be in 1..=4", self.texels_per_pixel)));
         }
         if !(0.0..=2.0).contains(&self.margin) {
             return Err(Error::settings("layer_margin", format!("{} must be in 0..=2", self.margin)));
@@ -160,8 +165,8 @@ pub struct Layers {
     /// Planar depth along −z (m) of layer k's surface at each texel (the k-th front-facing hit
     /// of the texel's centre ray); +inf where the ray has left the scene (the environment shows).
     pub depth_m: Vec<f32>,
-    /// Radiance leaving that surface towards the centre (linear RGB, path traced; filter-jittered
-    /// samples, each peeling its own k-th hit), or the environment's where the depth is +inf.
+    /// Radiance leaving that surface towards the centre (linear RGB, path traced; samples
+    /// jittered over the texel, each peeling its own k-th hit), or the environment's where the depth is +inf.
     pub radiance: Vec<Vec3>,
     /// Camera-to-world transform the layers were made with.
     pub to_world: DAffine3,
@@ -174,7 +179,6 @@ impl Layers {
         let k_count = settings.count;
         let texels = frame.texels();
         let tracer = PathTracer { max_depth: settings.max_depth, ..PathTracer::default() };
-        let filter = FilterSampler::new(PixelFilter::default());
         let origin = to_world.transform_point3(DVec3::ZERO).as_vec3();
         // Rows in parallel; each row returns its K × width depths and radiances.
         let rows: Vec<(Vec<f32>, Vec<Vec3>)> = (0..frame.height)
@@ -195,11 +199,8 @@ impl Layers {
                     //    environment once it has left the scene).
                     for s in 0..settings.spp {
                         let mut sampler = PixelSampler::new(col as u32, row as u32, s, settings.seed ^ 0x1a7e_5eed);
-                        let off = filter.sample(sampler.next_2d());
-                        let dir = frame.direction(DVec2::new(
-                            col as f64 + 0.5 + off.x as f64,
-                            row as f64 + 0.5 + off.y as f64,
-                        ));
+                        let off = sampler.next_2d();
+                        let dir = frame.direction(DVec2::new(col as f64 + off.x as f64, row as f64 + off.y as f64));
                         let d = to_world.transform_vector3(dir).normalize().as_vec3();
                         let hits = peel(scene, origin, d, k_count);
                         for k in 0..k_count {

@@ -9,7 +9,7 @@
 //! | name | type | unit | default |
 //! |---|---|---|---|
 //! | `method` | [`Method`]: `mc`, `multiview`, `ibrt`, `spread` | — | `mc` |
-//! | `layers` | [`LayerSettings`] (count, spp, margin) | — | 4 layers, 16 spp, 0.15 |
+//! | `layers` | [`LayerSettings`] (count, spp, margin) | — | 4 layers, 4 spp per texel, 2 texels per pixel, margin 0.15 |
 //!
 //! `spp` of [`RenderSettings`] keeps its meaning for every method: the camera rays per pixel
 //! (lens samples); the shading budget of the preview methods is the layers' `spp`.
@@ -109,7 +109,13 @@ pub fn make_layers(
     settings: &RenderSettings,
     preview: &PreviewSettings,
 ) -> Result<Layers> {
-    let frame = LayerFrame::covering(&rig.camera, settings.width, settings.height, preview.layers.margin)?;
+    let frame = LayerFrame::covering(
+        &rig.camera,
+        settings.width,
+        settings.height,
+        preview.layers.margin,
+        preview.layers.texels_per_pixel,
+    )?;
     let layer_settings = LayerSettings { max_depth: settings.max_depth, seed: settings.seed, ..preview.layers };
     Layers::trace(scene, rig.to_world, frame, &layer_settings)
 }
