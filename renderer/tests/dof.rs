@@ -22,7 +22,7 @@ fn debug_layers_pinhole() {
     let mc = render(&rs, &rig, &st, &|_| true).unwrap().image;
     let frame = LayerFrame::covering(&rig.camera, 60, 40, 0.0, 1).unwrap();
     eprintln!("{frame:?}");
-    let layers = Layers::trace(&rs, rig.to_world, frame, &LayerSettings { spp: 64, ..LayerSettings::default() }).unwrap();
+    let layers = Layers::trace(&rs, rig.to_world, frame, &LayerSettings { spp: 64, ..LayerSettings::default() }, 0.0).unwrap();
     for (x, y) in [(5usize, 30usize), (10, 35), (30, 20), (55, 30), (50, 15)] {
         let i = y * 60 + x;
         let ray = rig.camera.generate_ray(DVec2::new((x as f64 + 0.5) / 60.0, (y as f64 + 0.5) / 40.0), DVec2::splat(0.5), 550.0).unwrap();

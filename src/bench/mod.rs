@@ -4,12 +4,14 @@ use clap::Subcommand;
 use glam::{DVec2, DVec3};
 use petzval_renderer::{Error, Sensor};
 
+mod dof;
 mod instances;
 mod lens;
 mod lens_models;
 mod render;
 mod render_models;
 
+use dof::bench_dof;
 use instances::bench_instances;
 use lens::bench_lens;
 use lens_models::bench_lens_models;
@@ -89,6 +91,24 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 1_000_000)]
         triangles: usize,
     },
+    /// Every depth-of-field method (mc, multiview, ibrt, spread) against a converged Monte Carlo
+    /// render on three scenes (the demo, a near occluder before highlights, the demo with a
+    /// tilted sensor) through a thin lens: time, relative RMSE and mean FLIP over a ladder of
+    /// budgets, then error at equal time and time to equal error.
+    Dof {
+        /// Resolution WxH.
+        #[arg(long, default_value = "240x160")]
+        resolution: String,
+        /// Samples per pixel of the Monte Carlo reference.
+        #[arg(long, default_value_t = 2048)]
+        reference_spp: u32,
+        /// Relative RMSE of the equal-error column.
+        #[arg(long, default_value_t = 0.15)]
+        target_rmse: f64,
+        /// Write every render as a PNG into this directory.
+        #[arg(long)]
+        save: Option<std::path::PathBuf>,
+    },
     /// Memory of a scene of many instances of one mesh (mesh data, BLAS, instance records, TLAS)
     /// against one copy, a render of it, and the built-in demo flattened vs instanced.
     Instances {
@@ -120,6 +140,9 @@ pub fn run(cmd: BenchCommand) -> Result<(), Error> {
         BenchCommand::Render { resolution, spp, triangles } => bench_render(&resolution, spp, triangles),
         BenchCommand::Instances { instances, triangles, resolution, spp, repeats, save } => {
             bench_instances(instances, triangles, &resolution, spp, repeats, save.as_deref())
+        }
+        BenchCommand::Dof { resolution, reference_spp, target_rmse, save } => {
+            bench_dof(&resolution, reference_spp, target_rmse, save.as_deref())
         }
         BenchCommand::LensModels { lens, rays, resolutions, json } => bench_lens_models(lens, rays, &resolutions, json),
         BenchCommand::RenderModels { resolution, spp, resolutions, seed, save, json } => {

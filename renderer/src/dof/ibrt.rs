@@ -39,6 +39,8 @@ pub struct LayerTracer {
     /// Pyramid level l ≥ 1: per 2^l block, [min lo, max hi] over all layers; level 0 is the
     /// per-texel union over the layers.
     mips: Vec<Vec<[f32; 2]>>,
+    /// Width of each pyramid level.
+    level_widths: Vec<usize>,
     /// Nearest and farthest finite depth.
     depth_range: [f32; 2],
 }
@@ -127,7 +129,11 @@ impl LayerTracer {
             mips.push(next);
             (lw, lh) = (nw, nh);
         }
-        LayerTracer { layers, span, mips, depth_range }
+        let mut level_widths = vec![w];
+        while level_widths.len() < mips.len() {
+            level_widths.push(level_widths.last().expect("level 0 exists").div_ceil(2));
+        }
+        LayerTracer { layers, span, mips, level_widths, depth_range }
     }
 
     /// The layers.
@@ -187,61 +193,52 @@ impl LayerTracer {
         let (s_in, s_out) = clip_segment(p0, p1, size)?;
         let depth_at = |s: f64| 1.0 / (w0 + (w1 - w0) * s);
         let delta = p1 - p0;
-        // 3. Walk: at each position, jump the largest block the ray's depth span misses, else
-        //    test the texel's elements.
+        // 3. Walk (maximum-mipmap traversal): at the current level, jump the block if the ray's
+        //    depth span misses the block's, and go up a level; otherwise go down one, and at
+        //    level 0 test the texel's elements.
         let mut s = s_in;
         let top = self.mips.len() - 1;
+        let mut level = top.min(4);
         let mut guard = 0usize;
-        while s < s_out && guard < 1 << 20 {
+        while s < s_out && guard < 1 << 22 {
             guard += 1;
             let p = p0 + delta * (s + 1e-9);
-            let (tx, ty) = (p.x.floor().clamp(0.0, size.x - 1.0) as usize, p.y.floor().clamp(0.0, size.y - 1.0) as usize);
-            let mut advanced = false;
-            for level in (0..=top).rev() {
-                let (bx, by) = (tx >> level, ty >> level);
-                let lw = self.level_width(level);
-                let m = self.mips[level][by * lw + bx];
-                let cell = (1usize << level) as f64;
-                let exit = cell_exit(p0, delta, s, DVec2::new(bx as f64 * cell, by as f64 * cell), cell).min(s_out);
-                let (za, zb) = (depth_at(s), depth_at(exit));
-                let misses = !(m[0] <= zb as f32 && za as f32 <= m[1]);
-                if misses {
-                    s = exit.max(s + 1e-12);
-                    advanced = true;
-                    break;
-                }
-                if level == 0 {
-                    // The texel: the nearest element whose span meets the ray's.
-                    let mut best: Option<(usize, f64)> = None;
-                    for k in 0..self.layers.count {
-                        let i = self.layers.index(k, tx, ty);
-                        let [lo, hi] = self.span[i];
-                        if lo <= zb as f32 && za as f32 <= hi {
-                            let z = self.layers.depth_m[i] as f64;
-                            if best.is_none_or(|(_, bz)| z < bz) {
-                                best = Some((i, z));
-                            }
-                        }
+            let tx = p.x.floor().clamp(0.0, size.x - 1.0) as usize;
+            let ty = p.y.floor().clamp(0.0, size.y - 1.0) as usize;
+            let (bx, by) = (tx >> level, ty >> level);
+            let m = self.mips[level][by * self.level_widths[level] + bx];
+            let cell = (1usize << level) as f64;
+            let exit = cell_exit(p0, delta, s, DVec2::new(bx as f64 * cell, by as f64 * cell), cell).min(s_out);
+            let (za, zb) = (depth_at(s) as f32, depth_at(exit) as f32);
+            if !(m[0] <= zb && za <= m[1]) {
+                s = exit.max(s + 1e-12);
+                level = (level + 1).min(top);
+                continue;
+            }
+            if level > 0 {
+                level -= 1;
+                continue;
+            }
+            // The texel: the nearest element whose span meets the ray's.
+            let mut best: Option<(usize, f64)> = None;
+            for k in 0..self.layers.count {
+                let i = self.layers.index(k, tx, ty);
+                let [lo, hi] = self.span[i];
+                if lo <= zb && za <= hi {
+                    let z = self.layers.depth_m[i] as f64;
+                    if best.is_none_or(|(_, bz)| z < bz) {
+                        best = Some((i, z));
                     }
-                    if best.is_some() {
-                        return best;
-                    }
-                    s = exit.max(s + 1e-12);
-                    advanced = true;
                 }
             }
-            debug_assert!(advanced);
+            if best.is_some() {
+                return best;
+            }
+            s = exit.max(s + 1e-12);
         }
         None
     }
 
-    fn level_width(&self, level: usize) -> usize {
-        let mut w = self.layers.frame.width;
-        for _ in 0..level {
-            w = w.div_ceil(2);
-        }
-        w
-    }
 }
 
 /// The parameter range [s_in, s_out] ⊂ [0, 1] of segment p0 → p1 inside [0, size]; None if

@@ -168,72 +168,121 @@ pub struct Layers {
     /// Radiance leaving that surface towards the centre (linear RGB, path traced; samples
     /// jittered over the texel, each peeling its own k-th hit), or the environment's where the depth is +inf.
     pub radiance: Vec<Vec3>,
+    /// Whether each texel was shaded: every texel of layer 0, and the hidden texels some camera
+    /// ray can reach (the others hold zero radiance and are never looked up).
+    pub shaded: Vec<bool>,
     /// Camera-to-world transform the layers were made with.
     pub to_world: DAffine3,
 }
 
 impl Layers {
-    /// Traces the layers of `scene` seen from `to_world`'s origin through `frame`.
-    pub fn trace(scene: &RenderScene, to_world: DAffine3, frame: LayerFrame, settings: &LayerSettings) -> Result<Layers> {
+    /// Traces the layers of `scene` seen from `to_world`'s origin through `frame`, for a camera
+    /// whose rays cross the pupil plane (z = 0) within `pupil_radius_m` of the axis.
+    ///
+    /// 1. Depths: every layer's depth from each texel's centre ray.
+    /// 2. Which hidden texels any camera ray can reach: a ray from the pupil towards a hidden
+    ///    surface at depth z moves in the image by at most A·(1/z_near − 1/z) (A the pupil
+    ///    radius) before reaching it, so a hidden texel is reachable only if layer 0 has a
+    ///    texel at or behind z within that radius (an N-buffer of layer 0's maximum depth
+    ///    answers the window query in four lookups). Unreachable texels are not shaded.
+    /// 3. Radiance: jittered rays over each texel, each shading its own k-th hit.
+    pub fn trace(
+        scene: &RenderScene,
+        to_world: DAffine3,
+        frame: LayerFrame,
+        settings: &LayerSettings,
+        pupil_radius_m: f64,
+    ) -> Result<Layers> {
         settings.validate()?;
         let k_count = settings.count;
         let texels = frame.texels();
-        let tracer = PathTracer { max_depth: settings.max_depth, ..PathTracer::default() };
         let origin = to_world.transform_point3(DVec3::ZERO).as_vec3();
-        // Rows in parallel; each row returns its K × width depths and radiances.
-        let rows: Vec<(Vec<f32>, Vec<Vec3>)> = (0..frame.height)
+        // 1. Depths.
+        let depth_rows: Vec<Vec<f32>> = (0..frame.height)
             .into_par_iter()
             .map(|row| {
                 let mut depth = vec![f32::INFINITY; k_count * frame.width];
-                let mut radiance = vec![Vec3::ZERO; k_count * frame.width];
                 for col in 0..frame.width {
-                    // 1. Depths: the centre ray's front-facing hits.
                     let centre = frame.direction(DVec2::new(col as f64 + 0.5, row as f64 + 0.5));
                     let d = to_world.transform_vector3(centre).normalize().as_vec3();
                     let axial = (1.0 / centre.length()) as f32;
-                    let hits = peel(scene, origin, d, k_count);
-                    for (k, t) in hits.iter().enumerate() {
+                    for (k, t) in peel(scene, origin, d, k_count).iter().enumerate() {
                         depth[k * frame.width + col] = t * axial;
                     }
-                    // 2. Radiance: jittered rays, each shading its own k-th hit (or the
-                    //    environment once it has left the scene).
+                }
+                depth
+            })
+            .collect();
+        let mut depth_m = vec![f32::INFINITY; k_count * texels];
+        for (row, d) in depth_rows.iter().enumerate() {
+            for k in 0..k_count {
+                let dst = k * texels + row * frame.width;
+                depth_m[dst..dst + frame.width].copy_from_slice(&d[k * frame.width..(k + 1) * frame.width]);
+            }
+        }
+        // 2. Reachable texels.
+        let shaded = reachable(&frame, &depth_m, k_count, pupil_radius_m);
+        // 3. Radiance, rows in parallel.
+        let tracer = PathTracer { max_depth: settings.max_depth, ..PathTracer::default() };
+        let env = &scene.scene().environment;
+        let radiance_rows: Vec<Vec<Vec3>> = (0..frame.height)
+            .into_par_iter()
+            .map(|row| {
+                let mut radiance = vec![Vec3::ZERO; k_count * frame.width];
+                for col in 0..frame.width {
+                    let wanted = |k: usize| shaded[k * texels + row * frame.width + col];
+                    let last = (0..k_count).rev().find(|&k| wanted(k)).map_or(0, |k| k + 1);
                     for s in 0..settings.spp {
                         let mut sampler = PixelSampler::new(col as u32, row as u32, s, settings.seed ^ 0x1a7e_5eed);
                         let off = sampler.next_2d();
                         let dir = frame.direction(DVec2::new(col as f64 + off.x as f64, row as f64 + off.y as f64));
                         let d = to_world.transform_vector3(dir).normalize().as_vec3();
-                        let hits = peel(scene, origin, d, k_count);
-                        for k in 0..k_count {
-                            let mut layer_sampler = PixelSampler::new(col as u32, row as u32, s, settings.seed ^ (k as u32 + 1));
+                        let hits = peel(scene, origin, d, last);
+                        for k in (0..last).filter(|&k| wanted(k)) {
+                            let mut layer_sampler =
+                                PixelSampler::new(col as u32, row as u32, s, settings.seed ^ (k as u32 + 1));
                             let value = match hits.get(k) {
                                 Some(&t) => {
                                     // Start 1 % short of the hit (closer starts can miss it at
                                     // grazing angles), but past the previous layer's.
                                     let previous = if k > 0 { hits[k - 1] } else { 0.0 };
                                     let clip = ((t * 0.99).max(0.5 * (previous + t)), f32::INFINITY);
-                                    let sample = tracer.trace_clipped(scene, origin, d, clip, &mut layer_sampler);
-                                    sample.radiance
+                                    tracer.trace_clipped(scene, origin, d, clip, &mut layer_sampler).radiance
                                 }
-                                None => crate::integrator::lights::env_radiance(&scene.scene().environment, d),
+                                None => crate::integrator::lights::env_radiance(env, d),
                             };
                             radiance[k * frame.width + col] += value / settings.spp as f32;
                         }
                     }
                 }
-                (depth, radiance)
+                radiance
             })
             .collect();
-        // 3. Rows → layer-major planes.
-        let mut depth_m = vec![f32::INFINITY; k_count * texels];
         let mut radiance = vec![Vec3::ZERO; k_count * texels];
-        for (row, (d, r)) in rows.into_iter().enumerate() {
+        for (row, r) in radiance_rows.iter().enumerate() {
             for k in 0..k_count {
                 let dst = k * texels + row * frame.width;
-                depth_m[dst..dst + frame.width].copy_from_slice(&d[k * frame.width..(k + 1) * frame.width]);
                 radiance[dst..dst + frame.width].copy_from_slice(&r[k * frame.width..(k + 1) * frame.width]);
             }
         }
-        Ok(Layers { frame, count: k_count, depth_m, radiance, to_world })
+        Ok(Layers { frame, count: k_count, depth_m, radiance, shaded, to_world })
+    }
+
+    /// Share of the hidden layers' surface texels (k ≥ 1, finite depth) that were shaded.
+    pub fn hidden_shaded_fraction(&self) -> f64 {
+        let t = self.frame.texels();
+        let (mut n, mut shaded) = (0usize, 0usize);
+        for i in t..self.count * t {
+            if self.depth_m[i].is_finite() {
+                n += 1;
+                shaded += self.shaded[i] as usize;
+            }
+        }
+        if n == 0 {
+            0.0
+        } else {
+            shaded as f64 / n as f64
+        }
     }
 
     /// Index of layer `k`'s texel (`x`, `y`).
@@ -268,4 +317,85 @@ fn peel(scene: &RenderScene, origin: Vec3, dir: Vec3, k: usize) -> Vec<f32> {
         t0 = t + (t * 1e-4).max(1e-5);
     }
     out
+}
+
+/// Which texels some camera ray can reach (see [`Layers::trace`], step 2): all of layer 0, and
+/// a hidden texel at depth z where layer 0 has a texel at or behind z (or the environment)
+/// within A·(1/z_near − 1/z) of it.
+fn reachable(frame: &LayerFrame, depth_m: &[f32], k_count: usize, pupil_radius_m: f64) -> Vec<bool> {
+    let (w, h) = (frame.width, frame.height);
+    let texels = frame.texels();
+    let mut out = vec![false; k_count * texels];
+    out[..texels].fill(true);
+    if k_count == 1 {
+        return out;
+    }
+    let layer0 = &depth_m[..texels];
+    let z_near = layer0.iter().copied().fold(f32::INFINITY, f32::min) as f64;
+    let texel = frame.texel_size().min_element();
+    let nbuffer = NBuffer::max_of(layer0, w, h);
+    for k in 1..k_count {
+        for y in 0..h {
+            for x in 0..w {
+                let i = k * texels + y * w + x;
+                let z = depth_m[i];
+                if !z.is_finite() {
+                    continue;
+                }
+                let reach = pupil_radius_m * (1.0 / z_near - 1.0 / z as f64).max(0.0) / texel;
+                let r = (reach.ceil() as usize + 1).min(w.max(h));
+                out[i] = nbuffer.max_in(x, y, r) >= z * (1.0 - 4e-3);
+            }
+        }
+    }
+    out
+}
+
+/// An N-buffer (Décoret 2005): level i holds, at each texel, the maximum over the 2^i × 2^i
+/// square whose top-left corner it is, so the maximum over any square is four lookups.
+struct NBuffer {
+    width: usize,
+    height: usize,
+    levels: Vec<Vec<f32>>,
+}
+
+impl NBuffer {
+    fn max_of(values: &[f32], width: usize, height: usize) -> NBuffer {
+        let mut levels = vec![values.to_vec()];
+        let mut size = 1usize;
+        while size * 2 <= width.max(height) {
+            let prev = levels.last().expect("level 0 exists");
+            let mut next = prev.clone();
+            for y in 0..height {
+                for x in 0..width {
+                    let (x2, y2) = ((x + size).min(width - 1), (y + size).min(height - 1));
+                    let m = prev[y * width + x].max(prev[y * width + x2]).max(prev[y2 * width + x]).max(prev[y2 * width + x2]);
+                    next[y * width + x] = m;
+                }
+            }
+            levels.push(next);
+            size *= 2;
+        }
+        NBuffer { width, height, levels }
+    }
+
+    /// Maximum over the square of half-side `r` around (x, y), clipped to the image.
+    fn max_in(&self, x: usize, y: usize, r: usize) -> f32 {
+        let (x0, y0) = (x.saturating_sub(r), y.saturating_sub(r));
+        let (x1, y1) = ((x + r).min(self.width - 1), (y + r).min(self.height - 1));
+        let side = (x1 - x0 + 1).max(y1 - y0 + 1);
+        let level = (usize::BITS - 1 - side.leading_zeros()) as usize;
+        let level = level.min(self.levels.len() - 1);
+        let n = 1usize << level;
+        let l = &self.levels[level];
+        let xs = [x0, (x1 + 1).saturating_sub(n).max(x0)];
+        let ys = [y0, (y1 + 1).saturating_sub(n).max(y0)];
+        let mut m = f32::NEG_INFINITY;
+        for &yy in &ys {
+            for &xx in &xs {
+                m = m.max(l[yy * self.width + xx]);
+            }
+        }
+        m
+    }
 }

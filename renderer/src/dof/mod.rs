@@ -117,7 +117,31 @@ pub fn make_layers(
         preview.layers.texels_per_pixel,
     )?;
     let layer_settings = LayerSettings { max_depth: settings.max_depth, seed: settings.seed, ..preview.layers };
-    Layers::trace(scene, rig.to_world, frame, &layer_settings)
+    Layers::trace(scene, rig.to_world, frame, &layer_settings, pupil_radius_m(&rig.camera))
+}
+
+/// The largest distance from the axis at which the camera's rays cross the pupil plane z = 0
+/// (m): the aperture radius of a thin lens, about the entrance pupil's of a real lens (with a
+/// quarter of margin for pupil aberration), 0 for a pinhole.
+pub fn pupil_radius_m(camera: &crate::camera::Camera) -> f64 {
+    let wavelength =
+        camera.real_lens().map_or(crate::optics::glass::WAVELENGTH_D_NM, |l| l.primary_wavelength_nm());
+    let mut r = 0.0f64;
+    for film in [(0.5, 0.5), (0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0), (0.5, 0.0), (0.0, 0.5)] {
+        for i in 0..17 {
+            for j in 0..17 {
+                let u = glam::DVec2::new(i as f64 / 16.0, j as f64 / 16.0).min(glam::DVec2::splat(0.9999));
+                let Some(ray) = camera.generate_ray(glam::DVec2::new(film.0, film.1), u, wavelength) else { continue };
+                if ray.direction.z.abs() < 1e-9 {
+                    continue;
+                }
+                let t = -ray.origin.z / ray.direction.z;
+                let p = ray.origin + ray.direction * t;
+                r = r.max(p.truncate().length());
+            }
+        }
+    }
+    r * 1.25
 }
 
 /// Image-based ray tracing: camera rays looked up in the layers.

@@ -1,0 +1,268 @@
+//! `petzval bench dof`: every depth-of-field method (mc, multiview, ibrt, spread) against a
+//! converged Monte Carlo reference on three scenes, as a ladder of budgets: time, relative RMSE
+//! and mean LDR-FLIP per run, then each method's error at MC's time and its time to MC's error.
+
+use super::*;
+use glam::{Vec2, Vec3, Vec4};
+use petzval_renderer::dof::{self, LayerSettings, Method, PreviewSettings};
+use petzval_renderer::film::metrics::{flip_mean, relative_rmse};
+use petzval_renderer::film::{write_png, Image, ToneMap};
+use petzval_renderer::integrator::RenderScene;
+use petzval_renderer::render::{CameraRig, RenderSettings};
+use petzval_renderer::scene::{demo, Environment, Material, Mesh, Scene};
+use petzval_renderer::{Aperture, ApertureShape, Camera, Error, ThinCamera};
+
+/// One scene of the comparison.
+struct BenchScene {
+    name: &'static str,
+    scene: RenderScene,
+    rig: CameraRig,
+}
+
+/// One run: a method at one budget.
+struct Run {
+    scene: &'static str,
+    method: Method,
+    budget: String,
+    seconds: f64,
+    rel_rmse: f64,
+    flip: f64,
+}
+
+/// The demo's camera as a 50 mm thin lens at f/2 with the demo's six blades and focus
+/// (every method supports it), with the demo's sensor tilt or none.
+fn demo_scene(w: u32, h: u32, tilt: bool) -> Result<BenchScene, Error> {
+    let (scene, shot) = demo::demo_scene();
+    let cam = scene.cameras.first().cloned().ok_or_else(|| Error::settings("scene", "the demo has no camera"))?;
+    let to_world = glam::DAffine3::from_cols_array(&cam.to_world.to_cols_array().map(|v| v as f64));
+    let aspect = w as f64 / h as f64;
+    let sensor = Sensor {
+        width_mm: 36.0,
+        height_mm: 36.0 / aspect,
+        tilt_x_deg: if tilt { shot.tilt_x_deg.signum() * shot.tilt_x_deg.abs().max(4.0) } else { 0.0 },
+        ..Sensor::default()
+    };
+    let aperture = Aperture {
+        shape: ApertureShape::Blades { count: shot.blades, curvature: 0.0 },
+        rotation_rad: shot.blade_rotation_deg.to_radians(),
+        anamorphic_ratio: 1.0,
+    };
+    let camera = ThinCamera::new(sensor, 50.0, 2.0, Some(shot.focus_distance_m), aperture)?;
+    Ok(BenchScene {
+        name: if tilt { "demo, tilted sensor" } else { "demo" },
+        scene: RenderScene::new(scene)?,
+        rig: CameraRig { camera: Camera::Thin(camera), to_world },
+    })
+}
+
+/// An axis-aligned box.
+fn cuboid(lo: Vec3, hi: Vec3, material: u32) -> Mesh {
+    let mut m = Mesh::default();
+    let faces: [(Vec3, [Vec3; 4]); 6] = [
+        (Vec3::Z, [Vec3::new(lo.x, lo.y, hi.z), Vec3::new(hi.x, lo.y, hi.z), hi, Vec3::new(lo.x, hi.y, hi.z)]),
+        (Vec3::NEG_Z, [Vec3::new(hi.x, lo.y, lo.z), lo, Vec3::new(lo.x, hi.y, lo.z), Vec3::new(hi.x, hi.y, lo.z)]),
+        (Vec3::X, [Vec3::new(hi.x, lo.y, hi.z), Vec3::new(hi.x, lo.y, lo.z), Vec3::new(hi.x, hi.y, lo.z), hi]),
+        (Vec3::NEG_X, [lo, Vec3::new(lo.x, lo.y, hi.z), Vec3::new(lo.x, hi.y, hi.z), Vec3::new(lo.x, hi.y, lo.z)]),
+        (Vec3::Y, [Vec3::new(lo.x, hi.y, hi.z), hi, Vec3::new(hi.x, hi.y, lo.z), Vec3::new(lo.x, hi.y, lo.z)]),
+        (Vec3::NEG_Y, [lo, Vec3::new(hi.x, lo.y, lo.z), Vec3::new(hi.x, lo.y, hi.z), Vec3::new(lo.x, lo.y, hi.z)]),
+    ];
+    for (n, q) in faces {
+        let base = m.positions.len() as u32;
+        m.positions.extend_from_slice(&q);
+        m.normals.extend_from_slice(&[n; 4]);
+        m.tangents.extend_from_slice(&[Vec4::ZERO; 4]);
+        m.uv0.extend_from_slice(&[Vec2::ZERO; 4]);
+        m.indices.push([base, base + 1, base + 2]);
+        m.indices.push([base, base + 2, base + 3]);
+        m.material_ids.extend_from_slice(&[material; 2]);
+    }
+    m
+}
+
+/// A near object occluding bright highlights: a dark lattice 0.6 m from the camera, far out of
+/// focus, in front of a grid of small bright emitters 8 m away (in focus) above a grey floor.
+fn occluder_scene() -> Result<BenchScene, Error> {
+    let grey = |v: f32| Material {
+        base_color: Vec4::new(v, v, v, 1.0),
+        roughness: 0.8,
+        specular: 0.2,
+        ..Material::default()
+    };
+    let lamp = Material { emissive: Vec3::new(40.0, 30.0, 18.0), double_sided: true, ..grey(0.0) };
+    let mut mesh = Mesh::default();
+    mesh.append(&cuboid(Vec3::new(-20.0, -1.61, -30.0), Vec3::new(20.0, -1.6, 2.0), 0), 0);
+    mesh.append(&cuboid(Vec3::new(-20.0, -2.0, -12.0), Vec3::new(20.0, 8.0, -11.9), 0), 0);
+    for i in 0..9 {
+        for j in 0..5 {
+            let c = Vec3::new(-2.4 + 0.6 * i as f32, -0.9 + 0.45 * j as f32, -8.0);
+            mesh.append(&cuboid(c - Vec3::splat(0.035), c + Vec3::splat(0.035), 1), 0);
+        }
+    }
+    for i in 0..3 {
+        let x = -0.11 + 0.11 * i as f32;
+        mesh.append(&cuboid(Vec3::new(x - 0.012, -0.5, -0.62), Vec3::new(x + 0.012, 0.5, -0.6), 2), 0);
+    }
+    mesh.append(&cuboid(Vec3::new(-0.5, 0.03, -0.62), Vec3::new(0.5, 0.05, -0.6), 2), 0);
+    let scene = Scene {
+        materials: vec![grey(0.5), lamp, grey(0.04)],
+        environment: Environment::Constant(Vec3::new(0.02, 0.025, 0.04)),
+        ..Scene::world(mesh)
+    };
+    let sensor = Sensor { width_mm: 36.0, height_mm: 24.0, ..Sensor::default() };
+    let camera = ThinCamera::new(sensor, 50.0, 2.0, Some(8.0), Aperture::default())?;
+    Ok(BenchScene {
+        name: "near occluder, highlights",
+        scene: RenderScene::new(scene)?,
+        rig: CameraRig { camera: Camera::Thin(camera), to_world: glam::DAffine3::IDENTITY },
+    })
+}
+
+/// Runs the comparison and prints its tables.
+pub(super) fn bench_dof(
+    resolution: &str,
+    reference_spp: u32,
+    target_rmse: f64,
+    save: Option<&std::path::Path>,
+) -> Result<(), Error> {
+    let (w, h) = parse_wxh(resolution)?;
+    if let Some(dir) = save {
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    }
+    let scenes = [demo_scene(w, h, false)?, occluder_scene()?, demo_scene(w, h, true)?];
+    let base = RenderSettings { width: w, height: h, ..RenderSettings::default() };
+    let mut runs: Vec<Run> = Vec::new();
+    for s in &scenes {
+        // 1. The reference: Monte Carlo, converged.
+        let reference = render_one(s, Method::Mc, &RenderSettings { spp: reference_spp, seed: 99, ..base.clone() }, None)?;
+        eprintln!("{}: reference {} spp in {:.1} s", s.name, reference_spp, reference.1);
+        if let Some(dir) = save {
+            write_png(&dir.join(format!("{}-reference.png", slug(s.name))), &reference.0, 0.0, ToneMap::Srgb)?;
+        }
+        // 2. Each method over a ladder of budgets.
+        let ladder: Vec<(Method, String, RenderSettings, PreviewSettings)> = budgets(&base);
+        for (method, budget, settings, preview) in ladder {
+            match render_one(s, method, &settings, Some(&preview)) {
+                Ok((image, seconds)) => {
+                    let rel_rmse = relative_rmse(&reference.0, &image)?;
+                    let flip = flip_mean(&reference.0, &image, 0.0)?;
+                    eprintln!("{}: {method} {budget}: {seconds:.2} s, rel. RMSE {rel_rmse:.4}, FLIP {flip:.4}", s.name);
+                    if let Some(dir) = save {
+                        let name = format!("{}-{method}-{}.png", slug(s.name), slug(&budget));
+                        write_png(&dir.join(name), &image, 0.0, ToneMap::Srgb)?;
+                    }
+                    runs.push(Run { scene: s.name, method, budget, seconds, rel_rmse, flip });
+                }
+                Err(e) => eprintln!("{}: {method} {budget}: not run: {e}", s.name),
+            }
+        }
+    }
+    print_tables(&runs, w, h, reference_spp, target_rmse);
+    Ok(())
+}
+
+fn slug(s: &str) -> String {
+    s.chars().map(|c| if c.is_ascii_alphanumeric() { c } else { '-' }).collect()
+}
+
+/// The budgets: MC and multiview by samples per pixel (views), IBRT and spread by the layers'
+/// shading samples (IBRT with 64 lens samples per pixel).
+fn budgets(base: &RenderSettings) -> Vec<(Method, String, RenderSettings, PreviewSettings)> {
+    let mut out = Vec::new();
+    let layers = |spp: u32| PreviewSettings { layers: LayerSettings { spp, ..LayerSettings::default() } };
+    for spp in [4u32, 16, 64, 256] {
+        out.push((Method::Mc, format!("{spp} spp"), RenderSettings { spp, ..base.clone() }, PreviewSettings::default()));
+    }
+    for spp in [16u32, 64, 256] {
+        out.push((Method::Multiview, format!("{spp} views"), RenderSettings { spp, ..base.clone() }, layers(4)));
+    }
+    for layer_spp in [1u32, 4, 16] {
+        let st = RenderSettings { spp: 64, ..base.clone() };
+        out.push((Method::Ibrt, format!("{layer_spp} layer spp, 64 rays"), st, layers(layer_spp)));
+    }
+    for layer_spp in [1u32, 4, 16] {
+        let st = RenderSettings { spp: 1, ..base.clone() };
+        out.push((Method::Spread, format!("{layer_spp} layer spp"), st, layers(layer_spp)));
+    }
+    out
+}
+
+fn render_one(
+    s: &BenchScene,
+    method: Method,
+    settings: &RenderSettings,
+    preview: Option<&PreviewSettings>,
+) -> Result<(Image, f64), Error> {
+    let preview = preview.copied().unwrap_or_default();
+    let r = dof::render_method(method, &s.scene, &s.rig, settings, &preview, &|_| true, &|_, _| {})?;
+    Ok((r.image, r.seconds))
+}
+
+/// Error at the time of a budget, and time to an error, by log-log interpolation along a
+/// method's ladder.
+fn print_tables(runs: &[Run], w: u32, h: u32, reference_spp: u32, target: f64) {
+    println!(
+        "Depth-of-field methods against Monte Carlo ({reference_spp} spp, seed 99), {w}x{h}, {} threads; thin lens 50 mm f/2 (the demo's blades and focus). FLIP: mean LDR-FLIP of the sRGB previews at 67 px/degree.",
+        rayon::current_num_threads()
+    );
+    println!();
+    println!("| scene | method | budget | seconds | rel. RMSE | mean FLIP |");
+    println!("|---|---|---|---|---|---|");
+    for r in runs {
+        println!("| {} | {} | {} | {:.2} | {:.4} | {:.4} |", r.scene, r.method, r.budget, r.seconds, r.rel_rmse, r.flip);
+    }
+    println!();
+    println!("Equal time (each method's error at the time MC takes at 16 spp) and equal error (time to a relative RMSE of {target}; '—' where the method's ladder never reaches it):");
+    println!();
+    println!("| scene | method | rel. RMSE at MC-16's time | time to rel. RMSE {target} (s) | best rel. RMSE |");
+    println!("|---|---|---|---|---|");
+    let mut scenes: Vec<&str> = runs.iter().map(|r| r.scene).collect();
+    scenes.dedup();
+    for scene in scenes {
+        let mc16 = runs.iter().find(|r| r.scene == scene && r.method == Method::Mc && r.budget == "16 spp");
+        for method in Method::ALL {
+            let mut ladder: Vec<&Run> = runs.iter().filter(|r| r.scene == scene && r.method == method).collect();
+            if ladder.is_empty() {
+                continue;
+            }
+            ladder.sort_by(|a, b| a.seconds.total_cmp(&b.seconds));
+            let at_time = mc16.map(|m| interpolate(&ladder, m.seconds, |r| r.seconds, |r| r.rel_rmse));
+            let to_error = time_to_error(&ladder, target);
+            let best = ladder.iter().map(|r| r.rel_rmse).fold(f64::INFINITY, f64::min);
+            println!(
+                "| {scene} | {method} | {} | {} | {best:.4} |",
+                at_time.flatten().map(|e| format!("{e:.4}")).unwrap_or_else(|| "—".into()),
+                to_error.map(|t| format!("{t:.2}")).unwrap_or_else(|| "—".into()),
+            );
+        }
+    }
+}
+
+/// y at x along the ladder (log-log), None outside its range.
+fn interpolate(ladder: &[&Run], x: f64, fx: impl Fn(&Run) -> f64, fy: impl Fn(&Run) -> f64) -> Option<f64> {
+    for pair in ladder.windows(2) {
+        let (a, b) = (pair[0], pair[1]);
+        let (xa, xb) = (fx(a), fx(b));
+        if xa <= x && x <= xb && xb > xa {
+            let t = (x.ln() - xa.ln()) / (xb.ln() - xa.ln());
+            return Some((fy(a).ln() + t * (fy(b).ln() - fy(a).ln())).exp());
+        }
+    }
+    None
+}
+
+/// The first time along the ladder at which the error falls to `target` (log-log between runs).
+fn time_to_error(ladder: &[&Run], target: f64) -> Option<f64> {
+    if let Some(first) = ladder.first() {
+        if first.rel_rmse <= target {
+            return Some(first.seconds);
+        }
+    }
+    for pair in ladder.windows(2) {
+        let (a, b) = (pair[0], pair[1]);
+        if a.rel_rmse > target && b.rel_rmse <= target {
+            let t = (target.ln() - a.rel_rmse.ln()) / (b.rel_rmse.ln() - a.rel_rmse.ln());
+            return Some((a.seconds.ln() + t * (b.seconds.ln() - a.seconds.ln())).exp());
+        }
+    }
+    None
+}
