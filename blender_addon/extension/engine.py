@@ -259,6 +259,7 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
                 kw = self._view_kwargs(context, depsgraph)
                 render_kw = camera_mod.render_kwargs(scene, scene.frame_current)
                 render_kw.pop("spp")
+                render_kw["method"] = settings.viewport_method.lower()
                 key = viewport_mod.view_key({**kw, **render_kw}, w, h)
                 if key != getattr(self, "_vp_key", None):
                     if preview is not None:

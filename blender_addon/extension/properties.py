@@ -92,6 +92,18 @@ class PetzvalCameraSettings(bpy.types.PropertyGroup):
     )
 
 
+# The depth-of-field methods of the viewport preview: the identifiers, lower-cased, are
+# `petzval render --method` values (docs/dof-methods.md measures them against each other).
+VIEWPORT_METHODS = [
+    ("MC", "Monte Carlo", "Trace every lens ray through the scene (exact; noisy while it converges)", 0),
+    ("IBRT", "Layered Ray Tracing",
+     "Shade the view once into depth-peeled layers, then trace the lens rays against them (smooth blur "
+     "sooner; misses what the layers do not hold)", 1),
+    ("SPREAD", "PSF Spreading", "Spread each layer texel's lens blur onto the image", 2),
+    ("MULTIVIEW", "Multi-View", "Accumulate pinhole views through points of the pupil", 3),
+]
+
+
 class PetzvalRenderSettings(bpy.types.PropertyGroup):
     samples: IntProperty(name="Samples", description="Samples per pixel", default=64, min=1, soft_max=4096)
     viewport_samples: IntProperty(
@@ -100,6 +112,13 @@ class PetzvalRenderSettings(bpy.types.PropertyGroup):
         default=16,
         min=1,
         soft_max=1024,
+    )
+    viewport_method: EnumProperty(
+        name="Viewport Depth of Field",
+        description="How the viewport's Rendered shading makes depth of field (final renders always trace "
+        "every lens ray)",
+        items=VIEWPORT_METHODS,
+        default="MC",
     )
     viewport_divisor: IntProperty(
         name="Viewport Resolution Divisor",

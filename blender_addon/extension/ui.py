@@ -148,6 +148,7 @@ class PETZVAL_PT_sampling(PetzvalPanel, bpy.types.Panel):
         col.prop(s, "spectral")
         col = layout.column(heading="Viewport")
         col.prop(s, "viewport_samples", text="Samples")
+        col.prop(s, "viewport_method", text="Depth of Field")
         col.prop(s, "viewport_divisor", text="Resolution Divisor")
 
 

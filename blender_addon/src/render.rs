@@ -3,9 +3,10 @@
 
 use numpy::ndarray::{Array2, Array3};
 use numpy::IntoPyArray;
+use petzval_renderer::dof;
 use petzval_renderer::film::{Image, PixelFilter};
 use petzval_renderer::integrator::RenderScene;
-use petzval_renderer::render::{render_observed, CameraRig, RenderResult, RenderSettings};
+use petzval_renderer::render::{CameraRig, RenderResult, RenderSettings};
 use petzval_renderer::{shot, Error};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -35,7 +36,7 @@ pub(crate) fn image_arrays(py: Python<'_>, img: &Image) -> (Py<PyAny>, Py<PyAny>
 
 /// Renders a scene through a camera (see the stub for every argument).
 #[pyfunction]
-#[pyo3(signature = (scene, camera, width, height, *, crop = None, spp = 64, seed = 0, max_depth = 8, filter_width_px = 1.5, spectral = false, threads = 0, progress = None, progress_interval_s = 0.1))]
+#[pyo3(signature = (scene, camera, width, height, *, crop = None, spp = 64, seed = 0, max_depth = 8, filter_width_px = 1.5, spectral = false, threads = 0, progress = None, progress_interval_s = 0.1, method = "mc", layers = 4, layer_spp = 4))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn render(
     py: Python<'_>,
@@ -52,6 +53,9 @@ pub(crate) fn render(
     threads: usize,
     progress: Option<Py<PyAny>>,
     progress_interval_s: f64,
+    method: &str,
+    layers: usize,
+    layer_spp: u32,
 ) -> PyResult<Py<PyDict>> {
     guard(|| {
         // 1. Settings, checked before any work.
@@ -77,6 +81,10 @@ pub(crate) fn render(
             crop: crop.map(|(x0, y0, x1, y1)| [x0, y0, x1, y1]),
         };
         settings.validate().map_err(py_err)?;
+        let method: dof::Method = method.parse().map_err(py_err)?;
+        let layer_settings = dof::LayerSettings { count: layers, spp: layer_spp, ..dof::LayerSettings::default() };
+        layer_settings.validate().map_err(py_err)?;
+        let preview = dof::PreviewSettings { layers: layer_settings };
         if !(progress_interval_s.is_finite() && progress_interval_s > 0.0) {
             return Err(settings_err("progress_interval_s", format!("must be positive, got {progress_interval_s}")));
         }
@@ -131,7 +139,8 @@ pub(crate) fn render(
                             *l = Some((img.clone(), spp_done));
                         }
                     };
-                    let result = render_observed(&render_scene, &rig, &settings, &on_progress, &on_pass)?;
+                    let result =
+                        dof::render_method(method, &render_scene, &rig, &settings, &preview, &on_progress, &on_pass)?;
                     Ok((result, built.choice.model.to_string(), built.choice.reason, warnings))
                 };
                 match &pool {

@@ -22,13 +22,26 @@ fn debug_layers_pinhole() {
     let mc = render(&rs, &rig, &st, &|_| true).unwrap().image;
     let frame = LayerFrame::covering(&rig.camera, 60, 40, 0.0, 1).unwrap();
     eprintln!("{frame:?}");
-    let layers = Layers::trace(&rs, rig.to_world, frame, &LayerSettings { spp: 64, ..LayerSettings::default() }, 0.0).unwrap();
+    let layers =
+        Layers::trace(&rs, rig.to_world, frame, &LayerSettings { spp: 64, ..LayerSettings::default() }, 0.0, &|| true)
+            .unwrap()
+            .unwrap();
     for (x, y) in [(5usize, 30usize), (10, 35), (30, 20), (55, 30), (50, 15)] {
         let i = y * 60 + x;
-        let ray = rig.camera.generate_ray(DVec2::new((x as f64 + 0.5) / 60.0, (y as f64 + 0.5) / 40.0), DVec2::splat(0.5), 550.0).unwrap();
+        let ray = rig
+            .camera
+            .generate_ray(DVec2::new((x as f64 + 0.5) / 60.0, (y as f64 + 0.5) / 40.0), DVec2::splat(0.5), 550.0)
+            .unwrap();
         let (xy, _) = frame.project(ray.direction * 10.0).unwrap();
         let li = layers.index(0, x, y);
-        eprintln!("px ({x},{y}) mc {:?} depth {} | layer texel {xy:?} depth {:?} rad {:?} | l1 {:?}", mc.rgba[i], mc.depth[i], layers.depth_m[li], layers.radiance[li], layers.depth_m[layers.index(1, x, y)]);
+        eprintln!(
+            "px ({x},{y}) mc {:?} depth {} | layer texel {xy:?} depth {:?} rad {:?} | l1 {:?}",
+            mc.rgba[i],
+            mc.depth[i],
+            layers.depth_m[li],
+            layers.radiance[li],
+            layers.depth_m[layers.index(1, x, y)]
+        );
     }
     let _ = (dof::Method::Mc, DVec3::ZERO);
     let tracer = petzval_renderer::PathTracer::default();

@@ -58,7 +58,15 @@ fn thin_rig(focus_m: f64, tilt_x_deg: f64) -> CameraRig {
 }
 
 fn settings(spp: u32, seed: u32) -> RenderSettings {
-    RenderSettings { width: 64, height: 48, spp, seed, max_depth: 1, filter: PixelFilter::default(), ..Default::default() }
+    RenderSettings {
+        width: 64,
+        height: 48,
+        spp,
+        seed,
+        max_depth: 1,
+        filter: PixelFilter::default(),
+        ..Default::default()
+    }
 }
 
 fn ibrt(rs: &RenderScene, rig: &CameraRig, st: &RenderSettings, layers: usize) -> Image {
@@ -109,7 +117,9 @@ fn ibrt_hidden_layers_fill_partial_occlusion() {
         (se / n).sqrt() / (sum / n)
     };
     let (e_mc, e1, e3) = (band(&mc), band(&one), band(&three));
-    eprintln!("occluder's blurred band, relative RMSE against MC 1024 spp: MC 64 {e_mc:.4}, IBRT K=1 {e1:.4}, K=3 {e3:.4}");
+    eprintln!(
+        "occluder's blurred band, relative RMSE against MC 1024 spp: MC 64 {e_mc:.4}, IBRT K=1 {e1:.4}, K=3 {e3:.4}"
+    );
     assert!(e3 < 2.0 * e_mc, "K=3 {e3} vs MC noise {e_mc}");
     assert!(e1 > 3.0 * e_mc, "one layer cannot see behind the bar, yet K=1 {e1} is within MC noise {e_mc}");
 }
@@ -135,7 +145,7 @@ fn ibrt_rays_meet_a_plane_layer_at_its_depth() {
     let rig = thin_rig(2.0, 0.0);
     let st = settings(1, 0);
     let preview = PreviewSettings { layers: LayerSettings { count: 1, spp: 1, ..LayerSettings::default() } };
-    let tracer = LayerTracer::new(dof::make_layers(&rs, &rig, &st, &preview).unwrap());
+    let tracer = LayerTracer::new(dof::make_layers(&rs, &rig, &st, &preview, &|_| true).unwrap().unwrap());
     let normal = DVec3::new(0.0, s as f64, c as f64);
     let mut state = 12345u64;
     let mut rnd = || {
@@ -168,4 +178,39 @@ fn ibrt_rays_meet_a_plane_layer_at_its_depth() {
     // The texel's own depth is returned: within half a texel of slope plus the thickness.
     assert!(worst < 5e-3, "worst relative depth error {worst}");
     let _ = DVec2::ZERO;
+}
+
+/// Hidden texels that no camera ray can reach are not shaded, and none is ever hit: across the
+/// frame and the whole aperture, every IBRT hit of the occluder scene lands on a shaded texel,
+/// while most of the hidden layers' texels were skipped.
+#[test]
+fn ibrt_only_unreachable_hidden_texels_go_unshaded() {
+    let mut meshes = stripes(-3.0);
+    meshes.push(rect(-0.02, 0.02, -1.0, 1.0, -0.3, 2));
+    meshes.push(rect(-2.0, 2.0, -2.0, 2.0, -3.5, 0));
+    let rs = scene_of(&meshes, vec![emitter(1.0), emitter(0.2), emitter(0.0)]);
+    let rig = thin_rig(3.0, 0.0);
+    let st = settings(1, 0);
+    let preview = PreviewSettings { layers: LayerSettings { count: 3, spp: 1, ..LayerSettings::default() } };
+    let layers = dof::make_layers(&rs, &rig, &st, &preview, &|_| true).unwrap().unwrap();
+    let fraction = layers.hidden_shaded_fraction();
+    let tracer = LayerTracer::new(layers);
+    let (mut hits, mut hidden_hits) = (0usize, 0usize);
+    for j in 0..48 {
+        for i in 0..64 {
+            for l in 0..16 {
+                let film = DVec2::new((i as f64 + 0.5) / 64.0, (j as f64 + 0.5) / 48.0);
+                let lens = DVec2::new((l % 4) as f64 / 4.0 + 0.125, (l / 4) as f64 / 4.0 + 0.125);
+                let Some(ray) = rig.camera.generate_ray(film, lens, 550.0) else { continue };
+                if let Some((index, _)) = tracer.intersect(ray.origin, ray.direction) {
+                    hits += 1;
+                    hidden_hits += (index >= tracer.layers().frame.texels()) as usize;
+                    assert!(tracer.layers().shaded[index], "ray {ray:?} hit unshaded texel {index}");
+                }
+            }
+        }
+    }
+    eprintln!("hidden texels shaded: {:.1} %; {hits} hits, {hidden_hits} on hidden layers", 100.0 * fraction);
+    assert!(hidden_hits > 100, "the bar's blur should reach the hidden layers: {hidden_hits}");
+    assert!(fraction < 0.5, "most hidden texels (the wall behind the back wall) are unreachable: {fraction}");
 }

@@ -82,12 +82,8 @@ fn cuboid(lo: Vec3, hi: Vec3, material: u32) -> Mesh {
 /// A near object occluding bright highlights: a dark lattice 0.6 m from the camera, far out of
 /// focus, in front of a grid of small bright emitters 8 m away (in focus) above a grey floor.
 fn occluder_scene() -> Result<BenchScene, Error> {
-    let grey = |v: f32| Material {
-        base_color: Vec4::new(v, v, v, 1.0),
-        roughness: 0.8,
-        specular: 0.2,
-        ..Material::default()
-    };
+    let grey =
+        |v: f32| Material { base_color: Vec4::new(v, v, v, 1.0), roughness: 0.8, specular: 0.2, ..Material::default() };
     let lamp = Material { emissive: Vec3::new(40.0, 30.0, 18.0), double_sided: true, ..grey(0.0) };
     let mut mesh = Mesh::default();
     mesh.append(&cuboid(Vec3::new(-20.0, -1.61, -30.0), Vec3::new(20.0, -1.6, 2.0), 0), 0);
@@ -133,7 +129,8 @@ pub(super) fn bench_dof(
     let mut runs: Vec<Run> = Vec::new();
     for s in &scenes {
         // 1. The reference: Monte Carlo, converged.
-        let reference = render_one(s, Method::Mc, &RenderSettings { spp: reference_spp, seed: 99, ..base.clone() }, None)?;
+        let reference =
+            render_one(s, Method::Mc, &RenderSettings { spp: reference_spp, seed: 99, ..base.clone() }, None)?;
         eprintln!("{}: reference {} spp in {:.1} s", s.name, reference_spp, reference.1);
         if let Some(dir) = save {
             write_png(&dir.join(format!("{}-reference.png", slug(s.name))), &reference.0, 0.0, ToneMap::Srgb)?;
@@ -170,7 +167,12 @@ fn budgets(base: &RenderSettings) -> Vec<(Method, String, RenderSettings, Previe
     let mut out = Vec::new();
     let layers = |spp: u32| PreviewSettings { layers: LayerSettings { spp, ..LayerSettings::default() } };
     for spp in [4u32, 16, 64, 256] {
-        out.push((Method::Mc, format!("{spp} spp"), RenderSettings { spp, ..base.clone() }, PreviewSettings::default()));
+        out.push((
+            Method::Mc,
+            format!("{spp} spp"),
+            RenderSettings { spp, ..base.clone() },
+            PreviewSettings::default(),
+        ));
     }
     for spp in [16u32, 64, 256] {
         out.push((Method::Multiview, format!("{spp} views"), RenderSettings { spp, ..base.clone() }, layers(4)));
@@ -208,7 +210,10 @@ fn print_tables(runs: &[Run], w: u32, h: u32, reference_spp: u32, target: f64) {
     println!("| scene | method | budget | seconds | rel. RMSE | mean FLIP |");
     println!("|---|---|---|---|---|---|");
     for r in runs {
-        println!("| {} | {} | {} | {:.2} | {:.4} | {:.4} |", r.scene, r.method, r.budget, r.seconds, r.rel_rmse, r.flip);
+        println!(
+            "| {} | {} | {} | {:.2} | {:.4} | {:.4} |",
+            r.scene, r.method, r.budget, r.seconds, r.rel_rmse, r.flip
+        );
     }
     println!();
     println!("Equal time (each method's error at the time MC takes at 16 spp) and equal error (time to a relative RMSE of {target}; '—' where the method's ladder never reaches it):");

@@ -243,6 +243,9 @@ def render(
     threads: int = 0,
     progress: _ProgressCallback | None = None,
     progress_interval_s: float = 0.1,
+    method: str = "mc",
+    layers: int = 4,
+    layer_spp: int = 4,
 ) -> dict:
     """Renders ``scene`` through ``camera`` and returns ``{"rgba": (H, W, 4) float32,
     "depth": (H, W) float32, "spp": int, "complete": bool, "seconds": float, "lens_model": str,
@@ -263,4 +266,9 @@ def render(
     ``False`` to cancel (``None`` or ``True`` continue). An exception raised by the callback
     cancels and is re-raised. A cancelled render returns what converged with ``complete
     False`` (raises CancelledError if not even one pass finished). ``threads`` 0 uses all
-    cores. The GIL is released while rendering."""
+    cores. The GIL is released while rendering.
+
+    ``method`` is the depth-of-field method, as ``petzval render --method``: ``"mc"`` (Monte
+    Carlo through the lens, the reference), ``"ibrt"`` (camera rays traced against ``layers``
+    depth-peeled layers shaded with ``layer_spp`` samples per texel), ``"spread"`` or
+    ``"multiview"``; ``spp`` stays the camera rays per pixel."""

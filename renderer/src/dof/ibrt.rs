@@ -238,7 +238,6 @@ impl LayerTracer {
         }
         None
     }
-
 }
 
 /// The parameter range [s_in, s_out] ⊂ [0, 1] of segment p0 → p1 inside [0, size]; None if

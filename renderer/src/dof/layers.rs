@@ -42,11 +42,18 @@ impl LayerFrame {
     /// The frame that covers every chief ray of `camera` (lens sample at the pupil centre) for
     /// an image of `width` × `height` pixels, widened by `margin` of its extent on each side; its
     /// texels are `texels_per_pixel` across one of the image's pixels.
-    pub fn covering(camera: &Camera, width: u32, height: u32, margin: f64, texels_per_pixel: u32) -> Result<LayerFrame> {
+    pub fn covering(
+        camera: &Camera,
+        width: u32,
+        height: u32,
+        margin: f64,
+        texels_per_pixel: u32,
+    ) -> Result<LayerFrame> {
         // 1. Chief rays on a 33 × 33 grid over the frame (edges included).
         let n = 33;
         let (mut lo, mut hi) = (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY));
-        let wavelength = camera.real_lens().map_or(crate::optics::glass::WAVELENGTH_D_NM, |l| l.primary_wavelength_nm());
+        let wavelength =
+            camera.real_lens().map_or(crate::optics::glass::WAVELENGTH_D_NM, |l| l.primary_wavelength_nm());
         for j in 0..n {
             for i in 0..n {
                 let film = DVec2::new(i as f64 / (n - 1) as f64, j as f64 / (n - 1) as f64);
@@ -177,7 +184,8 @@ pub struct Layers {
 
 impl Layers {
     /// Traces the layers of `scene` seen from `to_world`'s origin through `frame`, for a camera
-    /// whose rays cross the pupil plane (z = 0) within `pupil_radius_m` of the axis.
+    /// whose rays cross the pupil plane (z = 0) within `pupil_radius_m` of the axis; None when
+    /// `keep_going` turned false (checked per row).
     ///
     /// 1. Depths: every layer's depth from each texel's centre ray.
     /// 2. Which hidden texels any camera ray can reach: a ray from the pupil towards a hidden
@@ -192,7 +200,8 @@ impl Layers {
         frame: LayerFrame,
         settings: &LayerSettings,
         pupil_radius_m: f64,
-    ) -> Result<Layers> {
+        keep_going: &(dyn Fn() -> bool + Sync),
+    ) -> Result<Option<Layers>> {
         settings.validate()?;
         let k_count = settings.count;
         let texels = frame.texels();
@@ -202,6 +211,9 @@ impl Layers {
             .into_par_iter()
             .map(|row| {
                 let mut depth = vec![f32::INFINITY; k_count * frame.width];
+                if !keep_going() {
+                    return depth;
+                }
                 for col in 0..frame.width {
                     let centre = frame.direction(DVec2::new(col as f64 + 0.5, row as f64 + 0.5));
                     let d = to_world.transform_vector3(centre).normalize().as_vec3();
@@ -229,6 +241,9 @@ impl Layers {
             .into_par_iter()
             .map(|row| {
                 let mut radiance = vec![Vec3::ZERO; k_count * frame.width];
+                if !keep_going() {
+                    return radiance;
+                }
                 for col in 0..frame.width {
                     let wanted = |k: usize| shaded[k * texels + row * frame.width + col];
                     let last = (0..k_count).rev().find(|&k| wanted(k)).map_or(0, |k| k + 1);
@@ -265,7 +280,10 @@ impl Layers {
                 radiance[dst..dst + frame.width].copy_from_slice(&r[k * frame.width..(k + 1) * frame.width]);
             }
         }
-        Ok(Layers { frame, count: k_count, depth_m, radiance, shaded, to_world })
+        if !keep_going() {
+            return Ok(None);
+        }
+        Ok(Some(Layers { frame, count: k_count, depth_m, radiance, shaded, to_world }))
     }
 
     /// Share of the hidden layers' surface texels (k ≥ 1, finite depth) that were shaded.
@@ -369,7 +387,10 @@ impl NBuffer {
             for y in 0..height {
                 for x in 0..width {
                     let (x2, y2) = ((x + size).min(width - 1), (y + size).min(height - 1));
-                    let m = prev[y * width + x].max(prev[y * width + x2]).max(prev[y2 * width + x]).max(prev[y2 * width + x2]);
+                    let m = prev[y * width + x]
+                        .max(prev[y * width + x2])
+                        .max(prev[y2 * width + x])
+                        .max(prev[y2 * width + x2]);
                     next[y * width + x] = m;
                 }
             }

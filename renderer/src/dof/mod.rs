@@ -91,7 +91,10 @@ pub fn render_method(
     let mut result = match method {
         Method::Mc => return crate::render::render_observed(scene, rig, settings, progress, on_pass),
         Method::Ibrt => {
-            let tracer = LayerTracer::new(make_layers(scene, rig, settings, preview)?);
+            let Some(layers) = make_layers(scene, rig, settings, preview, progress)? else {
+                return Ok(cancelled(settings, start));
+            };
+            let tracer = LayerTracer::new(layers);
             render_samples(rig, settings, progress, on_pass, &IbrtShader { tracer: &tracer, scene })?
         }
         Method::Multiview | Method::Spread => {
@@ -102,13 +105,28 @@ pub fn render_method(
     Ok(result)
 }
 
-/// The layers of `scene` for `rig`'s camera at `settings`' resolution.
+/// What a render cancelled before its first pass returns: a black image, no samples.
+fn cancelled(settings: &RenderSettings, start: Instant) -> RenderResult {
+    let [x0, y0, x1, y1] = settings.crop.unwrap_or([0, 0, settings.width, settings.height]);
+    RenderResult {
+        image: crate::film::Film::new(x1 - x0, y1 - y0).image(),
+        spp_done: 0,
+        complete: false,
+        seconds: start.elapsed().as_secs_f64(),
+        camera_rays: 0,
+        dropped_samples: 0,
+    }
+}
+
+/// The layers of `scene` for `rig`'s camera at `settings`' resolution; None when `progress`
+/// cancelled (it is asked with fraction 0 while the layers are traced).
 pub fn make_layers(
     scene: &RenderScene,
     rig: &CameraRig,
     settings: &RenderSettings,
     preview: &PreviewSettings,
-) -> Result<Layers> {
+    progress: Progress,
+) -> Result<Option<Layers>> {
     let frame = LayerFrame::covering(
         &rig.camera,
         settings.width,
@@ -117,15 +135,14 @@ pub fn make_layers(
         preview.layers.texels_per_pixel,
     )?;
     let layer_settings = LayerSettings { max_depth: settings.max_depth, seed: settings.seed, ..preview.layers };
-    Layers::trace(scene, rig.to_world, frame, &layer_settings, pupil_radius_m(&rig.camera))
+    Layers::trace(scene, rig.to_world, frame, &layer_settings, pupil_radius_m(&rig.camera), &|| progress(0.0))
 }
 
 /// The largest distance from the axis at which the camera's rays cross the pupil plane z = 0
 /// (m): the aperture radius of a thin lens, about the entrance pupil's of a real lens (with a
 /// quarter of margin for pupil aberration), 0 for a pinhole.
 pub fn pupil_radius_m(camera: &crate::camera::Camera) -> f64 {
-    let wavelength =
-        camera.real_lens().map_or(crate::optics::glass::WAVELENGTH_D_NM, |l| l.primary_wavelength_nm());
+    let wavelength = camera.real_lens().map_or(crate::optics::glass::WAVELENGTH_D_NM, |l| l.primary_wavelength_nm());
     let mut r = 0.0f64;
     for film in [(0.5, 0.5), (0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0), (0.5, 0.0), (0.0, 0.5)] {
         for i in 0..17 {
