@@ -10,7 +10,7 @@ use petzval_renderer::film::{write_png, Image, ToneMap};
 use petzval_renderer::integrator::RenderScene;
 use petzval_renderer::render::{CameraRig, RenderSettings};
 use petzval_renderer::scene::{demo, Environment, Material, Mesh, Scene};
-use petzval_renderer::{Aperture, ApertureShape, Camera, Error, ThinCamera};
+use petzval_renderer::{library_lens, Aperture, ApertureShape, Camera, Error, ExactCamera, ThinCamera};
 
 /// One scene of the comparison.
 struct BenchScene {
@@ -82,6 +82,11 @@ fn cuboid(lo: Vec3, hi: Vec3, material: u32) -> Mesh {
 /// A near object occluding bright highlights: a dark lattice 0.6 m from the camera, far out of
 /// focus, in front of a grid of small bright emitters 8 m away (in focus) above a grey floor.
 fn occluder_scene() -> Result<BenchScene, Error> {
+    occluder_scene_shot(8.0, 0.0)
+}
+
+/// The occluder scene focused at `focus_m`, the camera turned `yaw_deg` to the left.
+fn occluder_scene_shot(focus_m: f64, yaw_deg: f64) -> Result<BenchScene, Error> {
     let grey =
         |v: f32| Material { base_color: Vec4::new(v, v, v, 1.0), roughness: 0.8, specular: 0.2, ..Material::default() };
     let lamp = Material { emissive: Vec3::new(40.0, 30.0, 18.0), double_sided: true, ..grey(0.0) };
@@ -105,11 +110,14 @@ fn occluder_scene() -> Result<BenchScene, Error> {
         ..Scene::world(mesh)
     };
     let sensor = Sensor { width_mm: 36.0, height_mm: 24.0, ..Sensor::default() };
-    let camera = ThinCamera::new(sensor, 50.0, 2.0, Some(8.0), Aperture::default())?;
+    let camera = ThinCamera::new(sensor, 50.0, 2.0, Some(focus_m), Aperture::default())?;
     Ok(BenchScene {
         name: "near occluder, highlights",
         scene: RenderScene::new(scene)?,
-        rig: CameraRig { camera: Camera::Thin(camera), to_world: glam::DAffine3::IDENTITY },
+        rig: CameraRig {
+            camera: Camera::Thin(camera),
+            to_world: glam::DAffine3::from_rotation_y(yaw_deg.to_radians()),
+        },
     })
 }
 
@@ -270,4 +278,128 @@ fn time_to_error(ladder: &[&Run], target: f64) -> Option<f64> {
         }
     }
     None
+}
+
+/// One failure case: a scene and camera where a method breaks, its settings, and what to see.
+struct Failure {
+    name: &'static str,
+    what: &'static str,
+    scene: BenchScene,
+    method: Method,
+    preview: PreviewSettings,
+    spp: u32,
+}
+
+/// Renders each failure case with the method and with Monte Carlo, side by side (method left,
+/// MC right) as `DIR/failure-NAME.png`, and prints a table of their errors against MC.
+pub(super) fn bench_dof_failures(resolution: &str, reference_spp: u32, dir: &std::path::Path) -> Result<(), Error> {
+    let (w, h) = parse_wxh(resolution)?;
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let layers = |count: usize, margin: f64| PreviewSettings {
+        layers: LayerSettings { count, margin, spp: 8, ..LayerSettings::default() },
+    };
+    let fisheye = |method: Method, name: &'static str| -> Result<Failure, Error> {
+        let mut s = demo_scene(w, h, false)?;
+        let lens = library_lens("fisheye-10mm")?;
+        let aspect = w as f64 / h as f64;
+        let sensor = Sensor { width_mm: 36.0, height_mm: 36.0 / aspect, ..Sensor::default() };
+        s.rig.camera = Camera::Exact(ExactCamera::new(sensor, lens, Some(1.0))?);
+        Ok(Failure {
+            name,
+            what: "a 156° fisheye: ±78° still fits the ±80° planar frame, but its tangent grid spends the texels on the rim",
+            scene: s,
+            method,
+            preview: layers(4, 0.15),
+            spp: 64,
+        })
+    };
+    let mut cases = vec![
+        fisheye(Method::Ibrt, "wide-angle-ibrt")?,
+        Failure {
+            name: "near-object-one-layer-ibrt",
+            what: "one layer: the blurred near lattice hides the lamps and floor behind it, which no layer holds",
+            scene: occluder_scene()?,
+            method: Method::Ibrt,
+            preview: layers(1, 0.15),
+            spp: 64,
+        },
+        Failure {
+            name: "outside-frame-ibrt",
+            what: "no layer margin: the lamps just beyond the edge of the frame, far out of focus, blur into it in MC only",
+            scene: occluder_scene_shot(0.6, 37.0)?,
+            method: Method::Ibrt,
+            preview: layers(4, 0.0),
+            spp: 64,
+        },
+        Failure {
+            name: "tilt-ibrt",
+            what: "not a failure: a tilted sensor is only other camera rays against the same layers",
+            scene: demo_scene(w, h, true)?,
+            method: Method::Ibrt,
+            preview: layers(4, 0.15),
+            spp: 64,
+        },
+    ];
+    for method in [Method::Spread, Method::Multiview] {
+        cases.push(Failure {
+            name: if method == Method::Spread { "near-object-spread" } else { "near-object-multiview" },
+            what: "the near lattice far out of focus in front of bright lamps",
+            scene: occluder_scene()?,
+            method,
+            preview: layers(4, 0.15),
+            spp: 64,
+        });
+        cases.push(Failure {
+            name: if method == Method::Spread { "tilt-spread" } else { "tilt-multiview" },
+            what: "a tilted sensor (Scheimpflug)",
+            scene: demo_scene(w, h, true)?,
+            method,
+            preview: layers(4, 0.15),
+            spp: 64,
+        });
+    }
+    println!("| case | method | what | rel. RMSE | mean FLIP | image |");
+    println!("|---|---|---|---|---|---|");
+    let base = RenderSettings { width: w, height: h, ..RenderSettings::default() };
+    for case in &cases {
+        let reference =
+            render_one(&case.scene, Method::Mc, &RenderSettings { spp: reference_spp, seed: 99, ..base.clone() }, None)?;
+        let settings = RenderSettings { spp: case.spp, ..base.clone() };
+        let (image, _) = match render_one(&case.scene, case.method, &settings, Some(&case.preview)) {
+            Ok(r) => r,
+            Err(e) => {
+                println!("| {} | {} | {} | not run: {e} | | |", case.name, case.method, case.what);
+                continue;
+            }
+        };
+        let rel_rmse = relative_rmse(&reference.0, &image)?;
+        let flip = flip_mean(&reference.0, &image, 0.0)?;
+        let file = format!("failure-{}.png", case.name);
+        write_png(&dir.join(&file), &side_by_side(&image, &reference.0), 0.0, ToneMap::Srgb)?;
+        println!("| {} | {} | {} | {rel_rmse:.4} | {flip:.4} | {file} |", case.name, case.method, case.what);
+    }
+    Ok(())
+}
+
+/// Two images of one size side by side (a left, b right).
+fn side_by_side(a: &Image, b: &Image) -> Image {
+    let (w, h) = (a.width as usize, a.height as usize);
+    let mut out = Image {
+        width: 2 * a.width,
+        height: a.height,
+        rgba: Vec::with_capacity(2 * w * h),
+        depth: Vec::with_capacity(2 * w * h),
+        normal: Vec::with_capacity(2 * w * h),
+        albedo: Vec::with_capacity(2 * w * h),
+    };
+    for y in 0..h {
+        for img in [a, b] {
+            let row = y * w..(y + 1) * w;
+            out.rgba.extend_from_slice(&img.rgba[row.clone()]);
+            out.depth.extend_from_slice(&img.depth[row.clone()]);
+            out.normal.extend_from_slice(&img.normal[row.clone()]);
+            out.albedo.extend_from_slice(&img.albedo[row]);
+        }
+    }
+    out
 }

@@ -108,6 +108,10 @@ pub enum BenchCommand {
         /// Write every render as a PNG into this directory.
         #[arg(long)]
         save: Option<std::path::PathBuf>,
+        /// Instead, render the failure cases (wide angle, near objects, highlights outside the
+        /// frame, tilt) beside Monte Carlo into this directory.
+        #[arg(long)]
+        failures: Option<std::path::PathBuf>,
     },
     /// Memory of a scene of many instances of one mesh (mesh data, BLAS, instance records, TLAS)
     /// against one copy, a render of it, and the built-in demo flattened vs instanced.
@@ -141,9 +145,10 @@ pub fn run(cmd: BenchCommand) -> Result<(), Error> {
         BenchCommand::Instances { instances, triangles, resolution, spp, repeats, save } => {
             bench_instances(instances, triangles, &resolution, spp, repeats, save.as_deref())
         }
-        BenchCommand::Dof { resolution, reference_spp, target_rmse, save } => {
-            bench_dof(&resolution, reference_spp, target_rmse, save.as_deref())
-        }
+        BenchCommand::Dof { resolution, reference_spp, target_rmse, save, failures } => match failures {
+            Some(dir) => dof::bench_dof_failures(&resolution, reference_spp, &dir),
+            None => bench_dof(&resolution, reference_spp, target_rmse, save.as_deref()),
+        },
         BenchCommand::LensModels { lens, rays, resolutions, json } => bench_lens_models(lens, rays, &resolutions, json),
         BenchCommand::RenderModels { resolution, spp, resolutions, seed, save, json } => {
             bench_render_models(&resolution, spp, &resolutions, seed, save.as_deref(), json)
