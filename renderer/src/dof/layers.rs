@@ -22,6 +22,10 @@ use crate::sampler::PixelSampler;
 use glam::{DAffine3, DVec2, DVec3, Vec3};
 use rayon::prelude::*;
 
+/// Most layers.
+pub const MAX_LAYERS: usize = 16;
+/// Relative depth within which a jittered ray's hit is on the surface of the texel's centre ray.
+pub const SAME_SURFACE: f32 = 0.05;
 /// Largest tangent of the layer frame (80°): wider fields cannot be one planar pinhole image.
 const MAX_TAN: f64 = 5.67;
 
@@ -145,7 +149,7 @@ impl Default for LayerSettings {
 impl LayerSettings {
     /// Checks the settings.
     pub fn validate(&self) -> Result<()> {
-        if !(1..=16).contains(&self.count) {
+        if !(1..=MAX_LAYERS).contains(&self.count) {
             return Err(Error::settings("layers", format!("{} must be in 1..=16", self.count)));
         }
         if !(1..=65536).contains(&self.spp) {
@@ -172,8 +176,9 @@ pub struct Layers {
     /// Planar depth along −z (m) of layer k's surface at each texel (the k-th front-facing hit
     /// of the texel's centre ray); +inf where the ray has left the scene (the environment shows).
     pub depth_m: Vec<f32>,
-    /// Radiance leaving that surface towards the centre (linear RGB, path traced; samples
-    /// jittered over the texel, each peeling its own k-th hit), or the environment's where the depth is +inf.
+    /// Radiance leaving that surface towards the centre (linear RGB, path traced; rays jittered
+    /// over the texel, each shading its hit on that surface: within [`SAME_SURFACE`] of the
+    /// centre's depth; rays that miss the surface do not count), or the environment's where the depth is +inf.
     pub radiance: Vec<Vec3>,
     /// Whether each texel was shaded: every texel of layer 0, and the hidden texels some camera
     /// ray can reach (the others hold zero radiance and are never looked up).
@@ -193,7 +198,8 @@ impl Layers {
     ///    radius) before reaching it, so a hidden texel is reachable only if layer 0 has a
     ///    texel at or behind z within that radius (an N-buffer of layer 0's maximum depth
     ///    answers the window query in four lookups). Unreachable texels are not shaded.
-    /// 3. Radiance: jittered rays over each texel, each shading its own k-th hit.
+    /// 3. Radiance: jittered rays over each texel, each shading its hit on the centre ray's
+    ///    surface of each layer (so silhouettes do not mix surfaces into one layer).
     pub fn trace(
         scene: &RenderScene,
         to_world: DAffine3,
@@ -246,28 +252,63 @@ impl Layers {
                 }
                 for col in 0..frame.width {
                     let wanted = |k: usize| shaded[k * texels + row * frame.width + col];
-                    let last = (0..k_count).rev().find(|&k| wanted(k)).map_or(0, |k| k + 1);
+                    let centre_depth = |k: usize| depth_m[k * texels + row * frame.width + col];
+                    let mut sums = [Vec3::ZERO; MAX_LAYERS];
+                    let mut counts = [0u32; MAX_LAYERS];
+                    // Radiance from the path at hit `i` of ray `d` (peeled hits `hits`).
+                    let shade = |d: Vec3, hits: &[f32], i: usize, sampler: &mut PixelSampler| {
+                        // Start 1 % short of the hit (closer starts can miss it at grazing
+                        // angles), but past the previous hit.
+                        let t = hits[i];
+                        let previous = if i > 0 { hits[i - 1] } else { 0.0 };
+                        let clip = ((t * 0.99).max(0.5 * (previous + t)), f32::INFINITY);
+                        tracer.trace_clipped(scene, origin, d, clip, sampler).radiance
+                    };
                     for s in 0..settings.spp {
                         let mut sampler = PixelSampler::new(col as u32, row as u32, s, settings.seed ^ 0x1a7e_5eed);
                         let off = sampler.next_2d();
                         let dir = frame.direction(DVec2::new(col as f64 + off.x as f64, row as f64 + off.y as f64));
+                        let axial = (1.0 / dir.length()) as f32;
                         let d = to_world.transform_vector3(dir).normalize().as_vec3();
-                        let hits = peel(scene, origin, d, last);
-                        for k in (0..last).filter(|&k| wanted(k)) {
+                        // One hit more than layers: at this position the surface may lie deeper.
+                        let hits = peel(scene, origin, d, k_count + 1);
+                        for k in (0..k_count).filter(|&k| wanted(k)) {
+                            let z = centre_depth(k);
                             let mut layer_sampler =
                                 PixelSampler::new(col as u32, row as u32, s, settings.seed ^ (k as u32 + 1));
-                            let value = match hits.get(k) {
-                                Some(&t) => {
-                                    // Start 1 % short of the hit (closer starts can miss it at
-                                    // grazing angles), but past the previous layer's.
-                                    let previous = if k > 0 { hits[k - 1] } else { 0.0 };
-                                    let clip = ((t * 0.99).max(0.5 * (previous + t)), f32::INFINITY);
-                                    tracer.trace_clipped(scene, origin, d, clip, &mut layer_sampler).radiance
-                                }
-                                None => crate::integrator::lights::env_radiance(env, d),
-                            };
-                            radiance[k * frame.width + col] += value / settings.spp as f32;
+                            if !z.is_finite() {
+                                sums[k] += crate::integrator::lights::env_radiance(env, d);
+                                counts[k] += 1;
+                                continue;
+                            }
+                            // This ray's hit on the centre's surface: the nearest in depth, if
+                            // within SAME_SURFACE of it (else the surface does not cover this
+                            // position and the sample says nothing about it).
+                            let nearest = (0..hits.len()).min_by(|&a, &b| {
+                                (hits[a] * axial - z).abs().total_cmp(&(hits[b] * axial - z).abs())
+                            });
+                            if let Some(i) = nearest.filter(|&i| (hits[i] * axial - z).abs() <= SAME_SURFACE * z) {
+                                sums[k] += shade(d, &hits, i, &mut layer_sampler);
+                                counts[k] += 1;
+                            }
                         }
+                    }
+                    for k in (0..k_count).filter(|&k| wanted(k)) {
+                        let value = if counts[k] > 0 {
+                            sums[k] / counts[k] as f32
+                        } else {
+                            // No jittered ray met the surface: shade the centre ray's own hit.
+                            let centre = frame.direction(DVec2::new(col as f64 + 0.5, row as f64 + 0.5));
+                            let d = to_world.transform_vector3(centre).normalize().as_vec3();
+                            let hits = peel(scene, origin, d, k + 1);
+                            let mut sampler = PixelSampler::new(col as u32, row as u32, 0, settings.seed ^ 0x5eed_c0de);
+                            if hits.len() > k {
+                                shade(d, &hits, k, &mut sampler)
+                            } else {
+                                crate::integrator::lights::env_radiance(env, d)
+                            }
+                        };
+                        radiance[k * frame.width + col] = value;
                     }
                 }
                 radiance
