@@ -126,6 +126,13 @@ BAD_RENDER_ARGS = [
     ("nan-environment-strength", ["--environment-strength", "nan"], ["environment-strength"]),
     ("inf-filter-width", ["--filter-width", "inf"], ["filter-width"]),
     ("nan-tolerance", ["--tolerance", "nan"], ["tolerance"]),
+    # issue 13: the depth-of-field method and its layers
+    ("unknown-method", ["--method", "raytrace"], ["method", "raytrace"]),
+    ("zero-layers", ["--method", "ibrt", "--layers", "0"], ["layers"]),
+    ("too-many-layers", ["--method", "ibrt", "--layers", "17"], ["layers"]),
+    ("zero-layer-spp", ["--method", "ibrt", "--layer-spp", "0"], ["layer_spp"]),
+    ("nan-layer-margin", ["--method", "ibrt", "--layer-margin", "nan"], ["layer_margin"]),
+    ("zero-layer-texels", ["--method", "ibrt", "--layer-texels", "0"], ["layer_texels"]),
 ]
 
 
@@ -441,6 +448,24 @@ def test_render_demo_without_arguments(petzval, tmp_path):
     assert 0.001 < rgb.mean() < 10, rgb.mean()
     # alpha is coverage: the table and street fill the lower part of the frame (sky above)
     assert (ch["A"] > 0.99).mean() > 0.5, f"alpha: {(ch['A'] > 0.99).mean():.2f} of the pixels fully covered"
+
+
+def test_render_methods_record_themselves(petzval, tmp_path):
+    """--method ibrt renders the demo through its real lens (tilted sensor) from depth-peeled
+    layers: near the Monte Carlo render of the same settings, with `dofMethod` in the EXR."""
+    images = {}
+    for method in ("mc", "ibrt"):
+        out = f"{method}.exr"
+        r = run(petzval, ["render", "--resolution", "96x64", "--spp", "32", "-o", out, "--no-png",
+                          "--method", method], tmp_path)
+        assert r.returncode == 0, r.stderr
+        meta, ch = read_exr(tmp_path / out)
+        assert meta["petzval/dofMethod"] == method, meta
+        images[method] = np.stack([ch["R"], ch["G"], ch["B"]])
+    mc, ibrt = images["mc"], images["ibrt"]
+    assert np.isfinite(ibrt).all()
+    ratio = ibrt.mean() / mc.mean()
+    assert abs(ratio - 1) < 0.05, f"IBRT mean / MC mean = {ratio:.4f}"
 
 
 def test_render_output_options(petzval, tmp_path):
