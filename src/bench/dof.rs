@@ -362,8 +362,12 @@ pub(super) fn bench_dof_failures(resolution: &str, reference_spp: u32, dir: &std
     println!("|---|---|---|---|---|---|");
     let base = RenderSettings { width: w, height: h, ..RenderSettings::default() };
     for case in &cases {
-        let reference =
-            render_one(&case.scene, Method::Mc, &RenderSettings { spp: reference_spp, seed: 99, ..base.clone() }, None)?;
+        let reference = render_one(
+            &case.scene,
+            Method::Mc,
+            &RenderSettings { spp: reference_spp, seed: 99, ..base.clone() },
+            None,
+        )?;
         let settings = RenderSettings { spp: case.spp, ..base.clone() };
         let (image, _) = match render_one(&case.scene, case.method, &settings, Some(&case.preview)) {
             Ok(r) => r,

@@ -27,6 +27,8 @@ pub const SURFACE_JUMP: f32 = 0.03;
 /// Largest second difference of inverse depth, relative to the step, of three texels on one
 /// surface (0 on a plane).
 pub const PLANAR_TOLERANCE: f32 = 0.25;
+/// Most partly covering elements one ray passes through before the environment.
+pub const MAX_PARTIAL_HITS: usize = 8;
 /// Least half-thickness of a layer element, relative to its depth.
 pub const THICKNESS: f32 = 2e-3;
 
@@ -141,36 +143,48 @@ impl LayerTracer {
         &self.layers
     }
 
-    /// The radiance along camera-space ray `ray` (origin in metres), as a path sample (alpha 1
-    /// on a layer hit; depth along the ray).
+    /// The radiance along camera-space ray `ray` (origin in metres), as a path sample (alpha:
+    /// the coverage of the layer elements it met; depth along the ray to the first). Elements
+    /// that cover part of their texel ([`Layers::coverage`]) pass the rest on to what lies
+    /// behind them.
     pub fn shade(&self, scene: &RenderScene, ray: &CameraRay) -> PathSample {
-        let miss = |dir: DVec3| PathSample {
-            radiance: self.layers.environment(scene, dir),
+        let mut out = PathSample {
+            radiance: Vec3::ZERO,
             alpha: 0.0,
             depth_m: f32::INFINITY,
             normal: Vec3::ZERO,
             albedo: Vec3::ZERO,
             dropped: false,
         };
-        match self.intersect(ray.origin, ray.direction) {
-            Some((index, z)) => {
+        let mut transmitted = 1.0f32;
+        let mut after_z = 0.0f64;
+        for _ in 0..MAX_PARTIAL_HITS {
+            let Some((index, z)) = self.intersect_beyond(ray.origin, ray.direction, after_z) else { break };
+            if out.depth_m.is_infinite() {
                 let d = ray.direction.normalize();
-                let t = (z + ray.origin.z) / -d.z;
-                PathSample {
-                    radiance: self.layers.radiance[index],
-                    alpha: 1.0,
-                    depth_m: t as f32,
-                    normal: Vec3::ZERO,
-                    albedo: Vec3::ZERO,
-                    dropped: false,
-                }
+                out.depth_m = ((z + ray.origin.z) / -d.z) as f32;
             }
-            None => miss(ray.direction),
+            let coverage = self.layers.coverage[index];
+            out.radiance += transmitted * coverage * self.layers.radiance[index];
+            out.alpha += transmitted * coverage;
+            transmitted *= 1.0 - coverage;
+            after_z = z;
+            if transmitted < 1e-3 {
+                return out;
+            }
         }
+        out.radiance += transmitted * self.layers.environment(scene, ray.direction);
+        out
     }
 
     /// The first layer element along the ray: its index and planar depth (m).
     pub fn intersect(&self, origin: DVec3, dir: DVec3) -> Option<(usize, f64)> {
+        self.intersect_beyond(origin, dir, 0.0)
+    }
+
+    /// The first layer element along the ray deeper than `after_z` (m): its index and planar
+    /// depth.
+    pub fn intersect_beyond(&self, origin: DVec3, dir: DVec3, after_z: f64) -> Option<(usize, f64)> {
         let frame = self.layers.frame;
         let [z_near, z_far] = self.depth_range;
         if !(z_near.is_finite()) || dir.z >= -1e-9 {
@@ -180,7 +194,7 @@ impl LayerTracer {
         //    with w = w0 + (w1 − w0)·s, from the nearest depth to the farthest.
         let a = DVec2::new(dir.x / -dir.z, dir.y / -dir.z);
         let b = DVec2::new(origin.x + origin.z * a.x, origin.y + origin.z * a.y);
-        let z0 = (z_near as f64 * 0.999).max(-origin.z + 1e-6);
+        let z0 = (z_near as f64 * 0.999).max(-origin.z + 1e-6).max(after_z * (1.0 - 2.0 * THICKNESS as f64));
         let z1 = z_far as f64 * 1.001;
         if z1 <= z0 {
             return None;
@@ -224,8 +238,8 @@ impl LayerTracer {
             for k in 0..self.layers.count {
                 let i = self.layers.index(k, tx, ty);
                 let [lo, hi] = self.span[i];
-                if lo <= zb && za <= hi {
-                    let z = self.layers.depth_m[i] as f64;
+                let z = self.layers.depth_m[i] as f64;
+                if lo <= zb && za <= hi && z > after_z {
                     if best.is_none_or(|(_, bz)| z < bz) {
                         best = Some((i, z));
                     }

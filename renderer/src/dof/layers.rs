@@ -1,6 +1,12 @@
 //! Depth-peeled layers seen from the perspective centre: the shared input of the image-based
-//! preview methods. Our ray tracer makes them directly (the first hit, then the next front-facing intersections
-//! along each ray), so no rasteriser and no frustum matrices are needed, under tilt as anywhere else.
+//! preview methods. Our ray tracer makes them directly, so no rasteriser and no frustum
+//! matrices are needed, under tilt as anywhere else: each texel's jittered rays are peeled (the
+//! first hit, then the next front-facing ones), their hits grouped into surfaces (a hit within
+//! [`SAME_SURFACE`] of a surface's tangent plane belongs to it), and the K nearest surfaces are
+//! the texel's layers, each with its depth, its coverage of the texel (the share of the rays that
+//! met it: sub-texel objects and silhouettes keep their energy without mixing surfaces) and its
+//! radiance towards the centre (those rays' paths from it). Behind the last surface of a texel
+//! lies the environment.
 //!
 //! The layers live in a [`LayerFrame`]: a pinhole at the camera's origin (the thin lens's centre,
 //! a real lens's entrance pupil) looking down −z, with a rectilinear grid of texels in tangent
@@ -24,8 +30,11 @@ use rayon::prelude::*;
 
 /// Most layers.
 pub const MAX_LAYERS: usize = 16;
-/// Relative depth within which a jittered ray's hit is on the surface of the texel's centre ray.
-pub const SAME_SURFACE: f32 = 0.05;
+/// Distance from the tangent plane of a texel's centre hit, relative to its depth, within which a
+/// jittered ray's hit is on the same surface.
+pub const SAME_SURFACE: f32 = 0.01;
+/// Largest distance from the centre hit, relative to its depth, of a hit on the same surface.
+pub const SAME_SURFACE_REACH: f32 = 0.5;
 /// Largest tangent of the layer frame (80°): wider fields cannot be one planar pinhole image.
 const MAX_TAN: f64 = 5.67;
 
@@ -173,13 +182,15 @@ pub struct Layers {
     pub frame: LayerFrame,
     /// Number of layers K.
     pub count: usize,
-    /// Planar depth along −z (m) of layer k's surface at each texel (the k-th front-facing hit
-    /// of the texel's centre ray); +inf where the ray has left the scene (the environment shows).
+    /// Planar depth along −z (m) of layer k's surface at each texel (the mean over the rays that
+    /// met it); +inf for the environment behind the texel's last surface.
     pub depth_m: Vec<f32>,
-    /// Radiance leaving that surface towards the centre (linear RGB, path traced; rays jittered
-    /// over the texel, each shading its hit on that surface: within [`SAME_SURFACE`] of the
-    /// centre's depth; rays that miss the surface do not count), or the environment's where the depth is +inf.
+    /// Radiance leaving that surface towards the centre (linear RGB: the mean of the paths from
+    /// the hits of the rays that met it), or the environment's mean over the texel.
     pub radiance: Vec<Vec3>,
+    /// Share of the jittered rays over each texel that met its surface (1 for the environment):
+    /// the surface covers this much of the texel, and the rest shows what lies behind.
+    pub coverage: Vec<f32>,
     /// Whether each texel was shaded: every texel of layer 0, and the hidden texels some camera
     /// ray can reach (the others hold zero radiance and are never looked up).
     pub shaded: Vec<bool>,
@@ -192,14 +203,14 @@ impl Layers {
     /// whose rays cross the pupil plane (z = 0) within `pupil_radius_m` of the axis; None when
     /// `keep_going` turned false (checked per row).
     ///
-    /// 1. Depths: every layer's depth from each texel's centre ray.
+    /// 1. Surfaces: each texel's `spp` jittered rays peeled (K + 1 hits), their hits grouped by
+    ///    surface; the K nearest surfaces by mean depth, then the environment.
     /// 2. Which hidden texels any camera ray can reach: a ray from the pupil towards a hidden
     ///    surface at depth z moves in the image by at most A·(1/z_near − 1/z) (A the pupil
     ///    radius) before reaching it, so a hidden texel is reachable only if layer 0 has a
     ///    texel at or behind z within that radius (an N-buffer of layer 0's maximum depth
     ///    answers the window query in four lookups). Unreachable texels are not shaded.
-    /// 3. Radiance: jittered rays over each texel, each shading its hit on the centre ray's
-    ///    surface of each layer (so silhouettes do not mix surfaces into one layer).
+    /// 3. Radiance: the same rays, each path traced from its hit on each layer's surface.
     pub fn trace(
         scene: &RenderScene,
         to_world: DAffine3,
@@ -212,35 +223,70 @@ impl Layers {
         let k_count = settings.count;
         let texels = frame.texels();
         let origin = to_world.transform_point3(DVec3::ZERO).as_vec3();
-        // 1. Depths.
-        let depth_rows: Vec<Vec<f32>> = (0..frame.height)
+        // 1. Surfaces: each texel's jittered rays, peeled, their hits grouped by surface.
+        let jitter = |col: usize, row: usize, s: u32| {
+            let mut sampler = PixelSampler::new(col as u32, row as u32, s, settings.seed ^ 0x1a7e_5eed);
+            let off = sampler.next_2d();
+            let dir = frame.direction(DVec2::new(col as f64 + off.x as f64, row as f64 + off.y as f64));
+            ((1.0 / dir.length()) as f32, to_world.transform_vector3(dir).normalize().as_vec3())
+        };
+        let surface_rows: Vec<Vec<Surface>> = (0..frame.height)
             .into_par_iter()
             .map(|row| {
-                let mut depth = vec![f32::INFINITY; k_count * frame.width];
+                let mut out = vec![Surface::EMPTY; k_count * frame.width];
                 if !keep_going() {
-                    return depth;
+                    return out;
                 }
                 for col in 0..frame.width {
-                    let centre = frame.direction(DVec2::new(col as f64 + 0.5, row as f64 + 0.5));
-                    let d = to_world.transform_vector3(centre).normalize().as_vec3();
-                    let axial = (1.0 / centre.length()) as f32;
-                    for (k, t) in peel(scene, origin, d, k_count).iter().enumerate() {
-                        depth[k * frame.width + col] = t * axial;
+                    let mut surfaces: Vec<Surface> = Vec::with_capacity(2 * k_count);
+                    for s in 0..settings.spp {
+                        let (axial, d) = jitter(col, row, s);
+                        let mut seen = 0u64;
+                        for hit in peel(scene, origin, d, k_count + 1) {
+                            let z = hit.t * axial;
+                            match surfaces.iter().position(|c| c.holds(&hit)) {
+                                Some(i) if seen & (1 << i) == 0 => {
+                                    seen |= 1 << i;
+                                    surfaces[i].depth_sum += z;
+                                    surfaces[i].count += 1;
+                                }
+                                Some(_) => {}
+                                None if surfaces.len() < 64 => {
+                                    seen |= 1 << surfaces.len();
+                                    surfaces.push(Surface {
+                                        position: hit.position,
+                                        normal: hit.normal,
+                                        depth_sum: z,
+                                        count: 1,
+                                    });
+                                }
+                                None => {}
+                            }
+                        }
+                    }
+                    // The K nearest surfaces, then the environment.
+                    surfaces.sort_by(|a, b| a.depth().total_cmp(&b.depth()));
+                    surfaces.truncate(k_count);
+                    for (k, c) in surfaces.into_iter().enumerate() {
+                        out[k * frame.width + col] = c;
                     }
                 }
-                depth
+                out
             })
             .collect();
-        let mut depth_m = vec![f32::INFINITY; k_count * texels];
-        for (row, d) in depth_rows.iter().enumerate() {
+        let mut surfaces = vec![Surface::EMPTY; k_count * texels];
+        for (row, r) in surface_rows.iter().enumerate() {
             for k in 0..k_count {
                 let dst = k * texels + row * frame.width;
-                depth_m[dst..dst + frame.width].copy_from_slice(&d[k * frame.width..(k + 1) * frame.width]);
+                surfaces[dst..dst + frame.width].copy_from_slice(&r[k * frame.width..(k + 1) * frame.width]);
             }
         }
+        let depth_m: Vec<f32> = surfaces.iter().map(|c| c.depth()).collect();
+        let coverage: Vec<f32> =
+            surfaces.iter().map(|c| if c.count == 0 { 1.0 } else { c.count as f32 / settings.spp as f32 }).collect();
         // 2. Reachable texels.
         let shaded = reachable(&frame, &depth_m, k_count, pupil_radius_m);
-        // 3. Radiance, rows in parallel.
+        // 3. Radiance: the same rays, each shading its hit on each layer's surface.
         let tracer = PathTracer { max_depth: settings.max_depth, ..PathTracer::default() };
         let env = &scene.scene().environment;
         let radiance_rows: Vec<Vec<Vec3>> = (0..frame.height)
@@ -251,64 +297,35 @@ impl Layers {
                     return radiance;
                 }
                 for col in 0..frame.width {
-                    let wanted = |k: usize| shaded[k * texels + row * frame.width + col];
-                    let centre_depth = |k: usize| depth_m[k * texels + row * frame.width + col];
+                    let at = |k: usize| k * texels + row * frame.width + col;
                     let mut sums = [Vec3::ZERO; MAX_LAYERS];
                     let mut counts = [0u32; MAX_LAYERS];
-                    // Radiance from the path at hit `i` of ray `d` (peeled hits `hits`).
-                    let shade = |d: Vec3, hits: &[f32], i: usize, sampler: &mut PixelSampler| {
-                        // Start 1 % short of the hit (closer starts can miss it at grazing
-                        // angles), but past the previous hit.
-                        let t = hits[i];
-                        let previous = if i > 0 { hits[i - 1] } else { 0.0 };
-                        let clip = ((t * 0.99).max(0.5 * (previous + t)), f32::INFINITY);
-                        tracer.trace_clipped(scene, origin, d, clip, sampler).radiance
-                    };
                     for s in 0..settings.spp {
-                        let mut sampler = PixelSampler::new(col as u32, row as u32, s, settings.seed ^ 0x1a7e_5eed);
-                        let off = sampler.next_2d();
-                        let dir = frame.direction(DVec2::new(col as f64 + off.x as f64, row as f64 + off.y as f64));
-                        let axial = (1.0 / dir.length()) as f32;
-                        let d = to_world.transform_vector3(dir).normalize().as_vec3();
-                        // One hit more than layers: at this position the surface may lie deeper.
+                        let (_, d) = jitter(col, row, s);
                         let hits = peel(scene, origin, d, k_count + 1);
-                        for k in (0..k_count).filter(|&k| wanted(k)) {
-                            let z = centre_depth(k);
-                            let mut layer_sampler =
-                                PixelSampler::new(col as u32, row as u32, s, settings.seed ^ (k as u32 + 1));
-                            if !z.is_finite() {
+                        for k in (0..k_count).filter(|&k| shaded[at(k)]) {
+                            let surface = &surfaces[at(k)];
+                            if surface.count == 0 {
+                                // The environment, behind every surface of the texel.
                                 sums[k] += crate::integrator::lights::env_radiance(env, d);
                                 counts[k] += 1;
                                 continue;
                             }
-                            // This ray's hit on the centre's surface: the nearest in depth, if
-                            // within SAME_SURFACE of it (else the surface does not cover this
-                            // position and the sample says nothing about it).
-                            let nearest = (0..hits.len()).min_by(|&a, &b| {
-                                (hits[a] * axial - z).abs().total_cmp(&(hits[b] * axial - z).abs())
-                            });
-                            if let Some(i) = nearest.filter(|&i| (hits[i] * axial - z).abs() <= SAME_SURFACE * z) {
-                                sums[k] += shade(d, &hits, i, &mut layer_sampler);
-                                counts[k] += 1;
-                            }
+                            let Some(i) = hits.iter().position(|h| surface.holds(h)) else { continue };
+                            // Start 1 % short of the hit (closer starts can miss it at grazing
+                            // angles), but past the previous hit.
+                            let (t, previous) = (hits[i].t, if i > 0 { hits[i - 1].t } else { 0.0 });
+                            let clip = ((t * 0.99).max(0.5 * (previous + t)), f32::INFINITY);
+                            let mut sampler =
+                                PixelSampler::new(col as u32, row as u32, s, settings.seed ^ (k as u32 + 1));
+                            sums[k] += tracer.trace_clipped(scene, origin, d, clip, &mut sampler).radiance;
+                            counts[k] += 1;
                         }
                     }
-                    for k in (0..k_count).filter(|&k| wanted(k)) {
-                        let value = if counts[k] > 0 {
-                            sums[k] / counts[k] as f32
-                        } else {
-                            // No jittered ray met the surface: shade the centre ray's own hit.
-                            let centre = frame.direction(DVec2::new(col as f64 + 0.5, row as f64 + 0.5));
-                            let d = to_world.transform_vector3(centre).normalize().as_vec3();
-                            let hits = peel(scene, origin, d, k + 1);
-                            let mut sampler = PixelSampler::new(col as u32, row as u32, 0, settings.seed ^ 0x5eed_c0de);
-                            if hits.len() > k {
-                                shade(d, &hits, k, &mut sampler)
-                            } else {
-                                crate::integrator::lights::env_radiance(env, d)
-                            }
-                        };
-                        radiance[k * frame.width + col] = value;
+                    for k in 0..k_count {
+                        if counts[k] > 0 {
+                            radiance[k * frame.width + col] = sums[k] / counts[k] as f32;
+                        }
                     }
                 }
                 radiance
@@ -324,7 +341,7 @@ impl Layers {
         if !keep_going() {
             return Ok(None);
         }
-        Ok(Some(Layers { frame, count: k_count, depth_m, radiance, shaded, to_world }))
+        Ok(Some(Layers { frame, count: k_count, depth_m, radiance, coverage, shaded, to_world }))
     }
 
     /// Share of the hidden layers' surface texels (k ≥ 1, finite depth) that were shaded.
@@ -357,10 +374,50 @@ impl Layers {
     }
 }
 
-/// Distances along unit `dir` of the first hit (what the centre sees, from either side) and the
+/// One surface met by a texel's jittered rays: the tangent plane of its first hit, and the
+/// planar depths and number of the rays that met it (count 0: the environment).
+#[derive(Debug, Clone, Copy)]
+struct Surface {
+    position: Vec3,
+    normal: Vec3,
+    depth_sum: f32,
+    count: u32,
+}
+
+impl Surface {
+    const EMPTY: Surface = Surface { position: Vec3::ZERO, normal: Vec3::ZERO, depth_sum: 0.0, count: 0 };
+
+    /// Mean planar depth of the rays that met it (+inf for the environment).
+    fn depth(&self) -> f32 {
+        if self.count == 0 {
+            f32::INFINITY
+        } else {
+            self.depth_sum / self.count as f32
+        }
+    }
+
+    /// Whether `hit` lies on this surface: within [`SAME_SURFACE`] of its tangent plane and
+    /// [`SAME_SURFACE_REACH`] of its first hit, relative to the depth.
+    fn holds(&self, hit: &Peeled) -> bool {
+        let z = self.depth().min(hit.t);
+        self.count > 0
+            && (hit.position - self.position).dot(self.normal).abs() <= SAME_SURFACE * z
+            && (hit.position - self.position).length() <= SAME_SURFACE_REACH * z
+    }
+}
+
+/// A peeled hit: distance along the ray, world position and geometric normal.
+#[derive(Debug, Clone, Copy)]
+struct Peeled {
+    t: f32,
+    position: Vec3,
+    normal: Vec3,
+}
+
+/// The first hit (what the centre sees, from either side) and the
 /// next `k − 1` front-facing hits (double-sided materials count from both sides; the back
 /// faces of closed objects are skipped): each peel restarts just past the previous hit.
-fn peel(scene: &RenderScene, origin: Vec3, dir: Vec3, k: usize) -> Vec<f32> {
+fn peel(scene: &RenderScene, origin: Vec3, dir: Vec3, k: usize) -> Vec<Peeled> {
     let mut out = Vec::with_capacity(k);
     let mut t0 = 0.0f32;
     let mut guard = 0;
@@ -371,7 +428,7 @@ fn peel(scene: &RenderScene, origin: Vec3, dir: Vec3, k: usize) -> Vec<f32> {
         let t = t0 + hit.t;
         let double_sided = scene.scene().materials[hit.material_id as usize].double_sided;
         if out.is_empty() || hit.front_face || double_sided {
-            out.push(t);
+            out.push(Peeled { t, position: hit.position, normal: hit.geometric_normal });
         }
         t0 = t + (t * 1e-4).max(1e-5);
     }
