@@ -239,10 +239,8 @@ impl LayerTracer {
                 let i = self.layers.index(k, tx, ty);
                 let [lo, hi] = self.span[i];
                 let z = self.layers.depth_m[i] as f64;
-                if lo <= zb && za <= hi && z > after_z {
-                    if best.is_none_or(|(_, bz)| z < bz) {
-                        best = Some((i, z));
-                    }
+                if lo <= zb && za <= hi && z > after_z && best.is_none_or(|(_, bz)| z < bz) {
+                    best = Some((i, z));
                 }
             }
             if best.is_some() {
