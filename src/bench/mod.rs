@@ -92,9 +92,10 @@ pub enum BenchCommand {
         triangles: usize,
     },
     /// Every depth-of-field method (mc, multiview, ibrt, spread) against a converged Monte Carlo
-    /// render on three scenes (the demo, a near occluder before highlights, the demo with a
-    /// tilted sensor) through a thin lens: time, relative RMSE and mean FLIP over a ladder of
-    /// budgets, then error at equal time and time to equal error.
+    /// render on four scenes (the demo, a near occluder before highlights, the demo with a
+    /// tilted sensor, all through a thin lens, and the demo through its real lens): time,
+    /// relative RMSE and mean FLIP over a ladder of budgets, then error at equal time and time to
+    /// equal error.
     Dof {
         /// Resolution WxH.
         #[arg(long, default_value = "240x160")]
