@@ -5,6 +5,9 @@
 //! * [`Method::Ibrt`]: image-based ray tracing. The scene is shaded into K depth-peeled
 //!   [`layers`] (radiance and depth), and every camera ray of the real camera model (any lens,
 //!   tilt and shift) is intersected with the layers as height fields ([`ibrt`]).
+//! * [`Method::Multiview`]: multi-view accumulation. Every lens sample is one pinhole view
+//!   shared by all pixels; visibility is traced exactly and the radiance looked up in the layers
+//!   ([`multiview`]).
 //!
 //! | name | type | unit | default |
 //! |---|---|---|---|
@@ -16,6 +19,7 @@
 
 pub mod ibrt;
 pub mod layers;
+pub mod multiview;
 
 pub use ibrt::LayerTracer;
 pub use layers::{LayerFrame, LayerSettings, Layers};
@@ -94,7 +98,8 @@ pub fn render_method(
             let tracer = LayerTracer::new(make_layers(scene, rig, settings, preview)?);
             render_samples(rig, settings, progress, on_pass, &IbrtShader { tracer: &tracer, scene })?
         }
-        Method::Multiview | Method::Spread => {
+        Method::Multiview => multiview::render_multiview(scene, rig, settings, preview, progress, on_pass)?.0,
+        Method::Spread => {
             return Err(Error::settings("method", format!("'{method}' is not built yet")));
         }
     };
