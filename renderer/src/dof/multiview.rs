@@ -12,8 +12,11 @@
 //! * **Shading, as cheap as a rasterised view.** Visibility along the view ray is exact (the
 //!   primary ray is traced against the scene); the radiance at the hit is looked up in the
 //!   depth-peeled [`Layers`] seen from the perspective centre: the hit is projected into the
-//!   layer frame and, at the four texels around it (bilinear weights), the layer whose depth
-//!   matches the hit's within [`DEPTH_TOLERANCE`] (relative) gives the radiance. The layers hold
+//!   layer frame and, at the four texels around it (bilinear weights), the layer whose surface
+//!   holds the hit gives the radiance: the hit lies within [`PLANE_TOLERANCE`] of the texel's
+//!   tangent plane (found again once per texel by tracing its centre ray to the layer's depth;
+//!   a plain depth match fails on planes seen at grazing angles, whose depth changes by tens of
+//!   per cent per texel) and within [`DEPTH_TOLERANCE`] of its depth. The layers hold
 //!   the radiance leaving the surface towards the *pupil centre*: it stands in for the radiance
 //!   towards the view's pupil point (exact for diffuse surfaces; glossy highlights do not move
 //!   across the pupil, an error of the order of the pupil's angle at the surface). When no layer
@@ -40,7 +43,8 @@
 //! | `spp` (of [`RenderSettings`]) | u32: views N (lens samples shared by every pixel) | — | 64 |
 //! | `seed` (of [`RenderSettings`]) | u32: scrambles the view sequence and the fallback paths | — | 0 |
 //! | `layers` (of [`PreviewSettings`]) | [`crate::dof::LayerSettings`] | — | 4 layers, 16 spp, 0.15 |
-//! | [`DEPTH_TOLERANCE`] | f32: relative depth match of a hit and a layer | — | 0.03 |
+//! | [`PLANE_TOLERANCE`] | f64: distance of a hit from a layer texel's tangent plane, relative to its depth | — | 0.005 |
+//! | [`DEPTH_TOLERANCE`] | f64: largest relative depth difference of a hit and a matching texel | — | 0.5 |
 
 use super::layers::Layers;
 use super::{make_layers, PreviewSettings};
@@ -53,9 +57,19 @@ use crate::sampler::PixelSampler;
 use glam::{DAffine3, DMat4, DVec2, DVec3, DVec4, Vec3};
 use std::sync::atomic::{AtomicU64, Ordering};
 
-/// Largest relative difference of a hit's planar depth and a layer's for the layer to hold the
-/// hit's surface (3 %, the layers' [`crate::dof::ibrt::SURFACE_JUMP`]).
-pub const DEPTH_TOLERANCE: f32 = 0.03;
+/// Largest distance of a hit from a layer texel's tangent plane, relative to the texel's depth,
+/// for the texel to hold the hit's surface (a sphere of radius R bends away from its tangent
+/// plane by s²/2R over a footprint s: far below this at texel footprints).
+pub const PLANE_TOLERANCE: f64 = 0.005;
+
+/// Largest relative difference of a hit's planar depth and a layer texel's (a sanity bound on
+/// the tangent-plane match; a plane seen at a grazing angle changes depth by δθ/α per texel of
+/// angle δθ at the angle α to the plane); also the whole test where a texel's surface could not
+/// be found again (then 3 %, the layers' [`crate::dof::ibrt::SURFACE_JUMP`]).
+pub const DEPTH_TOLERANCE: f64 = 0.5;
+
+/// The depth-only tolerance of texels whose surface could not be found again.
+const DEPTH_ONLY_TOLERANCE: f64 = 0.03;
 
 /// Salt of the view sequence's scramble (so it differs from every pixel's own stream).
 const VIEW_SALT: u32 = 0x5f1e_77a3;
@@ -104,8 +118,10 @@ pub fn render_multiview(
 ) -> Result<(RenderResult, MultiviewStats)> {
     settings.validate()?;
     let layers = make_layers(scene, rig, settings, preview)?;
+    let surfaces = texel_surfaces(scene, &layers);
     let shader = MultiviewShader {
         layers: &layers,
+        surfaces: &surfaces,
         scene,
         tracer: PathTracer { max_depth: settings.max_depth, ..PathTracer::default() },
         to_camera: rig.to_world.inverse(),
@@ -121,6 +137,8 @@ pub fn render_multiview(
 /// The multi-view shader: shared lens samples, exact visibility, radiance from the layers.
 struct MultiviewShader<'a> {
     layers: &'a Layers,
+    /// Per layer texel (the layers' index): its surface point and unit normal (camera space).
+    surfaces: &'a [Option<(DVec3, DVec3)>],
     scene: &'a RenderScene,
     tracer: PathTracer,
     to_camera: DAffine3,
@@ -142,7 +160,6 @@ impl MultiviewShader<'_> {
         let c = xy - DVec2::splat(0.5);
         let base = c.floor();
         let f = c - base;
-        let z = z as f32;
         let (mut sum, mut weight) = (Vec3::ZERO, 0.0f32);
         for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
             let w = (if dx == 0 { 1.0 - f.x } else { f.x }) * (if dy == 0 { 1.0 - f.y } else { f.y });
@@ -152,21 +169,66 @@ impl MultiviewShader<'_> {
             }
             let tx = (base.x as i64 + dx).clamp(0, frame.width as i64 - 1) as usize;
             let ty = (base.y as i64 + dy).clamp(0, frame.height as i64 - 1) as usize;
-            // The layer nearest in depth, if within the tolerance.
-            let best = (0..self.layers.count)
-                .map(|k| self.layers.index(k, tx, ty))
-                .filter(|&i| self.layers.depth_m[i].is_finite())
-                .map(|i| (i, (self.layers.depth_m[i] / z - 1.0).abs()))
-                .min_by(|a, b| a.1.total_cmp(&b.1));
-            if let Some((i, err)) = best {
-                if err <= DEPTH_TOLERANCE {
-                    sum += self.layers.radiance[i] * w;
-                    weight += w;
+            // The layer whose surface holds the hit, nearest to its tangent plane.
+            let mut best: Option<(usize, f64)> = None;
+            for k in 0..self.layers.count {
+                let i = self.layers.index(k, tx, ty);
+                let zk = self.layers.depth_m[i] as f64;
+                if !zk.is_finite() {
+                    continue;
                 }
+                let depth_err = (zk / z - 1.0).abs();
+                let score = match self.surfaces[i] {
+                    Some((q, n)) if depth_err <= DEPTH_TOLERANCE => {
+                        let d = (n.dot(p - q) / zk).abs();
+                        (d <= PLANE_TOLERANCE).then_some(d)
+                    }
+                    None if depth_err <= DEPTH_ONLY_TOLERANCE => Some(depth_err * PLANE_TOLERANCE),
+                    _ => None,
+                };
+                if let Some(d) = score {
+                    if best.is_none_or(|(_, b)| d < b) {
+                        best = Some((i, d));
+                    }
+                }
+            }
+            if let Some((i, _)) = best {
+                sum += self.layers.radiance[i] * w;
+                weight += w;
             }
         }
         (weight > 0.0).then(|| sum / weight)
     }
+}
+
+/// The surface of every layer texel: its centre ray traced again to the layer's depth, giving
+/// the point and the unit geometric normal (camera space); None where nothing is found within
+/// 0.1 % of the depth (or the texel is empty).
+fn texel_surfaces(scene: &RenderScene, layers: &Layers) -> Vec<Option<(DVec3, DVec3)>> {
+    use rayon::prelude::*;
+    let frame = layers.frame;
+    let to_world = layers.to_world;
+    let to_camera = to_world.inverse();
+    let origin = to_world.transform_point3(DVec3::ZERO).as_vec3();
+    (0..layers.count * frame.texels())
+        .into_par_iter()
+        .map(|i| {
+            let z = layers.depth_m[i] as f64;
+            if !z.is_finite() {
+                return None;
+            }
+            let t = i % frame.texels();
+            let (x, y) = (t % frame.width, t / frame.width);
+            let centre = frame.direction(DVec2::new(x as f64 + 0.5, y as f64 + 0.5));
+            let d = to_world.transform_vector3(centre).normalize().as_vec3();
+            let range = z * centre.length();
+            let t0 = (range * (1.0 - 1e-3)) as f32;
+            let hit = scene.intersect(origin + d * t0, d, (range * 2e-3) as f32)?;
+            let q = to_camera.transform_point3(hit.position.as_dvec3());
+            let n = to_camera.transform_vector3(hit.geometric_normal.as_dvec3()).normalize();
+            n.is_finite().then_some((q, n))
+        })
+        .collect()
 }
 
 impl SampleShader for MultiviewShader<'_> {
