@@ -259,6 +259,49 @@ fn blocks(img: &Image, b: usize) -> Vec<f64> {
     out
 }
 
+/// `img` filtered once more as the layers filter the radiance they hold: their Blackman–Harris
+/// pixel filter (3 px) and the bilinear lookup (a 1-px tent), convolved and sampled at whole
+/// pixels (separable, 5 taps).
+fn layer_filtered(img: &Image) -> Image {
+    let bh = |x: f64| {
+        let a = std::f64::consts::TAU * x / 3.0;
+        if x.abs() >= 1.5 {
+            0.0
+        } else {
+            0.35875 + 0.48829 * a.cos() + 0.14128 * (2.0 * a).cos() + 0.01168 * (3.0 * a).cos()
+        }
+    };
+    let mut k = [0.0f64; 5];
+    for (i, w) in k.iter_mut().enumerate() {
+        let d = i as f64 - 2.0;
+        *w = (0..600).map(|j| -1.5 + (j as f64 + 0.5) * 0.005).map(|t| bh(t) * (1.0 - (d - t).abs()).max(0.0)).sum();
+    }
+    let total: f64 = k.iter().sum();
+    let k = k.map(|w| (w / total) as f32);
+    let (w, h) = (img.width as i64, img.height as i64);
+    let pass = |src: &[[f32; 4]], dx: i64, dy: i64| -> Vec<[f32; 4]> {
+        let mut out = vec![[0.0f32; 4]; src.len()];
+        for y in 0..h {
+            for x in 0..w {
+                let mut acc = [0.0f32; 4];
+                for (i, kw) in k.iter().enumerate() {
+                    let o = i as i64 - 2;
+                    let (sx, sy) = ((x + o * dx).clamp(0, w - 1), (y + o * dy).clamp(0, h - 1));
+                    let p = src[(sy * w + sx) as usize];
+                    for c in 0..4 {
+                        acc[c] += kw * p[c];
+                    }
+                }
+                out[(y * w + x) as usize] = acc;
+            }
+        }
+        out
+    };
+    let mut out = img.clone();
+    out.rgba = pass(&pass(&img.rgba, 1, 0), 0, 1);
+    out
+}
+
 /// (mean relative error, relative RMSE) of `a` against `reference` (values per block).
 fn compare(a: &[f64], reference: &[f64]) -> (f64, f64) {
     let n = a.len() as f64;
@@ -268,19 +311,27 @@ fn compare(a: &[f64], reference: &[f64]) -> (f64, f64) {
     ((mean_a - mean_ref).abs() / mean_ref, mse.sqrt() / mean_ref)
 }
 
-/// Multi-view (64 views) against a 1024-spp Monte Carlo reference on the tilted ground scene,
-/// against the noise of an MC render of the same 64 spp: the mean within 2 % (both estimate the
-/// same integral; the layers' radiance is unbiased and shared views change only where the
-/// samples go), and the relative RMSE per pixel and per 4 × 4 block within 1.5 × that of 64-spp
-/// MC plus 3 % (the method's own errors: the layers' second pixel filter softens edges, and
-/// 64 shared views make 64 ghost copies of strongly defocused edges instead of noise). The
-/// fallback fraction (disoccluded surfaces path traced) stays below 10 %.
+/// Multi-view (64 views, layers of 64 spp) against a 1024-spp Monte Carlo reference on the tilted
+/// ground scene, with the noise of a 64-spp MC render as the yardstick:
+/// * the image mean within 1 % (both estimate the same integral: the layers' radiance is
+///   unbiased and shared views change only where the samples go; measured 0.35 %);
+/// * the relative RMSE of 4 × 4 block means within 1.5 × MC's + 0.015 (measured 0.023 against
+///   MC's 0.011): at block scale only the method's own errors remain (64 shared views make 64
+///   ghost copies of strongly defocused edges instead of noise, and the layers' noise is seen
+///   coherently by every view);
+/// * per pixel, against the reference filtered once more as the layers filter their radiance
+///   (their 3-px Blackman–Harris filter and the bilinear lookup), within 1.5 × the same measure
+///   of 64-spp MC + 0.01 (measured 0.037 against 0.024); unfiltered it is larger (0.10 against
+///   MC's 0.048: the documented softness of a second pixel filter on sharp checker edges);
+/// * a control: the same scene through the untilted camera (the plane of focus in the wrong
+///   place) fails the per-pixel bound (by 1.7 ×; > 1.3 × asserted), so the bound sees focus errors;
+/// * fewer than 2 % of the hits fall back to path tracing (measured 0.08 %).
 #[test]
 fn multiview_matches_mc_on_a_tilted_thin_lens_scene() {
     let scene = ground_scene();
     let rig = tilted_rig();
     let base = RenderSettings { width: 64, height: 48, spp: 64, seed: 3, ..RenderSettings::default() };
-    let preview = PreviewSettings { layers: LayerSettings { spp: 32, ..LayerSettings::default() } };
+    let preview = PreviewSettings { layers: LayerSettings { spp: 64, ..LayerSettings::default() } };
     let reference = render(&scene, &rig, &RenderSettings { spp: 1024, seed: 11, ..base.clone() }, &|_| true).unwrap();
     let mc = render(&scene, &rig, &base, &|_| true).unwrap();
     let (mv, stats) = render_multiview(&scene, &rig, &base, &preview, &|_| true, &|_, _| {}).unwrap();
@@ -295,6 +346,10 @@ fn multiview_matches_mc_on_a_tilted_thin_lens_scene() {
     let (_, mc_rmse4) = compare(&blocks(&mc.image, 4), &r4);
     let (mv_mean, mv_rmse) = compare(&blocks(&mv.image, 1), &r1);
     let (_, mv_rmse4) = compare(&blocks(&mv.image, 4), &r4);
+    let soft = blocks(&layer_filtered(&reference.image), 1);
+    let (_, mv_rmse_soft) = compare(&blocks(&mv.image, 1), &soft);
+    let (_, mc_rmse_soft) = compare(&blocks(&layer_filtered(&mc.image), 1), &soft);
+    eprintln!("against the reference filtered as the layers are: multiview {mv_rmse_soft:.4}, MC 64 spp (filtered too) {mc_rmse_soft:.4}");
     eprintln!(
         "multiview vs MC 1024 spp: mean rel. error {mv_mean:.4}, rel. RMSE {mv_rmse:.4} per pixel, {mv_rmse4:.4} per 4×4 \
          block; MC 64 spp: {mc_mean:.4}, {mc_rmse:.4}, {mc_rmse4:.4}; fallbacks {:.4} ({} of {} hits), misses {}; \
@@ -306,10 +361,23 @@ fn multiview_matches_mc_on_a_tilted_thin_lens_scene() {
         mv.seconds,
         mc.seconds
     );
-    assert!(mv_mean < 0.02, "mean relative error {mv_mean}");
-    assert!(mv_rmse < 1.5 * mc_rmse + 0.03, "relative RMSE {mv_rmse} against MC's {mc_rmse}");
-    assert!(mv_rmse4 < 1.5 * mc_rmse4 + 0.03, "block relative RMSE {mv_rmse4} against MC's {mc_rmse4}");
-    assert!(stats.fallback_fraction() < 0.1, "fallback fraction {}", stats.fallback_fraction());
+    assert!(mv_mean < 0.01, "mean relative error {mv_mean}");
+    assert!(mv_rmse4 < 1.5 * mc_rmse4 + 0.015, "block relative RMSE {mv_rmse4} against MC's {mc_rmse4}");
+    let bound = 1.5 * mc_rmse_soft + 0.01;
+    assert!(mv_rmse_soft < bound, "relative RMSE {mv_rmse_soft} against the filtered reference (MC's {mc_rmse_soft})");
+    assert!(mv_rmse > mv_rmse_soft, "the layers' second filter should explain part of the per-pixel error");
+    let untilted = CameraRig {
+        camera: Camera::Thin(
+            ThinCamera::new(Sensor { shift_mm: DVec2::new(0.0, 2.0), ..Sensor::default() }, 40.0, 1.8, Some(1.5), Aperture::default())
+                .unwrap(),
+        ),
+        ..rig.clone()
+    };
+    let (wrong, _) = render_multiview(&scene, &untilted, &base, &preview, &|_| true, &|_, _| {}).unwrap();
+    let (_, wrong_rmse) = compare(&blocks(&wrong.image, 1), &soft);
+    eprintln!("control, untilted sensor: relative RMSE {wrong_rmse:.4} against the filtered reference (bound {bound:.4})");
+    assert!(wrong_rmse > 1.3 * bound, "an untilted sensor passes for a tilted one: {wrong_rmse} vs bound {bound}");
+    assert!(stats.fallback_fraction() < 0.02, "fallback fraction {}", stats.fallback_fraction());
     assert!(stats.misses > 0, "the sky should show");
 }
 

@@ -107,7 +107,7 @@ impl MultiviewStats {
 }
 
 /// Renders `scene` through `rig` by multi-view accumulation (see the module docs), returning
-/// the image and the shading statistics.
+/// the image (its `seconds` include making the layers) and the shading statistics.
 pub fn render_multiview(
     scene: &RenderScene,
     rig: &CameraRig,
@@ -117,6 +117,7 @@ pub fn render_multiview(
     on_pass: PassObserver,
 ) -> Result<(RenderResult, MultiviewStats)> {
     settings.validate()?;
+    let start = std::time::Instant::now();
     let layers = make_layers(scene, rig, settings, preview)?;
     let surfaces = texel_surfaces(scene, &layers);
     let shader = MultiviewShader {
@@ -128,7 +129,8 @@ pub fn render_multiview(
         seed: settings.seed,
         counts: Default::default(),
     };
-    let result = render_samples(rig, settings, progress, on_pass, &shader)?;
+    let mut result = render_samples(rig, settings, progress, on_pass, &shader)?;
+    result.seconds = start.elapsed().as_secs_f64();
     let [layer_hits, fallbacks, misses] = shader.counts.each_ref().map(|c| c.load(Ordering::Relaxed));
     let stats = MultiviewStats { samples: layer_hits + fallbacks + misses, layer_hits, fallbacks, misses };
     Ok((result, stats))
