@@ -62,7 +62,15 @@ fn multiview_view_transform_maps_points_onto_the_views_rays() {
         };
         let focal = rng.range(24.0, 100.0);
         let focus = if cam_i % 7 == 3 { None } else { Some(rng.range(0.5, 20.0)) };
-        let aperture = if cam_i % 2 == 0 { Aperture::default() } else { Aperture { shape: ApertureShape::Blades { count: 6, curvature: 0.0 }, rotation_rad: 0.3, anamorphic_ratio: 1.0 } };
+        let aperture = if cam_i % 2 == 0 {
+            Aperture::default()
+        } else {
+            Aperture {
+                shape: ApertureShape::Blades { count: 6, curvature: 0.0 },
+                rotation_rad: 0.3,
+                anamorphic_ratio: 1.0,
+            }
+        };
         let thin = ThinCamera::new(sensor, focal, rng.range(1.4, 8.0), focus, aperture).unwrap();
         let camera = Camera::Thin(thin.clone());
         let plane = camera.focus_plane();
@@ -205,7 +213,7 @@ fn ground_scene() -> RenderScene {
             }
             mesh.indices.push([base, base + 1, base + 2]);
             mesh.indices.push([base, base + 2, base + 3]);
-            let m = (i + j as i32).rem_euclid(2) as u32;
+            let m = (i + j).rem_euclid(2) as u32;
             mesh.material_ids.extend([m, m]);
         }
     }
@@ -223,11 +231,11 @@ fn ground_scene() -> RenderScene {
         diffuse(Vec3::new(0.8, 0.3, 0.2)),
         diffuse(Vec3::new(0.2, 0.5, 0.8)),
     ];
-    let mut scene = Scene { materials, environment: Environment::Constant(Vec3::new(0.3, 0.4, 0.6)), ..Scene::world(mesh) };
-    scene.lights.push(Light::Directional {
-        direction: Vec3::new(0.4, -1.0, -0.3).normalize(),
-        irradiance: Vec3::splat(1.5),
-    });
+    let mut scene =
+        Scene { materials, environment: Environment::Constant(Vec3::new(0.3, 0.4, 0.6)), ..Scene::world(mesh) };
+    scene
+        .lights
+        .push(Light::Directional { direction: Vec3::new(0.4, -1.0, -0.3).normalize(), irradiance: Vec3::splat(1.5) });
     RenderScene::new(scene).unwrap()
 }
 
@@ -368,14 +376,22 @@ fn multiview_matches_mc_on_a_tilted_thin_lens_scene() {
     assert!(mv_rmse > mv_rmse_soft, "the layers' second filter should explain part of the per-pixel error");
     let untilted = CameraRig {
         camera: Camera::Thin(
-            ThinCamera::new(Sensor { shift_mm: DVec2::new(0.0, 2.0), ..Sensor::default() }, 40.0, 1.8, Some(1.5), Aperture::default())
-                .unwrap(),
+            ThinCamera::new(
+                Sensor { shift_mm: DVec2::new(0.0, 2.0), ..Sensor::default() },
+                40.0,
+                1.8,
+                Some(1.5),
+                Aperture::default(),
+            )
+            .unwrap(),
         ),
         ..rig.clone()
     };
     let (wrong, _) = render_multiview(&scene, &untilted, &base, &preview, &|_| true, &|_, _| {}).unwrap();
     let (_, wrong_rmse) = compare(&blocks(&wrong.image, 1), &soft);
-    eprintln!("control, untilted sensor: relative RMSE {wrong_rmse:.4} against the filtered reference (bound {bound:.4})");
+    eprintln!(
+        "control, untilted sensor: relative RMSE {wrong_rmse:.4} against the filtered reference (bound {bound:.4})"
+    );
     assert!(wrong_rmse > 1.3 * bound, "an untilted sensor passes for a tilted one: {wrong_rmse} vs bound {bound}");
     assert!(stats.fallback_fraction() < 0.02, "fallback fraction {}", stats.fallback_fraction());
     assert!(stats.misses > 0, "the sky should show");
@@ -423,10 +439,9 @@ fn multiview_pinhole_view_error_of_real_lenses() {
             assert!(e.points == 81 && e.max_angle_rad < 1e-9, "{name} at {u}: {e:?}");
         }
     }
-    for (name, cam, f) in [
-        ("double-gauss-50mm f/2.8", &exact, lens.paraxial().efl_mm),
-        ("wide-22mm", &wide, wide_lens.paraxial().efl_mm),
-    ] {
+    for (name, cam, f) in
+        [("double-gauss-50mm f/2.8", &exact, lens.paraxial().efl_mm), ("wide-22mm", &wide, wide_lens.paraxial().efl_mm)]
+    {
         let mut worst = 0.0f64;
         for u in samples {
             let e = pinhole_view_error(cam, u, 9, 587.6).unwrap();

@@ -238,12 +238,19 @@ impl SampleShader for MultiviewShader<'_> {
         view_lens_sample(s, self.seed)
     }
 
-    fn shade(&self, _ray: &CameraRay, origin: Vec3, dir: Vec3, clip: (f32, f32), sampler: &mut PixelSampler)
-        -> PathSample {
+    fn shade(
+        &self,
+        _ray: &CameraRay,
+        origin: Vec3,
+        dir: Vec3,
+        clip: (f32, f32),
+        sampler: &mut PixelSampler,
+    ) -> PathSample {
         let d = dir.normalize_or_zero();
         let (t_near, t_far) = (clip.0.max(0.0), clip.1);
         let start = origin + d * t_near;
-        let found = if t_far > t_near && d != Vec3::ZERO { self.scene.intersect(start, d, t_far - t_near) } else { None };
+        let found =
+            if t_far > t_near && d != Vec3::ZERO { self.scene.intersect(start, d, t_far - t_near) } else { None };
         let Some(hit) = found else {
             self.counts[2].fetch_add(1, Ordering::Relaxed);
             return PathSample {
@@ -363,7 +370,7 @@ pub fn view_transform(camera: &ThinCamera, lens_point_mm: DVec2) -> Result<DMat4
     // 4. Normalise the last row to w = ω̂·(X − p) (it vanishes at p), positive in front (−z).
     let omega = DVec3::new(mtx.x_axis.w, mtx.y_axis.w, mtx.z_axis.w);
     let len = omega.length();
-    if !(len.is_finite() && len > 0.0) || !mtx.is_finite() {
+    if !(len.is_finite() && len > 0.0 && mtx.is_finite()) {
         return Err(Error::settings("lens_point_mm", format!("no view from {lens_point_mm}: degenerate projection")));
     }
     let s = if omega.z > 0.0 { -1.0 / len } else { 1.0 / len };
@@ -413,12 +420,7 @@ pub struct PinholeViewError {
 /// the lens / front principal plane); for a traced lens it measures
 /// where the multi-view picture breaks (see the module docs). None when the camera has no plane
 /// of focus (pinhole, focus at infinity), `grid < 2`, or no ray passes.
-pub fn pinhole_view_error(
-    camera: &Camera,
-    lens_u: DVec2,
-    grid: usize,
-    wavelength_nm: f64,
-) -> Option<PinholeViewError> {
+pub fn pinhole_view_error(camera: &Camera, lens_u: DVec2, grid: usize, wavelength_nm: f64) -> Option<PinholeViewError> {
     if grid < 2 || !lens_u.is_finite() {
         return None;
     }
@@ -444,9 +446,10 @@ pub fn pinhole_view_error(
     for j in 0..grid {
         for i in 0..grid {
             let film = DVec2::new(i as f64 / (grid - 1) as f64, j as f64 / (grid - 1) as f64);
-            let (Some(ray), Some(chief)) =
-                (camera.generate_ray(film, lens_u, wavelength_nm), camera.generate_ray(film, DVec2::splat(0.5), wavelength_nm))
-            else {
+            let (Some(ray), Some(chief)) = (
+                camera.generate_ray(film, lens_u, wavelength_nm),
+                camera.generate_ray(film, DVec2::splat(0.5), wavelength_nm),
+            ) else {
                 continue;
             };
             let Some(t) = plane.intersect(chief.origin, chief.direction) else { continue };
