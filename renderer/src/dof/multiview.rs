@@ -455,7 +455,7 @@ pub fn pinhole_view_error(camera: &Camera, lens_u: DVec2, grid: usize, wavelengt
             let Some(t) = plane.intersect(chief.origin, chief.direction) else { continue };
             let focus = chief.origin + chief.direction * t;
             let ideal = (focus - view_point).normalize();
-            let angle = ideal.angle_between(ray.direction.normalize());
+            let angle = angle_between(ideal, ray.direction);
             if !angle.is_finite() {
                 continue;
             }
@@ -474,4 +474,112 @@ pub fn pinhole_view_error(camera: &Camera, lens_u: DVec2, grid: usize, wavelengt
         max_pupil_shift_mm: max_shift,
         points: n,
     })
+}
+
+/// The optical part of [`pinhole_view_error`] for a traced lens (exact or LRTF model, traced
+/// exactly here), without the sampler's: for each film point of a `grid` × `grid` lattice the
+/// ray through the fixed entrance-pupil point `pupil_point_mm` (camera space, on the paraxial
+/// entrance pupil's plane z = 0) is found by Newton iteration on its aim at the rear element,
+/// and compared with the ideal pinhole-view ray from that pupil point through the film point's
+/// focus point (its chief ray, through the pupil centre, where it meets
+/// [`Camera::focus_plane`]). What remains is the lens's: aberrations (the rays of one pupil
+/// point towards a film point miss its focus point: spherical aberration, coma, field
+/// curvature against the thick-lens plane) and the pupil's own aberration at wide angles.
+/// `max_pupil_shift_mm` is the largest Newton residual at the pupil plane. None for other
+/// models, `grid < 2`, or when no ray passes.
+pub fn traced_pinhole_view_error(
+    camera: &Camera,
+    pupil_point_mm: DVec2,
+    grid: usize,
+    wavelength_nm: f64,
+) -> Option<PinholeViewError> {
+    let exact = match camera {
+        Camera::Exact(c) => c,
+        Camera::Lrtf(c) => c.exact(),
+        _ => return None,
+    };
+    if grid < 2 || !pupil_point_mm.is_finite() {
+        return None;
+    }
+    let plane = camera.focus_plane()?;
+    let (mut max_angle, mut sum, mut max_residual, mut n) = (0.0f64, 0.0, 0.0f64, 0usize);
+    let view_point = DVec3::new(pupil_point_mm.x, pupil_point_mm.y, 0.0) * 1e-3;
+    for j in 0..grid {
+        for i in 0..grid {
+            let film = DVec2::new(i as f64 / (grid - 1) as f64, j as f64 / (grid - 1) as f64);
+            let (Some((ray, residual)), Some((chief, _))) = (
+                ray_through_pupil(exact, film, pupil_point_mm, wavelength_nm),
+                ray_through_pupil(exact, film, DVec2::ZERO, wavelength_nm),
+            ) else {
+                continue;
+            };
+            let Some(t) = plane.intersect(chief.origin, chief.direction) else { continue };
+            let focus = chief.origin + chief.direction * t;
+            let angle = angle_between(focus - view_point, ray.direction);
+            if !angle.is_finite() {
+                continue;
+            }
+            max_angle = max_angle.max(angle);
+            max_residual = max_residual.max(residual);
+            sum += angle;
+            n += 1;
+        }
+    }
+    (n > 0).then(|| PinholeViewError {
+        pupil_point_mm,
+        max_angle_rad: max_angle,
+        mean_angle_rad: sum / n as f64,
+        max_pupil_shift_mm: max_residual,
+        points: n,
+    })
+}
+
+/// The ray (camera space, origin on the plane z = 0) from image position `film` through the
+/// lens that crosses the entrance pupil's plane at `target_mm`, and the residual there (mm):
+/// Newton iteration on the aim point at the rear element, from the pupil sampler's centre.
+fn ray_through_pupil(
+    camera: &crate::camera::ExactCamera,
+    film: DVec2,
+    target_mm: DVec2,
+    wavelength_nm: f64,
+) -> Option<(CameraRay, f64)> {
+    use crate::optics::lens::{Ray, TraceDirection};
+    let lens = camera.lens();
+    let z_ep = lens.paraxial().entrance_pupil_z_mm;
+    let p = camera.sensor().film_point(film, camera.film_z_mm());
+    let rear = camera.pupil().rear_z_mm;
+    let cross = |a: DVec2| -> Option<(DVec2, DVec3)> {
+        let ray = Ray::new(p, DVec3::new(a.x, a.y, rear) - p);
+        let out = lens.trace(&ray, wavelength_nm, TraceDirection::FilmToScene)?.ray;
+        if out.direction.z.abs() < 1e-12 {
+            return None;
+        }
+        let s = (z_ep - out.origin.z) / out.direction.z;
+        Some(((out.origin + out.direction * s).truncate(), out.direction))
+    };
+    let mut aim = camera.pupil().sample(p.truncate(), DVec2::splat(0.5))?.point.truncate();
+    let h = 1e-5;
+    for _ in 0..40 {
+        let (c, dir) = cross(aim)?;
+        let r = c - target_mm;
+        if r.length() < 1e-9 {
+            let origin = DVec3::new(c.x, c.y, 0.0) * 1e-3;
+            return Some((CameraRay { origin, direction: dir.normalize(), weight: 1.0 }, r.length()));
+        }
+        let (cx, _) = cross(aim + DVec2::new(h, 0.0))?;
+        let (cy, _) = cross(aim + DVec2::new(0.0, h))?;
+        let jac = glam::DMat2::from_cols((cx - c) / h, (cy - c) / h);
+        if !(jac.determinant().abs() > 1e-12) {
+            return None;
+        }
+        let step = jac.inverse() * r;
+        // damped: at most 1 mm per step on the rear element
+        aim -= step * (1.0f64).min(1.0 / step.length().max(1e-300));
+    }
+    None
+}
+
+/// The angle between two vectors, accurate near 0 (atan2 of the cross and dot products).
+fn angle_between(a: DVec3, b: DVec3) -> f64 {
+    a.cross(b).length().atan2(a.dot(b))
 }
