@@ -27,16 +27,28 @@
 //!   the same machinery: a fixed lens sample per view, and `generate_ray` does the distortion and
 //!   the exact pupil. The thick lens gives true pinhole views (a fixed point on the principal
 //!   planes). For the traced lens the pinhole view is an approximation, measured by
-//!   [`pinhole_view_error`]: (1) with aberrations the rays of one pupil point towards a pixel's
-//!   focus point do not meet in one point (spherical aberration, field curvature, coma), (2) at
+//!   [`pinhole_view_error`] (the rays `generate_ray` gives for a fixed sample) and
+//!   [`traced_pinhole_view_error`] (the lens's own part: rays through one fixed entrance-pupil
+//!   point). It breaks where (1) with aberrations the rays of one pupil point towards a pixel's
+//!   focus point do not meet in one point (spherical aberration, coma, field curvature), (2) at
 //!   wide angles the pupil moves and tilts with the field angle (pupil aberration), and (3) the
 //!   exact camera samples the exit pupil's bounds for each film radius, rotated to the film
-//!   point's azimuth, so a fixed sample is not a fixed entrance-pupil point across the frame. The
-//!   image stays a correct N-sample estimate per pixel; only the "one view = one pinhole"
-//!   picture (what a rasteriser needs) breaks.
+//!   point's azimuth, so a fixed sample is not a fixed entrance-pupil point across the frame.
+//!   Measured over a 9 × 9 film grid at 960 px across 36 mm (tests/dof.rs): the lens's own part
+//!   at 70 % of the pupil radius is up to 1.4 px for a double Gauss at f/2.8, 2.7 px for a
+//!   Petzval at f/4, 1.6 px for a 22 mm wide angle at f/4; the sampler's rotation makes the
+//!   fixed-sample rays up to 9 px from one pinhole view (the pupil point moves by up to 13 mm).
+//!   The image stays a correct N-sample estimate per pixel (multi-view through the traced double
+//!   Gauss agrees with Monte Carlo about as closely as on the thin lens); only the "one view = one
+//!   pinhole" picture, which a rasteriser would need, breaks.
 //!
-//! The layers are pre-filtered (their own jittered samples), so the image is slightly softer
-//! than Monte Carlo's (the pixel filter applied twice).
+//! The layers are pre-filtered (their own jittered samples) and looked up bilinearly, so the
+//! image is slightly softer than Monte Carlo's (a second pixel filter: on the tests' checkered
+//! ground the per-pixel relative RMSE against MC is 0.10, and 0.037 against MC filtered the same
+//! way, near 64-spp MC's 0.024). Their noise is seen coherently by every view (an in-focus
+//! surface is looked up at the same texels by all views), so the layers' `spp` bounds the noise
+//! of sharp regions. Cost: the layers (K × texels × their spp paths) dominate; each view costs
+//! one primary ray per pixel, so the method pays off when the views outnumber the layers' spp.
 //!
 //! | name | type | unit | default |
 //! |---|---|---|---|
