@@ -74,13 +74,13 @@ use std::sync::atomic::{AtomicU64, Ordering};
 /// plane by s²/2R over a footprint s: far below this at texel footprints).
 pub const PLANE_TOLERANCE: f64 = 0.005;
 
-/// Largest relative difference of a hit's planar depth and a layer texel's (a sanity bound on
-/// the tangent-plane match; a plane seen at a grazing angle changes depth by δθ/α per texel of
-/// angle δθ at the angle α to the plane); also the whole test where a texel's surface could not
-/// be found again (then 3 %, the layers' [`crate::dof::ibrt::SURFACE_JUMP`]).
+/// Largest relative difference of a hit's planar depth and a layer texel's: a sanity bound on
+/// the tangent-plane match (a plane seen at a grazing angle α changes depth by δθ/α per texel
+/// of angle δθ, so the bound is loose).
 pub const DEPTH_TOLERANCE: f64 = 0.5;
 
-/// The depth-only tolerance of texels whose surface could not be found again.
+/// The depth-only tolerance of texels whose surface could not be found again (the layers'
+/// [`crate::dof::ibrt::SURFACE_JUMP`]).
 const DEPTH_ONLY_TOLERANCE: f64 = 0.03;
 
 /// Salt of the view sequence's scramble (so it differs from every pixel's own stream).
@@ -131,6 +131,17 @@ pub fn render_multiview(
     settings.validate()?;
     let start = std::time::Instant::now();
     let layers = make_layers(scene, rig, settings, preview)?;
+    let bytes = (layers.depth_m.len() * std::mem::size_of::<[f32; 4]>()) as u64;
+    if let Err(budget) = crate::limits::check_memory(bytes) {
+        return Err(Error::settings(
+            "layers",
+            format!(
+                "the layers' tangent planes need {}, {}",
+                crate::limits::format_bytes(bytes),
+                crate::limits::over_budget(budget)
+            ),
+        ));
+    }
     let surfaces = texel_surfaces(scene, &layers);
     let shader = MultiviewShader {
         layers: &layers,
@@ -151,8 +162,9 @@ pub fn render_multiview(
 /// The multi-view shader: shared lens samples, exact visibility, radiance from the layers.
 struct MultiviewShader<'a> {
     layers: &'a Layers,
-    /// Per layer texel (the layers' index): its surface point and unit normal (camera space).
-    surfaces: &'a [Option<(DVec3, DVec3)>],
+    /// Per layer texel (the layers' index): its tangent plane n·x = d (camera space, unit n;
+    /// NaN where the surface was not found again).
+    surfaces: &'a [[f32; 4]],
     scene: &'a RenderScene,
     tracer: PathTracer,
     to_camera: DAffine3,
@@ -163,7 +175,8 @@ struct MultiviewShader<'a> {
 
 impl MultiviewShader<'_> {
     /// The layers' radiance at camera-space point `p`: bilinear over the four texels around
-    /// its projection, each taking the layer of matching depth; None when none matches.
+    /// its projection, each taking the layer whose surface holds `p` (see the module docs);
+    /// None when none does.
     fn lookup(&self, p: DVec3) -> Option<Vec3> {
         let frame = self.layers.frame;
         let (xy, z) = frame.project(p)?;
@@ -192,13 +205,14 @@ impl MultiviewShader<'_> {
                     continue;
                 }
                 let depth_err = (zk / z - 1.0).abs();
-                let score = match self.surfaces[i] {
-                    Some((q, n)) if depth_err <= DEPTH_TOLERANCE => {
-                        let d = (n.dot(p - q) / zk).abs();
-                        (d <= PLANE_TOLERANCE).then_some(d)
-                    }
-                    None if depth_err <= DEPTH_ONLY_TOLERANCE => Some(depth_err * PLANE_TOLERANCE),
-                    _ => None,
+                let [nx, ny, nz, offset] = self.surfaces[i].map(f64::from);
+                let score = if !nx.is_finite() {
+                    (depth_err <= DEPTH_ONLY_TOLERANCE).then_some(depth_err * PLANE_TOLERANCE)
+                } else if depth_err <= DEPTH_TOLERANCE {
+                    let d = ((DVec3::new(nx, ny, nz).dot(p) - offset) / zk).abs();
+                    (d <= PLANE_TOLERANCE).then_some(d)
+                } else {
+                    None
                 };
                 if let Some(d) = score {
                     if best.is_none_or(|(_, b)| d < b) {
@@ -216,9 +230,10 @@ impl MultiviewShader<'_> {
 }
 
 /// The surface of every layer texel: its centre ray traced again to the layer's depth, giving
-/// the point and the unit geometric normal (camera space); None where nothing is found within
-/// 0.1 % of the depth (or the texel is empty).
-fn texel_surfaces(scene: &RenderScene, layers: &Layers) -> Vec<Option<(DVec3, DVec3)>> {
+/// its tangent plane (camera space: unit geometric normal n and offset n·q, 16 bytes a texel,
+/// the size of the layers' own); NaN where nothing is found within 0.1 % of the depth (or the
+/// texel is empty).
+fn texel_surfaces(scene: &RenderScene, layers: &Layers) -> Vec<[f32; 4]> {
     use rayon::prelude::*;
     let frame = layers.frame;
     let to_world = layers.to_world;
@@ -227,9 +242,10 @@ fn texel_surfaces(scene: &RenderScene, layers: &Layers) -> Vec<Option<(DVec3, DV
     (0..layers.count * frame.texels())
         .into_par_iter()
         .map(|i| {
+            let none = [f32::NAN; 4];
             let z = layers.depth_m[i] as f64;
             if !z.is_finite() {
-                return None;
+                return none;
             }
             let t = i % frame.texels();
             let (x, y) = (t % frame.width, t / frame.width);
@@ -237,10 +253,14 @@ fn texel_surfaces(scene: &RenderScene, layers: &Layers) -> Vec<Option<(DVec3, DV
             let d = to_world.transform_vector3(centre).normalize().as_vec3();
             let range = z * centre.length();
             let t0 = (range * (1.0 - 1e-3)) as f32;
-            let hit = scene.intersect(origin + d * t0, d, (range * 2e-3) as f32)?;
+            let Some(hit) = scene.intersect(origin + d * t0, d, (range * 2e-3) as f32) else { return none };
             let q = to_camera.transform_point3(hit.position.as_dvec3());
             let n = to_camera.transform_vector3(hit.geometric_normal.as_dvec3()).normalize();
-            n.is_finite().then_some((q, n))
+            if n.is_finite() {
+                [n.x as f32, n.y as f32, n.z as f32, n.dot(q) as f32]
+            } else {
+                none
+            }
         })
         .collect()
 }
