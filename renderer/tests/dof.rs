@@ -4,8 +4,8 @@ use crate::common::icosphere;
 use glam::{DAffine3, DVec2, DVec3, Vec2, Vec3, Vec4};
 use petzval_renderer::camera::ThickCamera;
 use petzval_renderer::dof::multiview::{
-    apply_view_transform, lens_point_mm, pinhole_view_error, render_multiview, traced_pinhole_view_error,
-    view_lens_sample, view_transform,
+    apply_view_transform, focus_quadrilateral, lens_point_mm, pinhole_view_error, render_multiview,
+    traced_pinhole_view_error, view_lens_sample, view_transform,
 };
 use petzval_renderer::dof::{render_method, LayerSettings, Method, PreviewSettings};
 use petzval_renderer::film::Image;
@@ -148,6 +148,61 @@ fn multiview_view_transform_maps_points_onto_the_views_rays() {
         "view transform: {cases} points; worst relative ray distance {worst_ray:.2e}, focus-plane point off the \
          chief ray {worst_chief:.2e}, round trip {worst_back:.2e} (image units), w on the hinge {worst_hinge:.2e}"
     );
+}
+
+/// The frustum: every view maps the quadrilateral of sharp focus onto the frame's corners (it is
+/// the same for all views; under tilt and shift it is a general quadrilateral on the tilted
+/// plane of focus), and focus at infinity has none (nor a sensor whose corner lies closer to
+/// the lens than its focal length).
+#[test]
+fn multiview_views_share_the_quadrilateral_of_focus() {
+    let mut rng = Rng(3);
+    for _ in 0..20 {
+        let sensor = Sensor {
+            shift_mm: DVec2::new(rng.range(-3.0, 3.0), rng.range(-3.0, 3.0)),
+            tilt_x_deg: rng.range(-3.0, 3.0),
+            tilt_y_deg: rng.range(-3.0, 3.0),
+            ..Sensor::default()
+        };
+        // (close enough that every corner of the tilted sensor lies beyond the focal length)
+        let thin = ThinCamera::new(sensor, 50.0, 2.0, Some(rng.range(0.4, 1.0)), Aperture::default()).unwrap();
+        let quad = focus_quadrilateral(&thin).unwrap();
+        let plane = Camera::Thin(thin.clone()).focus_plane().unwrap();
+        for q in quad {
+            assert!(plane.normal.dot(q - plane.point_m).abs() < 1e-9 * q.length(), "{q} is off the plane of focus");
+        }
+        let expected = [DVec2::new(0.0, 0.0), DVec2::new(1.0, 0.0), DVec2::new(1.0, 1.0), DVec2::new(0.0, 1.0)];
+        for _ in 0..5 {
+            let p = lens_point_mm(&thin, DVec2::new(rng.next(), rng.next()));
+            let m = view_transform(&thin, p).unwrap();
+            for (q, e) in quad.iter().zip(expected) {
+                let (uv, _) = apply_view_transform(&m, *q).unwrap();
+                assert!((uv - e).length() < 1e-9, "corner {q} maps to {uv}, not {e}");
+            }
+        }
+    }
+    let at_infinity = ThinCamera::new(Sensor::default(), 50.0, 2.0, None, Aperture::default()).unwrap();
+    assert!(focus_quadrilateral(&at_infinity).is_err());
+    // tilted 10° and focused at 10 m, a corner of the sensor sits closer than the focal length:
+    // the plane of focus passes behind the horizon there
+    let sensor = Sensor { tilt_x_deg: 10.0, ..Sensor::default() };
+    let wraps = ThinCamera::new(sensor, 50.0, 2.0, Some(10.0), Aperture::default()).unwrap();
+    assert!(focus_quadrilateral(&wraps).is_err());
+}
+
+/// Bad settings reach the method as errors, not panics.
+#[test]
+fn multiview_refuses_bad_settings() {
+    let scene = ground_scene();
+    let rig = tilted_rig();
+    let ok = RenderSettings { width: 8, height: 8, spp: 1, ..RenderSettings::default() };
+    let preview = PreviewSettings::default();
+    for bad in [RenderSettings { spp: 0, ..ok.clone() }, RenderSettings { width: 0, ..ok.clone() }] {
+        assert!(render_method(Method::Multiview, &scene, &rig, &bad, &preview, &|_| true, &|_, _| {}).is_err());
+    }
+    let no_layers = PreviewSettings { layers: LayerSettings { count: 0, ..LayerSettings::default() } };
+    assert!(render_multiview(&scene, &rig, &ok, &no_layers, &|_| true, &|_, _| {}).is_err());
+    assert!(render_multiview(&scene, &rig, &ok, &preview, &|_| true, &|_, _| {}).is_ok());
 }
 
 /// Bad pupil points are refused, not a panic or a NaN matrix.

@@ -415,6 +415,30 @@ pub fn view_transform(camera: &ThinCamera, lens_point_mm: DVec2) -> Result<DMat4
     Ok(mtx)
 }
 
+/// The quadrilateral the sensor images onto the plane of sharp focus (camera space, metres):
+/// the conjugates of the frame's corners, in the order of image positions (0, 0), (1, 0),
+/// (1, 1), (0, 1) (top left first, clockwise as seen in the image). It is the same for every
+/// view; with the view's point p as apex it bounds the view's frustum (a general, non-symmetric
+/// pyramid under tilt and shift). Errors when focused at infinity (the quadrilateral lies at
+/// infinity) or when a corner images behind the lens.
+pub fn focus_quadrilateral(camera: &ThinCamera) -> Result<[DVec3; 4]> {
+    let f = camera.lens_focal_length_mm();
+    let corners = [DVec2::new(0.0, 0.0), DVec2::new(1.0, 0.0), DVec2::new(1.0, 1.0), DVec2::new(0.0, 1.0)];
+    let mut out = [DVec3::ZERO; 4];
+    for (o, c) in out.iter_mut().zip(corners) {
+        let p = camera.sensor().film_point(c, camera.film_distance_mm());
+        let den = p.z - f;
+        if !(den > 1e-9 * f) {
+            return Err(Error::settings(
+                "focus_distance_m",
+                format!("the frame's corner {c} images at or beyond infinity: no quadrilateral of focus"),
+            ));
+        }
+        *o = -p * (f / den) * 1e-3;
+    }
+    Ok(out)
+}
+
 /// Applies a [`view_transform`] to camera-space point `x` (metres): image position (u, v) and
 /// ζ = 1/w (m⁻¹); None where w ≤ 0 (behind the view or on its vanishing plane).
 pub fn apply_view_transform(m: &DMat4, x: DVec3) -> Option<(DVec2, f64)> {
