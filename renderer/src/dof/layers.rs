@@ -191,6 +191,9 @@ pub struct Layers {
     /// Share of the jittered rays over each texel that met its surface (1 for the environment):
     /// the surface covers this much of the texel, and the rest shows what lies behind.
     pub coverage: Vec<f32>,
+    /// Tangent plane of each surface, camera space: unit geometric normal n and offset n·q for a
+    /// point q of it (NaN for the environment); a point p is on it where n·p − offset ≈ 0.
+    pub planes: Vec<[f32; 4]>,
     /// Whether each texel was shaded: every texel of layer 0, and the hidden texels some camera
     /// ray can reach (the others hold zero radiance and are never looked up).
     pub shaded: Vec<bool>,
@@ -282,6 +285,19 @@ impl Layers {
             }
         }
         let depth_m: Vec<f32> = surfaces.iter().map(|c| c.depth()).collect();
+        let to_camera = to_world.inverse();
+        let planes: Vec<[f32; 4]> = surfaces
+            .iter()
+            .map(|c| {
+                let n = to_camera.transform_vector3(c.normal.as_dvec3()).normalize();
+                let q = to_camera.transform_point3(c.position.as_dvec3());
+                if c.count == 0 || !n.is_finite() {
+                    [f32::NAN; 4]
+                } else {
+                    [n.x as f32, n.y as f32, n.z as f32, n.dot(q) as f32]
+                }
+            })
+            .collect();
         let coverage: Vec<f32> =
             surfaces.iter().map(|c| if c.count == 0 { 1.0 } else { c.count as f32 / settings.spp as f32 }).collect();
         // 2. Reachable texels.
@@ -341,7 +357,7 @@ impl Layers {
         if !keep_going() {
             return Ok(None);
         }
-        Ok(Some(Layers { frame, count: k_count, depth_m, radiance, coverage, shaded, to_world }))
+        Ok(Some(Layers { frame, count: k_count, depth_m, radiance, coverage, planes, shaded, to_world }))
     }
 
     /// Share of the hidden layers' surface texels (k ≥ 1, finite depth) that were shaded.

@@ -5,6 +5,9 @@
 //! * [`Method::Ibrt`]: image-based ray tracing. The scene is shaded into K depth-peeled
 //!   [`layers`] (radiance and depth), and every camera ray of the real camera model (any lens,
 //!   tilt and shift) is intersected with the layers as height fields ([`ibrt`]).
+//! * [`Method::Multiview`]: multi-view accumulation. Every lens sample is one pinhole view
+//!   shared by all pixels; visibility is traced exactly and the radiance looked up in the layers
+//!   ([`multiview`]).
 //!
 //! | name | type | unit | default |
 //! |---|---|---|---|
@@ -16,6 +19,7 @@
 
 pub mod ibrt;
 pub mod layers;
+pub mod multiview;
 
 pub use ibrt::LayerTracer;
 pub use layers::{LayerFrame, LayerSettings, Layers};
@@ -97,7 +101,8 @@ pub fn render_method(
             let tracer = LayerTracer::new(layers);
             render_samples(rig, settings, progress, on_pass, &IbrtShader { tracer: &tracer, scene })?
         }
-        Method::Multiview | Method::Spread => {
+        Method::Multiview => multiview::render_multiview(scene, rig, settings, preview, progress, on_pass)?.0,
+        Method::Spread => {
             return Err(Error::settings("method", format!("'{method}' is not built yet")));
         }
     };
@@ -106,7 +111,7 @@ pub fn render_method(
 }
 
 /// What a render cancelled before its first pass returns: a black image, no samples.
-fn cancelled(settings: &RenderSettings, start: Instant) -> RenderResult {
+pub(crate) fn cancelled(settings: &RenderSettings, start: Instant) -> RenderResult {
     let [x0, y0, x1, y1] = settings.crop.unwrap_or([0, 0, settings.width, settings.height]);
     RenderResult {
         image: crate::film::Film::new(x1 - x0, y1 - y0).image(),
