@@ -43,10 +43,9 @@
 //!   Gauss agrees with Monte Carlo about as closely as on the thin lens); only the "one view = one
 //!   pinhole" picture, which a rasteriser would need, breaks.
 //!
-//! The layers are pre-filtered (their own jittered samples) and looked up bilinearly, so the
-//! image is slightly softer than Monte Carlo's (a second pixel filter: on the tests' checkered
-//! ground the per-pixel relative RMSE against MC is 0.10, and 0.037 against MC filtered the same
-//! way, near 64-spp MC's 0.024). Their noise is seen coherently by every view (an in-focus
+//! The layers' texels are half a pixel, their radiance the mean over the texel, looked up
+//! bilinearly: on the tests' tilted checkered ground the per-pixel relative RMSE against a
+//! 1024-spp MC reference is 0.030 at 64 views (64-spp MC: 0.048). Their noise is seen coherently by every view (an in-focus
 //! surface is looked up at the same texels by all views), so the layers' `spp` bounds the noise
 //! of sharp regions. Cost: the layers (K × texels × their spp paths) dominate; each view costs
 //! one primary ray per pixel, so the method pays off when the views outnumber the layers' spp.
