@@ -144,8 +144,10 @@ pub(super) fn bench_dof(
     reference_spp: u32,
     target_rmse: f64,
     save: Option<&std::path::Path>,
+    methods: &str,
 ) -> Result<(), Error> {
     let (w, h) = parse_wxh(resolution)?;
+    let methods: Vec<Method> = methods.split(',').map(|m| m.trim().parse()).collect::<Result<_, _>>()?;
     if let Some(dir) = save {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     }
@@ -154,8 +156,7 @@ pub(super) fn bench_dof(
     let mut runs: Vec<Run> = Vec::new();
     for s in &scenes {
         // 1. The reference: Monte Carlo, converged.
-        let reference =
-            render_one(s, Method::Mc, &RenderSettings { spp: reference_spp, seed: 99, ..base.clone() }, None)?;
+        let reference = reference_image(s, &base, reference_spp, save)?;
         eprintln!("{}: reference {} spp in {:.1} s", s.name, reference_spp, reference.1);
         if let Some(dir) = save {
             write_png(&dir.join(format!("{}-reference.png", slug(s.name))), &reference.0, 0.0, ToneMap::Srgb)?;
@@ -163,6 +164,9 @@ pub(super) fn bench_dof(
         // 2. Each method over a ladder of budgets.
         let ladder: Vec<(Method, String, RenderSettings, PreviewSettings)> = budgets(&base);
         for (method, budget, settings, preview) in ladder {
+            if !methods.contains(&method) {
+                continue;
+            }
             match render_one(s, method, &settings, Some(&preview)) {
                 Ok((image, seconds)) => {
                     let rel_rmse = relative_rmse(&reference.0, &image)?;
@@ -180,6 +184,48 @@ pub(super) fn bench_dof(
     }
     print_tables(&runs, w, h, reference_spp, target_rmse);
     Ok(())
+}
+
+/// The Monte Carlo reference of a scene, read from `DIR/NAME-WxH-SPPspp.rgba` when a previous
+/// run with `--save DIR` left it there (raw little-endian f32 RGBA after a u32 width and height),
+/// else rendered (and left there). Its time is 0 when it was read.
+fn reference_image(
+    s: &BenchScene,
+    base: &RenderSettings,
+    spp: u32,
+    save: Option<&std::path::Path>,
+) -> Result<(Image, f64), Error> {
+    let (w, h) = (base.width, base.height);
+    let cache = save.map(|d| d.join(format!("{}-{w}x{h}-{spp}spp.rgba", slug(s.name))));
+    if let Some(path) = &cache {
+        if let Ok(bytes) = std::fs::read(path) {
+            let n = (w * h) as usize;
+            if bytes.len() == 8 + 16 * n && bytes[..8] == [w.to_le_bytes(), h.to_le_bytes()].concat()[..] {
+                let f = |i: usize| f32::from_le_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
+                let rgba = (0..n).map(|p| [0, 1, 2, 3].map(|c| f(8 + 16 * p + 4 * c))).collect();
+                let image = Image {
+                    width: w,
+                    height: h,
+                    rgba,
+                    depth: vec![f32::INFINITY; n],
+                    normal: vec![[0.0; 3]; n],
+                    albedo: vec![[0.0; 3]; n],
+                };
+                return Ok((image, 0.0));
+            }
+        }
+    }
+    let reference = render_one(s, Method::Mc, &RenderSettings { spp, seed: 99, ..base.clone() }, None)?;
+    if let Some(path) = &cache {
+        let mut bytes = [w.to_le_bytes(), h.to_le_bytes()].concat();
+        for p in &reference.0.rgba {
+            for c in p {
+                bytes.extend_from_slice(&c.to_le_bytes());
+            }
+        }
+        petzval_renderer::write_atomic(path, &bytes).map_err(Error::Optics)?;
+    }
+    Ok(reference)
 }
 
 fn slug(s: &str) -> String {

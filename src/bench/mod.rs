@@ -109,6 +109,10 @@ pub enum BenchCommand {
         /// Write every render as a PNG into this directory.
         #[arg(long)]
         save: Option<std::path::PathBuf>,
+        /// Methods to run (comma-separated; the Monte Carlo reference is always made, or read
+        /// from the --save directory of an earlier run).
+        #[arg(long, default_value = "mc,multiview,ibrt,spread")]
+        methods: String,
         /// Instead, render the failure cases (wide angle, near objects, highlights outside the
         /// frame, tilt) beside Monte Carlo into this directory.
         #[arg(long)]
@@ -146,9 +150,9 @@ pub fn run(cmd: BenchCommand) -> Result<(), Error> {
         BenchCommand::Instances { instances, triangles, resolution, spp, repeats, save } => {
             bench_instances(instances, triangles, &resolution, spp, repeats, save.as_deref())
         }
-        BenchCommand::Dof { resolution, reference_spp, target_rmse, save, failures } => match failures {
+        BenchCommand::Dof { resolution, reference_spp, target_rmse, save, methods, failures } => match failures {
             Some(dir) => dof::bench_dof_failures(&resolution, reference_spp, &dir),
-            None => bench_dof(&resolution, reference_spp, target_rmse, save.as_deref()),
+            None => bench_dof(&resolution, reference_spp, target_rmse, save.as_deref(), &methods),
         },
         BenchCommand::LensModels { lens, rays, resolutions, json } => bench_lens_models(lens, rays, &resolutions, json),
         BenchCommand::RenderModels { resolution, spp, resolutions, seed, save, json } => {
