@@ -16,6 +16,7 @@
 
 pub mod ibrt;
 pub mod layers;
+pub mod spread;
 
 pub use ibrt::LayerTracer;
 pub use layers::{LayerFrame, LayerSettings, Layers};
@@ -94,7 +95,14 @@ pub fn render_method(
             let tracer = LayerTracer::new(make_layers(scene, rig, settings, preview)?);
             render_samples(rig, settings, progress, on_pass, &IbrtShader { tracer: &tracer, scene })?
         }
-        Method::Multiview | Method::Spread => {
+        Method::Spread => {
+            let layers = make_layers(scene, rig, settings, preview)?;
+            let spread_settings = spread::SpreadSettings::default();
+            let r = spread::render_spread(&layers, &rig.camera, settings, &spread_settings, progress)?;
+            on_pass(&r.image, r.spp_done);
+            r
+        }
+        Method::Multiview => {
             return Err(Error::settings("method", format!("'{method}' is not built yet")));
         }
     };
