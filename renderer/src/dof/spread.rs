@@ -133,6 +133,9 @@ const CHUNK: usize = 4096;
 const WEIGHT_NODES: usize = 41;
 /// Margin of the weight table beyond the frame (film units).
 const WEIGHT_MARGIN: f64 = 0.5;
+/// Texels around a silhouette texel searched for the surface whose radiance it carries (the
+/// layers' 3-texel-wide filter reaches 1.5 texels; 2 covers it).
+const SILHOUETTE_REACH: usize = 2;
 /// Depth standing in for infinity in the real-lens table (m).
 const FAR_M: f64 = 1e6;
 
@@ -180,18 +183,19 @@ pub fn render_spread(
     };
     // 3. Texels into slices (counting sort; nearest slice first). Of a column of texels that
     //    have left the scene only the first counts (the others repeat the environment).
+    let depth = silhouette_depths(layers);
     let texels = layers.frame.texels();
-    let mut keep = Vec::with_capacity(layers.depth_m.len());
+    let mut keep = Vec::with_capacity(depth.len());
     for k in 0..layers.count {
         for t in 0..texels {
-            let z = layers.depth_m[k * texels + t];
-            let repeated = k > 0 && !z.is_finite() && !layers.depth_m[(k - 1) * texels + t].is_finite();
+            let z = depth[k * texels + t];
+            let repeated = k > 0 && !z.is_finite() && !depth[(k - 1) * texels + t].is_finite();
             let usable = !z.is_nan() && z > 0.0 && !repeated && layers.radiance[k * texels + t].is_finite();
             keep.push(usable);
         }
     }
     let mut counts = vec![0usize; slices + 2];
-    for (i, &z) in layers.depth_m.iter().enumerate() {
+    for (i, &z) in depth.iter().enumerate() {
         if keep[i] {
             counts[slice_of(z) + 1] += 1;
         }
@@ -201,7 +205,7 @@ pub fn render_spread(
     }
     let mut order = vec![0u32; counts[slices + 1]];
     let mut fill = counts.clone();
-    for (i, &z) in layers.depth_m.iter().enumerate() {
+    for (i, &z) in depth.iter().enumerate() {
         if keep[i] {
             let s = slice_of(z);
             order[fill[s]] = i as u32;
@@ -217,7 +221,7 @@ pub fn render_spread(
     let mut depth_weight = vec![0.0f64; cw * ch];
     let mut alpha_geometry = vec![0.0f64; cw * ch];
     let mut complete = true;
-    let ctx = Kernel { layers, optics: &optics, weights: &weights, view: &view };
+    let ctx = Kernel { layers, depth: &depth, optics: &optics, weights: &weights, view: &view };
     for s in 0..=slices {
         if !progress(s as f32 / (slices + 1) as f32) {
             complete = false;
@@ -352,6 +356,35 @@ pub fn render_spread(
     })
 }
 
+/// The layers' depths as spread: a texel whose centre ray left the scene (+inf) next to
+/// texels of its layer that hit something carries part of their radiance (the layers'
+/// radiance is filtered over about 3 texels), so it is spread at the nearest depth within
+/// [`SILHOUETTE_REACH`] texels; the environment behind it then comes from the next layer.
+fn silhouette_depths(layers: &Layers) -> Vec<f32> {
+    let f = layers.frame;
+    let texels = f.texels();
+    let mut depth = layers.depth_m.clone();
+    for k in 0..layers.count {
+        let plane = &layers.depth_m[k * texels..(k + 1) * texels];
+        let out = &mut depth[k * texels..(k + 1) * texels];
+        for y in 0..f.height {
+            for x in 0..f.width {
+                if plane[y * f.width + x].is_finite() {
+                    continue;
+                }
+                let mut near = f32::INFINITY;
+                for ny in y.saturating_sub(SILHOUETTE_REACH)..(y + SILHOUETTE_REACH + 1).min(f.height) {
+                    for nx in x.saturating_sub(SILHOUETTE_REACH)..(x + SILHOUETTE_REACH + 1).min(f.width) {
+                        near = near.min(plane[ny * f.width + nx]);
+                    }
+                }
+                out[y * f.width + x] = near;
+            }
+        }
+    }
+    depth
+}
+
 /// The image window: full-frame pixel size and the crop's top-left pixel.
 #[derive(Debug, Clone, Copy)]
 struct View {
@@ -380,6 +413,8 @@ struct Splat {
 /// What the PSF kernel reads.
 struct Kernel<'a> {
     layers: &'a Layers,
+    /// Depths as spread ([`silhouette_depths`]).
+    depth: &'a [f32],
     optics: &'a Optics,
     weights: &'a WeightTable,
     view: &'a View,
@@ -397,7 +432,7 @@ impl Kernel<'_> {
             let i = i as usize;
             let t = i % texels;
             let (x, y) = ((t % frame.width) as f64 + 0.5, (t / frame.width) as f64 + 0.5);
-            let z = self.layers.depth_m[i] as f64;
+            let z = self.depth[i] as f64;
             let dir = frame.direction(DVec2::new(x, y));
             // Footprint: the chief images of the texel's edges.
             let Some(centre) = self.optics.chief(dir) else { continue };
