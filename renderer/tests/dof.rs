@@ -326,10 +326,6 @@ mod spread_method {
         let flat_mc = mc_img(&scene, cam(0.0), &st);
         let (_, _, rel_untilted) = compare(&flat, &flat_mc);
         let (_, _, rel_ignored) = compare(&flat, &mc);
-        for (name, img) in [("flat", &flat), ("flatmc", &flat_mc)] {
-            let txt: String = img.rgba.chunks(72).map(|r| r.iter().map(|p| format!("{:.4} ", p[0])).collect::<String>() + "\n").collect();
-            std::fs::write(format!("/tmp/sp/{name}.txt"), txt).unwrap();
-        }
         eprintln!("spread untilted vs untilted MC: relative RMSE {rel_untilted:.4}; untilted spread vs tilted MC: {rel_ignored:.4}");
         let (mean_err, rel) = results[0];
         assert!(mean_err.abs() < 0.01, "mean off by {mean_err}");

@@ -221,7 +221,8 @@ pub fn render_spread(
     let mut depth_weight = vec![0.0f64; cw * ch];
     let mut alpha_geometry = vec![0.0f64; cw * ch];
     let mut complete = true;
-    let ctx = Kernel { layers, depth: &depth, optics: &optics, weights: &weights, view: &view };
+    let radiance = unmixed_radiance(layers);
+    let ctx = Kernel { layers, radiance: &radiance, depth: &depth, optics: &optics, weights: &weights, view: &view };
     for s in 0..=slices {
         if !progress(s as f32 / (slices + 1) as f32) {
             complete = false;
@@ -356,15 +357,72 @@ pub fn render_spread(
     })
 }
 
-/// The layers' depths as spread: a texel whose centre ray left the scene (+inf) next to
-/// texels of its layer that hit something carries part of their radiance (the layers'
+/// The layers' radiance as spread. A sample of the layers' filter (about 3 texels wide) that
+/// has no k-th hit returns the environment, so near the silhouettes of layer k − 1 a texel of
+/// layer k ≥ 1 mixes its surface with the environment: L = p·L_surface + (1 − p)·L_env, with p
+/// the filter's weight over the texels whose centre ray has a k-th hit. It is un-mixed
+/// (L_env from the layer at the texel that left the scene, else black), where p ≥ 0.25.
+fn unmixed_radiance(layers: &Layers) -> Vec<glam::Vec3> {
+    let f = layers.frame;
+    let texels = f.texels();
+    let mut radiance = layers.radiance.clone();
+    let weights = filter_weights();
+    for k in 1..layers.count {
+        for y in 0..f.height {
+            for x in 0..f.width {
+                let t = y * f.width + x;
+                if !layers.depth_m[k * texels + t].is_finite() {
+                    continue;
+                }
+                let mut p = 0.0f32;
+                for (dy, wy) in weights.iter().enumerate() {
+                    for (dx, wx) in weights.iter().enumerate() {
+                        let (nx, ny) = (x as i64 + dx as i64 - 1, y as i64 + dy as i64 - 1);
+                        let inside = nx >= 0 && ny >= 0 && (nx as usize) < f.width && (ny as usize) < f.height;
+                        if inside && layers.depth_m[k * texels + ny as usize * f.width + nx as usize].is_finite() {
+                            p += wx * wy;
+                        }
+                    }
+                }
+                if p >= 0.999 || p < 0.25 {
+                    continue;
+                }
+                let env = (k + 1..layers.count)
+                    .find(|&kk| !layers.depth_m[kk * texels + t].is_finite())
+                    .map_or(glam::Vec3::ZERO, |kk| layers.radiance[kk * texels + t]);
+                let l = (layers.radiance[k * texels + t] - env * (1.0 - p)) / p;
+                radiance[k * texels + t] = l.max(glam::Vec3::ZERO);
+            }
+        }
+    }
+    radiance
+}
+
+/// Weights of the texels at offsets −1, 0, 1 under the layers' filter (Blackman–Harris 3
+/// texels wide, integrated over each texel).
+fn filter_weights() -> [f32; 3] {
+    let width = 3.0f64;
+    let n = 3000;
+    let mut w = [0.0f64; 3];
+    for i in 0..n {
+        let x = -1.5 + width * (i as f64 + 0.5) / n as f64;
+        let t = TAU * (x / width + 0.5);
+        let v = 0.35875 - 0.48829 * t.cos() + 0.14128 * (2.0 * t).cos() - 0.01168 * (3.0 * t).cos();
+        w[((x + 1.5).floor() as usize).min(2)] += v;
+    }
+    let total: f64 = w.iter().sum();
+    w.map(|v| (v / total) as f32)
+}
+
+/// The layers' depths as spread: a texel of the first layer whose centre ray left the scene
+/// (+inf) next to texels that hit something carries part of their radiance (the layers'
 /// radiance is filtered over about 3 texels), so it is spread at the nearest depth within
 /// [`SILHOUETTE_REACH`] texels; the environment behind it then comes from the next layer.
 fn silhouette_depths(layers: &Layers) -> Vec<f32> {
     let f = layers.frame;
     let texels = f.texels();
     let mut depth = layers.depth_m.clone();
-    for k in 0..layers.count {
+    for k in 0..layers.count.min(1) {
         let plane = &layers.depth_m[k * texels..(k + 1) * texels];
         let out = &mut depth[k * texels..(k + 1) * texels];
         for y in 0..f.height {
@@ -413,6 +471,8 @@ struct Splat {
 /// What the PSF kernel reads.
 struct Kernel<'a> {
     layers: &'a Layers,
+    /// Radiance as spread ([`unmixed_radiance`]).
+    radiance: &'a [glam::Vec3],
     /// Depths as spread ([`silhouette_depths`]).
     depth: &'a [f32],
     optics: &'a Optics,
@@ -468,7 +528,7 @@ impl Kernel<'_> {
             }
             // Edges accumulate +1 inside for negative shoelace area (y down): fix the sign.
             let scale = -1.0 / area;
-            let radiance = self.layers.radiance[i];
+            let radiance = self.radiance[i];
             let energy = w_bar * footprint;
             let depth = if z.is_finite() { z } else { 0.0 };
             let value = [
