@@ -168,7 +168,7 @@ pub fn render_spread(
     if !has_geometry {
         (w_lo, w_hi) = (0.0, 0.0);
     }
-    let optics = Optics::new(camera, layers, w_hi, spread)?;
+    let optics = Optics::new(camera, layers, w_hi, view.size, spread)?;
     let weights = WeightTable::new(camera);
     // 2. Slices: equal steps of inverse depth, as many as the blur range needs.
     let blur_range = if has_geometry { optics.blur_range_px(&view, w_lo, w_hi) } else { 0.0 };
@@ -717,7 +717,7 @@ enum Optics {
 }
 
 impl Optics {
-    fn new(camera: &Camera, layers: &Layers, w_max: f64, spread: &SpreadSettings) -> Result<Optics> {
+    fn new(camera: &Camera, layers: &Layers, w_max: f64, view_size: DVec2, spread: &SpreadSettings) -> Result<Optics> {
         Ok(match camera {
             Camera::Pinhole(c) => Optics::Pinhole(Plane::new(*c.sensor(), c.focal_length_mm())),
             Camera::Thin(c) => Optics::Thin {
@@ -733,7 +733,7 @@ impl Optics {
                         "spread: a real lens with a tilted sensor is not supported (its PSFs are not rotationally symmetric)",
                     ));
                 }
-                Optics::Table(Box::new(PsfTable::new(camera, layers, w_max, spread)?))
+                Optics::Table(Box::new(PsfTable::new(camera, layers, w_max, view_size, spread)?))
             }
         })
     }
@@ -918,7 +918,7 @@ struct PsfTable {
 }
 
 impl PsfTable {
-    fn new(camera: &Camera, layers: &Layers, w_max: f64, settings: &SpreadSettings) -> Result<PsfTable> {
+    fn new(camera: &Camera, layers: &Layers, w_max: f64, view_size: DVec2, settings: &SpreadSettings) -> Result<PsfTable> {
         let sensor = *camera.sensor();
         let axis = sensor.axis_film_coord();
         let wavelength = primary_wavelength(camera);
@@ -935,11 +935,11 @@ impl PsfTable {
             let d = ray.direction;
             (d.z < -1e-9).then(|| d.x.hypot(d.y) / -d.z)
         };
-        let diag = sensor.width_mm.hypot(sensor.height_mm);
+        let reach = 2.0 * sensor.extent().0 + 1.0;
         let steps = 512;
         let (mut chief_r, mut chief_tan) = (vec![0.0], vec![0.0]);
         for k in 1..=steps {
-            let r = 2.0 * diag * k as f64 / steps as f64;
+            let r = reach * k as f64 / steps as f64;
             let Some(t) = chief_tangent(axis + DVec2::new(r / sensor.width_mm, 0.0)) else { break };
             if t <= *chief_tan.last().unwrap_or(&0.0) {
                 break;
@@ -955,10 +955,15 @@ impl PsfTable {
         }
         let r_max = *chief_r.last().unwrap_or(&1.0);
         let (nr, nd, g) = (settings.table_radii, settings.table_depths, settings.pupil_grid);
-        let radii: Vec<f64> = (0..nr).map(|i| r_max * i as f64 / (nr - 1) as f64).collect();
+        // (The first node half a step off the axis: on it the film azimuth, which turns the pupil
+        // sampling, is undefined.)
+        let radii: Vec<f64> = (0..nr).map(|i| r_max * (i as f64).max(0.5) / (nr - 1) as f64).collect();
         let w_top = w_max.max(1e-3);
         let inv_depth: Vec<f64> = (0..nd).map(|j| w_top * j as f64 / (nd - 1) as f64).collect();
-        // 2. Entries: Newton solves per pupil sample, in parallel over entries.
+        // 2. Entries: Newton solves per pupil sample (to 1/1000 of a pixel), in parallel over
+        //    entries.
+        let tol = 1e-3 / (view_size.x.max(view_size.y)).max(1.0);
+        let tol_f = 1e-3 * frame.texel_size().min_element();
         let entries: Vec<(Option<(DVec2, [f64; TABLE_ANGLES])>, u64)> = (0..nr * nd)
             .into_par_iter()
             .map(|e| {
@@ -968,18 +973,40 @@ impl PsfTable {
                 let z = if inv_depth[j] > 0.0 { 1.0 / inv_depth[j] } else { FAR_M };
                 let x = DVec3::new(tan * z, 0.0, -z);
                 let mut rays = 0u64;
+                // Pupil samples in breadth-first order from the grid's centre, each started
+                // from its parent's solution (continuation: short Newton paths).
+                let mut start = vec![None::<DVec2>; g * g];
+                let mut queue = std::collections::VecDeque::with_capacity(g * g);
+                let c = (g / 2) * g + g / 2;
+                let mut seen = vec![false; g * g];
+                seen[c] = true;
+                queue.push_back((c, chief_film));
                 let mut pts = Vec::with_capacity(g * g);
-                for m in 0..g * g {
+                while let Some((m, from)) = queue.pop_front() {
                     let u = DVec2::new(((m % g) as f64 + 0.5) / g as f64, ((m / g) as f64 + 0.5) / g as f64);
-                    if let Some(s) = solve_film(camera, x, u, chief_film, wavelength, &mut rays) {
+                    let solved = solve_film(camera, x, u, from, tol, tol_f, wavelength, &mut rays);
+                    if let Some(s) = solved {
                         let o = s - chief_film;
                         pts.push(DVec2::new(o.x * sensor.width_mm, -o.y * sensor.height_mm));
+                    }
+                    start[m] = solved;
+                    let (mx, my) = ((m % g) as i64, (m / g) as i64);
+                    for (dx, dy) in [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)] {
+                        let (nx, ny) = (mx + dx, my + dy);
+                        if nx >= 0 && ny >= 0 && nx < g as i64 && ny < g as i64 {
+                            let n = ny as usize * g + nx as usize;
+                            if !seen[n] {
+                                seen[n] = true;
+                                queue.push_back((n, solved.unwrap_or(from)));
+                            }
+                        }
                     }
                 }
                 (radial_outline(&convex_hull(pts)), rays)
             })
             .collect();
         let rays = entries.iter().map(|e| e.1).sum::<u64>() + chief_r.len() as u64;
+        eprintln!("DEBUG table chief {} r_max {r_max} tan_max {tan_max} valid {} of {} rays {rays}; e0 {:?} e_last {:?}", chief_r.len(), entries.iter().filter(|e| e.0.is_some()).count(), entries.len(), entries[nd - 1].0.map(|e| (e.0, e.1[0], e.1[8])), entries[nd * nr - 1].0.map(|e| (e.0, e.1[0], e.1[8])));
         Ok(PsfTable { sensor, axis, chief_r, chief_tan, radii, inv_depth, entries: entries.into_iter().map(|e| e.0).collect(), rays })
     }
 
@@ -1067,9 +1094,21 @@ fn interp(xs: &[f64], ys: &[f64], x: f64) -> f64 {
 }
 
 /// The film point whose camera ray for pupil sample `u` passes through camera-space point `x`:
-/// Newton's method in 2-D with a finite-difference Jacobian from `start`; None when it is
-/// vignetted or does not converge.
-fn solve_film(camera: &Camera, x: DVec3, u: DVec2, start: DVec2, wavelength: f64, rays: &mut u64) -> Option<DVec2> {
+/// Newton's method in 2-D with a finite-difference Jacobian from `start`, converged when the
+/// step is below `tol` (film units) and the miss below `tol_f` (tangent units); None when it
+/// is vignetted or does not converge (the pupil sampling of a real lens is piecewise over film
+/// radius and turns with the film azimuth, so the residual can jump).
+#[allow(clippy::too_many_arguments)]
+fn solve_film(
+    camera: &Camera,
+    x: DVec3,
+    u: DVec2,
+    start: DVec2,
+    tol: f64,
+    tol_f: f64,
+    wavelength: f64,
+    rays: &mut u64,
+) -> Option<DVec2> {
     let z = -x.z;
     let target = DVec2::new(x.x / z, x.y / z);
     let mut residual = |s: DVec2| -> Option<DVec2> {
@@ -1082,30 +1121,29 @@ fn solve_film(camera: &Camera, x: DVec3, u: DVec2, start: DVec2, wavelength: f64
         let p = r.origin + r.direction * t;
         Some(DVec2::new(p.x / z, p.y / z) - target)
     };
-    let h = 1e-6;
+    let h = (tol * 10.0).min(1e-5);
     let mut s = start;
-    for _ in 0..16 {
+    for _ in 0..20 {
         let f = residual(s)?;
-        if f.length() < 1e-11 {
-            return Some(s);
-        }
         let fx = (residual(s + DVec2::new(h, 0.0))? - f) / h;
         let fy = (residual(s + DVec2::new(0.0, h))? - f) / h;
         let det = fx.perp_dot(fy);
-        if !(det.abs() > 1e-18) {
+        if !(det.abs() > 1e-300) {
             return None;
         }
-        // Solve [fx fy]·δ = −f.
-        let delta = DVec2::new(-f.perp_dot(fy) / det, -fx.perp_dot(-f) / det) ;
+        // Solve [fx fy]·δ = −f (Cramer).
+        let delta = DVec2::new(fy.perp_dot(f) / det, f.perp_dot(fx) / det);
         let step = delta.length();
         let delta = if step > 0.05 { delta * (0.05 / step) } else { delta };
         s += delta;
         if !s.is_finite() {
             return None;
         }
+        if step < tol {
+            return (residual(s)?.length() < tol_f).then_some(s);
+        }
     }
-    let f = residual(s)?;
-    (f.length() < 1e-8).then_some(s)
+    None
 }
 
 /// A convex outline as its centroid and radii at [`TABLE_ANGLES`] angles about it; None for
