@@ -129,7 +129,7 @@ mod spread_method {
         let rig = CameraRig { camera, to_world: DAffine3::IDENTITY };
         let preview = PreviewSettings { layers: LayerSettings { spp: layer_spp, ..LayerSettings::default() } };
         let layers = dof::make_layers(scene, &rig, st, &preview).unwrap();
-        let r = spread::render_spread(&layers, &rig.camera, st, s, &|_| true).unwrap();
+        let r = spread::render_spread(&layers, Some(scene), &rig.camera, st, s, &|_| true).unwrap();
         assert!(r.complete);
         r.image
     }
@@ -227,7 +227,7 @@ mod spread_method {
             depth_m[centre] = z;
             radiance[centre] = Vec3::ONE;
             let layers = Layers { frame, count: 1, depth_m, radiance, to_world: DAffine3::IDENTITY };
-            let img = spread::render_spread(&layers, &cam, &st, &SpreadSettings::default(), &|_| true).unwrap().image;
+            let img = spread::render_spread(&layers, None, &cam, &st, &SpreadSettings::default(), &|_| true).unwrap().image;
             let (flux, c, r2) = moments(&img);
             let expected = r_px * r_px * (2.0 + (2.0 * PI / 64.0).cos()) / 6.0 + if r_px > 0.0 { 2.0 / 12.0 } else { 0.0 };
             eprintln!("spread single texel at {z} m: energy {flux:.6}, centre {c:?}, E[r²] {r2:.4} vs {expected:.4}");
@@ -423,7 +423,7 @@ mod spread_method {
         let mut ratios = Vec::new();
         for shift in [DVec2::ZERO, DVec2::new(15.0, 10.0)] {
             let sensor = Sensor { width_mm: w as f64 * pitch, height_mm: w as f64 * pitch, shift_mm: shift, ..Sensor::default() };
-            let cam = Camera::Exact(ExactCamera::new(sensor, lens.clone(), Some(2.0)).unwrap());
+            let cam = Camera::Exact(ExactCamera::new(sensor, lens.clone(), Some(std::env::var("FOC").map_or(2.0, |v| v.parse().unwrap()))).unwrap());
             let ray = cam.generate_ray(DVec2::splat(0.5), DVec2::splat(0.5), 587.56).unwrap();
             let dist = 0.7 / -ray.direction.z;
             let p = ray.origin + ray.direction * dist;
@@ -436,6 +436,12 @@ mod spread_method {
             let axis_px = DVec2::new(a.x, a.y) * w as f64;
             let (r_mc, t_mc, f_mc) = radial_tangential(&mc, axis_px);
             let (r_sp, t_sp, f_sp) = radial_tangential(&sp, axis_px);
+            if std::env::var("DUMP").is_ok() {
+                for (name, img) in [("rl_sp", &sp), ("rl_mc", &mc)] {
+                    let txt: String = img.rgba.chunks(64).map(|r| r.iter().map(|p| format!("{:.4} ", p[0])).collect::<String>() + "\n").collect();
+                    std::fs::write(format!("/tmp/sp/{name}.txt"), txt).unwrap();
+                }
+            }
             let (ratio_mc, ratio_sp) = ((r_mc / t_mc).sqrt(), (r_sp / t_sp).sqrt());
             eprintln!(
                 "spread real lens, shift {shift}: σ radial/tangential spread {:.2}/{:.2} px (ratio {ratio_sp:.3}), MC {:.2}/{:.2} px (ratio {ratio_mc:.3}); energy spread {f_sp:.3} vs MC {f_mc:.3} ({:+.2}%)",
@@ -477,7 +483,7 @@ mod spread_method {
             SpreadSettings { max_slices: 0, ..SpreadSettings::default() },
             SpreadSettings { pupil_grid: 1, ..SpreadSettings::default() },
         ] {
-            assert!(spread::render_spread(&layers, &rig.camera, &st, &bad, &|_| true).is_err());
+            assert!(spread::render_spread(&layers, Some(&scene), &rig.camera, &st, &bad, &|_| true).is_err());
         }
         let _ = PixelFilter::default();
     }

@@ -98,7 +98,7 @@ pub fn render_method(
         Method::Spread => {
             let layers = make_layers(scene, rig, settings, preview)?;
             let spread_settings = spread::SpreadSettings::default();
-            let r = spread::render_spread(&layers, &rig.camera, settings, &spread_settings, progress)?;
+            let r = spread::render_spread(&layers, Some(scene), &rig.camera, settings, &spread_settings, progress)?;
             on_pass(&r.image, r.spp_done);
             r
         }

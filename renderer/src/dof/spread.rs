@@ -42,7 +42,7 @@
 //! | `composite` | [`Composite`]: `over` or `saturate` | — | `over` |
 //! | `table_radii` | usize: field radii of a real lens's PSF table | — | 12 |
 //! | `table_depths` | usize: inverse depths of a real lens's PSF table | — | 16 |
-//! | `pupil_grid` | usize: pupil samples per side (G², solved by Newton) per table entry | — | 12 |
+//! | `pupil_grid` | usize: pupil samples per side (G², solved by Newton) per table entry | — | 24 |
 //!
 //! Limits: texels outside the layer frame are lost (the frame's margin must cover the blur);
 //! within one slice the layers are not ordered (hidden texels in the slice of a visible surface
@@ -53,6 +53,7 @@ use super::layers::Layers;
 use crate::camera::{Camera, Sensor};
 use crate::error::{Error, Result};
 use crate::film::Image;
+use crate::integrator::RenderScene;
 use crate::optics::aperture::{Aperture, ApertureShape};
 use crate::render::{Progress, RenderResult, RenderSettings};
 use glam::{DMat3, DVec2, DVec3};
@@ -96,7 +97,7 @@ impl Default for SpreadSettings {
             composite: Composite::Over,
             table_radii: 12,
             table_depths: 16,
-            pupil_grid: 12,
+            pupil_grid: 24,
         }
     }
 }
@@ -139,10 +140,13 @@ const SILHOUETTE_REACH: usize = 2;
 /// Depth standing in for infinity in the real-lens table (m).
 const FAR_M: f64 = 1e6;
 
-/// Spreads `layers` through `camera` into an image of `settings`' size (and crop window).
+/// Spreads `layers` (made of `scene`, which, if given, supplies the environment behind the
+/// silhouettes of the deeper layers) through `camera` into an image of `settings`' size (and
+/// crop window).
 /// `progress` sees the fraction of slices done and may cancel (the result is then incomplete).
 pub fn render_spread(
     layers: &Layers,
+    scene: Option<&RenderScene>,
     camera: &Camera,
     settings: &RenderSettings,
     spread: &SpreadSettings,
@@ -171,7 +175,8 @@ pub fn render_spread(
     let optics = Optics::new(camera, layers, w_hi, view.size, spread)?;
     let weights = WeightTable::new(camera);
     // 2. Slices: equal steps of inverse depth, as many as the blur range needs.
-    let blur_range = if has_geometry { optics.blur_range_px(&view, w_lo, w_hi) } else { 0.0 };
+    let slope = if has_geometry { optics.blur_slope_px(&view, w_lo.min(1.0 / FAR_M), w_hi) } else { 0.0 };
+    let blur_range = slope * (w_hi - w_lo);
     let slices = ((blur_range / spread.slice_blur_px).ceil() as usize).clamp(1, spread.max_slices);
     let slice_of = |z: f32| -> usize {
         if !z.is_finite() {
@@ -184,13 +189,18 @@ pub fn render_spread(
     // 3. Texels into slices (counting sort; nearest slice first). Of a column of texels that
     //    have left the scene only the first counts (the others repeat the environment).
     let depth = silhouette_depths(layers);
+    let occluded = Occluders::new(layers);
     let texels = layers.frame.texels();
     let mut keep = Vec::with_capacity(depth.len());
     for k in 0..layers.count {
         for t in 0..texels {
             let z = depth[k * texels + t];
             let repeated = k > 0 && !z.is_finite() && !depth[(k - 1) * texels + t].is_finite();
-            let usable = !z.is_nan() && z > 0.0 && !repeated && layers.radiance[k * texels + t].is_finite();
+            let usable = !z.is_nan()
+                && z > 0.0
+                && !repeated
+                && layers.radiance[k * texels + t].is_finite()
+                && !(k > 0 && occluded.hidden(t, z, layers.depth_m[t], slope));
             keep.push(usable);
         }
     }
@@ -221,7 +231,7 @@ pub fn render_spread(
     let mut depth_weight = vec![0.0f64; cw * ch];
     let mut alpha_geometry = vec![0.0f64; cw * ch];
     let mut complete = true;
-    let radiance = unmixed_radiance(layers);
+    let radiance = unmixed_radiance(layers, scene);
     let ctx = Kernel { layers, radiance: &radiance, depth: &depth, optics: &optics, weights: &weights, view: &view };
     for s in 0..=slices {
         if !progress(s as f32 / (slices + 1) as f32) {
@@ -357,12 +367,74 @@ pub fn render_spread(
     })
 }
 
+/// Where the first layer hides the layers behind it from every point of the aperture: the
+/// first layer's largest depth over squares of radius 0, 1, 2, 4, … texels.
+struct Occluders {
+    /// Per radius: the square-window maximum of the first layer's depth.
+    max_depth: Vec<(usize, Vec<f32>)>,
+}
+
+impl Occluders {
+    fn new(layers: &Layers) -> Occluders {
+        let f = layers.frame;
+        let (w, h) = (f.width, f.height);
+        let base: Vec<f32> = layers.depth_m[..f.texels()].to_vec();
+        let mut max_depth = vec![(0usize, base.clone())];
+        for r in [1usize, 2, 4, 8, 16] {
+            let mut rows = vec![0.0f32; w * h];
+            for y in 0..h {
+                for x in 0..w {
+                    let mut m = 0.0f32;
+                    for xx in x.saturating_sub(r)..(x + r + 1).min(w) {
+                        m = m.max(base[y * w + xx]);
+                    }
+                    rows[y * w + x] = m;
+                }
+            }
+            let mut out = vec![0.0f32; w * h];
+            for y in 0..h {
+                for x in 0..w {
+                    let mut m = 0.0f32;
+                    for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
+                        m = m.max(rows[yy * w + x]);
+                    }
+                    // Beyond the frame nothing is known to occlude.
+                    if x < r || y < r || x + r >= w || y + r >= h {
+                        m = f32::INFINITY;
+                    }
+                    out[y * w + x] = m;
+                }
+            }
+            max_depth.push((r, out));
+        }
+        Occluders { max_depth }
+    }
+
+    /// Whether the point of a deeper layer at texel `t`, depth `z` (m), behind the first
+    /// layer's `z0` is hidden from every aperture point: seen from the aperture's rim it moves
+    /// against the first layer by half the change of blur diameter (`slope` px per 1/m of
+    /// inverse depth, texels ≈ pixels), and every first-layer texel within that reach is nearer.
+    fn hidden(&self, t: usize, z: f32, z0: f32, slope: f64) -> bool {
+        if !(z0 < z) || !z.is_finite() {
+            return false;
+        }
+        // The ray through the texel's centre stays in it for a shift below half a texel.
+        let reach = 0.5 * slope * (1.0 / z0 as f64 - 1.0 / z as f64) - 0.5;
+        match self.max_depth.iter().find(|(r, _)| *r as f64 >= reach) {
+            Some((_, m)) => m[t] < z * (1.0 - 1e-3),
+            None => false,
+        }
+    }
+}
+
 /// The layers' radiance as spread. A sample of the layers' filter (about 3 texels wide) that
 /// has no k-th hit returns the environment, so near the silhouettes of layer k − 1 a texel of
 /// layer k ≥ 1 mixes its surface with the environment: L = p·L_surface + (1 − p)·L_env, with p
 /// the filter's weight over the texels whose centre ray has a k-th hit. It is un-mixed
 /// (L_env from the layer at the texel that left the scene, else black), where p ≥ 0.25.
-fn unmixed_radiance(layers: &Layers) -> Vec<glam::Vec3> {
+/// Conversely, where a texel of layer k ≥ 1 has left the scene near texels of layer k that
+/// have not, its radiance is the environment's, looked up in `scene` (if given).
+fn unmixed_radiance(layers: &Layers, scene: Option<&RenderScene>) -> Vec<glam::Vec3> {
     let f = layers.frame;
     let texels = f.texels();
     let mut radiance = layers.radiance.clone();
@@ -372,6 +444,18 @@ fn unmixed_radiance(layers: &Layers) -> Vec<glam::Vec3> {
             for x in 0..f.width {
                 let t = y * f.width + x;
                 if !layers.depth_m[k * texels + t].is_finite() {
+                    // The environment behind a silhouette of layer k carries part of layer k's
+                    // surfaces: with the scene at hand, it is looked up exactly.
+                    if let Some(scene) = scene {
+                        let near = (y.saturating_sub(SILHOUETTE_REACH)..(y + SILHOUETTE_REACH + 1).min(f.height)).any(|ny| {
+                            (x.saturating_sub(SILHOUETTE_REACH)..(x + SILHOUETTE_REACH + 1).min(f.width))
+                                .any(|nx| layers.depth_m[k * texels + ny * f.width + nx].is_finite())
+                        });
+                        if near {
+                            let dir = f.direction(DVec2::new(x as f64 + 0.5, y as f64 + 0.5));
+                            radiance[k * texels + t] = layers.environment(scene, dir);
+                        }
+                    }
                     continue;
                 }
                 let mut p = 0.0f32;
@@ -792,9 +876,10 @@ impl Optics {
         }
     }
 
-    /// Range of blur (PSF diameter, pixels) over inverse depths [w_lo, w_hi] (1/m), from the
-    /// PSF at the image centre at nine inverse depths (it is affine in inverse depth).
-    fn blur_range_px(&self, view: &View, w_lo: f64, w_hi: f64) -> f64 {
+    /// Largest rate of change of the blur (PSF diameter, pixels) with inverse depth (per
+    /// 1/m) over [w_lo, w_hi], from the PSF at the image centre at nine inverse depths (it is
+    /// affine in inverse depth for a thin lens).
+    fn blur_slope_px(&self, view: &View, w_lo: f64, w_hi: f64) -> f64 {
         if w_hi <= w_lo {
             return 0.0;
         }
@@ -805,22 +890,22 @@ impl Optics {
             if !self.psf(dir, 1.0 / wi, poly) {
                 return None;
             }
-            let px: Vec<DVec2> = poly.iter().map(|p| p * view.size).collect();
+            let px: Vec<DVec2> = poly.iter().map(|p| *p * view.size).collect();
             let (lo, hi) = px.iter().fold((DVec2::INFINITY, DVec2::NEG_INFINITY), |(a, b), p| (a.min(*p), b.max(*p)));
             Some((hi - lo).max_element())
         };
         let n = 9;
+        let step = (w_hi - w_lo) / (n - 1) as f64;
         let mut slope: f64 = 0.0;
         let mut prev: Option<f64> = None;
         for i in 0..n {
-            let wi = w_lo + (w_hi - w_lo) * i as f64 / (n - 1) as f64;
-            let d = diam(wi.max(1e-9), &mut poly);
+            let d = diam((w_lo + step * i as f64).max(1e-9), &mut poly);
             if let (Some(a), Some(b)) = (prev, d) {
-                slope = slope.max((b - a).abs());
+                slope = slope.max((b - a).abs() / step);
             }
             prev = d;
         }
-        slope * (n - 1) as f64
+        slope
     }
 }
 
@@ -964,6 +1049,7 @@ impl PsfTable {
         //    entries.
         let tol = 1e-3 / (view_size.x.max(view_size.y)).max(1.0);
         let tol_f = 1e-3 * frame.texel_size().min_element();
+        let sampler = PupilRays::new(camera, wavelength);
         let entries: Vec<(Option<(DVec2, [f64; TABLE_ANGLES])>, u64)> = (0..nr * nd)
             .into_par_iter()
             .map(|e| {
@@ -974,22 +1060,31 @@ impl PsfTable {
                 let x = DVec3::new(tan * z, 0.0, -z);
                 let mut rays = 0u64;
                 // Pupil samples in breadth-first order from the grid's centre, each started
-                // from its parent's solution (continuation: short Newton paths).
-                let mut start = vec![None::<DVec2>; g * g];
+                // from its parent's solution (continuation: short Newton paths); one that fails
+                // restarts from a ring at the extent of the outline so far.
                 let mut queue = std::collections::VecDeque::with_capacity(g * g);
                 let c = (g / 2) * g + g / 2;
                 let mut seen = vec![false; g * g];
                 seen[c] = true;
                 queue.push_back((c, chief_film));
                 let mut pts = Vec::with_capacity(g * g);
+                let mut extent = 0.0f64;
                 while let Some((m, from)) = queue.pop_front() {
                     let u = DVec2::new(((m % g) as f64 + 0.5) / g as f64, ((m / g) as f64 + 0.5) / g as f64);
-                    let solved = solve_film(camera, x, u, from, tol, tol_f, wavelength, &mut rays);
+                    let ray_at = |s: DVec2| sampler.ray(s, u);
+                    let mut solved = solve_film(&ray_at, x, from, tol, tol_f, &mut rays);
+                    if solved.is_none() && extent > 0.0 {
+                        solved = (0..8).find_map(|a| {
+                            let ang = TAU * a as f64 / 8.0;
+                            let s0 = chief_film + DVec2::new(ang.cos(), ang.sin()) * extent;
+                            solve_film(&ray_at, x, s0, tol, tol_f, &mut rays)
+                        });
+                    }
                     if let Some(s) = solved {
+                        extent = extent.max((s - chief_film).length());
                         let o = s - chief_film;
                         pts.push(DVec2::new(o.x * sensor.width_mm, -o.y * sensor.height_mm));
                     }
-                    start[m] = solved;
                     let (mx, my) = ((m % g) as i64, (m / g) as i64);
                     for (dx, dy) in [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)] {
                         let (nx, ny) = (mx + dx, my + dy);
@@ -1079,6 +1174,58 @@ impl PsfTable {
     }
 }
 
+/// Rays of a real lens's camera by film point and a pupil parameter u ∈ [0, 1]² that stays
+/// fixed while the film point moves (Newton needs rays smooth in the film point): for the
+/// exact trace and the LRTF model (whose table stands for the same lens) a point on a square
+/// over the exit-pupil bounds on the rear plane, traced exactly (the cameras' own pupil
+/// sampling is piecewise over film radius and turns with the film azimuth); for the thick
+/// lens its own lens sample (a fixed point of its aperture).
+enum PupilRays<'a> {
+    Camera { camera: &'a Camera, wavelength: f64 },
+    Rear { camera: &'a crate::camera::ExactCamera, half: f64, wavelength: f64 },
+}
+
+impl<'a> PupilRays<'a> {
+    fn new(camera: &'a Camera, wavelength: f64) -> PupilRays<'a> {
+        let exact = match camera {
+            Camera::Exact(c) => Some(c),
+            Camera::Lrtf(c) => Some(c.exact()),
+            _ => None,
+        };
+        match exact {
+            Some(c) => {
+                let half = c
+                    .pupil()
+                    .boxes
+                    .iter()
+                    .filter(|b| b.min.is_finite() && b.max.is_finite())
+                    .map(|b| b.min.abs().max(b.max.abs()).max_element())
+                    .fold(0.0f64, f64::max);
+                PupilRays::Rear { camera: c, half, wavelength }
+            }
+            None => PupilRays::Camera { camera, wavelength },
+        }
+    }
+
+    /// Camera-space ray (origin m, unit direction) from film point `film` for parameter `u`.
+    fn ray(&self, film: DVec2, u: DVec2) -> Option<(DVec3, DVec3)> {
+        match self {
+            PupilRays::Camera { camera, wavelength } => {
+                camera.generate_ray(film, u, *wavelength).map(|r| (r.origin, r.direction))
+            }
+            PupilRays::Rear { camera, half, wavelength } => {
+                let p = camera.sensor().film_point(film, camera.film_z_mm());
+                let q = DVec3::new((2.0 * u.x - 1.0) * half, (2.0 * u.y - 1.0) * half, camera.pupil().rear_z_mm);
+                let ray = crate::optics::lens::Ray::new(p, q - p);
+                let out = camera.lens().trace(&ray, *wavelength, crate::optics::lens::TraceDirection::FilmToScene)?;
+                let z_ep = camera.lens().paraxial().entrance_pupil_z_mm;
+                let o = out.ray.origin;
+                Some((DVec3::new(o.x, o.y, o.z - z_ep) * 1e-3, out.ray.direction))
+            }
+        }
+    }
+}
+
 /// Linear interpolation of `ys` over increasing `xs` at `x` (clamped).
 fn interp(xs: &[f64], ys: &[f64], x: f64) -> f64 {
     let n = xs.len();
@@ -1093,32 +1240,28 @@ fn interp(xs: &[f64], ys: &[f64], x: f64) -> f64 {
     ys[k - 1] + (ys[k] - ys[k - 1]) * t
 }
 
-/// The film point whose camera ray for pupil sample `u` passes through camera-space point `x`:
-/// Newton's method in 2-D with a finite-difference Jacobian from `start`, converged when the
-/// step is below `tol` (film units) and the miss below `tol_f` (tangent units); None when it
-/// is vignetted or does not converge (the pupil sampling of a real lens is piecewise over film
-/// radius and turns with the film azimuth, so the residual can jump).
-#[allow(clippy::too_many_arguments)]
+/// The film point whose ray (`ray_at(film)`: origin in metres, direction; camera space)
+/// passes through camera-space point `x`: Newton's method in 2-D with a finite-difference
+/// Jacobian from `start`, converged when the step is below `tol` (film units) and the miss
+/// below `tol_f` (tangent units); None when the ray is blocked or it does not converge.
 fn solve_film(
-    camera: &Camera,
+    ray_at: &dyn Fn(DVec2) -> Option<(DVec3, DVec3)>,
     x: DVec3,
-    u: DVec2,
     start: DVec2,
     tol: f64,
     tol_f: f64,
-    wavelength: f64,
     rays: &mut u64,
 ) -> Option<DVec2> {
     let z = -x.z;
     let target = DVec2::new(x.x / z, x.y / z);
     let mut residual = |s: DVec2| -> Option<DVec2> {
         *rays += 1;
-        let r = camera.generate_ray(s, u, wavelength)?;
-        if r.direction.z >= -1e-12 {
+        let (o, d) = ray_at(s)?;
+        if d.z >= -1e-12 {
             return None;
         }
-        let t = (-z - r.origin.z) / r.direction.z;
-        let p = r.origin + r.direction * t;
+        let t = (-z - o.z) / d.z;
+        let p = o + d * t;
         Some(DVec2::new(p.x / z, p.y / z) - target)
     };
     let h = (tol * 10.0).min(1e-5);
