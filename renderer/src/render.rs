@@ -192,8 +192,14 @@ pub(crate) trait SampleShader: Sync {
 
     /// The radiance (and first-hit AOVs) along camera ray `ray` (camera space), whose world ray
     /// is `origin` + t·`dir` seen between `clip.0` and `clip.1`.
-    fn shade(&self, ray: &CameraRay, origin: Vec3, dir: Vec3, clip: (f32, f32), sampler: &mut PixelSampler)
-        -> PathSample;
+    fn shade(
+        &self,
+        ray: &CameraRay,
+        origin: Vec3,
+        dir: Vec3,
+        clip: (f32, f32),
+        sampler: &mut PixelSampler,
+    ) -> PathSample;
 }
 
 /// Monte Carlo: every camera ray is path traced.
@@ -203,8 +209,14 @@ struct PathShader<'a> {
 }
 
 impl SampleShader for PathShader<'_> {
-    fn shade(&self, _ray: &CameraRay, origin: Vec3, dir: Vec3, clip: (f32, f32), sampler: &mut PixelSampler)
-        -> PathSample {
+    fn shade(
+        &self,
+        _ray: &CameraRay,
+        origin: Vec3,
+        dir: Vec3,
+        clip: (f32, f32),
+        sampler: &mut PixelSampler,
+    ) -> PathSample {
         self.tracer.trace_clipped(self.scene, origin, dir, clip, sampler)
     }
 }

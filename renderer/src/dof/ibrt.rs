@@ -195,7 +195,8 @@ impl LayerTracer {
         while s < s_out && guard < 1 << 20 {
             guard += 1;
             let p = p0 + delta * (s + 1e-9);
-            let (tx, ty) = (p.x.floor().clamp(0.0, size.x - 1.0) as usize, p.y.floor().clamp(0.0, size.y - 1.0) as usize);
+            let (tx, ty) =
+                (p.x.floor().clamp(0.0, size.x - 1.0) as usize, p.y.floor().clamp(0.0, size.y - 1.0) as usize);
             let mut advanced = false;
             for level in (0..=top).rev() {
                 let (bx, by) = (tx >> level, ty >> level);

@@ -46,7 +46,8 @@ impl LayerFrame {
         // 1. Chief rays on a 33 × 33 grid over the frame (edges included).
         let n = 33;
         let (mut lo, mut hi) = (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY));
-        let wavelength = camera.real_lens().map_or(crate::optics::glass::WAVELENGTH_D_NM, |l| l.primary_wavelength_nm());
+        let wavelength =
+            camera.real_lens().map_or(crate::optics::glass::WAVELENGTH_D_NM, |l| l.primary_wavelength_nm());
         for j in 0..n {
             for i in 0..n {
                 let film = DVec2::new(i as f64 / (n - 1) as f64, j as f64 / (n - 1) as f64);
@@ -169,7 +170,12 @@ pub struct Layers {
 
 impl Layers {
     /// Traces the layers of `scene` seen from `to_world`'s origin through `frame`.
-    pub fn trace(scene: &RenderScene, to_world: DAffine3, frame: LayerFrame, settings: &LayerSettings) -> Result<Layers> {
+    pub fn trace(
+        scene: &RenderScene,
+        to_world: DAffine3,
+        frame: LayerFrame,
+        settings: &LayerSettings,
+    ) -> Result<Layers> {
         settings.validate()?;
         let k_count = settings.count;
         let texels = frame.texels();
@@ -196,14 +202,13 @@ impl Layers {
                     for s in 0..settings.spp {
                         let mut sampler = PixelSampler::new(col as u32, row as u32, s, settings.seed ^ 0x1a7e_5eed);
                         let off = filter.sample(sampler.next_2d());
-                        let dir = frame.direction(DVec2::new(
-                            col as f64 + 0.5 + off.x as f64,
-                            row as f64 + 0.5 + off.y as f64,
-                        ));
+                        let dir = frame
+                            .direction(DVec2::new(col as f64 + 0.5 + off.x as f64, row as f64 + 0.5 + off.y as f64));
                         let d = to_world.transform_vector3(dir).normalize().as_vec3();
                         let hits = peel(scene, origin, d, k_count);
                         for k in 0..k_count {
-                            let mut layer_sampler = PixelSampler::new(col as u32, row as u32, s, settings.seed ^ (k as u32 + 1));
+                            let mut layer_sampler =
+                                PixelSampler::new(col as u32, row as u32, s, settings.seed ^ (k as u32 + 1));
                             let value = match hits.get(k) {
                                 Some(&t) => {
                                     // Start 1 % short of the hit (closer starts can miss it at

@@ -44,10 +44,21 @@
 //! | `table_depths` | usize: inverse depths of a real lens's PSF table | — | 16 |
 //! | `pupil_grid` | usize: pupil samples per side (G², solved by Newton) per table entry | — | 24 |
 //!
+//! * **Layer repairs** (the layers' radiance is filtered over about 3 texels, their depth is the
+//!   centre ray's): an environment texel of the first layer next to a surface carries part of
+//!   it and is spread at its depth; a deeper layer's texel near a silhouette of the layer in
+//!   front mixes in the environment (samples with no k-th hit) and is un-mixed; a deeper
+//!   layer's texel that the first layer hides from every point of the aperture (its parallax
+//!   against the first layer is smaller than the occluder around it) is dropped, so the back of
+//!   a closed double-sided object does not add to its front.
+//!
 //! Limits: texels outside the layer frame are lost (the frame's margin must cover the blur);
-//! within one slice the layers are not ordered (hidden texels in the slice of a visible surface
-//! mix into it); a real lens with a tilted sensor is refused (its PSFs are not rotationally
-//! symmetric); the intensity inside a PSF is uniform (no aberration structure).
+//! within one slice the layers are not ordered (hidden texels that are visible from part of the
+//! aperture mix into the visible surface of their slice); a real lens with a tilted sensor is
+//! refused (its PSFs are not rotationally symmetric); the intensity inside a PSF is uniform (no
+//! aberration structure); a real lens's PSF energy uses the mean ray weight at its chief point,
+//! exact in focus but not for a defocused point whose bundle the rims cut differently (a
+//! defocused corner point of the double Gauss at f/2 gets 27% too much).
 
 use super::layers::Layers;
 use crate::camera::{Camera, Sensor};
@@ -447,10 +458,11 @@ fn unmixed_radiance(layers: &Layers, scene: Option<&RenderScene>) -> Vec<glam::V
                     // The environment behind a silhouette of layer k carries part of layer k's
                     // surfaces: with the scene at hand, it is looked up exactly.
                     if let Some(scene) = scene {
-                        let near = (y.saturating_sub(SILHOUETTE_REACH)..(y + SILHOUETTE_REACH + 1).min(f.height)).any(|ny| {
-                            (x.saturating_sub(SILHOUETTE_REACH)..(x + SILHOUETTE_REACH + 1).min(f.width))
-                                .any(|nx| layers.depth_m[k * texels + ny * f.width + nx].is_finite())
-                        });
+                        let near =
+                            (y.saturating_sub(SILHOUETTE_REACH)..(y + SILHOUETTE_REACH + 1).min(f.height)).any(|ny| {
+                                (x.saturating_sub(SILHOUETTE_REACH)..(x + SILHOUETTE_REACH + 1).min(f.width))
+                                    .any(|nx| layers.depth_m[k * texels + ny * f.width + nx].is_finite())
+                            });
                         if near {
                             let dir = f.direction(DVec2::new(x as f64 + 0.5, y as f64 + 0.5));
                             radiance[k * texels + t] = layers.environment(scene, dir);
@@ -468,7 +480,7 @@ fn unmixed_radiance(layers: &Layers, scene: Option<&RenderScene>) -> Vec<glam::V
                         }
                     }
                 }
-                if p >= 0.999 || p < 0.25 {
+                if !(0.25..0.999).contains(&p) {
                     continue;
                 }
                 let env = (k + 1..layers.count)
@@ -581,7 +593,8 @@ impl Kernel<'_> {
             // Footprint: the chief images of the texel's edges.
             let Some(centre) = self.optics.chief(dir) else { continue };
             let edge = |dx: f64, dy: f64| self.optics.chief(frame.direction(DVec2::new(x + dx, y + dy)));
-            let (Some(l), Some(r), Some(u), Some(d)) = (edge(-0.5, 0.0), edge(0.5, 0.0), edge(0.0, -0.5), edge(0.0, 0.5))
+            let (Some(l), Some(r), Some(u), Some(d)) =
+                (edge(-0.5, 0.0), edge(0.5, 0.0), edge(0.0, -0.5), edge(0.0, 0.5))
             else {
                 continue;
             };
@@ -607,7 +620,12 @@ impl Kernel<'_> {
                 let c = poly.iter().copied().sum::<DVec2>() / poly.len().max(1) as f64;
                 let c = if c.is_finite() { c } else { self.view.px(centre) };
                 poly.clear();
-                poly.extend([c + DVec2::new(-0.5, -0.5), c + DVec2::new(-0.5, 0.5), c + DVec2::new(0.5, 0.5), c + DVec2::new(0.5, -0.5)]);
+                poly.extend([
+                    c + DVec2::new(-0.5, -0.5),
+                    c + DVec2::new(-0.5, 0.5),
+                    c + DVec2::new(0.5, 0.5),
+                    c + DVec2::new(0.5, -0.5),
+                ]);
                 area = signed_area(&poly);
             }
             // Edges accumulate +1 inside for negative shoelace area (y down): fix the sign.
@@ -623,7 +641,13 @@ impl Kernel<'_> {
                 footprint * depth * scale,
             ];
             let (y0, y1) = poly.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.y), b.max(p.y)));
-            splats.push(Splat { first: verts.len() as u32, count: poly.len() as u32, value, y0: y0 as f32, y1: y1 as f32 });
+            splats.push(Splat {
+                first: verts.len() as u32,
+                count: poly.len() as u32,
+                value,
+                y0: y0 as f32,
+                y1: y1 as f32,
+            });
             verts.extend(poly.iter().map(|p| [p.x as f32, p.y as f32]));
         }
         (splats, verts)
@@ -642,7 +666,16 @@ fn signed_area(p: &[DVec2]) -> f64 {
 /// to [0, `width`]: what lies left of the image still covers it, what lies right does not.
 /// (The signed-area accumulation of font-rs, R. Levien, 2016.)
 #[allow(clippy::too_many_arguments)]
-fn draw_edge(acc: &mut [[f64; 5]], stride: usize, row0: usize, row1: usize, width: f32, a: [f32; 2], b: [f32; 2], value: &[f64; 5]) {
+fn draw_edge(
+    acc: &mut [[f64; 5]],
+    stride: usize,
+    row0: usize,
+    row1: usize,
+    width: f32,
+    a: [f32; 2],
+    b: [f32; 2],
+    value: &[f64; 5],
+) {
     if (a[1] - b[1]).abs() <= f32::EPSILON * (a[1].abs() + 1.0) {
         return;
     }
@@ -721,7 +754,8 @@ impl WeightTable {
                 let film = Self::node(i % n, i / n);
                 let mut sum = 0.0;
                 for j in 0..lens * lens {
-                    let u = DVec2::new(((j % lens) as f64 + 0.5) / lens as f64, ((j / lens) as f64 + 0.5) / lens as f64);
+                    let u =
+                        DVec2::new(((j % lens) as f64 + 0.5) / lens as f64, ((j / lens) as f64 + 0.5) / lens as f64);
                     sum += camera.generate_ray(film, u, wavelength).map_or(0.0, |r| r.weight);
                 }
                 let v = sum / (lens * lens) as f64;
@@ -775,7 +809,10 @@ impl Plane {
     fn film_of(&self, q: DVec3) -> DVec2 {
         let v = self.rotation.transpose() * (q - DVec3::new(0.0, 0.0, self.film_z));
         let (sx, sy) = (-v.x, -v.y);
-        DVec2::new((sx - self.sensor.shift_mm.x) / self.sensor.width_mm + 0.5, 0.5 - (sy - self.sensor.shift_mm.y) / self.sensor.height_mm)
+        DVec2::new(
+            (sx - self.sensor.shift_mm.x) / self.sensor.width_mm + 0.5,
+            0.5 - (sy - self.sensor.shift_mm.y) / self.sensor.height_mm,
+        )
     }
 
     /// Where the line through `l` along `d` meets the sensor (film coordinates).
@@ -971,7 +1008,8 @@ fn convex_hull(mut pts: Vec<DVec2>) -> Vec<DVec2> {
     let mut hull: Vec<DVec2> = Vec::with_capacity(pts.len() * 2);
     for pass in 0..2 {
         let start = hull.len();
-        let iter: Box<dyn Iterator<Item = &DVec2>> = if pass == 0 { Box::new(pts.iter()) } else { Box::new(pts.iter().rev()) };
+        let iter: Box<dyn Iterator<Item = &DVec2>> =
+            if pass == 0 { Box::new(pts.iter()) } else { Box::new(pts.iter().rev()) };
         for &p in iter {
             while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0 {
                 hull.pop();
@@ -982,6 +1020,10 @@ fn convex_hull(mut pts: Vec<DVec2>) -> Vec<DVec2> {
     }
     hull
 }
+
+/// A PSF outline: its centroid's offset from the chief point (mm; radial, tangential) and its
+/// radii about the centroid at [`TABLE_ANGLES`] angles.
+type Outline = (DVec2, [f64; TABLE_ANGLES]);
 
 /// A real lens's PSF outlines over (field radius on the sensor, inverse depth), traced (see the
 /// module docs), and its chief-ray map (object tangent → sensor radius).
@@ -998,20 +1040,31 @@ struct PsfTable {
     /// Per (radius, depth) entry, radius-major: the outline's centroid offset from the chief
     /// point (mm, radial/tangential) and its radii at [`TABLE_ANGLES`] angles about it; None
     /// where every pupil sample is vignetted.
-    entries: Vec<Option<(DVec2, [f64; TABLE_ANGLES])>>,
+    entries: Vec<Option<Outline>>,
     rays: u64,
 }
 
 impl PsfTable {
-    fn new(camera: &Camera, layers: &Layers, w_max: f64, view_size: DVec2, settings: &SpreadSettings) -> Result<PsfTable> {
+    fn new(
+        camera: &Camera,
+        layers: &Layers,
+        w_max: f64,
+        view_size: DVec2,
+        settings: &SpreadSettings,
+    ) -> Result<PsfTable> {
         let sensor = *camera.sensor();
         let axis = sensor.axis_film_coord();
         let wavelength = primary_wavelength(camera);
         let frame = layers.frame;
-        let tan_max = [frame.tan_min, frame.tan_max, DVec2::new(frame.tan_min.x, frame.tan_max.y), DVec2::new(frame.tan_max.x, frame.tan_min.y)]
-            .iter()
-            .map(|t| t.length())
-            .fold(0.0f64, f64::max);
+        let tan_max = [
+            frame.tan_min,
+            frame.tan_max,
+            DVec2::new(frame.tan_min.x, frame.tan_max.y),
+            DVec2::new(frame.tan_max.x, frame.tan_min.y),
+        ]
+        .iter()
+        .map(|t| t.length())
+        .fold(0.0f64, f64::max);
         // 1. Chief map along +x (upright) from the axis outwards until the chief rays reach the
         //    frame's largest tangent (or fail).
         let chief_tangent = |film: DVec2| -> Option<f64> {
@@ -1050,7 +1103,7 @@ impl PsfTable {
         let tol = 1e-3 / (view_size.x.max(view_size.y)).max(1.0);
         let tol_f = 1e-3 * frame.texel_size().min_element();
         let sampler = PupilRays::new(camera, wavelength);
-        let entries: Vec<(Option<(DVec2, [f64; TABLE_ANGLES])>, u64)> = (0..nr * nd)
+        let entries: Vec<(Option<Outline>, u64)> = (0..nr * nd)
             .into_par_iter()
             .map(|e| {
                 let (i, j) = (e / nd, e % nd);
@@ -1101,8 +1154,16 @@ impl PsfTable {
             })
             .collect();
         let rays = entries.iter().map(|e| e.1).sum::<u64>() + chief_r.len() as u64;
-        eprintln!("DEBUG table chief {} r_max {r_max} tan_max {tan_max} valid {} of {} rays {rays}; e0 {:?} e_last {:?}", chief_r.len(), entries.iter().filter(|e| e.0.is_some()).count(), entries.len(), entries[nd - 1].0.map(|e| (e.0, e.1[0], e.1[8])), entries[nd * nr - 1].0.map(|e| (e.0, e.1[0], e.1[8])));
-        Ok(PsfTable { sensor, axis, chief_r, chief_tan, radii, inv_depth, entries: entries.into_iter().map(|e| e.0).collect(), rays })
+        Ok(PsfTable {
+            sensor,
+            axis,
+            chief_r,
+            chief_tan,
+            radii,
+            inv_depth,
+            entries: entries.into_iter().map(|e| e.0).collect(),
+            rays,
+        })
     }
 
     /// Radial unit vector (upright film mm) and sensor radius of direction `dir`.
@@ -1291,7 +1352,7 @@ fn solve_film(
 
 /// A convex outline as its centroid and radii at [`TABLE_ANGLES`] angles about it; None for
 /// fewer than three points.
-fn radial_outline(hull: &[DVec2]) -> Option<(DVec2, [f64; TABLE_ANGLES])> {
+fn radial_outline(hull: &[DVec2]) -> Option<Outline> {
     if hull.is_empty() {
         return None;
     }
