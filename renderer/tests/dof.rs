@@ -534,6 +534,32 @@ mod spread_method {
         assert_eq!(bits(&a), bits(&b));
     }
 
+    /// `render_method(Method::Spread)` (the CLI's `--method spread`) is this spread of the
+    /// layers made with the preview settings, and reports itself complete.
+    #[test]
+    fn spread_method_renders_through_render_method() {
+        let scene = occlusion_scene();
+        let st = settings(36, 24, 1);
+        let cam = thin(small_sensor(3.0), 1.4, 2.0, Aperture::default(), true);
+        let rig = CameraRig { camera: cam.clone(), to_world: DAffine3::IDENTITY };
+        let preview = PreviewSettings { layers: LayerSettings { spp: 4, ..LayerSettings::default() } };
+        let passes = std::sync::atomic::AtomicU32::new(0);
+        let r = dof::render_method(dof::Method::Spread, &scene, &rig, &st, &preview, &|_| true, &|_, _| {
+            passes.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        })
+        .unwrap();
+        assert!(r.complete && r.spp_done == st.spp);
+        assert_eq!(passes.load(std::sync::atomic::Ordering::Relaxed), 1);
+        let direct = spread_img(&scene, cam, &st, 4, &SpreadSettings::default());
+        assert_eq!(r.image.rgba, direct.rgba);
+        assert!(
+            r.image.rgba.iter().any(|p| p[0] > 0.1) && r.image.rgba.iter().all(|p| p.iter().all(|v| v.is_finite()))
+        );
+        // Cancelled through the progress callback: incomplete, not an error.
+        let c = dof::render_method(dof::Method::Spread, &scene, &rig, &st, &preview, &|_| false, &|_, _| {}).unwrap();
+        assert!(!c.complete);
+    }
+
     /// Bad settings are errors, not panics.
     #[test]
     fn spread_rejects_bad_settings() {
@@ -551,6 +577,23 @@ mod spread_method {
         ] {
             assert!(spread::render_spread(&layers, Some(&scene), &rig.camera, &st, &bad, &|_| true).is_err());
         }
+        // A real lens with a tilted sensor is refused before any layer is traced.
+        let lens = petzval_renderer::library_lens("double-gauss-50mm").unwrap();
+        let tilted = Sensor { tilt_x_deg: 3.0, ..Sensor::default() };
+        let exact = Camera::Exact(petzval_renderer::ExactCamera::new(tilted, lens, Some(2.0)).unwrap());
+        assert!(spread::check_camera(&exact).is_err());
+        assert!(spread::check_camera(&thin(tilted, 2.0, 2.0, Aperture::default(), true)).is_ok());
+        let rig = CameraRig { camera: exact, to_world: DAffine3::IDENTITY };
+        let r = dof::render_method(
+            dof::Method::Spread,
+            &scene,
+            &rig,
+            &st,
+            &PreviewSettings::default(),
+            &|_| true,
+            &|_, _| {},
+        );
+        assert!(r.is_err());
         let _ = PixelFilter::default();
     }
 }

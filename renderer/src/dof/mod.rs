@@ -96,10 +96,13 @@ pub fn render_method(
             render_samples(rig, settings, progress, on_pass, &IbrtShader { tracer: &tracer, scene })?
         }
         Method::Spread => {
+            spread::check_camera(&rig.camera)?;
             let layers = make_layers(scene, rig, settings, preview)?;
             let spread_settings = spread::SpreadSettings::default();
             let r = spread::render_spread(&layers, Some(scene), &rig.camera, settings, &spread_settings, progress)?;
-            on_pass(&r.image, r.spp_done);
+            if r.complete {
+                on_pass(&r.image, r.spp_done);
+            }
             r
         }
         Method::Multiview => {

@@ -10,11 +10,18 @@
 //!   coordinates (X′ may be at infinity, or virtual). Under tilt that is a projectively
 //!   distorted polygon (a conic section for a circular stop). Real lenses (exact trace, LRTF
 //!   table, thick lens): a table of PSF outlines over (field radius on the sensor, inverse depth)
-//!   made by tracing real rays: for a point X and a grid of pupil samples u, Newton's method
-//!   (2-D, finite-difference Jacobian, from the chief point) finds the film point whose camera
-//!   ray passes through X; vignetted samples drop out (the cat's eye towards the corners) and
-//!   the convex hull of the solutions, stored as radii about its centroid, is the outline;
-//!   the lens is rotationally symmetric, so a radial table suffices. A pinhole's PSF is a point.
+//!   made by tracing real rays: for a point X and a G × G grid of pupil samples u, Newton's
+//!   method (2-D, finite-difference Jacobian; the samples solved outwards from the grid's
+//!   centre, each from its neighbour's solution) finds the film point whose ray for u passes
+//!   through X; vignetted samples drop out (the cat's eye towards the corners) and the convex
+//!   hull of the solutions, stored as radii about its centroid, is the outline; the lens is
+//!   rotationally symmetric, so a radial table suffices, looked up bilinearly. For the exact
+//!   and LRTF models u is a fixed point of the rear plane, traced exactly through the lens (the
+//!   cameras' own lens sample u maps to the exit pupil piecewise over film radius and turned
+//!   with the film azimuth, so `generate_ray(s, u)` jumps as s moves and Newton stalls); the
+//!   thick lens uses its own `generate_ray` (smooth in s). The chief map (object tangent →
+//!   sensor radius) follows the ray through the entrance pupil's centre. A pinhole's PSF is a
+//!   point.
 //! * **Energy**. A texel of radiance L gives its PSF the energy L · w̄(p) · J: w̄ the mean camera
 //!   ray weight at its chief film point p (exposure, natural and mechanical vignetting; a table
 //!   over the film), J the texel's footprint on the sensor in pixels (≈ 1 on a rectilinear
@@ -539,6 +546,20 @@ fn silhouette_depths(layers: &Layers) -> Vec<f32> {
     depth
 }
 
+/// Whether spreading supports `camera`: every model, but a real lens (exact, LRTF, thick)
+/// only with an untilted sensor (its PSF table relies on rotational symmetry).
+pub fn check_camera(camera: &Camera) -> Result<()> {
+    let s = camera.sensor();
+    let real = matches!(camera, Camera::Thick(_) | Camera::Exact(_) | Camera::Lrtf(_));
+    if real && (s.tilt_x_deg != 0.0 || s.tilt_y_deg != 0.0) {
+        return Err(Error::settings(
+            "method",
+            "spread: a real lens with a tilted sensor is not supported (its PSFs are not rotationally symmetric); use --lens-model thin, or --method mc or ibrt",
+        ));
+    }
+    Ok(())
+}
+
 /// The image window: full-frame pixel size and the crop's top-left pixel.
 #[derive(Debug, Clone, Copy)]
 struct View {
@@ -849,13 +870,7 @@ impl Optics {
                 outline: aperture_outline(c.aperture(), c.aperture_radius_mm()),
             },
             Camera::Thick(_) | Camera::Exact(_) | Camera::Lrtf(_) => {
-                let s = camera.sensor();
-                if s.tilt_x_deg != 0.0 || s.tilt_y_deg != 0.0 {
-                    return Err(Error::settings(
-                        "method",
-                        "spread: a real lens with a tilted sensor is not supported (its PSFs are not rotationally symmetric)",
-                    ));
-                }
+                check_camera(camera)?;
                 Optics::Table(Box::new(PsfTable::new(camera, layers, w_max, view_size, spread)?))
             }
         })
