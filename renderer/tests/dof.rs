@@ -577,6 +577,11 @@ mod spread_method {
         ] {
             assert!(spread::render_spread(&layers, Some(&scene), &rig.camera, &st, &bad, &|_| true).is_err());
         }
+        // Layers whose planes do not match their frame.
+        let mut broken = layers.clone();
+        broken.depth_m.pop();
+        assert!(spread::render_spread(&broken, Some(&scene), &rig.camera, &st, &SpreadSettings::default(), &|_| true)
+            .is_err());
         // A real lens with a tilted sensor is refused before any layer is traced.
         let lens = petzval_renderer::library_lens("double-gauss-50mm").unwrap();
         let tilted = Sensor { tilt_x_deg: 3.0, ..Sensor::default() };

@@ -172,6 +172,24 @@ pub fn render_spread(
 ) -> Result<RenderResult> {
     settings.validate()?;
     spread.validate()?;
+    let n = layers.count.checked_mul(layers.frame.texels());
+    if n != Some(layers.depth_m.len())
+        || n != Some(layers.radiance.len())
+        || !layers.frame.tan_min.is_finite()
+        || !layers.frame.tan_max.is_finite()
+    {
+        return Err(Error::settings(
+            "layers",
+            format!(
+                "{} layers of {}×{} texels do not match {} depths and {} radiances (or the frame is not finite)",
+                layers.count,
+                layers.frame.width,
+                layers.frame.height,
+                layers.depth_m.len(),
+                layers.radiance.len()
+            ),
+        ));
+    }
     let start = Instant::now();
     let (w, h) = (settings.width, settings.height);
     let [x0, y0, x1, y1] = settings.crop.unwrap_or([0, 0, w, h]);
