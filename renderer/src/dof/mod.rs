@@ -20,6 +20,7 @@
 pub mod ibrt;
 pub mod layers;
 pub mod multiview;
+pub mod spread;
 
 pub use ibrt::LayerTracer;
 pub use layers::{LayerFrame, LayerSettings, Layers};
@@ -103,7 +104,16 @@ pub fn render_method(
         }
         Method::Multiview => multiview::render_multiview(scene, rig, settings, preview, progress, on_pass)?.0,
         Method::Spread => {
-            return Err(Error::settings("method", format!("'{method}' is not built yet")));
+            spread::check_camera(&rig.camera)?;
+            let Some(layers) = make_layers(scene, rig, settings, preview, progress)? else {
+                return Ok(cancelled(settings, start));
+            };
+            let spread_settings = spread::SpreadSettings::default();
+            let r = spread::render_spread(&layers, Some(scene), &rig.camera, settings, &spread_settings, progress)?;
+            if r.complete {
+                on_pass(&r.image, r.spp_done);
+            }
+            r
         }
     };
     result.seconds = start.elapsed().as_secs_f64();
