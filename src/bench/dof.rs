@@ -142,7 +142,6 @@ fn occluder_scene_shot(focus_m: f64, yaw_deg: f64) -> Result<BenchScene, Error> 
 pub(super) fn bench_dof(
     resolution: &str,
     reference_spp: u32,
-    target_rmse: f64,
     save: Option<&std::path::Path>,
     methods: &str,
 ) -> Result<(), Error> {
@@ -182,7 +181,7 @@ pub(super) fn bench_dof(
             }
         }
     }
-    print_tables(&runs, w, h, reference_spp, target_rmse);
+    print_tables(&runs, w, h, reference_spp);
     Ok(())
 }
 
@@ -270,9 +269,8 @@ fn render_one(
     Ok((r.image, r.seconds))
 }
 
-/// Error at the time of a budget, and time to an error, by log-log interpolation along a
-/// method's ladder.
-fn print_tables(runs: &[Run], w: u32, h: u32, reference_spp: u32, target: f64) {
+/// The runs, then each preview run against Monte Carlo at equal time and at equal error.
+fn print_tables(runs: &[Run], w: u32, h: u32, reference_spp: u32) {
     println!(
         "Depth-of-field methods against Monte Carlo ({reference_spp} spp, seed 99), {w}x{h}, {} threads; thin lens 50 mm f/2 with the demo's blades and focus, except 'demo, real lens' (the demo's double Gauss traced exactly, its f-number and tilt). FLIP: mean LDR-FLIP of the sRGB previews at 67 px/degree.",
         rayon::current_num_threads()
@@ -287,29 +285,36 @@ fn print_tables(runs: &[Run], w: u32, h: u32, reference_spp: u32, target: f64) {
         );
     }
     println!();
-    println!("Equal time (each method's error at the time MC takes at 16 spp) and equal error (time to a relative RMSE of {target}; '—' where the method's ladder never reaches it):");
+    println!(
+        "Each preview run against Monte Carlo on the same scene: MC's error in the same time, and MC's time to the \
+         same error (log-log between MC's runs; '~' where it is extrapolated beyond them with error ∝ time^-1/2)."
+    );
     println!();
-    println!("| scene | method | rel. RMSE at MC-16's time | time to rel. RMSE {target} (s) | best rel. RMSE |");
-    println!("|---|---|---|---|---|");
-    let mut scenes: Vec<&str> = runs.iter().map(|r| r.scene).collect();
-    scenes.dedup();
-    for scene in scenes {
-        let mc16 = runs.iter().find(|r| r.scene == scene && r.method == Method::Mc && r.budget == "16 spp");
-        for method in Method::ALL {
-            let mut ladder: Vec<&Run> = runs.iter().filter(|r| r.scene == scene && r.method == method).collect();
-            if ladder.is_empty() {
-                continue;
-            }
-            ladder.sort_by(|a, b| a.seconds.total_cmp(&b.seconds));
-            let at_time = mc16.map(|m| interpolate(&ladder, m.seconds, |r| r.seconds, |r| r.rel_rmse));
-            let to_error = time_to_error(&ladder, target);
-            let best = ladder.iter().map(|r| r.rel_rmse).fold(f64::INFINITY, f64::min);
-            println!(
-                "| {scene} | {method} | {} | {} | {best:.4} |",
-                at_time.flatten().map(|e| format!("{e:.4}")).unwrap_or_else(|| "—".into()),
-                to_error.map(|t| format!("{t:.2}")).unwrap_or_else(|| "—".into()),
-            );
-        }
+    println!("| scene | method | budget | seconds | rel. RMSE | MC's rel. RMSE in that time | MC's time to that rel. RMSE (s) | speed-up at equal error |");
+    println!("|---|---|---|---|---|---|---|---|");
+    for r in runs.iter().filter(|r| r.method != Method::Mc) {
+        let mut mc: Vec<&Run> = runs.iter().filter(|m| m.scene == r.scene && m.method == Method::Mc).collect();
+        mc.sort_by(|a, b| a.seconds.total_cmp(&b.seconds));
+        let (Some(first), Some(last)) = (mc.first(), mc.last()) else { continue };
+        let (err_at, err_mark) = match interpolate(&mc, r.seconds, |m| m.seconds, |m| m.rel_rmse) {
+            Some(e) => (e, ""),
+            None if r.seconds > last.seconds => (last.rel_rmse * (last.seconds / r.seconds).sqrt(), "~"),
+            None => (first.rel_rmse * (first.seconds / r.seconds).sqrt(), "~"),
+        };
+        let (time_to, time_mark) = match time_to_error(&mc, r.rel_rmse) {
+            Some(t) if r.rel_rmse <= first.rel_rmse => (t, ""),
+            _ if r.rel_rmse > first.rel_rmse => (first.seconds * (first.rel_rmse / r.rel_rmse).powi(2), "~"),
+            _ => (last.seconds * (last.rel_rmse / r.rel_rmse).powi(2), "~"),
+        };
+        println!(
+            "| {} | {} | {} | {:.2} | {:.4} | {err_mark}{err_at:.4} | {time_mark}{time_to:.2} | {time_mark}{:.2}× |",
+            r.scene,
+            r.method,
+            r.budget,
+            r.seconds,
+            r.rel_rmse,
+            time_to / r.seconds
+        );
     }
 }
 

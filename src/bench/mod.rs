@@ -103,9 +103,6 @@ pub enum BenchCommand {
         /// Samples per pixel of the Monte Carlo reference.
         #[arg(long, default_value_t = 2048)]
         reference_spp: u32,
-        /// Relative RMSE of the equal-error column.
-        #[arg(long, default_value_t = 0.15)]
-        target_rmse: f64,
         /// Write every render as a PNG into this directory.
         #[arg(long)]
         save: Option<std::path::PathBuf>,
@@ -150,9 +147,9 @@ pub fn run(cmd: BenchCommand) -> Result<(), Error> {
         BenchCommand::Instances { instances, triangles, resolution, spp, repeats, save } => {
             bench_instances(instances, triangles, &resolution, spp, repeats, save.as_deref())
         }
-        BenchCommand::Dof { resolution, reference_spp, target_rmse, save, methods, failures } => match failures {
+        BenchCommand::Dof { resolution, reference_spp, save, methods, failures } => match failures {
             Some(dir) => dof::bench_dof_failures(&resolution, reference_spp, &dir),
-            None => bench_dof(&resolution, reference_spp, target_rmse, save.as_deref(), &methods),
+            None => bench_dof(&resolution, reference_spp, save.as_deref(), &methods),
         },
         BenchCommand::LensModels { lens, rays, resolutions, json } => bench_lens_models(lens, rays, &resolutions, json),
         BenchCommand::RenderModels { resolution, spp, resolutions, seed, save, json } => {
