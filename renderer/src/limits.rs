@@ -17,6 +17,7 @@
 //! | [`MAX_FILE_BYTES`] | 1 GiB per glTF buffer or image file | the glTF loader |
 //! | lens lengths | 10⁷ mm ([`crate::optics::prescription::MAX_LENGTH_MM`]) | every lens format |
 //! | glass Abbe number | 0 or 5…1000 ([`crate::optics::prescription::MIN_ABBE`], [`crate::optics::prescription::MAX_ABBE`]) | every lens format |
+//! | [`LAYER_BYTES_PER_TEXEL`] × layers × texels | at most [`MEMORY_SHARE`] of the available memory | `dof::make_layers`, before the layers are traced |
 //! | LRTF tables | 2…4096 cells per axis, 1…64 wavelengths, size equal to the data present | `LrtfTable::load` |
 
 /// Largest image side.
@@ -52,6 +53,11 @@ pub const MAX_FILE_BYTES: u64 = 1 << 30;
 /// Peak memory per image pixel during a render: the film's sums, the image of the last pass
 /// kept for interrupts, the finished image, and the output's channel copies.
 pub const FILM_BYTES_PER_PIXEL: u64 = PIXEL_SUMS_BYTES + 3 * IMAGE_BYTES_PER_PIXEL + 16;
+
+/// Peak memory per texel of one depth-peeled layer of the preview methods: depth, radiance,
+/// coverage, tangent plane and shaded flag (37 B), the surfaces and radiance rows while they are
+/// traced (44 B), and IBRT's spans and pyramid (about 11 B).
+pub const LAYER_BYTES_PER_TEXEL: u64 = 96;
 
 /// Bytes of one pixel's sums on the film (`film::PixelSums`; the film asserts it at compile time).
 pub const PIXEL_SUMS_BYTES: u64 = 15 * 4;

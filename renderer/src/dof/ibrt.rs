@@ -146,29 +146,30 @@ impl LayerTracer {
     /// The radiance along camera-space ray `ray` (origin in metres), as a path sample (alpha:
     /// the coverage of the layer elements it met; depth along the ray to the first). Elements
     /// that cover part of their texel ([`Layers::coverage`]) pass the rest on to what lies
-    /// behind them.
-    pub fn shade(&self, scene: &RenderScene, ray: &CameraRay) -> PathSample {
-        let mut out = PathSample {
-            radiance: Vec3::ZERO,
-            alpha: 0.0,
-            depth_m: f32::INFINITY,
-            normal: Vec3::ZERO,
-            albedo: Vec3::ZERO,
-            dropped: false,
-        };
+    /// behind them. Only elements whose distance along the ray lies within `clip` (m, the
+    /// clipping planes) count; beyond them the environment shows, as in Monte Carlo.
+    pub fn shade(&self, scene: &RenderScene, ray: &CameraRay, clip: (f32, f32)) -> PathSample {
+        let mut out = PathSample::miss(Vec3::ZERO);
         let mut transmitted = 1.0f32;
         let mut after_z = 0.0f64;
+        let d = ray.direction.normalize();
         for _ in 0..MAX_PARTIAL_HITS {
             let Some((index, z)) = self.intersect_beyond(ray.origin, ray.direction, after_z) else { break };
+            let t = ((z + ray.origin.z) / -d.z) as f32;
+            if t > clip.1 {
+                break;
+            }
+            after_z = z;
+            if t < clip.0 {
+                continue;
+            }
             if out.depth_m.is_infinite() {
-                let d = ray.direction.normalize();
-                out.depth_m = ((z + ray.origin.z) / -d.z) as f32;
+                out.depth_m = t;
             }
             let coverage = self.layers.coverage[index];
             out.radiance += transmitted * coverage * self.layers.radiance[index];
             out.alpha += transmitted * coverage;
             transmitted *= 1.0 - coverage;
-            after_z = z;
             if transmitted < 1e-3 {
                 return out;
             }

@@ -147,11 +147,22 @@ pub struct LayerSettings {
     pub max_depth: u32,
     /// Seed.
     pub seed: u32,
+    /// Clipping planes along the view axis (m): only what lies between them is layered (as
+    /// Monte Carlo's camera rays see only that).
+    pub clip_m: (f64, f64),
 }
 
 impl Default for LayerSettings {
     fn default() -> Self {
-        LayerSettings { count: 4, spp: 4, margin: 0.15, texels_per_pixel: 2, max_depth: 8, seed: 0 }
+        LayerSettings {
+            count: 4,
+            spp: 4,
+            margin: 0.15,
+            texels_per_pixel: 2,
+            max_depth: 8,
+            seed: 0,
+            clip_m: (0.0, f64::INFINITY),
+        }
     }
 }
 
@@ -233,6 +244,11 @@ impl Layers {
             let dir = frame.direction(DVec2::new(col as f64 + off.x as f64, row as f64 + off.y as f64));
             ((1.0 / dir.length()) as f32, to_world.transform_vector3(dir).normalize().as_vec3())
         };
+        // The clipping planes as distances along a ray of axial cosine `axial`.
+        let clip_along = |axial: f32| {
+            let (near, far) = settings.clip_m;
+            ((near / axial as f64) as f32, (far / axial as f64) as f32)
+        };
         let surface_rows: Vec<Vec<Surface>> = (0..frame.height)
             .into_par_iter()
             .map(|row| {
@@ -245,7 +261,7 @@ impl Layers {
                     for s in 0..settings.spp {
                         let (axial, d) = jitter(col, row, s);
                         let mut seen = 0u64;
-                        for hit in peel(scene, origin, d, k_count + 1) {
+                        for hit in peel(scene, origin, d, k_count + 1, clip_along(axial)) {
                             let z = hit.t * axial;
                             match surfaces.iter().position(|c| c.holds(&hit)) {
                                 Some(i) if seen & (1 << i) == 0 => {
@@ -317,8 +333,8 @@ impl Layers {
                     let mut sums = [Vec3::ZERO; MAX_LAYERS];
                     let mut counts = [0u32; MAX_LAYERS];
                     for s in 0..settings.spp {
-                        let (_, d) = jitter(col, row, s);
-                        let hits = peel(scene, origin, d, k_count + 1);
+                        let (axial, d) = jitter(col, row, s);
+                        let hits = peel(scene, origin, d, k_count + 1, clip_along(axial));
                         for k in (0..k_count).filter(|&k| shaded[at(k)]) {
                             let surface = &surfaces[at(k)];
                             if surface.count == 0 {
@@ -430,17 +446,17 @@ struct Peeled {
     normal: Vec3,
 }
 
-/// The first hit (what the centre sees, from either side) and the
+/// Within `clip` (distances along the ray), the first hit (what the centre sees, from either side) and the
 /// next `k − 1` front-facing hits (double-sided materials count from both sides; the back
 /// faces of closed objects are skipped): each peel restarts just past the previous hit.
-fn peel(scene: &RenderScene, origin: Vec3, dir: Vec3, k: usize) -> Vec<Peeled> {
+fn peel(scene: &RenderScene, origin: Vec3, dir: Vec3, k: usize, clip: (f32, f32)) -> Vec<Peeled> {
     let mut out = Vec::with_capacity(k);
-    let mut t0 = 0.0f32;
+    let mut t0 = clip.0.max(0.0);
     let mut guard = 0;
-    while out.len() < k && guard < 64 {
+    while out.len() < k && guard < 64 && t0 < clip.1 {
         guard += 1;
         let o = origin + dir * t0;
-        let Some(hit) = scene.intersect(o, dir, f32::INFINITY) else { break };
+        let Some(hit) = scene.intersect(o, dir, clip.1 - t0) else { break };
         let t = t0 + hit.t;
         let double_sided = scene.scene().materials[hit.material_id as usize].double_sided;
         if out.is_empty() || hit.front_face || double_sided {

@@ -8,6 +8,9 @@
 //! * [`Method::Multiview`]: multi-view accumulation. Every lens sample is one pinhole view
 //!   shared by all pixels; visibility is traced exactly and the radiance looked up in the layers
 //!   ([`multiview`]).
+//! * [`Method::Spread`]: PSF spreading. Every layer texel spreads its point-spread function (the
+//!   aperture projected from its conjugate point, or a real lens's traced PSF table) onto depth
+//!   slices composited front to back ([`spread`]).
 //!
 //! | name | type | unit | default |
 //! |---|---|---|---|
@@ -149,7 +152,26 @@ pub fn make_layers(
         preview.layers.margin,
         preview.layers.texels_per_pixel,
     )?;
-    let layer_settings = LayerSettings { max_depth: settings.max_depth, seed: settings.seed, ..preview.layers };
+    let layer_settings = LayerSettings {
+        max_depth: settings.max_depth,
+        seed: settings.seed,
+        clip_m: (settings.clip_start_m, settings.clip_end_m),
+        ..preview.layers
+    };
+    let bytes = (frame.texels() * layer_settings.count) as u64 * crate::limits::LAYER_BYTES_PER_TEXEL;
+    if let Err(budget) = crate::limits::check_memory(bytes) {
+        return Err(Error::settings(
+            "layers",
+            format!(
+                "{} layers of {}x{} texels need about {}, {}",
+                layer_settings.count,
+                frame.width,
+                frame.height,
+                crate::limits::format_bytes(bytes),
+                crate::limits::over_budget(budget)
+            ),
+        ));
+    }
     Layers::trace(scene, rig.to_world, frame, &layer_settings, pupil_radius_m(&rig.camera), &|| progress(0.0))
 }
 
@@ -183,7 +205,7 @@ struct IbrtShader<'a> {
 }
 
 impl SampleShader for IbrtShader<'_> {
-    fn shade(&self, ray: &CameraRay, _o: Vec3, _d: Vec3, _clip: (f32, f32), _s: &mut PixelSampler) -> PathSample {
-        self.tracer.shade(self.scene, ray)
+    fn shade(&self, ray: &CameraRay, _o: Vec3, _d: Vec3, clip: (f32, f32), _s: &mut PixelSampler) -> PathSample {
+        self.tracer.shade(self.scene, ray, clip)
     }
 }

@@ -239,14 +239,7 @@ impl SampleShader for MultiviewShader<'_> {
             if t_far > t_near && d != Vec3::ZERO { self.scene.intersect(start, d, t_far - t_near) } else { None };
         let Some(hit) = found else {
             self.counts[2].fetch_add(1, Ordering::Relaxed);
-            return PathSample {
-                radiance: crate::integrator::lights::env_radiance(&self.scene.scene().environment, d),
-                alpha: 0.0,
-                depth_m: f32::INFINITY,
-                normal: Vec3::ZERO,
-                albedo: Vec3::ZERO,
-                dropped: false,
-            };
+            return PathSample::miss(crate::integrator::lights::env_radiance(&self.scene.scene().environment, d));
         };
         let p = self.to_camera.transform_point3(hit.position.as_dvec3());
         match self.lookup(p) {

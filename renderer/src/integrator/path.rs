@@ -68,6 +68,20 @@ pub struct PathSample {
     pub dropped: bool,
 }
 
+impl PathSample {
+    /// A sample that hit nothing and carries `radiance` (the environment's, or zero).
+    pub fn miss(radiance: Vec3) -> PathSample {
+        PathSample {
+            radiance,
+            alpha: 0.0,
+            depth_m: f32::INFINITY,
+            normal: Vec3::ZERO,
+            albedo: Vec3::ZERO,
+            dropped: false,
+        }
+    }
+}
+
 /// Power heuristic (β = 2) weight of strategy `a` against `b`.
 #[inline]
 pub fn power_heuristic(a: f32, b: f32) -> f32 {
@@ -118,14 +132,7 @@ impl PathTracer {
         clip: (f32, f32),
         sampler: &mut PixelSampler,
     ) -> PathSample {
-        let mut out = PathSample {
-            radiance: Vec3::ZERO,
-            alpha: 0.0,
-            depth_m: f32::INFINITY,
-            normal: Vec3::ZERO,
-            albedo: Vec3::ZERO,
-            dropped: false,
-        };
+        let mut out = PathSample::miss(Vec3::ZERO);
         let mut d = dir.normalize_or_zero();
         if d == Vec3::ZERO || !origin.is_finite() || !d.is_finite() {
             return out;
