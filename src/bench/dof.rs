@@ -162,6 +162,7 @@ pub(super) fn bench_dof(
         }
         // 2. Each method over a ladder of budgets.
         let ladder: Vec<(Method, String, RenderSettings, PreviewSettings)> = budgets(&base);
+        let mut images: Vec<(Method, String, f64, Image)> = Vec::new();
         for (method, budget, settings, preview) in ladder {
             if !methods.contains(&method) {
                 continue;
@@ -175,13 +176,45 @@ pub(super) fn bench_dof(
                         let name = format!("{}-{method}-{}.png", slug(s.name), slug(&budget));
                         write_png(&dir.join(name), &image, 0.0, ToneMap::Srgb)?;
                     }
-                    runs.push(Run { scene: s.name, method, budget, seconds, rel_rmse, flip });
+                    runs.push(Run { scene: s.name, method, budget: budget.clone(), seconds, rel_rmse, flip });
+                    images.push((method, budget, seconds, image));
                 }
                 Err(e) => eprintln!("{}: {method} {budget}: not run: {e}", s.name),
             }
         }
+        // 3. The image strip at about equal time.
+        if let Some(dir) = save {
+            write_strip(dir, s.name, &reference.0, &images)?;
+        }
     }
     print_tables(&runs, w, h, reference_spp);
+    Ok(())
+}
+
+/// Writes `DIR/strip-SCENE.png`: the reference, then each method (in `Method` order) at the budget
+/// whose time is nearest to Monte Carlo's at 64 spp, left to right; prints which runs it shows.
+fn write_strip(
+    dir: &std::path::Path,
+    scene: &str,
+    reference: &Image,
+    images: &[(Method, String, f64, Image)],
+) -> Result<(), Error> {
+    let target = images.iter().find(|r| r.0 == Method::Mc && r.1 == "64 spp").or(images.first()).map_or(0.0, |r| r.2);
+    let mut shown: Vec<&Image> = vec![reference];
+    let mut caption = vec!["reference".to_string()];
+    for method in [Method::Mc, Method::Multiview, Method::Ibrt, Method::Spread] {
+        let nearest = images
+            .iter()
+            .filter(|r| r.0 == method)
+            .min_by(|a, b| (a.2 - target).abs().total_cmp(&(b.2 - target).abs()));
+        if let Some((_, budget, seconds, image)) = nearest {
+            shown.push(image);
+            caption.push(format!("{method} {budget} ({seconds:.1} s)"));
+        }
+    }
+    let file = dir.join(format!("strip-{}.png", slug(scene)));
+    write_png(&file, &strip(&shown), 0.0, ToneMap::Srgb)?;
+    eprintln!("{}: strip {}: {}", scene, file.display(), caption.join(" | "));
     Ok(())
 }
 
@@ -455,17 +488,23 @@ pub(super) fn bench_dof_failures(resolution: &str, reference_spp: u32, dir: &std
 
 /// Two images of one size side by side (a left, b right).
 fn side_by_side(a: &Image, b: &Image) -> Image {
-    let (w, h) = (a.width as usize, a.height as usize);
+    strip(&[a, b])
+}
+
+/// Images of one size placed left to right in one image.
+fn strip(images: &[&Image]) -> Image {
+    let (w, h) = (images[0].width as usize, images[0].height as usize);
+    let n = images.len();
     let mut out = Image {
-        width: 2 * a.width,
-        height: a.height,
-        rgba: Vec::with_capacity(2 * w * h),
-        depth: Vec::with_capacity(2 * w * h),
-        normal: Vec::with_capacity(2 * w * h),
-        albedo: Vec::with_capacity(2 * w * h),
+        width: n as u32 * images[0].width,
+        height: images[0].height,
+        rgba: Vec::with_capacity(n * w * h),
+        depth: Vec::with_capacity(n * w * h),
+        normal: Vec::with_capacity(n * w * h),
+        albedo: Vec::with_capacity(n * w * h),
     };
     for y in 0..h {
-        for img in [a, b] {
+        for img in images {
             let row = y * w..(y + 1) * w;
             out.rgba.extend_from_slice(&img.rgba[row.clone()]);
             out.depth.extend_from_slice(&img.depth[row.clone()]);
