@@ -337,10 +337,8 @@ fn apply_render_settings(args: &mut RenderArgs) -> Result<Vec<RenderArgs>, Error
     };
     let time =
         args.frame.or_else(|| args.frames.as_deref().and_then(|f| parse_frames(f).ok()?.first().map(|&f| f as f64)));
-    let rs = petzval_usd::render_settings::read(&path, time, args.settings.as_deref()).map_err(|e| match e {
-        petzval_usd::Error::Renderer(e) => e,
-        e => Error::scene(path.display().to_string(), "", e.to_string()),
-    })?;
+    let rs =
+        petzval_usd::render_settings::read(&path, time, args.settings.as_deref()).map_err(|e| usd_error(&path, e))?;
     let Some(rs) = rs else { return Ok(Vec::new()) };
     for w in &rs.warnings {
         eprintln!("warning: {w}");
@@ -360,6 +358,24 @@ fn apply_render_settings(args: &mut RenderArgs) -> Result<Vec<RenderArgs>, Error
 }
 
 /// One product's settings onto the options the command line left at their defaults.
+/// A USD error as the renderer's: its own when it is one, else a scene error naming the shot
+/// once (the USD error names its layer; when that is the shot itself, relative or absolute, the
+/// name is not repeated).
+fn usd_error(path: &std::path::Path, e: petzval_usd::Error) -> Error {
+    if let petzval_usd::Error::Renderer(e) = e {
+        return e;
+    }
+    let file = path.display().to_string();
+    let message = e.to_string();
+    let absolute = std::fs::canonicalize(path).map(|p| p.display().to_string()).unwrap_or_default();
+    let rest = [&file, &absolute]
+        .iter()
+        .filter(|f| !f.is_empty())
+        .find_map(|f| message.strip_prefix(&format!("{f}: ")))
+        .unwrap_or(&message);
+    Error::scene(file, "", rest.to_string())
+}
+
 fn apply_settings(args: &mut RenderArgs, rs: &petzval_usd::render_settings::RenderSettings) {
     if args.camera.is_none() {
         args.camera = rs.camera.clone();
@@ -450,10 +466,7 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
     let mut usd_cam: Option<(String, petzval_usd::UsdCamera, Option<f64>)> = None;
     let (mut scene, demo_shot): (Scene, Option<demo::DemoShot>) = match &args.scene {
         Some(path) if petzval_usd::is_usd_path(path) => {
-            let usd_err = |e: petzval_usd::Error| match e {
-                petzval_usd::Error::Renderer(e) => e,
-                e => Error::scene(path.display().to_string(), "", e.to_string()),
-            };
+            let usd_err = |e: petzval_usd::Error| usd_error(path, e);
             let shot = petzval_usd::load(path, args.frame).map_err(usd_err)?;
             let cam = shot.camera(args.camera.as_deref()).map_err(usd_err)?.clone();
             usd_cam = Some((shot.file.clone(), cam, shot.time));

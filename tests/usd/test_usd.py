@@ -557,6 +557,9 @@ def test_bad_input_names_layer_prim_attribute(petzval: Path, tmp_path: Path) -> 
     )
     r = run(petzval, "usd", "info", str(path), ok=False)
     assert "/M.faceVertexIndices" in r.stderr and "outside" in r.stderr
+    # `render` names the shot once, not once as given and again as the layer
+    r = run(petzval, "render", str(path), "-o", str(tmp_path / "x.exr"), ok=False)
+    assert "/M.faceVertexIndices" in r.stderr and r.stderr.count("bad.usda") == 1, r.stderr
     # a missing reference is a listed warning; the rest loads
     path.write_text(
         '#usda 1.0\ndef Xform "A" (references = @./missing.usda@)\n{\n}\n'

@@ -101,6 +101,9 @@ pub struct IndexCache {
     // concurrent reader needs only a shared snapshot rather than a lock on the
     // hot path. Keep population off the critical section when that lands.
     pub(super) redirected_prims: HashMap<Path, Path>,
+    /// How deeply [`Self::effective_path`] is nested now (petzval patch: a
+    /// guard that turns runaway recursion into an error, not a stack overflow).
+    pub(super) redirect_depth: usize,
     /// One-shot errors from layer collection that the [`LayerGraph`](super::layer_graph::LayerGraph)
     /// cannot regenerate (e.g. `UnresolvedSublayer`). Set once at construction;
     /// never cleared, since nothing recomputes them.
@@ -230,6 +233,7 @@ impl IndexCache {
             clip_cache: ClipCache::default(),
             prototypes: PrototypeRegistry::default(),
             redirected_prims: HashMap::new(),
+            redirect_depth: 0,
             collection_errors,
             query_errors: Vec::new(),
             in_progress: HashSet::new(),

@@ -609,6 +609,20 @@ impl IndexCache {
     /// rather than once per query; the memo is cleared whenever the prototype
     /// registry is invalidated.
     pub(super) fn effective_path(&mut self, graph: &LayerGraph, path: &Path) -> Result<Path> {
+        // petzval patch: each nesting level walks one ancestor (or one nested
+        // instance); no real stage nests this deep, and a cycle must not take the
+        // stack down.
+        const MAX_REDIRECT_DEPTH: usize = 512;
+        if self.redirect_depth >= MAX_REDIRECT_DEPTH {
+            anyhow::bail!("instancing of <{path}> recursed deeper than {MAX_REDIRECT_DEPTH} levels");
+        }
+        self.redirect_depth += 1;
+        let result = self.effective_path_unguarded(graph, path);
+        self.redirect_depth -= 1;
+        result
+    }
+
+    fn effective_path_unguarded(&mut self, graph: &LayerGraph, path: &Path) -> Result<Path> {
         let prim = path.prim_path();
         let redirected = match self.redirected_prims.get(&prim) {
             Some(hit) => hit.clone(),

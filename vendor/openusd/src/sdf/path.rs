@@ -395,6 +395,11 @@ impl Path {
         // (a child of another prim) or directly by a `}` (a child of a variant
         // selection, `/A{v=s}B`), whichever is rightmost.
         match self.path.rfind(['/', '}']) {
+            // petzval patch: a malformed path ending in a `}` that opens no variant
+            // selection (a parsed connection target can hold one) was its own
+            // parent, and the instancing code's ancestor walk recursed on it until
+            // the stack overflowed; it has no parent instead.
+            Some(i) if self.path.as_bytes()[i] == b'}' && i + 1 == self.path.len() => None,
             // Child of a variant selection: keep up to and including the `}`.
             Some(i) if self.path.as_bytes()[i] == b'}' => Some(Path::from_str_unchecked(&self.path[..i + 1])),
             Some(0) => Some(Path::abs_root()),

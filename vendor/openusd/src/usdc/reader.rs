@@ -401,6 +401,18 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
             loop {
                 let index = current_index;
                 current_index += 1;
+                // petzval patch: every index here comes from the file; check it.
+                ensure!(
+                    index < path_indexes.len() && index < element_token_indexes.len() && index < jumps.len(),
+                    "compressed path entry {index} out of range ({} entries)",
+                    path_indexes.len()
+                );
+                let path_index = path_indexes[index] as usize;
+                ensure!(
+                    path_index < self.paths.len() && index < self.paths.len(),
+                    "path index {path_index} out of range ({} paths)",
+                    self.paths.len()
+                );
 
                 if parent_path.is_empty() {
                     parent_path = sdf::Path::new("/")?;
@@ -409,9 +421,10 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
                     let token_index = element_token_indexes[index];
                     let is_prim_property_path = token_index < 0;
                     let token_index = token_index.unsigned_abs() as usize;
-                    let element_token = self.tokens[token_index].as_str();
+                    let element_token = self.token_at(token_index)?;
+                    let element_token = element_token.as_str();
 
-                    self.paths[path_indexes[index] as usize] = if is_prim_property_path {
+                    self.paths[path_index] = if is_prim_property_path {
                         parent_path.append_property(element_token)?
                     } else if element_token.starts_with('{') {
                         // Variant segments are appended directly without a separator
@@ -427,14 +440,14 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
 
                 if has_child {
                     if has_sibling {
-                        let sibling_index = index + jumps[index] as usize;
+                        let sibling_index = index.saturating_add(jumps[index] as usize);
                         // Siblings share this node's parent; defer the subtree.
                         pending.push((sibling_index, parent_path.clone()));
                     }
 
                     // Descend into the child (the next sequential entry) under
                     // this node's path.
-                    parent_path = self.paths[path_indexes[index] as usize].clone();
+                    parent_path = self.paths[path_index].clone();
                 }
 
                 if !has_child && !has_sibling {
@@ -491,9 +504,29 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
         self.sections.iter().find(|s| s.name() == name)
     }
 
-    fn resolve_string(&self, string_index: u32) -> String {
-        let token = self.strings[string_index as usize];
-        self.tokens[token].clone()
+    fn resolve_string(&self, string_index: u32) -> Result<String> {
+        let token = *self.strings.get(string_index as usize).with_context(|| {
+            format!("string index {string_index} out of range ({} strings)", self.strings.len())
+        })? /* petzval patch: an error, not a panic */;
+        self.token_at(token)
+    }
+
+    /// The token at `index`, or an error when the file's index is out of range
+    /// (petzval patch: indices come from the file, so they are checked).
+    fn token_at(&self, index: usize) -> Result<String> {
+        self.tokens
+            .get(index)
+            .cloned()
+            .with_context(|| format!("token index {index} out of range ({} tokens)", self.tokens.len()))
+    }
+
+    /// The path at `index`, or an error when the file's index is out of range
+    /// (petzval patch).
+    fn path_at(&self, index: usize) -> Result<sdf::Path> {
+        self.paths
+            .get(index)
+            .cloned()
+            .with_context(|| format!("path index {index} out of range ({} paths)", self.paths.len()))
     }
 
     fn set_position(&mut self, position: u64) -> Result<()> {
@@ -524,7 +557,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
 
     fn read_token(&mut self, value: ValueRep) -> Result<String> {
         let index: u64 = self.unpack_value(value)?;
-        let value = self.tokens[index as usize].clone();
+        let value = self.token_at(index as usize)?;
 
         Ok(value)
     }
@@ -538,9 +571,9 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
     fn read_asset_path(&mut self, value: ValueRep) -> Result<String> {
         let index = self.unpack_value::<u32>(value)?;
         if value.is_inlined() {
-            Ok(self.tokens[index as usize].clone())
+            self.token_at(index as usize)
         } else {
-            Ok(self.resolve_string(index))
+            self.resolve_string(index)
         }
     }
 
@@ -694,7 +727,9 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
 
                     let mut output = vec![T::zero(); count];
                     for (i, index) in indexes.into_iter().enumerate() {
-                        output[i] = lut[index as usize];
+                        output[i] = *lut.get(index as usize).with_context(|| {
+                            format!("lookup index {index} out of range ({lut_size} entries)")
+                        })? /* petzval patch */;
                     }
 
                     output
@@ -752,23 +787,23 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
 
     /// Reads a count-prefixed vector of `u32` indices and maps each through
     /// `lookup` to produce the element value.
-    fn read_indexed_vec<T>(&mut self, lookup: impl Fn(&Self, usize) -> T) -> Result<Vec<T>> {
+    fn read_indexed_vec<T>(&mut self, lookup: impl Fn(&Self, usize) -> Result<T>) -> Result<Vec<T>> {
         let count = self.reader.read_count()?;
         let indices = self.reader.read_vec::<u32>(count)?;
 
-        Ok(indices.into_iter().map(|index| lookup(self, index as usize)).collect())
+        indices.into_iter().map(|index| lookup(self, index as usize)).collect()
     }
 
     fn read_string_vec(&mut self) -> Result<Vec<String>> {
-        self.read_indexed_vec(|file, index| file.tokens[file.strings[index]].clone())
+        self.read_indexed_vec(|file, index| file.resolve_string(index as u32))
     }
 
     fn read_token_vec(&mut self) -> Result<Vec<String>> {
-        self.read_indexed_vec(|file, index| file.tokens[index].clone())
+        self.read_indexed_vec(|file, index| file.token_at(index))
     }
 
     fn read_path_vec(&mut self) -> Result<Vec<sdf::Path>> {
-        self.read_indexed_vec(|file, index| file.paths[index].clone())
+        self.read_indexed_vec(|file, index| file.path_at(index))
     }
 
     /// Reads a count-prefixed vector of POD values.
@@ -779,14 +814,14 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
 
     fn read_string(&mut self) -> Result<String> {
         let index = self.reader.read_pod::<u32>()?;
-        let string = self.resolve_string(index);
+        let string = self.resolve_string(index)?;
 
         Ok(string)
     }
 
     fn read_path(&mut self) -> Result<sdf::Path> {
         let index = self.reader.read_pod::<u32>()?;
-        let path = self.paths[index as usize].clone();
+        let path = self.path_at(index as usize)?;
 
         Ok(path)
     }
@@ -1006,7 +1041,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
                 ensure!(!value.is_array());
 
                 let string_index = self.unpack_value::<u32>(value)?;
-                sdf::Value::String(self.resolve_string(string_index))
+                sdf::Value::String(self.resolve_string(string_index)?)
             }
             Type::AssetPath if value.is_array() => {
                 // Asset arrays (`asset[]`, e.g. value-clip `assetPaths`) are
@@ -1022,8 +1057,8 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
                 let indices = self.reader.read_vec::<u32>(count)?;
                 let tokens = indices
                     .into_iter()
-                    .map(|i| self.tokens[i as usize].as_str().into())
-                    .collect();
+                    .map(|i| self.token_at(i as usize).map(Into::into))
+                    .collect::<Result<_>>()?;
 
                 sdf::Value::TokenVec(tokens)
             }
@@ -1444,8 +1479,8 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
                 for _ in 0..count {
                     let src_idx: u32 = self.reader.read_pod()?;
                     let tgt_idx: u32 = self.reader.read_pod()?;
-                    let src = self.paths[src_idx as usize].clone();
-                    let tgt = self.paths[tgt_idx as usize].clone();
+                    let src = self.path_at(src_idx as usize)?;
+                    let tgt = self.path_at(tgt_idx as usize)?;
                     pairs.push((src, tgt));
                 }
                 sdf::Value::Relocates(pairs)
