@@ -134,3 +134,12 @@ fn kept_crash_cases_pass() {
     }
     assert!(n >= 2, "{n} cases");
 }
+
+/// cargo-fuzz (overflow checks on) found a GLB whose header length is below the header's own
+/// 12 bytes: the gltf crate's subtraction underflowed. It is refused before the gltf crate sees it.
+#[test]
+fn glb_header_length_below_the_header_is_refused() {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz/gltf-glb-length-underflow.glb");
+    let e = petzval_renderer::scene::gltf::load_gltf(&p).unwrap_err().to_string();
+    assert!(e.contains("gltf-glb-length-underflow.glb") && e.contains("below its own 12 bytes"), "{e}");
+}

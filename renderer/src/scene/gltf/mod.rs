@@ -165,6 +165,16 @@ impl<'a> Loader<'a> {
         if bytes.is_empty() {
             return Err(err("empty file".into()));
         }
+        // A GLB header whose total length is below its own 12 bytes underflows in the gltf
+        // crate (a panic where overflow checks are on, as under cargo-fuzz): refuse it here.
+        if let [b'g', b'l', b'T', b'F', _, _, _, _, l0, l1, l2, l3, ..] = bytes {
+            let length = u32::from_le_bytes([*l0, *l1, *l2, *l3]);
+            if length < 12 {
+                return Err(err(format!(
+                    "not a valid glTF file: the GLB header's length {length} is below its own 12 bytes"
+                )));
+            }
+        }
         let gltf::Gltf { document, blob } =
             gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| err(format!("not a valid glTF file: {e}")))?;
         // KHR_mesh_quantization only widens the accessor types allowed for attributes, which

@@ -889,7 +889,8 @@ where
             Some(sdf::Value::TimeSamples(map)) => map,
             None => Vec::new(),
             Some(other) => {
-                debug_assert!(false, "timeSamples field is not a TimeSamples (got {other:?})");
+                // petzval patch: a field of another type in a hostile file is ignored, not asserted
+                let _ = &other;
                 Vec::new()
             }
         };
@@ -992,7 +993,8 @@ where
                 changed
             }
             Some(other) => {
-                debug_assert!(false, "connectionPaths field is not a sdf::PathListOp (got {other:?})");
+                // petzval patch: a field of another type in a hostile file is ignored, not asserted
+                let _ = &other;
                 let op = if prepend {
                     sdf::PathListOp::prepended([path])
                 } else {
@@ -1053,7 +1055,8 @@ where
                 true
             }
             Some(other) => {
-                debug_assert!(false, "connectionPaths field is not a sdf::PathListOp (got {other:?})");
+                // petzval patch: a field of another type in a hostile file is ignored, not asserted
+                let _ = &other;
                 self.set(key, sdf::Value::PathListOp(sdf::PathListOp::deleted([path.clone()])));
                 true
             }
@@ -1180,7 +1183,8 @@ where
                 self.set(key, sdf::Value::PathListOp(op));
             }
             Some(other) => {
-                debug_assert!(false, "targetPaths field is not a sdf::PathListOp (got {other:?})");
+                // petzval patch: a field of another type in a hostile file is ignored, not asserted
+                let _ = &other;
                 self.set(key, sdf::Value::PathListOp(sdf::PathListOp::explicit([path])));
             }
             None => {

@@ -19,7 +19,8 @@ pub fn encoded_buffer_size<T: PrimInt>(count: usize) -> usize {
         0
     } else {
         let sz = mem::size_of::<T>();
-        sz + (count * 2).div_ceil(8) + (sz * count)
+        // petzval patch: `count` comes from the file; saturate rather than overflow
+        sz.saturating_add(count.saturating_mul(2).div_ceil(8)).saturating_add(sz.saturating_mul(count))
     }
 }
 

@@ -279,7 +279,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
                 .map(|(index, value)| Field::new(*index, *value))
                 .collect();
 
-            debug_assert_eq!(fields.len(), field_count);
+            ensure!(fields.len() == field_count, "inconsistent data in the file") /* petzval patch: was a debug assertion */;
 
             fields
         };
@@ -310,7 +310,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
                 .map(|i| if i == INVALID_INDEX { None } else { Some(i as usize) })
                 .collect::<Vec<_>>();
 
-            debug_assert_eq!(sets.len(), count);
+            ensure!(sets.len() == count, "inconsistent data in the file") /* petzval patch: was a debug assertion */;
 
             sets
         };
@@ -358,13 +358,13 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
         // Read compressed data.
 
         let path_indexes = self.read_encoded_ints::<u32>(count)?;
-        debug_assert_eq!(path_indexes.len(), count);
+        ensure!(path_indexes.len() == count, "inconsistent data in the file") /* petzval patch: was a debug assertion */;
 
         let element_token_indexes = self.read_encoded_ints::<i32>(count)?;
-        debug_assert_eq!(element_token_indexes.len(), count);
+        ensure!(element_token_indexes.len() == count, "inconsistent data in the file") /* petzval patch: was a debug assertion */;
 
         let jumps = self.read_encoded_ints::<i32>(count)?;
-        debug_assert_eq!(jumps.len(), count);
+        ensure!(jumps.len() == count, "inconsistent data in the file") /* petzval patch: was a debug assertion */;
 
         self.build_compressed_paths(&path_indexes, &element_token_indexes, &jumps)?;
 
@@ -616,7 +616,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
         let buffer = self.read_compressed::<u8>(estimated_size)?;
 
         let ints = coding::decode_ints(buffer.as_slice(), count)?;
-        debug_assert_eq!(ints.len(), count);
+        ensure!(ints.len() == count, "inconsistent data in the file") /* petzval patch: was a debug assertion */;
 
         Ok(ints)
     }
@@ -625,7 +625,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
 
     // Implements various logic and compatibility checks to figure out the array length and whether it's compressed.
     fn unpack_array_len(&mut self, value: ValueRep, kind: ArrayKind) -> Result<(usize, bool)> {
-        debug_assert!(!value.is_inlined());
+        ensure!(!value.is_inlined(), "inconsistent value representation in the file") /* petzval patch: was a debug assertion */;
 
         // Empty array.
         if value.payload() == 0 {
@@ -659,7 +659,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
             ArrayKind::Other => {
                 // Fallback to uncompressed.
                 // See https://github.com/PixarAnimationStudios/OpenUSD/blob/0b18ad3f840c24eb25e16b795a5b0821cf05126e/pxr/usd/usd/crateFile.cpp#L1868
-                debug_assert!(!value.is_compressed());
+                // petzval patch: a compressed flag here is ignored (as Pixar's reader does), not asserted
                 compressed = false;
             }
         }
@@ -921,7 +921,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
     /// the on-disk element — safe for all gf vec types since they are
     /// `#[repr(C)]` and `bytemuck::Pod`.
     fn read_gf_array<U: Default + NoUninit + AnyBitPattern>(&mut self, value: ValueRep) -> Result<Vec<U>> {
-        debug_assert!(value.is_array() && !value.is_compressed());
+        ensure!(value.is_array() && !value.is_compressed(), "inconsistent value representation in the file") /* petzval patch: was a debug assertion */;
         let (count, _) = self.unpack_array_len(value, ArrayKind::Other)?;
         if count == 0 {
             return Ok(Vec::default());
@@ -933,8 +933,8 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
         &mut self,
         value: ValueRep,
     ) -> Result<Vec<[T; N]>> {
-        debug_assert!(value.is_array());
-        debug_assert!(!value.is_compressed());
+        ensure!(value.is_array(), "inconsistent value representation in the file") /* petzval patch: was a debug assertion */;
+        ensure!(!value.is_compressed(), "inconsistent value representation in the file") /* petzval patch: was a debug assertion */;
 
         let (count, _) = self.unpack_array_len(value, ArrayKind::Other)?;
 
@@ -1415,7 +1415,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
                 ensure!(count == times.len(), "Invalid time samples count");
 
                 let value_reps = self.reader.read_vec::<ValueRep>(count)?;
-                debug_assert_eq!(value_reps.len(), count);
+                ensure!(value_reps.len() == count, "inconsistent data in the file") /* petzval patch: was a debug assertion */;
 
                 let values = value_reps
                     .into_iter()
