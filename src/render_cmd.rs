@@ -357,7 +357,6 @@ fn apply_render_settings(args: &mut RenderArgs) -> Result<Vec<RenderArgs>, Error
     Ok(others)
 }
 
-/// One product's settings onto the options the command line left at their defaults.
 /// A USD error as the renderer's: its own when it is one, else a scene error naming the shot
 /// once (the USD error names its layer; when that is the shot itself, relative or absolute, the
 /// name is not repeated).
@@ -376,6 +375,7 @@ fn usd_error(path: &std::path::Path, e: petzval_usd::Error) -> Error {
     Error::scene(file, "", rest.to_string())
 }
 
+/// One product's settings onto the options the command line left at their defaults.
 fn apply_settings(args: &mut RenderArgs, rs: &petzval_usd::render_settings::RenderSettings) {
     if args.camera.is_none() {
         args.camera = rs.camera.clone();

@@ -888,9 +888,8 @@ where
         let mut map = match existing {
             Some(sdf::Value::TimeSamples(map)) => map,
             None => Vec::new(),
-            Some(other) => {
+            Some(_) => {
                 // petzval patch: a field of another type in a hostile file is ignored, not asserted
-                let _ = &other;
                 Vec::new()
             }
         };
@@ -992,9 +991,8 @@ where
                 self.set(key, sdf::Value::PathListOp(op));
                 changed
             }
-            Some(other) => {
+            Some(_) => {
                 // petzval patch: a field of another type in a hostile file is ignored, not asserted
-                let _ = &other;
                 let op = if prepend {
                     sdf::PathListOp::prepended([path])
                 } else {
@@ -1054,9 +1052,8 @@ where
                 self.set(key, sdf::Value::PathListOp(op));
                 true
             }
-            Some(other) => {
+            Some(_) => {
                 // petzval patch: a field of another type in a hostile file is ignored, not asserted
-                let _ = &other;
                 self.set(key, sdf::Value::PathListOp(sdf::PathListOp::deleted([path.clone()])));
                 true
             }
@@ -1182,9 +1179,8 @@ where
                 }
                 self.set(key, sdf::Value::PathListOp(op));
             }
-            Some(other) => {
+            Some(_) => {
                 // petzval patch: a field of another type in a hostile file is ignored, not asserted
-                let _ = &other;
                 self.set(key, sdf::Value::PathListOp(sdf::PathListOp::explicit([path])));
             }
             None => {
