@@ -13,11 +13,13 @@
 //! | `filter` | [`PixelFilter`] | px | Blackman–Harris spanning 3 px (Cycles' default) |
 //! | `clip_start_m`, `clip_end_m` | f64: clipping planes perpendicular to the view axis (Cycles) | m | 0, ∞ |
 //! | `crop` | optional `[x0, y0, x1, y1)` window of the frame to render (row 0 = top) | px | whole frame |
+//! | `bokeh_paths` | f32: light paths from emitters through the lens per pixel per sample, combined with camera paths by MIS (see [`crate::bokeh`]); exact lens model | — | 0 (off) |
 
+use crate::bokeh::BokehTracer;
 use crate::camera::{Camera, CameraRay};
 use crate::error::{Error, Result};
 use crate::film::{Film, FilterSampler, Image, PixelFilter};
-use crate::integrator::{PathSample, PathTracer, RenderScene};
+use crate::integrator::{PathSample, PathTracer, RenderScene, SurfaceHit};
 use crate::limits;
 use crate::sampler::PixelSampler;
 use crate::spectral;
@@ -60,6 +62,8 @@ pub struct RenderSettings {
     pub clip_end_m: f64,
     /// Render only this window `[x0, y0, x1, y1)` of the frame; the image is the window's size.
     pub crop: Option<[u32; 4]>,
+    /// Light paths from emissive triangles through the lens per pixel per sample (0 = none).
+    pub bokeh_paths: f32,
 }
 
 impl Default for RenderSettings {
@@ -76,6 +80,7 @@ impl Default for RenderSettings {
             clip_start_m: 0.0,
             clip_end_m: f64::INFINITY,
             crop: None,
+            bokeh_paths: 0.0,
         }
     }
 }
@@ -120,6 +125,12 @@ impl RenderSettings {
             return bad(
                 "clip",
                 format!("clip start {} and end {} must satisfy 0 ≤ start < end", self.clip_start_m, self.clip_end_m),
+            );
+        }
+        if !(self.bokeh_paths.is_finite() && (0.0..=64.0).contains(&self.bokeh_paths)) {
+            return bad(
+                "bokeh_paths",
+                format!("{} must be in 0..=64 light paths per pixel per sample", self.bokeh_paths),
             );
         }
         if let Some([x0, y0, x1, y1]) = self.crop {
@@ -178,8 +189,10 @@ pub fn render_observed(
     progress: Progress,
     on_pass: PassObserver,
 ) -> Result<RenderResult> {
+    settings.validate()?;
     let tracer = PathTracer { max_depth: settings.max_depth, ..PathTracer::default() };
-    render_samples(rig, settings, progress, on_pass, &PathShader { tracer, scene })
+    let bokeh = BokehTracer::new(scene, rig, settings)?;
+    render_samples(rig, settings, progress, on_pass, &PathShader { tracer, scene, bokeh })
 }
 
 /// What a render method does with each camera sample (Monte Carlo traces a path; the preview
@@ -190,14 +203,21 @@ pub(crate) trait SampleShader: Sync {
         own
     }
 
+    /// Light paths traced alongside the camera samples (Monte Carlo with bokeh light paths).
+    fn bokeh(&self) -> Option<&BokehTracer<'_>> {
+        None
+    }
+
     /// The radiance (and first-hit AOVs) along camera ray `ray` (camera space), whose world ray
-    /// is `origin` + t·`dir` seen between `clip.0` and `clip.1`.
+    /// is `origin` + t·`dir` seen between `clip.0` and `clip.1`; `camera_density` is the
+    /// sample's density for weighting it against light paths (0 without them).
     fn shade(
         &self,
         ray: &CameraRay,
         origin: Vec3,
         dir: Vec3,
         clip: (f32, f32),
+        camera_density: f64,
         sampler: &mut PixelSampler,
     ) -> PathSample;
 }
@@ -206,18 +226,30 @@ pub(crate) trait SampleShader: Sync {
 struct PathShader<'a> {
     tracer: PathTracer,
     scene: &'a RenderScene,
+    bokeh: Option<BokehTracer<'a>>,
 }
 
 impl SampleShader for PathShader<'_> {
+    fn bokeh(&self) -> Option<&BokehTracer<'_>> {
+        self.bokeh.as_ref()
+    }
+
     fn shade(
         &self,
         _ray: &CameraRay,
         origin: Vec3,
         dir: Vec3,
         clip: (f32, f32),
+        camera_density: f64,
         sampler: &mut PixelSampler,
     ) -> PathSample {
-        self.tracer.trace_clipped(self.scene, origin, dir, clip, sampler)
+        match &self.bokeh {
+            None => self.tracer.trace_clipped(self.scene, origin, dir, clip, sampler),
+            Some(b) => {
+                let weight = |hit: &SurfaceHit, d: Vec3| b.camera_weight(camera_density, origin, d, hit);
+                self.tracer.trace_weighted(self.scene, origin, dir, clip, sampler, Some(&weight))
+            }
+        }
     }
 }
 
@@ -236,6 +268,10 @@ pub(crate) fn render_samples(
     let [x0, y0, x1, y1] = settings.crop.unwrap_or([0, 0, w, h]);
     let (cw, ch) = (x1 - x0, y1 - y0);
     let mut film = Film::new(cw, ch);
+    let bokeh = shader.bokeh();
+    if bokeh.is_some() {
+        film.splat = vec![Vec3::ZERO; film.pixels.len()];
+    }
     let (clip_near, clip_far) = (settings.clip_start_m, settings.clip_end_m);
     let filter = FilterSampler::new(settings.filter);
     let cancelled = AtomicBool::new(false);
@@ -282,7 +318,8 @@ pub(crate) fn render_samples(
                     let d = rig.to_world.transform_vector3(ray.direction).normalize().as_vec3();
                     let axial = (-ray.direction.z / ray.direction.length()).max(1e-6);
                     let clip = ((clip_near / axial) as f32, (clip_far / axial) as f32);
-                    let sample = shader.shade(&ray, o, d, clip, &mut sampler);
+                    let camera_density = bokeh.map_or(0.0, |b| b.camera_density(film_uv, lens_u, off));
+                    let sample = shader.shade(&ray, o, d, clip, camera_density, &mut sampler);
                     let value = sample.radiance * lambda_weight * ray.weight as f32;
                     if !value.is_finite() || sample.dropped {
                         px.dropped += 1;
@@ -313,7 +350,12 @@ pub(crate) fn render_samples(
             }
         });
         if !cancelled.load(Ordering::Relaxed) {
+            // 4. The pass's light paths, splatted (the camera samples above weighted against them).
+            if let Some(b) = bokeh {
+                b.trace_pass(range.clone(), &mut film.splat);
+            }
             done += n;
+            film.splat_scale = 1.0 / done as f32;
             on_pass(&film.image(), done);
         }
         pass_spp = (pass_spp * 2).min(16);

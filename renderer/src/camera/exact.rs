@@ -8,7 +8,7 @@
 //! | `lens` | [`Lens`], already stopped down and with its stop shape | — | — |
 //! | `focus_distance_m` | optional f64 from the entrance pupil (None = infinity) | m | None |
 
-use super::{centre_mean, check_positive, geometric_factor, CameraRay, Sensor};
+use super::{centre_mean, check_positive, geometric_factor, CameraRay, FilmConnection, Sensor};
 use crate::error::{Error, Result};
 use crate::optics::lens::{Lens, Ray, TraceDirection};
 use crate::optics::pupil::ExitPupilBounds;
@@ -24,6 +24,8 @@ pub struct ExactCamera {
     film_z_mm: f64,
     pupil: ExitPupilBounds,
     exposure: f64,
+    /// A plane (lens frame z) wholly in front of the first surface: light paths enter there.
+    front_plane_z_mm: f64,
 }
 
 impl ExactCamera {
@@ -33,7 +35,8 @@ impl ExactCamera {
         let film_z_mm = Self::film_position_mm(&sensor, &lens, focus_distance_m)?;
         let (r_max, dz) = sensor.extent();
         let pupil = ExitPupilBounds::compute(&lens, film_z_mm, dz, r_max * 1.001);
-        let mut cam = ExactCamera { sensor, lens, focus_distance_m, film_z_mm, pupil, exposure: 1.0 };
+        let front_plane_z_mm = front_plane_z_mm(&lens);
+        let mut cam = ExactCamera { sensor, lens, focus_distance_m, film_z_mm, pupil, exposure: 1.0, front_plane_z_mm };
         let centre = cam.sensor.axis_film_coord();
         let mean = centre_mean(|u| cam.raw_ray(centre, u, cam.lens.primary_wavelength_nm()).map(|r| r.weight));
         if !(mean > 0.0) {
@@ -133,7 +136,85 @@ impl ExactCamera {
         Some(CameraRay { origin: DVec3::new(o.x, o.y, o.z - z_ep) * 1e-3, direction: out.direction, weight })
     }
 
+    /// The camera strategy's density for the sample (`film`, `lens_u`) in the ray (étendue)
+    /// measure, per unit film density: pdf of the rear-plane point / (cosθ_film cosθ_rear / d²),
+    /// for weighting camera paths against light paths. None when the sample is not drawn.
+    pub(super) fn sample_density(&self, film: DVec2, lens_u: DVec2) -> Option<f64> {
+        let p = self.sensor.film_point(film, self.film_z_mm);
+        let s = self.pupil.sample(DVec2::new(p.x, p.y), lens_u)?;
+        let g = geometric_factor(p, s.point, self.sensor.normal());
+        (g > 0.0).then(|| s.pdf_area / g)
+    }
+
+    /// Light tracing: where the ray from `from_m` towards `to_m` (camera space, metres) lands
+    /// on the film after the lens, at `wavelength_nm`. None when the lens absorbs it or it
+    /// misses the sensor plane.
+    pub(super) fn connect(&self, from_m: DVec3, to_m: DVec3, wavelength_nm: f64) -> Option<FilmConnection> {
+        // 1. The object-space ray in the lens frame (mm), started where it enters the lens.
+        let z_ep = self.lens.paraxial().entrance_pupil_z_mm;
+        let o = from_m * 1e3 + DVec3::new(0.0, 0.0, z_ep);
+        let d = (to_m - from_m).normalize();
+        if !(d.z > 1e-9) || !o.is_finite() {
+            return None;
+        }
+        let t_entry = (self.front_plane_z_mm - o.z) / d.z;
+        if !(t_entry > 0.0) {
+            return None; // the source is inside the lens
+        }
+        let entry = o + d * t_entry;
+        // 2. Through the lens to the film side.
+        let traced =
+            self.lens.trace(&Ray { origin: entry, direction: d }, wavelength_nm, TraceDirection::SceneToFilm)?;
+        let r = traced.ray;
+        // 3. Onto the sensor plane.
+        let n = self.sensor.normal();
+        let denom = r.direction.dot(n);
+        if !(denom > 1e-12) {
+            return None;
+        }
+        let t = (DVec3::new(0.0, 0.0, self.film_z_mm) - r.origin).dot(n) / denom;
+        if !(t >= 0.0) {
+            return None;
+        }
+        let x = r.origin + r.direction * t;
+        // 4. The camera's density for this ray: its rear-plane point and the pupil domain.
+        let fxy = DVec2::new(x.x, x.y);
+        let ts = (self.pupil.rear_z_mm - r.origin.z) / r.direction.z;
+        let s = r.origin + r.direction * ts;
+        let camera_density = if self.pupil.contains(fxy, DVec2::new(s.x, s.y)) {
+            let g = geometric_factor(x, s, n);
+            let area = self.pupil.domain_area(fxy.length());
+            if g > 0.0 && area > 0.0 {
+                1.0 / (area * g)
+            } else {
+                0.0
+            }
+        } else {
+            0.0
+        };
+        let entry_m = DVec3::new(entry.x, entry.y, entry.z - z_ep) * 1e-3;
+        Some(FilmConnection {
+            film: self.sensor.film_coord(x, self.film_z_mm),
+            importance: traced.transmission * self.exposure,
+            camera_density,
+            entry_m,
+        })
+    }
+
     pub(super) fn generate_ray(&self, film: DVec2, lens_u: DVec2, wavelength_nm: f64) -> Option<CameraRay> {
         self.raw_ray(film, lens_u, wavelength_nm).map(|r| CameraRay { weight: r.weight * self.exposure, ..r })
     }
+}
+
+/// A plane (lens frame z) wholly in front of `lens`'s first surface: its vertex, less the
+/// surface's forward sag at the rim, less a margin for a tilted first element.
+fn front_plane_z_mm(lens: &Lens) -> f64 {
+    let Some(first) = lens.surfaces().first() else { return 0.0 };
+    let h = first.semi_diameter_mm.max(first.housing_semi_diameter_mm);
+    let sag = [(h, 0.0), (0.0, h), (h * std::f64::consts::FRAC_1_SQRT_2, h * std::f64::consts::FRAC_1_SQRT_2)]
+        .iter()
+        .map(|&(x, y)| first.shape.sag(x, y).unwrap_or(-h))
+        .fold(0.0f64, f64::min);
+    let tilt_margin = if first.placement.is_some() { h } else { 0.0 };
+    first.z_mm + sag - tilt_margin - 0.01
 }

@@ -68,6 +68,21 @@ pub struct CameraRay {
     pub weight: f64,
 }
 
+/// Where light from a scene point lands on the film (light tracing through the camera).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FilmConnection {
+    /// Image position in [0,1]² (top left = (0,0)), as [`Camera::generate_ray`] takes it.
+    pub film: DVec2,
+    /// Importance per unit radiance before the pixel filter: stop transmission × exposure
+    /// (a camera ray's weight is this × cosθ_film cosθ_rear / d² / pdf).
+    pub importance: f64,
+    /// The camera strategy's density for this ray, as [`Camera::sample_density`] gives it
+    /// (0 when the camera cannot draw it).
+    pub camera_density: f64,
+    /// Where the ray enters the lens (camera space, metres): visibility is tested up to here.
+    pub entry_m: DVec3,
+}
+
 /// Every camera model; each variant is named as its [`LensModel`].
 #[derive(Debug, Clone)]
 pub enum Camera {
@@ -143,6 +158,40 @@ impl Camera {
             Camera::Thick(c) => c.generate_ray(film, lens_u),
             Camera::Exact(c) => c.generate_ray(film, lens_u, wavelength_nm),
             Camera::Lrtf(c) => c.generate_ray(film, lens_u, wavelength_nm),
+        }
+    }
+
+    /// Whether light can be traced from the scene onto the film ([`Camera::connect`]): the
+    /// exact model.
+    pub fn can_connect(&self) -> bool {
+        matches!(self, Camera::Exact(_))
+    }
+
+    /// The camera strategy's density for sample (`film`, `lens_u`) in the ray (étendue)
+    /// measure, per unit film density (mm⁻² of the rear plane over the geometric factor), for
+    /// combining camera paths with light paths. None for models that cannot connect.
+    pub fn sample_density(&self, film: DVec2, lens_u: DVec2) -> Option<f64> {
+        match self {
+            Camera::Exact(c) => c.sample_density(film, lens_u),
+            _ => None,
+        }
+    }
+
+    /// Light tracing: where the ray from `from_m` towards `to_m` (camera space, metres) lands
+    /// on the film, at `wavelength_nm`; None when blocked or for models that cannot connect.
+    pub fn connect(&self, from_m: DVec3, to_m: DVec3, wavelength_nm: f64) -> Option<FilmConnection> {
+        match self {
+            Camera::Exact(c) => c.connect(from_m, to_m, wavelength_nm),
+            _ => None,
+        }
+    }
+
+    /// Radius of the entrance pupil (metres, paraxial, about the camera origin), for models
+    /// that can connect.
+    pub fn entrance_pupil_radius_m(&self) -> Option<f64> {
+        match self {
+            Camera::Exact(c) => Some(0.5e-3 * c.lens().paraxial().entrance_pupil_diameter_mm),
+            _ => None,
         }
     }
 

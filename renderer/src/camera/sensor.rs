@@ -71,6 +71,14 @@ impl Sensor {
         DVec3::new(0.0, 0.0, film_z_mm) + self.rotation() * DVec3::new(-sx, -sy, 0.0)
     }
 
+    /// The inverse of [`Sensor::film_point`]: the image position of lens-frame point `p` on
+    /// the sensor plane (pivot at z = `film_z_mm`).
+    pub fn film_coord(&self, p: DVec3, film_z_mm: f64) -> DVec2 {
+        let local = self.rotation().transpose() * (p - DVec3::new(0.0, 0.0, film_z_mm));
+        let (sx, sy) = (-local.x, -local.y);
+        DVec2::new((sx - self.shift_mm.x) / self.width_mm + 0.5, 0.5 - (sy - self.shift_mm.y) / self.height_mm)
+    }
+
     /// Image position (in [0,1]² when the shift is small) where the optical axis meets the sensor.
     pub fn axis_film_coord(&self) -> DVec2 {
         DVec2::new(0.5 - self.shift_mm.x / self.width_mm, 0.5 + self.shift_mm.y / self.height_mm)

@@ -205,7 +205,15 @@ struct IbrtShader<'a> {
 }
 
 impl SampleShader for IbrtShader<'_> {
-    fn shade(&self, ray: &CameraRay, _o: Vec3, _d: Vec3, clip: (f32, f32), _s: &mut PixelSampler) -> PathSample {
+    fn shade(
+        &self,
+        ray: &CameraRay,
+        _o: Vec3,
+        _d: Vec3,
+        clip: (f32, f32),
+        _c: f64,
+        _s: &mut PixelSampler,
+    ) -> PathSample {
         self.tracer.shade(self.scene, ray, clip)
     }
 }

@@ -91,6 +91,34 @@ impl FilterSampler {
     }
 
     /// Offset from the pixel centre (pixels) for a sample `u` in [0,1)².
+    /// Density (per px) of [`FilterSampler::sample_1d`] at offset `x` (px from the centre).
+    fn pdf_1d(&self, x: f32) -> f32 {
+        let v = x / self.width_px + 0.5;
+        let inv = &self.inverse_cdf;
+        if !(v >= inv[0] && v <= inv[inv.len() - 1]) {
+            return 0.0;
+        }
+        // the segment i with inv[i] <= v < inv[i+1]: each holds probability 1/m
+        let i = inv.partition_point(|&a| a <= v).clamp(1, inv.len() - 1) - 1;
+        let dv = inv[i + 1] - inv[i];
+        if dv > 0.0 {
+            1.0 / ((inv.len() - 1) as f32 * dv * self.width_px)
+        } else {
+            0.0
+        }
+    }
+
+    /// Density (per px²) with which [`FilterSampler::sample`] draws offset `off` (px from the
+    /// pixel centre): the effective pixel filter, for splatting light-path samples.
+    pub fn pdf(&self, off: Vec2) -> f32 {
+        self.pdf_1d(off.x) * self.pdf_1d(off.y)
+    }
+
+    /// Half the filter's width (px): offsets beyond it have zero density.
+    pub fn radius_px(&self) -> f32 {
+        0.5 * self.width_px
+    }
+
     pub fn sample(&self, u: Vec2) -> Vec2 {
         Vec2::new(self.sample_1d(u.x), self.sample_1d(u.y))
     }
@@ -131,6 +159,10 @@ pub struct Film {
     pub height: u32,
     /// Row-major pixel sums, row 0 at the top.
     pub pixels: Vec<PixelSums>,
+    /// Light-path splats (radiance sums; empty when no light paths are traced).
+    pub splat: Vec<Vec3>,
+    /// Scale of `splat` in the image (1 / samples per pixel done).
+    pub splat_scale: f32,
 }
 
 /// A finished image: per-pixel means.
@@ -156,7 +188,13 @@ pub struct Image {
 impl Film {
     /// An empty film.
     pub fn new(width: u32, height: u32) -> Self {
-        Film { width, height, pixels: vec![PixelSums::default(); (width as usize) * (height as usize)] }
+        Film {
+            width,
+            height,
+            pixels: vec![PixelSums::default(); (width as usize) * (height as usize)],
+            splat: Vec::new(),
+            splat_scale: 0.0,
+        }
     }
 
     /// Per-pixel means.
@@ -170,9 +208,9 @@ impl Film {
             normal: Vec::with_capacity(n),
             albedo: Vec::with_capacity(n),
         };
-        for p in &self.pixels {
+        for (i, p) in self.pixels.iter().enumerate() {
             let s = p.samples.max(1) as f32;
-            let c = p.rgb / s;
+            let c = p.rgb / s + self.splat.get(i).map_or(Vec3::ZERO, |&v| v * self.splat_scale);
             let alpha = if p.alpha_weight > 0.0 { (p.alpha / p.alpha_weight).clamp(0.0, 1.0) } else { 0.0 };
             img.rgba.push([c.x, c.y, c.z, alpha]);
             img.depth.push(if p.hits > 0 { p.depth / p.hits as f32 } else { f32::INFINITY });

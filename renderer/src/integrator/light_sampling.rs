@@ -206,6 +206,29 @@ impl RenderScene {
         }
     }
 
+    /// [`RenderScene::triangle_light_pdf`] for a shading point `p` at distance `dist` from the
+    /// hit along unit `dir` (not the ray's own origin): light paths start on the lens.
+    pub fn triangle_light_pdf_from(&self, p: Vec3, n: Vec3, hit: &SurfaceHit, dir: Vec3, dist: f32) -> f32 {
+        let pmf = self.lights.triangle_pmf(p, n, hit.instance, hit.triangle);
+        if pmf == 0.0 {
+            return 0.0;
+        }
+        let [a, b, c] = self.world_triangle(hit.instance, hit.triangle);
+        let area = 0.5 * (b - a).cross(c - a).length();
+        let cos_l = hit.geometric_normal.dot(dir).abs();
+        let pdf = pmf * dist * dist / (area * cos_l);
+        if pdf.is_finite() {
+            pdf
+        } else {
+            0.0
+        }
+    }
+
+    /// Whether any triangle emits (only those can be found by light paths through the lens).
+    pub fn has_emissive_triangles(&self) -> bool {
+        self.lights.kinds.iter().any(|k| matches!(k, LightKind::Triangle { .. }))
+    }
+
     /// Pdf (selection × solid angle) of sampling the environment toward `dir` (the environment's
     /// selection pmf is the same at every shading point).
     pub fn env_light_pdf(&self, dir: Vec3) -> f32 {

@@ -34,6 +34,9 @@ pub enum LightStrategy {
     BsdfOnly,
 }
 
+/// The weight of emission hit by the camera ray itself: `(hit, unit direction) → weight`.
+pub type DirectWeight<'a> = &'a dyn Fn(&SurfaceHit, Vec3) -> f32;
+
 /// The path tracer's settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PathTracer {
@@ -132,6 +135,21 @@ impl PathTracer {
         clip: (f32, f32),
         sampler: &mut PixelSampler,
     ) -> PathSample {
+        self.trace_weighted(scene, origin, dir, clip, sampler, None)
+    }
+
+    /// [`PathTracer::trace_clipped`] with the emission that the camera ray itself hits
+    /// weighted by `direct_weight(hit, dir)` (the camera path's MIS weight against light
+    /// paths traced from emitters through the lens; None = 1).
+    pub fn trace_weighted(
+        &self,
+        scene: &RenderScene,
+        origin: Vec3,
+        dir: Vec3,
+        clip: (f32, f32),
+        sampler: &mut PixelSampler,
+        direct_weight: Option<DirectWeight>,
+    ) -> PathSample {
         let mut out = PathSample::miss(Vec3::ZERO);
         let mut d = dir.normalize_or_zero();
         if d == Vec3::ZERO || !origin.is_finite() || !d.is_finite() {
@@ -187,7 +205,7 @@ impl PathTracer {
             let le = scene.emission(&hit);
             if le != Vec3::ZERO {
                 let w = if depth == 0 {
-                    1.0
+                    direct_weight.map_or(1.0, |f| f(&hit, d))
                 } else {
                     let light_pdf = scene.triangle_light_pdf(prev_p, prev_n, &hit, d);
                     match self.strategy {
