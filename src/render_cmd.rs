@@ -4,12 +4,12 @@ use clap::Args;
 use glam::{DAffine3, DVec2};
 use indicatif::{ProgressBar, ProgressStyle};
 use petzval_renderer::camera::host::{self, FilmBack, HostCamera, SensorFit, Shift};
-use petzval_renderer::dof;
 use petzval_renderer::film::{write_exr, write_png, ExrLayers, Metadata, PixelFilter, ToneMap};
 use petzval_renderer::integrator::RenderScene;
 use petzval_renderer::render::{CameraRig, RenderSettings};
 use petzval_renderer::scene::{demo, gltf, Environment, Scene, SceneCamera};
 use petzval_renderer::shot;
+use petzval_renderer::{bokeh, dof};
 use petzval_renderer::{Aperture, ApertureShape, Camera, Error, LensModel};
 use std::path::PathBuf;
 use std::time::Duration;
@@ -135,9 +135,10 @@ pub struct RenderArgs {
     pub filter_width: f32,
     /// Bokeh light paths: light traced from emissive surfaces through the lens onto the film,
     /// this many per pixel per sample, combined with camera paths by MIS so that small bright
-    /// defocused emitters converge (exact lens model, --method mc; 0 = off).
-    #[arg(long, default_value_t = 0.0)]
-    pub bokeh_paths: f32,
+    /// defocused emitters converge (a real lens, exact or LRTF model, --method mc; 0 = off).
+    /// auto: 1 where the camera can trace light and the scene has emissive surfaces, else 0.
+    #[arg(long, default_value = "auto")]
+    pub bokeh_paths: String,
     /// Depth-of-field method: mc (Monte Carlo through the lens, the reference), multiview
     /// (pinhole views through pupil samples), ibrt (rays traced against depth-peeled layers) or
     /// spread (PSFs spread from the layers). --spp stays the camera rays per pixel.
@@ -282,7 +283,12 @@ fn check_numbers(args: &RenderArgs) -> Result<(), Error> {
     finite_in("exposure", args.exposure as f64, -64.0, 64.0)?;
     finite_in("environment-strength", args.environment_strength as f64, 0.0, 1e6)?;
     finite_in("filter-width", args.filter_width as f64, 0.0, 16.0)?;
-    finite_in("bokeh-paths", args.bokeh_paths as f64, 0.0, 64.0)?;
+    if args.bokeh_paths != "auto" {
+        let v: f64 = args.bokeh_paths.parse().map_err(|_| {
+            settings_err("bokeh-paths", format!("must be auto or a number of light paths, got '{}'", args.bokeh_paths))
+        })?;
+        finite_in("bokeh-paths", v, 0.0, 64.0)?;
+    }
     if !(args.tolerance.is_finite() && args.tolerance > 0.0) {
         return Err(settings_err("tolerance", format!("must be a positive number of pixels, got {}", args.tolerance)));
     }
@@ -623,11 +629,21 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
         } else {
             PixelFilter::Box { width_px: 1.0 }
         },
-        bokeh_paths: args.bokeh_paths,
         ..RenderSettings::default()
     };
-    settings.validate()?;
     let (method, preview) = method_settings(&args)?;
+    let settings = RenderSettings {
+        bokeh_paths: match args.bokeh_paths.as_str() {
+            "auto" if method == dof::Method::Mc => bokeh::auto_paths(&render_scene, &rig.camera),
+            "auto" => 0.0,
+            v => v.parse().unwrap_or(0.0),
+        },
+        ..settings
+    };
+    settings.validate()?;
+    if settings.bokeh_paths > 0.0 {
+        eprintln!("bokeh light paths: {} per pixel per sample (--bokeh-paths)", settings.bokeh_paths);
+    }
     crate::signals::enter(crate::signals::Phase::Rendering);
     let bar = ProgressBar::new(1000);
     bar.set_style(

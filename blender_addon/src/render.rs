@@ -3,10 +3,10 @@
 
 use numpy::ndarray::{Array2, Array3};
 use numpy::IntoPyArray;
-use petzval_renderer::dof;
 use petzval_renderer::film::{Image, PixelFilter};
 use petzval_renderer::integrator::RenderScene;
 use petzval_renderer::render::{CameraRig, RenderResult, RenderSettings};
+use petzval_renderer::{bokeh, dof};
 use petzval_renderer::{shot, Error};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -36,7 +36,7 @@ pub(crate) fn image_arrays(py: Python<'_>, img: &Image) -> (Py<PyAny>, Py<PyAny>
 
 /// Renders a scene through a camera (see the stub for every argument).
 #[pyfunction]
-#[pyo3(signature = (scene, camera, width, height, *, crop = None, spp = 64, seed = 0, max_depth = 8, filter_width_px = 1.5, spectral = false, threads = 0, progress = None, progress_interval_s = 0.1, method = "mc", layers = 4, layer_spp = 4, bokeh_paths = 0.0))]
+#[pyo3(signature = (scene, camera, width, height, *, crop = None, spp = 64, seed = 0, max_depth = 8, filter_width_px = 1.5, spectral = false, threads = 0, progress = None, progress_interval_s = 0.1, method = "mc", layers = 4, layer_spp = 4, bokeh_paths = None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn render(
     py: Python<'_>,
@@ -56,7 +56,7 @@ pub(crate) fn render(
     method: &str,
     layers: usize,
     layer_spp: u32,
-    bokeh_paths: f32,
+    bokeh_paths: Option<f32>,
 ) -> PyResult<Py<PyDict>> {
     guard(|| {
         // 1. Settings, checked before any work.
@@ -80,7 +80,7 @@ pub(crate) fn render(
             clip_start_m,
             clip_end_m,
             crop: crop.map(|(x0, y0, x1, y1)| [x0, y0, x1, y1]),
-            bokeh_paths,
+            bokeh_paths: bokeh_paths.unwrap_or(0.0),
         };
         settings.validate().map_err(py_err)?;
         let method: dof::Method = method.parse().map_err(py_err)?;
@@ -129,6 +129,12 @@ pub(crate) fn render(
                     let rig = CameraRig { camera: built.camera, to_world };
                     let settings = RenderSettings {
                         spectral: settings.spectral && rig.camera.is_dispersive(),
+                        // None = auto, as `petzval render --bokeh-paths auto`
+                        bokeh_paths: match bokeh_paths {
+                            None if method == dof::Method::Mc => bokeh::auto_paths(&render_scene, &rig.camera),
+                            None => 0.0,
+                            Some(v) => v,
+                        },
                         ..settings.clone()
                     };
                     let on_progress = |f: f32| {

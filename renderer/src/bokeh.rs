@@ -25,7 +25,7 @@
 //!
 //! | name | type | unit | default |
 //! |---|---|---|---|
-//! | `bokeh_paths` | f32: light paths per pixel per sample (0 = off); exact lens model only | — | 0 |
+//! | `bokeh_paths` | f32: light paths per pixel per sample (0 = off); exact and LRTF lens models | — | 0 |
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -37,6 +37,16 @@ use crate::sampler::PixelSampler;
 use crate::spectral;
 use glam::{DAffine3, DVec2, DVec3, Vec2, Vec3};
 use rayon::prelude::*;
+
+/// The `auto` choice of light paths per pixel per sample: 1 where `camera` can trace light onto
+/// its film (a real lens, exact or LRTF model) and `scene` has emissive triangles, else 0.
+pub fn auto_paths(scene: &RenderScene, camera: &Camera) -> f32 {
+    if camera.can_connect() && scene.has_emissive_triangles() {
+        1.0
+    } else {
+        0.0
+    }
+}
 
 /// Light paths traced per parallel task (a fixed split, so the image does not depend on the
 /// thread count).
@@ -83,7 +93,10 @@ impl<'a> BokehTracer<'a> {
         let Some(ep_radius_m) = camera.entrance_pupil_radius_m().filter(|_| camera.can_connect()) else {
             return Err(Error::settings(
                 "bokeh_paths",
-                format!("light paths through the lens need the exact lens model; this camera is {}", camera.model()),
+                format!(
+                    "light paths through the lens need the exact or LRTF lens model (a real lens); this camera is {}",
+                    camera.model()
+                ),
             ));
         };
         if !scene.has_emissive_triangles() {

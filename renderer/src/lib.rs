@@ -6,7 +6,7 @@
 // is exactly what every such check wants (a NaN setting or sample must be refused).
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-mod bokeh;
+pub mod bokeh;
 pub mod dof;
 mod error;
 pub mod film;

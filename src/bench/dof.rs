@@ -13,10 +13,13 @@ use petzval_renderer::scene::{demo, Environment, Material, Mesh, Scene};
 use petzval_renderer::{library_lens, Aperture, ApertureShape, Camera, Error, ExactCamera, ThinCamera};
 
 /// One scene of the comparison.
-struct BenchScene {
-    name: &'static str,
-    scene: RenderScene,
-    rig: CameraRig,
+pub(super) struct BenchScene {
+    /// Its name in the tables.
+    pub(super) name: &'static str,
+    /// The scene.
+    pub(super) scene: RenderScene,
+    /// The camera.
+    pub(super) rig: CameraRig,
 }
 
 /// One run: a method at one budget.
@@ -57,7 +60,7 @@ fn demo_scene(w: u32, h: u32, tilt: bool) -> Result<BenchScene, Error> {
 
 /// The demo as `petzval render` shoots it: its real lens (double Gauss, exact trace), f-number,
 /// blades, focus and tilted sensor.
-fn demo_real_lens(w: u32, h: u32) -> Result<BenchScene, Error> {
+pub(super) fn demo_real_lens(w: u32, h: u32) -> Result<BenchScene, Error> {
     let mut s = demo_scene(w, h, true)?;
     let (_, shot) = demo::demo_scene();
     let aspect = w as f64 / h as f64;
@@ -73,7 +76,7 @@ fn demo_real_lens(w: u32, h: u32) -> Result<BenchScene, Error> {
 }
 
 /// An axis-aligned box.
-fn cuboid(lo: Vec3, hi: Vec3, material: u32) -> Mesh {
+pub(super) fn cuboid(lo: Vec3, hi: Vec3, material: u32) -> Mesh {
     let mut m = Mesh::default();
     let faces: [(Vec3, [Vec3; 4]); 6] = [
         (Vec3::Z, [Vec3::new(lo.x, lo.y, hi.z), Vec3::new(hi.x, lo.y, hi.z), hi, Vec3::new(lo.x, hi.y, hi.z)]),

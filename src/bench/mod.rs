@@ -4,6 +4,7 @@ use clap::Subcommand;
 use glam::{DVec2, DVec3};
 use petzval_renderer::{Error, Sensor};
 
+mod bokeh;
 mod dof;
 mod instances;
 mod lens;
@@ -11,6 +12,7 @@ mod lens_models;
 mod render;
 mod render_models;
 
+use bokeh::bench_bokeh;
 use dof::bench_dof;
 use instances::bench_instances;
 use lens::bench_lens;
@@ -115,6 +117,23 @@ pub enum BenchCommand {
         #[arg(long)]
         failures: Option<std::path::PathBuf>,
     },
+    /// Bokeh light paths (MIS with camera paths) against camera paths alone on the demo through
+    /// its real lens and on a night street: time, relative RMSE against a converged reference,
+    /// and time to equal error.
+    Bokeh {
+        /// Resolution WxH.
+        #[arg(long, default_value = "240x160")]
+        resolution: String,
+        /// Samples per pixel of the reference (rendered with light paths).
+        #[arg(long, default_value_t = 1024)]
+        reference_spp: u32,
+        /// The relative RMSE whose time the last table gives.
+        #[arg(long, default_value_t = 0.05)]
+        target: f64,
+        /// Write every render as a PNG into this directory.
+        #[arg(long)]
+        save: Option<std::path::PathBuf>,
+    },
     /// Memory of a scene of many instances of one mesh (mesh data, BLAS, instance records, TLAS)
     /// against one copy, a render of it, and the built-in demo flattened vs instanced.
     Instances {
@@ -144,6 +163,9 @@ pub fn run(cmd: BenchCommand) -> Result<(), Error> {
     match cmd {
         BenchCommand::Lens { lens, rays, json } => bench_lens(lens, rays, json),
         BenchCommand::Render { resolution, spp, triangles } => bench_render(&resolution, spp, triangles),
+        BenchCommand::Bokeh { resolution, reference_spp, target, save } => {
+            bench_bokeh(&resolution, reference_spp, target, save.as_deref())
+        }
         BenchCommand::Instances { instances, triangles, resolution, spp, repeats, save } => {
             bench_instances(instances, triangles, &resolution, spp, repeats, save.as_deref())
         }

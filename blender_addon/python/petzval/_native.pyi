@@ -246,7 +246,7 @@ def render(
     method: str = "mc",
     layers: int = 4,
     layer_spp: int = 4,
-    bokeh_paths: float = 0.0,
+    bokeh_paths: float | None = None,
 ) -> dict:
     """Renders ``scene`` through ``camera`` and returns ``{"rgba": (H, W, 4) float32,
     "depth": (H, W) float32, "spp": int, "complete": bool, "seconds": float, "lens_model": str,
@@ -277,4 +277,6 @@ def render(
     ``bokeh_paths`` (``"mc"`` with the exact lens model) traces that many light paths per pixel
     per sample from emissive surfaces through the lens onto the film, combined with the camera
     paths by multiple importance sampling, as ``petzval render --bokeh-paths``: small bright
-    defocused emitters converge several times faster; 0 turns them off."""
+    defocused emitters converge several times faster; 0 turns them off, and ``None`` (auto)
+    traces one where the camera can (a real lens, exact or LRTF model, ``"mc"``) and the scene
+    has emissive surfaces."""

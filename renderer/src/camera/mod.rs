@@ -162,9 +162,10 @@ impl Camera {
     }
 
     /// Whether light can be traced from the scene onto the film ([`Camera::connect`]): the
-    /// exact model.
+    /// exact model, and the LRTF model, whose light paths are traced exactly (its table maps
+    /// film → scene only; the two agree within the table's error, a fraction of a pixel).
     pub fn can_connect(&self) -> bool {
-        matches!(self, Camera::Exact(_))
+        matches!(self, Camera::Exact(_) | Camera::Lrtf(_))
     }
 
     /// The camera strategy's density for sample (`film`, `lens_u`) in the ray (étendue)
@@ -173,6 +174,7 @@ impl Camera {
     pub fn sample_density(&self, film: DVec2, lens_u: DVec2) -> Option<f64> {
         match self {
             Camera::Exact(c) => c.sample_density(film, lens_u),
+            Camera::Lrtf(c) => c.exact().sample_density(film, lens_u),
             _ => None,
         }
     }
@@ -182,6 +184,7 @@ impl Camera {
     pub fn connect(&self, from_m: DVec3, to_m: DVec3, wavelength_nm: f64) -> Option<FilmConnection> {
         match self {
             Camera::Exact(c) => c.connect(from_m, to_m, wavelength_nm),
+            Camera::Lrtf(c) => c.exact().connect(from_m, to_m, wavelength_nm),
             _ => None,
         }
     }
@@ -191,6 +194,7 @@ impl Camera {
     pub fn entrance_pupil_radius_m(&self) -> Option<f64> {
         match self {
             Camera::Exact(c) => Some(0.5e-3 * c.lens().paraxial().entrance_pupil_diameter_mm),
+            Camera::Lrtf(c) => Some(0.5e-3 * c.exact().lens().paraxial().entrance_pupil_diameter_mm),
             _ => None,
         }
     }
