@@ -29,10 +29,9 @@
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
-use crate::film::FilterSampler;
+use crate::film::{FilterSampler, PixelFilter};
 use crate::integrator::{RenderScene, SurfaceHit};
 use crate::optics::aperture::concentric_disk;
-use crate::render::{CameraRig, RenderSettings};
 use crate::sampler::PixelSampler;
 use crate::spectral;
 use glam::{DAffine3, DVec2, DVec3, Vec2, Vec3};
@@ -55,6 +54,27 @@ const CHUNK: u64 = 2048;
 const BATCH: u64 = 64;
 /// The sampler row of light paths (camera samples use rows below the image height).
 const LIGHT_ROW: u32 = 0xB0CE_0000;
+
+/// What the light tracer takes from the render's settings.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct LightPathSettings {
+    /// Light paths per pixel per sample (0 = none).
+    pub paths: f32,
+    /// The full frame (pixels).
+    pub width: u32,
+    /// The full frame (pixels).
+    pub height: u32,
+    /// The window rendered `[x0, y0, x1, y1)`.
+    pub crop: [u32; 4],
+    /// The pixel filter.
+    pub filter: PixelFilter,
+    /// One wavelength per path.
+    pub spectral: bool,
+    /// Seed.
+    pub seed: u32,
+    /// Clipping planes along the view axis (m).
+    pub clip_m: (f64, f64),
+}
 
 /// The light tracer of one render (immutable once built).
 pub(crate) struct BokehTracer<'a> {
@@ -85,11 +105,15 @@ impl<'a> BokehTracer<'a> {
     /// The tracer for `settings.bokeh_paths` > 0 and a scene with emissive triangles; None when
     /// there is nothing to trace. An error when light paths are asked for a camera model that
     /// cannot trace light onto its film.
-    pub(crate) fn new(scene: &'a RenderScene, rig: &'a CameraRig, settings: &RenderSettings) -> Result<Option<Self>> {
-        if settings.bokeh_paths <= 0.0 {
+    pub(crate) fn new(
+        scene: &'a RenderScene,
+        camera: &'a Camera,
+        to_world: DAffine3,
+        settings: &LightPathSettings,
+    ) -> Result<Option<Self>> {
+        if settings.paths <= 0.0 {
             return Ok(None);
         }
-        let camera = &rig.camera;
         let Some(ep_radius_m) = camera.entrance_pupil_radius_m().filter(|_| camera.can_connect()) else {
             return Err(Error::settings(
                 "bokeh_paths",
@@ -103,7 +127,7 @@ impl<'a> BokehTracer<'a> {
             return Ok(None);
         }
         let (w, h) = (settings.width, settings.height);
-        let crop = settings.crop.unwrap_or([0, 0, w, h]);
+        let crop = settings.crop;
         let window_px = (crop[2] - crop[0]) as f64 * (crop[3] - crop[1]) as f64;
         let radius_m = 1.25 * ep_radius_m + 0.5e-3;
         let radius_mm = radius_m * 1e3;
@@ -111,12 +135,12 @@ impl<'a> BokehTracer<'a> {
         Ok(Some(BokehTracer {
             scene,
             camera,
-            to_world: rig.to_world,
-            to_camera: rig.to_world.inverse(),
-            forward: rig.to_world.transform_vector3(DVec3::NEG_Z).normalize().as_vec3(),
+            to_world,
+            to_camera: to_world.inverse(),
+            forward: to_world.transform_vector3(DVec3::NEG_Z).normalize().as_vec3(),
             radius_m,
             disc_pdf_mm2: 1.0 / (std::f64::consts::PI * radius_mm * radius_mm),
-            paths_per_spp: (settings.bokeh_paths as f64 * window_px).ceil().max(1.0) as u64,
+            paths_per_spp: (settings.paths as f64 * window_px).ceil().max(1.0) as u64,
             px_area_mm2: sensor.width_mm / w as f64 * (sensor.height_mm / h as f64),
             width: w,
             height: h,
@@ -125,7 +149,7 @@ impl<'a> BokehTracer<'a> {
             spectral: settings.spectral,
             primary_nm: camera.real_lens().map_or(crate::optics::glass::WAVELENGTH_D_NM, |l| l.primary_wavelength_nm()),
             seed: settings.seed ^ 0x5bd1_e995,
-            clip_m: (settings.clip_start_m, settings.clip_end_m),
+            clip_m: settings.clip_m,
         }))
     }
 

@@ -15,7 +15,7 @@
 //! | `crop` | optional `[x0, y0, x1, y1)` window of the frame to render (row 0 = top) | px | whole frame |
 //! | `bokeh_paths` | f32: light paths from emitters through the lens per pixel per sample, combined with camera paths by MIS (see [`crate::bokeh`]); exact lens model | — | 0 (off) |
 
-use crate::bokeh::BokehTracer;
+use crate::bokeh::{BokehTracer, LightPathSettings};
 use crate::camera::{Camera, CameraRay};
 use crate::error::{Error, Result};
 use crate::film::{Film, FilterSampler, Image, PixelFilter};
@@ -191,7 +191,17 @@ pub fn render_observed(
 ) -> Result<RenderResult> {
     settings.validate()?;
     let tracer = PathTracer { max_depth: settings.max_depth, ..PathTracer::default() };
-    let bokeh = BokehTracer::new(scene, rig, settings)?;
+    let light = LightPathSettings {
+        paths: settings.bokeh_paths,
+        width: settings.width,
+        height: settings.height,
+        crop: settings.crop.unwrap_or([0, 0, settings.width, settings.height]),
+        filter: settings.filter,
+        spectral: settings.spectral,
+        seed: settings.seed,
+        clip_m: (settings.clip_start_m, settings.clip_end_m),
+    };
+    let bokeh = BokehTracer::new(scene, &rig.camera, rig.to_world, &light)?;
     render_samples(rig, settings, progress, on_pass, &PathShader { tracer, scene, bokeh })
 }
 
