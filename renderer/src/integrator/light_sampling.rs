@@ -190,20 +190,7 @@ impl RenderScene {
     /// point (`p`, `n`) would have produced the point of `hit` (an emissive triangle seen at
     /// distance `hit.t` along unit `dir`).
     pub fn triangle_light_pdf(&self, p: Vec3, n: Vec3, hit: &SurfaceHit, dir: Vec3) -> f32 {
-        let pmf = self.lights.triangle_pmf(p, n, hit.instance, hit.triangle);
-        if pmf == 0.0 {
-            return 0.0;
-        }
-        let [a, b, c] = self.world_triangle(hit.instance, hit.triangle);
-        let area = 0.5 * (b - a).cross(c - a).length();
-        let cos_l = hit.geometric_normal.dot(dir).abs();
-        let dist = hit.t;
-        let pdf = pmf * dist * dist / (area * cos_l);
-        if pdf.is_finite() {
-            pdf
-        } else {
-            0.0
-        }
+        self.triangle_light_pdf_from(p, n, hit, dir, hit.t)
     }
 
     /// [`RenderScene::triangle_light_pdf`] for a shading point `p` at distance `dist` from the
