@@ -13,7 +13,7 @@
 //! | `filter` | [`PixelFilter`] | px | Blackman–Harris spanning 3 px (Cycles' default) |
 //! | `clip_start_m`, `clip_end_m` | f64: clipping planes perpendicular to the view axis (Cycles) | m | 0, ∞ |
 //! | `crop` | optional `[x0, y0, x1, y1)` window of the frame to render (row 0 = top) | px | whole frame |
-//! | `bokeh_paths` | f32: light paths from emitters through the lens per pixel per sample, combined with camera paths by MIS (see [`crate::bokeh`]); exact lens model | — | 0 (off) |
+//! | `bokeh_paths` | f32: light paths from emitters through the lens per pixel per sample, combined with camera paths by MIS (see [`crate::bokeh`]); a real lens, exact or LRTF model | — | 0 (off; the CLI's and the Python module's auto gives 1 where it applies) |
 
 use crate::bokeh::{BokehTracer, LightPathSettings};
 use crate::camera::{Camera, CameraRay};
