@@ -71,6 +71,10 @@ fn main() {
         local_rays: env("BENCH_LOCAL_RAYS"),
         shift_steps: std::env::var("BENCH_SHIFT_STEPS").ok().and_then(|v| v.parse().ok()).unwrap_or(2),
         global_share: std::env::var("BENCH_GLOBAL_SHARE").ok().and_then(|v| v.parse().ok()).unwrap_or(0.35),
+        subsamples: std::env::var("BENCH_SUBSAMPLES")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(petzval_fit::forward::DEFAULT_SUBSAMPLES),
         ..Default::default()
     };
     println!(
@@ -118,6 +122,10 @@ fn main() {
         r.len()
     );
     let truth_values = [radii[0].1 * 1.03, radii[1].1 * 0.98, 0.4, -0.3, 0.05];
+    if std::env::var_os("BENCH_MODEL_ERROR").is_some() {
+        model_error(&problem, &truth_values);
+        return;
+    }
     if std::env::var_os("BENCH_FROM_TRUTH").is_some() {
         // the floor: the local stages alone, started at the truth
         let mut p = problem.clone();
@@ -150,4 +158,64 @@ fn main() {
         std::fs::read_to_string("/proc/loadavg").unwrap_or_default().trim()
     );
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The model's own error at the truth for several pupil patterns: each capture's noise-free
+/// model image (unit sum, no shift) against a grid's of 65 536 rays × 8², ‖m − m_ref‖ / ‖m_ref‖, with the
+/// time of one landing + splat of all nine captures.
+fn model_error(problem: &Problem, truth_values: &[f64]) {
+    use petzval_fit::forward::{splat, Pattern};
+    let mut model = problem.start.clone();
+    for (f, v) in problem.free.iter().zip(truth_values) {
+        model.set(&f.param, *v).unwrap();
+    }
+    let images = |pattern: Pattern| {
+        let p = Problem { pattern, ..problem.clone() };
+        let t = Instant::now();
+        let landings = p.landings(&model).unwrap();
+        let imgs: Vec<Vec<f64>> = landings
+            .iter()
+            .zip(&p.captures)
+            .map(|(l, c)| {
+                let img = splat(&l[0], glam::DVec2::ZERO, p.footprint_px, c.frame.width, c.frame.height);
+                let sum: f64 = img.iter().sum();
+                img.into_iter().map(|v| v / sum).collect()
+            })
+            .collect();
+        (imgs, t.elapsed().as_secs_f64(), landings.iter().map(|l| l[0].weights.len()).sum::<usize>())
+    };
+    let (reference, _, _) = images(Pattern::grid(1 << 16, 8));
+    let patterns = [
+        ("spiral 1048576", Pattern::spiral(1 << 20)),
+        ("spiral 16384", Pattern::spiral(16384)),
+        ("spiral 65536", Pattern::spiral(65536)),
+        ("grid 4096 × 2²/2²", Pattern::grid_edges(4096, 2, 2)),
+        ("grid 4096 × 2²/4²", Pattern::grid_edges(4096, 2, 4)),
+        ("grid 4096 × 2²/8²", Pattern::grid_edges(4096, 2, 8)),
+        ("grid 4096 × 3²/8²", Pattern::grid_edges(4096, 3, 8)),
+        ("grid 4096 × 4²/8²", Pattern::grid_edges(4096, 4, 8)),
+        ("grid 2048 × 4²/8²", Pattern::grid_edges(2048, 4, 8)),
+        ("grid 2048 × 4²/16²", Pattern::grid_edges(2048, 4, 16)),
+        ("grid 8192 × 2²/4²", Pattern::grid_edges(8192, 2, 4)),
+        ("grid 8192 × 2²/8²", Pattern::grid_edges(8192, 2, 8)),
+        ("grid 16384 × 2²/2²", Pattern::grid_edges(16384, 2, 2)),
+    ];
+    for (name, pattern) in patterns {
+        let (imgs, seconds, points) = images(pattern);
+        let errors: Vec<f64> = imgs
+            .iter()
+            .zip(&reference)
+            .map(|(m, r)| {
+                let d: f64 = m.iter().zip(r).map(|(a, b)| (a - b) * (a - b)).sum();
+                let n: f64 = r.iter().map(|b| b * b).sum();
+                (d / n).sqrt() * 100.0
+            })
+            .collect();
+        let worst = errors.iter().copied().fold(0.0, f64::max);
+        println!(
+            "{name:16} {:6.1} ms, {points:7} points: model error % {:?} (worst {worst:.2})",
+            seconds * 1e3,
+            errors.iter().map(|e| (e * 100.0).round() / 100.0).collect::<Vec<_>>()
+        );
+    }
 }

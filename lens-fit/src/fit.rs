@@ -6,7 +6,8 @@
 //! | name | type | unit | default |
 //! |---|---|---|---|
 //! | `time_limit_s` | f64: the whole fit | s | 60 |
-//! | `rays` | rays per wavelength per capture | — | 16 384 |
+//! | `rays` | traced rays per wavelength per capture (a grid's corners on the pupil disc) | — | 16 384 |
+//! | `subsamples` | points per grid cell side: interpolated inside the aperture, traced on its edges (`forward::Pattern::Grid`); 0 = a spiral of `rays` points, each traced | — | 4 |
 //! | `footprint_px` | ray footprint on the sensor (0: from the ray density) | px | 0 |
 //! | `global_share` | share of the time for the global stage (0 skips it) | — | 0.35 |
 //! | `local_share` | share of the time for the local stage (0 skips it) | — | 0.3 |
@@ -32,7 +33,7 @@
 use crate::captures::{self, CaptureImage};
 use crate::correction::{Basis, Correction};
 use crate::error::{Error, Result};
-use crate::forward::{disc_pattern, land, splat, Aim, Frame, Geometry, Landing};
+use crate::forward::{land, splat, Aim, Frame, Geometry, Landing, Pattern};
 use crate::manifest::{Capture, FNumber, FreeParam, Manifest, Wavelength};
 use crate::params::Model;
 use glam::DVec2;
@@ -49,6 +50,8 @@ pub struct FitOptions {
     pub time_limit_s: f64,
     /// Rays per wavelength per capture.
     pub rays: usize,
+    /// Points per grid cell side (0: a spiral, every point traced).
+    pub subsamples: usize,
     /// Ray footprint on the sensor.
     pub footprint_px: f64,
     /// Share of the time for the global stage.
@@ -86,6 +89,7 @@ impl Default for FitOptions {
         FitOptions {
             time_limit_s: 60.0,
             rays: crate::forward::DEFAULT_RAYS,
+            subsamples: crate::forward::DEFAULT_SUBSAMPLES,
             footprint_px: 0.0,
             global_share: 0.35,
             local_share: 0.3,
@@ -132,7 +136,7 @@ pub struct Problem {
     /// Captures.
     pub captures: Vec<Prepared>,
     /// The fixed pupil pattern.
-    pub pattern: Vec<DVec2>,
+    pub pattern: Pattern,
     /// Ray footprint.
     pub footprint_px: f64,
     /// The LRTF correction's normalisation (from the start lens and the sensor).
@@ -187,7 +191,7 @@ impl Problem {
             source_label: lens.source_label().to_string(),
             free: manifest.free.clone(),
             captures: Vec::new(),
-            pattern: disc_pattern(options.rays),
+            pattern: Pattern::for_fit(options.rays, options.subsamples),
             footprint_px: options.footprint_px,
             basis: Basis::new(&lens, 0.5 * manifest.sensor.width_mm.hypot(manifest.sensor.height_mm)),
             table_options: BakeOptions {

@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! petzval-fit MANIFEST -o FITTED.toml [--lrtf FITTED.lrtf] --report DIR [--time-limit S]
-//!             [--max-evaluations N] [--starts K] [--rays N] [--quiet]
+//!             [--max-evaluations N] [--starts K] [--rays N] [--subsamples K] [--quiet]
 //! petzval-fit MANIFEST --evaluate DIR --report DIR2
 //! petzval-fit MANIFEST --check
 //! ```
@@ -42,6 +42,10 @@ struct Args {
     /// Rays per wavelength per capture.
     #[arg(long, default_value_t = petzval_fit::forward::DEFAULT_RAYS)]
     rays: usize,
+    /// Points per pupil-grid cell side: interpolated inside the aperture, traced on its edges
+    /// (0: a spiral of `--rays` points, each traced).
+    #[arg(long, default_value_t = petzval_fit::forward::DEFAULT_SUBSAMPLES)]
+    subsamples: usize,
     /// No progress bar (it is drawn on stderr only when stderr is a terminal).
     #[arg(long, short = 'q')]
     quiet: bool,
@@ -96,6 +100,9 @@ fn run(args: &Args) -> petzval_fit::Result<()> {
     if !(64..=1 << 22).contains(&args.rays) {
         return Err(usage("--rays must be in 64..=4194304"));
     }
+    if args.subsamples > 16 {
+        return Err(usage("--subsamples must be in 0..=16"));
+    }
     if args.max_evaluations.is_some_and(|n| !(1..=100_000_000).contains(&n)) {
         return Err(usage("--max-evaluations must be in 1..=100000000"));
     }
@@ -105,6 +112,7 @@ fn run(args: &Args) -> petzval_fit::Result<()> {
     let mut options = FitOptions {
         time_limit_s: args.time_limit,
         rays: args.rays,
+        subsamples: args.subsamples,
         max_evaluations: args.max_evaluations.unwrap_or(0),
         starts: args.starts,
         ..Default::default()

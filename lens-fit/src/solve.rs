@@ -258,8 +258,8 @@ fn nlopt_stages(
     let budgets = stage_budgets(options);
     let total_budget = (options.max_evaluations > 0).then_some(options.max_evaluations);
     let with_rays = |rays: usize| {
-        if rays < problem.pattern.len() {
-            Problem { pattern: crate::forward::disc_pattern(rays), ..problem.clone() }
+        if rays < problem.pattern.rays() {
+            Problem { pattern: crate::forward::Pattern::for_fit(rays, options.subsamples), ..problem.clone() }
         } else {
             problem.clone()
         }

@@ -12,7 +12,7 @@
 //! | `hot_pixels` | (x, y, value) set after the noise | none |
 
 use crate::error::{Error, Result};
-use crate::forward::{disc_pattern, land, splat, Aim, Frame, Geometry};
+use crate::forward::{land, splat, Aim, Frame, Geometry, Pattern};
 use crate::manifest::{DistancesFrom, SensorSpec};
 use crate::params::Model;
 use glam::DVec2;
@@ -100,7 +100,7 @@ pub fn write_captures(
         None,
     )?;
     let image_err = |path: PathBuf, message: String| Error::Image { path, message };
-    let pattern = disc_pattern(options.rays);
+    let pattern = Pattern::spiral(options.rays);
     let mut manifest = format!(
         "[lens]\nstart = \"{start}\"\n\n[sensor]\nwidth_mm = 36.0\nheight_mm = 24.0\npixels = [6000, 4000]\n\n"
     );

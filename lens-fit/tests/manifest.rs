@@ -2,7 +2,7 @@
 //! source images where and how the lens says.
 
 use glam::DVec2;
-use petzval_fit::forward::{disc_pattern, land, splat, Aim, Frame, Geometry};
+use petzval_fit::forward::{land, splat, Aim, Frame, Geometry, Pattern};
 use petzval_fit::manifest::DistancesFrom;
 use petzval_fit::{CameraParams, Manifest, Model, Param, SensorSpec};
 use std::path::Path;
@@ -112,7 +112,7 @@ fn a_point_source_images_where_the_lens_says() {
     let frame = Frame { sensor, crop_origin_px: [2936, 1936], width: 128, height: 128 };
     let camera = CameraParams::default();
     let open = petzval_optics::library_lens("double-gauss-50mm").unwrap();
-    let pattern = disc_pattern(8192);
+    let pattern = Pattern::spiral(8192);
     let image = |lens: &petzval_optics::Lens, source: [f64; 3], focus: f64| {
         let g = Geometry::new(lens, &camera, source, focus, DistancesFrom::Sensor).unwrap();
         let aim = Aim::find(lens, g.source_mm, 550.0).unwrap();
