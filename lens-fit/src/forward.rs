@@ -251,8 +251,7 @@ pub fn land(
     // one ray: its image pixel and its light per mm² of the aim plane
     let trace = |u: DVec2| -> Option<(DVec2, f64)> {
         // 1. A ray from the source to its pupil point; light ∝ the solid angle per area.
-        let target =
-            DVec3::new(aim.centre_mm.x + u.x * aim.radius_mm, aim.centre_mm.y + u.y * aim.radius_mm, aim.z_mm);
+        let target = DVec3::new(aim.centre_mm.x + u.x * aim.radius_mm, aim.centre_mm.y + u.y * aim.radius_mm, aim.z_mm);
         let to = target - s;
         let r2 = to.length_squared();
         let cos = to.z / r2.sqrt();
@@ -419,21 +418,27 @@ fn edge_cell(
     out
 }
 
-/// A footprint of one and a half ray spacings: `1.5 √(A / N)` for N rays spread over the area A of
-/// a disc of twice their rms radius, within [0.02, 2] px (a sharp spot keeps its caustics, a
-/// wide defocus disc is covered without gaps; a 0.25 px floor measurably blurred sharp off-axis
-/// spots against optiland, 1.9–2.1 % residual). It varies smoothly with the landing.
-pub fn auto_footprint_px(landing: &Landing) -> f64 {
+/// The mean ray spacing `√(A / N)` for N rays spread over the area A of a disc of twice their
+/// rms radius (None for fewer than two rays or no light).
+pub fn ray_spacing_px(landing: &Landing) -> Option<f64> {
     let w: f64 = landing.weights.iter().sum();
     if !(w > 0.0) || landing.positions_px.len() < 2 {
-        return 1.0;
+        return None;
     }
     let c = landing.positions_px.iter().zip(&landing.weights).fold(DVec2::ZERO, |a, (p, wt)| a + *p * *wt) / w;
     let r2 =
         landing.positions_px.iter().zip(&landing.weights).map(|(p, wt)| (*p - c).length_squared() * wt).sum::<f64>()
             / w;
     let area = std::f64::consts::PI * 4.0 * r2;
-    (1.5 * (area / landing.positions_px.len() as f64).sqrt()).clamp(0.02, 2.0)
+    Some((area / landing.positions_px.len() as f64).sqrt())
+}
+
+/// A footprint of one and a half ray spacings ([`ray_spacing_px`]) within [0.02, 2] px (a sharp
+/// spot keeps its caustics, a wide defocus disc is covered without gaps; a 0.25 px floor
+/// measurably blurred sharp off-axis spots against optiland, 1.9–2.1 % residual). It varies
+/// smoothly with the landing.
+pub fn auto_footprint_px(landing: &Landing) -> f64 {
+    ray_spacing_px(landing).map_or(1.0, |s| (1.5 * s).clamp(0.02, 2.0))
 }
 
 /// The overlap of [x − h, x + h] with each pixel [i, i + 1], divided by 2h: (first pixel, up to
@@ -453,16 +458,10 @@ fn overlaps(x: f64, h: f64) -> (i64, [f64; 5]) {
 /// The model image (row-major, top row first) of a landing shifted by `shift_px`: each ray's
 /// box footprint integrated over the pixels it covers. The footprint is a square of
 /// `footprint_px` when that is positive, else the ray's own (`half_widths_px`), else a square
-/// from the landing's density ([`auto_footprint_px`]); half-widths within [0.0005, 1] px.
+/// from the landing's density ([`auto_footprint_px`]); own half-widths within [0.0005, 1] px.
 pub fn splat(landing: &Landing, shift_px: DVec2, footprint_px: f64, width: usize, height: usize) -> Vec<f64> {
     let own = footprint_px <= 0.0 && landing.half_widths_px.len() == landing.positions_px.len();
-    let square = if footprint_px > 0.0 {
-        footprint_px
-    } else if own && landing.half_widths_px.iter().all(|h| *h != DVec2::ZERO) {
-        1.0 // not used
-    } else {
-        auto_footprint_px(landing)
-    };
+    let square = if footprint_px > 0.0 { footprint_px } else { auto_footprint_px(landing) };
     let square = DVec2::splat(0.5 * square.clamp(1e-3, 2.0));
     let mut img = vec![0.0; width * height];
     for (k, (p, &w)) in landing.positions_px.iter().zip(&landing.weights).enumerate() {

@@ -123,7 +123,9 @@ fn hot_pixels_are_masked_and_do_not_bias_the_fit() {
 /// earlier median + 5σ centroid rule (which failed the recovery test's defocused disc):
 /// 600 / 3: 5.2 %, residuals 3.4–8.5 %; 2 000 / 5 came back (worst 0.16 %, residuals 1.0–1.6 %,
 /// 87 s). With the global stage's spots blurred to 2 px (`FIT_GLOBAL_FOOTPRINT=2`): 1 200 / 3:
-/// 2.73 %, 1 200 / 5: 3.27 %, 2 000 / 3: 2.42 % (1 px: 7.17 %). Not reliably, and not in 60 s, so this stays ignored.
+/// 2.73 %, 1 200 / 5: 3.27 %, 2 000 / 3: 2.42 % (1 px: 7.17 %). With the grid pupil pattern
+/// (8 192 rays × 2², `FIT_RAYS`): 600 / 3: 6.84 %; 2 000 / 5: 0.75 %, residuals 1.2–2.0 %, 72 s.
+/// Not within the 0.5 % tolerance, and not in 60 s, so this stays ignored.
 #[test]
 #[ignore = "four radii started 5 % off do not come back reliably within a 60 s budget (measured; issue 10)"]
 fn a_start_five_percent_off_on_four_radii_comes_back() {
@@ -157,7 +159,7 @@ fn a_start_five_percent_off_on_four_radii_comes_back() {
     // an evaluation budget (FIT_BUDGET) ends the fit, the time limit is only a cap
     let options = FitOptions {
         time_limit_s: 600.0,
-        rays: 16_384,
+        rays: env("FIT_RAYS", 8192.0) as usize,
         global_share: env("FIT_SHARE", 0.35),
         max_evaluations: env("FIT_BUDGET", 600.0) as usize,
         starts: env("FIT_STARTS", 3.0) as usize,
