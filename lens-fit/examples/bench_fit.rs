@@ -71,6 +71,7 @@ fn main() {
         local_rays: env("BENCH_LOCAL_RAYS"),
         shift_steps: std::env::var("BENCH_SHIFT_STEPS").ok().and_then(|v| v.parse().ok()).unwrap_or(2),
         global_share: std::env::var("BENCH_GLOBAL_SHARE").ok().and_then(|v| v.parse().ok()).unwrap_or(0.35),
+        central_differences: std::env::var_os("BENCH_CENTRAL").is_some(),
         subsamples: std::env::var("BENCH_SUBSAMPLES")
             .ok()
             .and_then(|v| v.parse().ok())

@@ -17,6 +17,7 @@
 //! | `shift_steps` | Gauss–Newton steps on each capture's shift in every global/local evaluation (0: the centroid-matching shift) | — | 2 |
 //! | `max_evaluations` | objective evaluations of the whole fit (0: no bound, the time limit alone) | — | 0 |
 //! | `starts` | local (BOBYQA) starts from the global stage's best mutually distinct points | — | 3 |
+//! | `central_differences` | Levenberg–Marquardt's parameter Jacobian by central differences (two evaluations per parameter: for narrow valleys, e.g. several coupled radii) | bool | false |
 //!
 //! The whole fit keeps to `time_limit_s`: CRS2 35 %, BOBYQA 30 %, Levenberg–Marquardt computes
 //! no Jacobian after the limit (the uncertainty stage always computes one). `max_evaluations`
@@ -71,6 +72,8 @@ pub struct FitOptions {
     pub max_evaluations: usize,
     /// Local starts from the global stage's best mutually distinct points.
     pub starts: usize,
+    /// Levenberg–Marquardt's parameter Jacobian by central differences (twice the cost).
+    pub central_differences: bool,
 }
 
 impl FitOptions {
@@ -99,6 +102,7 @@ impl Default for FitOptions {
             shift_steps: 2,
             max_evaluations: 0,
             starts: 3,
+            central_differences: false,
         }
     }
 }

@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! petzval-fit MANIFEST -o FITTED.toml [--lrtf FITTED.lrtf] --report DIR [--time-limit S]
-//!             [--max-evaluations N] [--starts K] [--rays N] [--subsamples K] [--quiet]
+//!             [--max-evaluations N] [--starts K] [--rays N] [--subsamples K] [--central-differences] [--quiet]
 //! petzval-fit MANIFEST --evaluate DIR --report DIR2
 //! petzval-fit MANIFEST --check
 //! ```
@@ -46,6 +46,10 @@ struct Args {
     /// (0: a spiral of `--rays` points, each traced).
     #[arg(long, default_value_t = petzval_fit::forward::DEFAULT_SUBSAMPLES)]
     subsamples: usize,
+    /// Levenberg–Marquardt's parameter Jacobian by central differences (twice the cost per
+    /// iteration; follows narrow valleys, e.g. several coupled radii, further).
+    #[arg(long)]
+    central_differences: bool,
     /// No progress bar (it is drawn on stderr only when stderr is a terminal).
     #[arg(long, short = 'q')]
     quiet: bool,
@@ -113,6 +117,7 @@ fn run(args: &Args) -> petzval_fit::Result<()> {
         time_limit_s: args.time_limit,
         rays: args.rays,
         subsamples: args.subsamples,
+        central_differences: args.central_differences,
         max_evaluations: args.max_evaluations.unwrap_or(0),
         starts: args.starts,
         ..Default::default()

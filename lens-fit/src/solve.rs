@@ -422,10 +422,12 @@ struct LmProblem<'a> {
     problem: &'a Problem,
     /// Residual rows of each capture (`offset`, `count`).
     rows: Vec<(usize, usize)>,
+    /// Central differences for the parameter columns (two evaluations per parameter).
+    central: bool,
 }
 
 impl LmProblem<'_> {
-    fn new(problem: &Problem) -> LmProblem<'_> {
+    fn new(problem: &Problem, central: bool) -> LmProblem<'_> {
         let mut rows = Vec::new();
         let mut offset = 0;
         for p in &problem.captures {
@@ -433,7 +435,12 @@ impl LmProblem<'_> {
             rows.push((offset, count));
             offset += count;
         }
-        LmProblem { problem, rows }
+        LmProblem { problem, rows, central }
+    }
+
+    /// Evaluations one Jacobian costs.
+    fn jacobian_cost(&self) -> usize {
+        self.problem.free.len() * if self.central { 2 } else { 1 }
     }
 
     fn split(&self, x: &[f64]) -> (Vec<f64>, Vec<DVec2>) {
@@ -469,6 +476,14 @@ impl LmProblem<'_> {
                 s[k] += h;
                 let l = self.landings_at(&s);
                 let r = self.problem.residual_vector(l.as_deref(), &shifts);
+                if self.central {
+                    // central: the forward step's curvature error cancels (a narrow valley)
+                    s[k] -= 2.0 * h;
+                    let l = self.landings_at(&s);
+                    let back = self.problem.residual_vector(l.as_deref(), &shifts);
+                    let values = r.iter().zip(&back).map(|(a, b)| (a - b) / (2.0 * h)).collect();
+                    return Column { offset: 0, values };
+                }
                 Column { offset: 0, values: r.iter().zip(base).map(|(a, b)| (a - b) / h).collect() }
             })
             .collect();
@@ -527,7 +542,7 @@ struct LmOutcome {
 /// the largest diagonal of JᵀJ seen so far (MINPACK's scaling), λ adapted from the gain ratio
 /// (Nielsen's rule); the parameters are kept in their bounds by clamping the step. Stops on
 /// the crate's tests (ftol, xtol, gtol, patience), the evaluation budget (a Jacobian costs one
-/// evaluation per parameter) or the deadline (no Jacobian or step after it).
+/// evaluation per parameter, two with central differences) or the deadline (no Jacobian or step after it).
 #[allow(clippy::too_many_arguments)]
 fn levenberg_marquardt(
     lm: &LmProblem,
@@ -571,14 +586,14 @@ fn levenberg_marquardt(
     let stop = 'outer: loop {
         if normal.is_none() {
             // a new Jacobian at x
-            if !affordable(evaluations, n + 1) {
+            if !affordable(evaluations, lm.jacobian_cost() + 1) {
                 break 'outer "evaluation budget";
             }
             if Instant::now() > deadline {
                 break 'outer "time limit";
             }
             let cols = lm.jacobian(&x, &r, landings.as_deref());
-            evaluations += n;
+            evaluations += lm.jacobian_cost();
             normal = Some(normal_equations(&cols, &r));
             report(evaluations, rr);
         }
@@ -710,7 +725,7 @@ pub fn run_with_progress(problem: &Problem, options: &FitOptions, progress: Prog
         x.push(s.y);
     }
     let deadline = start + std::time::Duration::from_secs_f64(options.time_limit_s);
-    let lm = LmProblem::new(problem);
+    let lm = LmProblem::new(problem, options.central_differences);
     let lm_budget = (options.max_evaluations > 0).then(|| stage_budgets(options)[2].unwrap_or(0));
     let total_budget = (options.max_evaluations > 0).then_some(options.max_evaluations);
     let outcome = levenberg_marquardt(&lm, x, lm_budget, deadline, start, used, total_budget, progress, &mut history);
@@ -727,7 +742,7 @@ pub fn run_with_progress(problem: &Problem, options: &FitOptions, progress: Prog
         None => {
             let (_, landings) = lm.residuals(&outcome.x);
             let cols = lm.jacobian(&outcome.x, &outcome.r, landings.as_deref());
-            (normal_equations(&cols, &outcome.r).0, n + 1)
+            (normal_equations(&cols, &outcome.r).0, lm.jacobian_cost() + 1)
         }
     };
     evaluations.push(("uncertainty".to_string(), extra));
