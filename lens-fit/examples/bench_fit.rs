@@ -6,6 +6,11 @@
 //! cargo run --release -p petzval-fit --example bench_fit [-- TIME_LIMIT_S [RAYS [MAX_EVALUATIONS [STARTS]]]]
 //! ```
 //!
+//! Environment: `BENCH_SUBSAMPLES` (the pupil grid's points per cell side; 0 = the spiral),
+//! `BENCH_CENTRAL` (central differences), `BENCH_GLOBAL_RAYS`, `BENCH_LOCAL_RAYS`,
+//! `BENCH_SHIFT_STEPS`, `BENCH_GLOBAL_SHARE`, `BENCH_FROM_TRUTH`, and `BENCH_MODEL_ERROR` (print
+//! each pupil pattern's model error at the truth against a dense reference, and stop).
+//!
 //! Prints the cost of one evaluation (all nine captures traced, splatted and fitted), of one
 //! Jacobian, the whole fit's wall-clock time with its evaluations per stage, and the values
 //! against the truth.

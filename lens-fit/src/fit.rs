@@ -6,8 +6,8 @@
 //! | name | type | unit | default |
 //! |---|---|---|---|
 //! | `time_limit_s` | f64: the whole fit | s | 60 |
-//! | `rays` | traced rays per wavelength per capture (a grid's corners on the pupil disc) | — | 16 384 |
-//! | `subsamples` | points per grid cell side: interpolated inside the aperture, traced on its edges (`forward::Pattern::Grid`); 0 = a spiral of `rays` points, each traced | — | 4 |
+//! | `rays` | traced rays per wavelength per capture (a grid's corners on the pupil disc) | — | 8 192 |
+//! | `subsamples` | points per grid cell side: interpolated inside the aperture, traced on its edges (`forward::Pattern::Grid`); 0 = a spiral of `rays` points, each traced | — | 2 |
 //! | `footprint_px` | ray footprint on the sensor (0: from the ray density) | px | 0 |
 //! | `global_share` | share of the time for the global stage (0 skips it) | — | 0.35 |
 //! | `local_share` | share of the time for the local stage (0 skips it) | — | 0.3 |

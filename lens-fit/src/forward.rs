@@ -4,8 +4,8 @@
 //!
 //! | name | type | unit | default |
 //! |---|---|---|---|
-//! | `rays` | traced rays per wavelength per capture (a grid's corners on the disc) | — | 16 384 |
-//! | `subsamples` | points per grid cell side, interpolated inside the aperture and traced on its edges; 0 = a spiral of `rays` points, each traced | — | 4 |
+//! | `rays` | traced rays per wavelength per capture (a grid's corners on the disc) | — | 8 192 |
+//! | `subsamples` | points per grid cell side, interpolated inside the aperture and traced on its edges; 0 = a spiral of `rays` points, each traced | — | 2 |
 //! | `footprint_px` | width of each ray's square footprint on the sensor; 0 = from the ray density ([`auto_footprint_px`]) | px | 0 |
 //! | `aim` | the sampling disc on the entrance-pupil plane: centre and radius | mm | found from the start lens, then fixed |
 //!
@@ -142,7 +142,7 @@ pub fn disc_pattern(count: usize) -> Vec<DVec2> {
         .collect()
 }
 
-/// Interpolated points per grid cell side, by default (16 points per cell).
+/// Interpolated points per grid cell side, by default (4 points per cell, 16 per edge cell).
 pub const DEFAULT_SUBSAMPLES: usize = 2;
 
 /// The fixed pupil sample pattern of a fit (points on the unit disc, scaled onto the aim disc).
@@ -171,8 +171,8 @@ impl Pattern {
         Pattern::Spiral(disc_pattern(rays))
     }
 
-    /// A grid with about `rays` traced corners on the unit disc and `sub × sub` points per cell
-    /// (`sub` = 0 or 1: the corners alone, each standing for its cell).
+    /// A grid with about `rays` traced corners on the unit disc, `sub × sub` points per interior
+    /// cell (`sub` = 0 or 1: one, at the cell's centre) and `2 sub × 2 sub` per edge cell.
     pub fn grid(rays: usize, sub: usize) -> Pattern {
         Pattern::grid_edges(rays, sub, 2 * sub.max(1))
     }
@@ -418,27 +418,21 @@ fn edge_cell(
     out
 }
 
-/// The mean ray spacing `√(A / N)` for N rays spread over the area A of a disc of twice their
-/// rms radius (None for fewer than two rays or no light).
-pub fn ray_spacing_px(landing: &Landing) -> Option<f64> {
+/// A footprint of one and a half ray spacings: `1.5 √(A / N)` for N rays spread over the area A of
+/// a disc of twice their rms radius, within [0.02, 2] px (a sharp spot keeps its caustics, a
+/// wide defocus disc is covered without gaps; a 0.25 px floor measurably blurred sharp off-axis
+/// spots against optiland, 1.9–2.1 % residual). It varies smoothly with the landing.
+pub fn auto_footprint_px(landing: &Landing) -> f64 {
     let w: f64 = landing.weights.iter().sum();
     if !(w > 0.0) || landing.positions_px.len() < 2 {
-        return None;
+        return 1.0;
     }
     let c = landing.positions_px.iter().zip(&landing.weights).fold(DVec2::ZERO, |a, (p, wt)| a + *p * *wt) / w;
     let r2 =
         landing.positions_px.iter().zip(&landing.weights).map(|(p, wt)| (*p - c).length_squared() * wt).sum::<f64>()
             / w;
     let area = std::f64::consts::PI * 4.0 * r2;
-    Some((area / landing.positions_px.len() as f64).sqrt())
-}
-
-/// A footprint of one and a half ray spacings ([`ray_spacing_px`]) within [0.02, 2] px (a sharp
-/// spot keeps its caustics, a wide defocus disc is covered without gaps; a 0.25 px floor
-/// measurably blurred sharp off-axis spots against optiland, 1.9–2.1 % residual). It varies
-/// smoothly with the landing.
-pub fn auto_footprint_px(landing: &Landing) -> f64 {
-    ray_spacing_px(landing).map_or(1.0, |s| (1.5 * s).clamp(0.02, 2.0))
+    (1.5 * (area / landing.positions_px.len() as f64).sqrt()).clamp(0.02, 2.0)
 }
 
 /// The overlap of [x − h, x + h] with each pixel [i, i + 1], divided by 2h: (first pixel, up to
@@ -461,7 +455,14 @@ fn overlaps(x: f64, h: f64) -> (i64, [f64; 5]) {
 /// from the landing's density ([`auto_footprint_px`]); own half-widths within [0.0005, 1] px.
 pub fn splat(landing: &Landing, shift_px: DVec2, footprint_px: f64, width: usize, height: usize) -> Vec<f64> {
     let own = footprint_px <= 0.0 && landing.half_widths_px.len() == landing.positions_px.len();
-    let square = if footprint_px > 0.0 { footprint_px } else { auto_footprint_px(landing) };
+    // the square footprint, where some ray has none of its own (the density pass only then)
+    let square = if footprint_px > 0.0 {
+        footprint_px
+    } else if !own || landing.half_widths_px.contains(&DVec2::ZERO) {
+        auto_footprint_px(landing)
+    } else {
+        1.0
+    };
     let square = DVec2::splat(0.5 * square.clamp(1e-3, 2.0));
     let mut img = vec![0.0; width * height];
     for (k, (p, &w)) in landing.positions_px.iter().zip(&landing.weights).enumerate() {

@@ -39,7 +39,7 @@ struct Args {
     /// Local (BOBYQA) starts from the global stage's best mutually distinct points.
     #[arg(long, default_value_t = FitOptions::default().starts)]
     starts: usize,
-    /// Rays per wavelength per capture.
+    /// Traced rays per wavelength per capture (the pupil grid's corners, or the spiral's points).
     #[arg(long, default_value_t = petzval_fit::forward::DEFAULT_RAYS)]
     rays: usize,
     /// Points per pupil-grid cell side: interpolated inside the aperture, traced on its edges

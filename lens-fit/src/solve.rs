@@ -477,11 +477,13 @@ impl LmProblem<'_> {
                 let l = self.landings_at(&s);
                 let r = self.problem.residual_vector(l.as_deref(), &shifts);
                 if self.central {
-                    // central: the forward step's curvature error cancels (a narrow valley)
-                    s[k] -= 2.0 * h;
+                    // central: the forward step's curvature error cancels (a narrow valley); at
+                    // a bound the back point stays on it (a one-sided difference there)
+                    s[k] = (scaled[k] - h).clamp(0.0, 1.0);
+                    let span = scaled[k] + h - s[k];
                     let l = self.landings_at(&s);
                     let back = self.problem.residual_vector(l.as_deref(), &shifts);
-                    let values = r.iter().zip(&back).map(|(a, b)| (a - b) / (2.0 * h)).collect();
+                    let values = r.iter().zip(&back).map(|(a, b)| (a - b) / span).collect();
                     return Column { offset: 0, values };
                 }
                 Column { offset: 0, values: r.iter().zip(base).map(|(a, b)| (a - b) / h).collect() }
