@@ -7,7 +7,7 @@
 //! ```
 //!
 //! Environment: `BENCH_SUBSAMPLES` (the pupil grid's points per cell side; 0 = the spiral),
-//! `BENCH_CENTRAL` (central differences), `BENCH_GLOBAL_RAYS`, `BENCH_LOCAL_RAYS`,
+//! `BENCH_FORWARD` (forward differences first, as `--forward-differences`), `BENCH_GLOBAL_RAYS`, `BENCH_LOCAL_RAYS`,
 //! `BENCH_SHIFT_STEPS`, `BENCH_GLOBAL_SHARE`, `BENCH_FROM_TRUTH`, and `BENCH_MODEL_ERROR` (print
 //! each pupil pattern's model error at the truth against a dense reference, and stop).
 //!
@@ -76,7 +76,7 @@ fn main() {
         local_rays: env("BENCH_LOCAL_RAYS"),
         shift_steps: std::env::var("BENCH_SHIFT_STEPS").ok().and_then(|v| v.parse().ok()).unwrap_or(2),
         global_share: std::env::var("BENCH_GLOBAL_SHARE").ok().and_then(|v| v.parse().ok()).unwrap_or(0.35),
-        central_differences: std::env::var_os("BENCH_CENTRAL").is_some(),
+        central_differences: std::env::var_os("BENCH_FORWARD").is_none(),
         subsamples: std::env::var("BENCH_SUBSAMPLES")
             .ok()
             .and_then(|v| v.parse().ok())

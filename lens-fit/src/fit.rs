@@ -7,7 +7,7 @@
 //! |---|---|---|---|
 //! | `time_limit_s` | f64: the whole fit | s | 60 |
 //! | `rays` | traced rays per wavelength per capture (a grid's corners on the pupil disc) | — | 8 192 |
-//! | `subsamples` | points per grid cell side: interpolated inside the aperture, traced on its edges (`forward::Pattern::Grid`); 0 = a spiral of `rays` points, each traced | — | 2 |
+//! | `subsamples` | points per grid cell side, interpolated from the cell's traced corners, twice as many near a rim (`forward::Pattern::Grid`); 0 = a spiral of `rays` points, each traced | — | 2 |
 //! | `footprint_px` | ray footprint on the sensor (0: from the ray density) | px | 0 |
 //! | `global_share` | share of the time for the global stage (0 skips it) | — | 0.35 |
 //! | `local_share` | share of the time for the local stage (0 skips it) | — | 0.3 |
@@ -17,10 +17,11 @@
 //! | `shift_steps` | Gauss–Newton steps on each capture's shift in every global/local evaluation (0: the centroid-matching shift) | — | 2 |
 //! | `max_evaluations` | objective evaluations of the whole fit (0: no bound, the time limit alone) | — | 0 |
 //! | `starts` | local (BOBYQA) starts from the global stage's best mutually distinct points | — | 3 |
-//! | `central_differences` | Levenberg–Marquardt's parameter Jacobian by central differences (two evaluations per parameter: for narrow valleys, e.g. several coupled radii) | bool | false |
+//! | `central_differences` | Levenberg–Marquardt's parameter Jacobian by central differences from the start (two evaluations per parameter: narrow valleys, e.g. several coupled radii, need them); false: forward differences until two poor steps, then central | bool | true |
 //!
 //! The whole fit keeps to `time_limit_s`: CRS2 35 %, BOBYQA 30 %, Levenberg–Marquardt computes
-//! no Jacobian after the limit (the uncertainty stage always computes one). `max_evaluations`
+//! no Jacobian or step that would leave too little time before the limit for the uncertainty
+//! stage's Jacobian (which it always computes, at the end point). `max_evaluations`
 //! is split over the stages by the same shares; with it (and a time limit that is not reached)
 //! a fit's end point does not depend on the machine's speed, load or thread count.
 //!
@@ -72,7 +73,8 @@ pub struct FitOptions {
     pub max_evaluations: usize,
     /// Local starts from the global stage's best mutually distinct points.
     pub starts: usize,
-    /// Levenberg–Marquardt's parameter Jacobian by central differences (twice the cost).
+    /// Levenberg–Marquardt's parameter Jacobian by central differences from the start (twice
+    /// the cost); false: forward differences until they prove poor, then central.
     pub central_differences: bool,
 }
 
@@ -102,7 +104,7 @@ impl Default for FitOptions {
             shift_steps: 2,
             max_evaluations: 0,
             starts: 3,
-            central_differences: false,
+            central_differences: true,
         }
     }
 }

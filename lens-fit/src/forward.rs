@@ -5,7 +5,7 @@
 //! | name | type | unit | default |
 //! |---|---|---|---|
 //! | `rays` | traced rays per wavelength per capture (a grid's corners on the disc) | — | 8 192 |
-//! | `subsamples` | points per grid cell side, interpolated inside the aperture and traced on its edges; 0 = a spiral of `rays` points, each traced | — | 2 |
+//! | `subsamples` | points per grid cell side, interpolated from the cell's corners (twice as many near a rim); 0 = a spiral of `rays` points, each traced with hard rims | — | 2 |
 //! | `footprint_px` | width of each ray's square footprint on the sensor; 0 = from the ray density ([`auto_footprint_px`]) | px | 0 |
 //! | `aim` | the sampling disc on the entrance-pupil plane: centre and radius | mm | found from the start lens, then fixed |
 //!
@@ -19,8 +19,13 @@
 //! sensor, and the camera writes it upright).
 //!
 //! Smoothness: the pattern of pupil points is fixed for a fit, and a ray's footprint is a
-//! small square whose overlap with each pixel is integrated exactly, so the model image is a
-//! continuous function of every parameter (no ray jumps between pixels).
+//! small box whose overlap with each pixel is integrated exactly, so no ray jumps between
+//! pixels. With the grid pattern no point switches on or off at a rim either: corners are
+//! traced with soft rims ([`Lens::trace_soft`]: every rim lowers a clearance instead of
+//! stopping the ray), each point's light is weighted by its coverage, a ramp in its signed
+//! distance from the aperture's outline, and a cell's points change from coarse to fine near
+//! a rim by a linear blend. The model image is then a continuous function of every parameter;
+//! what is left is the trace's rounding (about 1e-8 of Σr² near a fit's end).
 
 use crate::correction::Correction;
 use crate::manifest::{DistancesFrom, SensorSpec};
@@ -150,11 +155,12 @@ pub const DEFAULT_SUBSAMPLES: usize = 2;
 pub enum Pattern {
     /// Every point traced (a golden-angle spiral, [`disc_pattern`]).
     Spiral(Vec<DVec2>),
-    /// A square grid of `cells × cells` over [−1, 1]², its corners traced. A cell whose four
-    /// corners pass carries `sub × sub` points whose landings and light are interpolated
-    /// bilinearly from the corners (the pupil → sensor map is smooth inside the aperture); a
-    /// cell with one to three passing corners is on an edge of the aperture (the stop, a
-    /// vignetting rim) and its `edge_sub × edge_sub` points are traced one by one.
+    /// A square grid of `cells × cells` over [−1, 1]², its corners traced with soft rims. A
+    /// cell's points are interpolated bilinearly from its corners (landing, light and distance
+    /// from the aperture's outline: the pupil → sensor map is smooth across the rims when they
+    /// do not stop the rays), `sub × sub` of them inside the aperture and `edge_sub × edge_sub`
+    /// near an edge of it (the stop, a vignetting rim), each weighted by its coverage
+    /// ([`land`]). A cell with a corner that misses a surface is traced point by point.
     Grid {
         /// Cells per side.
         cells: usize,
@@ -231,6 +237,8 @@ pub struct Landing {
 
 /// Traces the fixed pattern from the source through the lens onto the (tilted) sensor; with a
 /// `correction` (LRTF correction mode), through the lens with its outgoing rays corrected.
+/// A spiral traces every point with hard rims; a grid traces its corners with soft rims
+/// ([`Lens::trace_soft`]) and weights each point by its smooth coverage ([`land_grid`]).
 #[allow(clippy::too_many_arguments)]
 pub fn land(
     lens: &Lens,
@@ -248,8 +256,14 @@ pub fn land(
     let pivot = DVec3::new(0.0, 0.0, geometry.film_z_mm);
     let (pitch_x, pitch_y) = frame.sensor.pitch_mm();
     let s = geometry.source_mm;
-    // one ray: its image pixel and its light per mm² of the aim plane
-    let trace = |u: DVec2| -> Option<(DVec2, f64)> {
+    // per-surface weights turning a rim clearance (mm on the surface) into mm on the aim plane
+    let rim_weights = match pattern {
+        Pattern::Grid { .. } => rim_weights(lens, s, aim, wavelength_nm),
+        Pattern::Spiral(_) => Vec::new(),
+    };
+    // one ray: its image pixel, its light per mm² of the aim plane and its signed distance
+    // from the aperture's outline on the aim plane (mm, +∞ for a hard trace)
+    let trace = |u: DVec2| -> Option<(DVec2, f64, f64)> {
         // 1. A ray from the source to its pupil point; light ∝ the solid angle per area.
         let target = DVec3::new(aim.centre_mm.x + u.x * aim.radius_mm, aim.centre_mm.y + u.y * aim.radius_mm, aim.z_mm);
         let to = target - s;
@@ -260,7 +274,11 @@ pub fn land(
             Some(c) if !c.is_zero() => c.uncorrect_incoming(s, to)?,
             _ => Ray::new(s, to),
         };
-        let out = lens.trace(&ray, wavelength_nm, TraceDirection::SceneToFilm)?;
+        let (out, inside_mm) = if rim_weights.is_empty() {
+            (lens.trace(&ray, wavelength_nm, TraceDirection::SceneToFilm)?, f64::INFINITY)
+        } else {
+            lens.trace_soft(&ray, wavelength_nm, TraceDirection::SceneToFilm, &rim_weights).ok()?
+        };
         // 3. Onto the sensor plane.
         let d = out.ray.direction;
         let denom = d.dot(normal);
@@ -274,14 +292,18 @@ pub fn land(
         let col = frame.sensor.pixels[0] as f64 / 2.0 - q.x / pitch_x - frame.crop_origin_px[0] as f64;
         let row = frame.sensor.pixels[1] as f64 / 2.0 + q.y / pitch_y - frame.crop_origin_px[1] as f64;
         let w = cos / r2 * out.transmission;
-        (col.is_finite() && row.is_finite() && w.is_finite()).then_some((DVec2::new(col, row), w))
+        (col.is_finite() && row.is_finite() && w.is_finite() && !inside_mm.is_nan()).then_some((
+            DVec2::new(col, row),
+            w,
+            inside_mm,
+        ))
     };
     let mut landing = Landing::default();
     match pattern {
         Pattern::Spiral(points) => {
             let cell_area = std::f64::consts::PI * aim.radius_mm * aim.radius_mm / points.len() as f64;
-            let traced: Vec<Option<(DVec2, f64)>> = points.par_iter().map(|u| trace(*u)).collect();
-            for (p, w) in traced.into_iter().flatten() {
+            let traced: Vec<Option<(DVec2, f64, f64)>> = points.par_iter().map(|u| trace(*u)).collect();
+            for (p, w, _) in traced.into_iter().flatten() {
                 landing.positions_px.push(p);
                 landing.weights.push(w * cell_area);
             }
@@ -297,9 +319,37 @@ pub fn land(
     landing
 }
 
+/// Per-surface weights `1 / gᵢ` that turn a rim clearance on surface `i` (mm) into a distance
+/// on the aim plane (mm), where `gᵢ` is how far the beam's crossing point on surface `i` moves
+/// per mm of aim point: the mean of `|pᵢ(+δ) − pᵢ(−δ)| / 2δ` along x and y about the aim
+/// centre, δ a quarter of the aim radius, traced without rims; `gᵢ` within [1e-3, 1e3]. The
+/// outline (clearance 0) does not depend on them, only how wide a rim's soft edge is. All ones
+/// when one of the four rays misses a surface.
+pub fn rim_weights(lens: &Lens, source_mm: DVec3, aim: &Aim, wavelength_nm: f64) -> Vec<f64> {
+    let delta = 0.25 * aim.radius_mm;
+    let hits = |offset: DVec2| {
+        let target = DVec3::new(aim.centre_mm.x + offset.x, aim.centre_mm.y + offset.y, aim.z_mm);
+        lens.trace_unclipped_hits(&Ray::new(source_mm, target - source_mm), wavelength_nm, TraceDirection::SceneToFilm)
+            .ok()
+    };
+    let n = lens.surfaces().len();
+    let rays = [DVec2::X, -DVec2::X, DVec2::Y, -DVec2::Y].map(|e| hits(e * delta));
+    let [Some(xp), Some(xm), Some(yp), Some(ym)] = rays else { return vec![1.0; n] };
+    (0..n)
+        .map(|i| {
+            let g = ((xp[i] - xm[i]).length() + (yp[i] - ym[i]).length()) / (4.0 * delta);
+            1.0 / g.clamp(1e-3, 1e3)
+        })
+        .collect()
+}
+
 /// One landed point: pixel position, light, and its footprint's half-widths (zero: from the
 /// landing's density, [`auto_footprint_px`]).
 type Point = (DVec2, f64, DVec2);
+
+/// One traced pupil point: pixel position, light per mm² of the aim plane, and the signed
+/// distance (mm on the aim plane, positive inside) from the aperture's outline.
+type Corner = (DVec2, f64, f64);
 
 /// The half-widths of a box with the second moments of the parallelogram spanned by `e1` and
 /// `e2` (a point's share of the pupil, mapped onto the image): `½ √(e1ₓ² + e2ₓ²)` per axis.
@@ -307,12 +357,25 @@ fn box_half_widths(e1: DVec2, e2: DVec2) -> DVec2 {
     DVec2::new((e1.x * e1.x + e2.x * e2.x).sqrt(), (e1.y * e1.y + e2.y * e2.y).sqrt()) * 0.5
 }
 
-/// The grid pattern's landings: corners traced, interior cells interpolated, edge cells traced
-/// point by point (in a fixed order, whatever the threads). Each point's footprint is its share
-/// of the pupil mapped onto the image (from the cell's bilinear map, or from its traced
-/// neighbours on an edge), so adjacent footprints tile the image as the pupil cells tile the pupil.
+/// The coverage of a point whose pupil square has side `h` (mm on the aim plane) at signed
+/// distance `inside_mm` from the outline: a linear ramp from 0 at `−h/2` to 1 at `+h/2`
+/// (exact for a straight rim parallel to a side; continuous everywhere).
+fn coverage(inside_mm: f64, h: f64) -> f64 {
+    (0.5 + inside_mm / h).clamp(0.0, 1.0)
+}
+
+/// The grid pattern's landings (in a fixed order, whatever the threads). Corners are traced
+/// with soft rims, so every corner near the aperture has a landing and a signed distance from
+/// the outline, and the pupil → sensor map is smooth across the rims. Each cell's points are
+/// interpolated bilinearly from its corners (position, light and distance), each weighted by
+/// its coverage ([`coverage`]): `sub × sub` points where the cell lies inside the outline by
+/// more than one cell, `edge_sub × edge_sub` near it, both blended linearly over one cell's
+/// width in between; a cell with a corner that misses a surface is traced point by point. Each
+/// point's footprint is its share of the pupil mapped onto the image, so adjacent footprints
+/// tile the image as the pupil cells tile the pupil. The image is a continuous function of
+/// every parameter: no point switches on or off, or between interpolated and traced, at a rim.
 fn land_grid(
-    trace: &(dyn Fn(DVec2) -> Option<(DVec2, f64)> + Sync),
+    trace: &(dyn Fn(DVec2) -> Option<Corner> + Sync),
     cells: usize,
     sub: usize,
     edge_sub: usize,
@@ -323,7 +386,7 @@ fn land_grid(
     let corner_u = |i: usize, j: usize| DVec2::new(-1.0 + i as f64 * step, -1.0 + j as f64 * step);
     // 1. Corners on (or within a cell's diagonal of) the unit disc are traced.
     let reach = 1.0 + step * std::f64::consts::SQRT_2;
-    let corners: Vec<Option<(DVec2, f64)>> = (0..(n + 1) * (n + 1))
+    let corners: Vec<Option<Corner>> = (0..(n + 1) * (n + 1))
         .into_par_iter()
         .map(|k| {
             let u = corner_u(k % (n + 1), k / (n + 1));
@@ -334,10 +397,9 @@ fn land_grid(
             }
         })
         .collect();
-    // 2. Each cell's points: light per point = density × the point's share of the cell's area.
-    let point_area = (radius_mm * step / sub as f64).powi(2);
-    let edge_area = (radius_mm * step / edge_sub as f64).powi(2);
-    let inv = 1.0 / sub as f64;
+    // 2. Each cell's points: light per point = density × its share of the cell's area × coverage.
+    let cell_mm = radius_mm * step;
+    let (h_in, h_edge) = (cell_mm / sub as f64, cell_mm / edge_sub as f64);
     let rows: Vec<Vec<Point>> = (0..n)
         .into_par_iter()
         .map(|j| {
@@ -349,24 +411,28 @@ fn land_grid(
                     corners[(j + 1) * (n + 1) + i],
                     corners[(j + 1) * (n + 1) + i + 1],
                 ];
-                match c {
-                    [None, None, None, None] => {}
-                    [Some(p00), Some(p10), Some(p01), Some(p11)] => {
-                        // interior: bilinear in the cell, footprints from its derivatives
-                        for b in 0..sub {
-                            for a in 0..sub {
-                                let (fa, fb) = ((a as f64 + 0.5) * inv, (b as f64 + 0.5) * inv);
-                                let w00 = (1.0 - fa) * (1.0 - fb);
-                                let (w10, w01, w11) = (fa * (1.0 - fb), (1.0 - fa) * fb, fa * fb);
-                                let p = p00.0 * w00 + p10.0 * w10 + p01.0 * w01 + p11.0 * w11;
-                                let density = p00.1 * w00 + p10.1 * w10 + p01.1 * w01 + p11.1 * w11;
-                                let da = ((p10.0 - p00.0) * (1.0 - fb) + (p11.0 - p01.0) * fb) * inv;
-                                let db = ((p01.0 - p00.0) * (1.0 - fa) + (p11.0 - p10.0) * fa) * inv;
-                                out.push((p, density * point_area, box_half_widths(da, db)));
-                            }
-                        }
+                if let [Some(c00), Some(c10), Some(c01), Some(c11)] = c {
+                    let q = [c00, c10, c01, c11];
+                    let d_max = q.iter().map(|c| c.2).fold(f64::NEG_INFINITY, f64::max);
+                    let d_min = q.iter().map(|c| c.2).fold(f64::INFINITY, f64::min);
+                    // every interpolated distance is a mix of the corners': none can be covered
+                    if d_max <= -0.5 * h_edge {
+                        continue;
                     }
-                    _ => out.extend(edge_cell(trace, corner_u(i, j), step, edge_sub, c, edge_area)),
+                    // the share of the coarse points: 0 within h_in/2 of the outline, 1 a cell further in
+                    let coarse = ((d_min - 0.5 * h_in) / cell_mm).clamp(0.0, 1.0);
+                    if coarse > 0.0 {
+                        bilinear_points(&mut out, q, sub, h_in, coarse);
+                    }
+                    if coarse < 1.0 {
+                        bilinear_points(&mut out, q, edge_sub, h_edge, 1.0 - coarse);
+                    }
+                } else {
+                    // a corner missed a surface: trace the cell's points, unless all are far out
+                    let near = c.iter().flatten().any(|c| c.2 > -0.5 * h_edge - 1.5 * cell_mm);
+                    if near {
+                        out.extend(traced_cell(trace, corner_u(i, j), step, edge_sub, h_edge));
+                    }
                 }
             }
             out
@@ -375,44 +441,68 @@ fn land_grid(
     rows.into_iter().flatten().collect()
 }
 
-/// An edge cell's points, each traced; a point's footprint from the differences to its traced
-/// neighbours in the cell (else the cell's passing corner edges; else the landing's density).
-fn edge_cell(
-    trace: &(dyn Fn(DVec2) -> Option<(DVec2, f64)> + Sync),
+/// Appends a cell's `sub × sub` points, interpolated bilinearly from its corners
+/// `[c00, c10, c01, c11]`, each with light `share × density × (h²) × coverage(distance, h)`
+/// (`h` the point's side on the aim plane) and its footprint from the bilinear map's derivatives.
+fn bilinear_points(out: &mut Vec<Point>, q: [Corner; 4], sub: usize, h: f64, share: f64) {
+    let [c00, c10, c01, c11] = q;
+    let inv = 1.0 / sub as f64;
+    let area = h * h * share;
+    for b in 0..sub {
+        for a in 0..sub {
+            let (fa, fb) = ((a as f64 + 0.5) * inv, (b as f64 + 0.5) * inv);
+            let (w00, w10, w01, w11) = ((1.0 - fa) * (1.0 - fb), fa * (1.0 - fb), (1.0 - fa) * fb, fa * fb);
+            let inside = c00.2 * w00 + c10.2 * w10 + c01.2 * w01 + c11.2 * w11;
+            let cover = coverage(inside, h);
+            if cover <= 0.0 {
+                continue;
+            }
+            let p = c00.0 * w00 + c10.0 * w10 + c01.0 * w01 + c11.0 * w11;
+            let density = c00.1 * w00 + c10.1 * w10 + c01.1 * w01 + c11.1 * w11;
+            let da = ((c10.0 - c00.0) * (1.0 - fb) + (c11.0 - c01.0) * fb) * inv;
+            let db = ((c01.0 - c00.0) * (1.0 - fa) + (c11.0 - c10.0) * fa) * inv;
+            out.push((p, density * area * cover, box_half_widths(da, db)));
+        }
+    }
+}
+
+/// A cell's `sub × sub` points, each traced (a corner of the cell missed a surface) and
+/// weighted by its coverage; a point's footprint from the differences to its traced
+/// neighbours (forward, at the last point backward; else at right angles to the other
+/// direction; else from the landing's density).
+fn traced_cell(
+    trace: &(dyn Fn(DVec2) -> Option<Corner> + Sync),
     origin: DVec2,
     step: f64,
     sub: usize,
-    c: [Option<(DVec2, f64)>; 4],
-    point_area: f64,
+    h: f64,
 ) -> Vec<Point> {
     let inv = 1.0 / sub as f64;
-    let traced: Vec<Option<(DVec2, f64)>> = (0..sub * sub)
+    let traced: Vec<Option<Corner>> = (0..sub * sub)
         .map(|k| {
             let (a, b) = (k % sub, k / sub);
             trace(origin + DVec2::new((a as f64 + 0.5) * inv, (b as f64 + 0.5) * inv) * step)
         })
         .collect();
     let pos = |a: usize, b: usize| traced[b * sub + a].map(|t| t.0);
-    let corner_edge = |x: Option<(DVec2, f64)>, y: Option<(DVec2, f64)>| Some((y?.0 - x?.0) * inv);
-    // the corner edges along a (00→10, 01→11) and along b (00→01, 10→11)
-    let cell_a = corner_edge(c[0], c[1]).or_else(|| corner_edge(c[2], c[3]));
-    let cell_b = corner_edge(c[0], c[2]).or_else(|| corner_edge(c[1], c[3]));
     let mut out = Vec::new();
     for b in 0..sub {
         for a in 0..sub {
-            let Some((p, density)) = traced[b * sub + a] else { continue };
+            let Some((p, density, inside)) = traced[b * sub + a] else { continue };
+            let cover = coverage(inside, h);
+            if cover <= 0.0 {
+                continue;
+            }
             let along = |fwd: Option<DVec2>, back: Option<DVec2>| fwd.map(|q| q - p).or_else(|| back.map(|q| p - q));
-            let da = along((a + 1 < sub).then(|| pos(a + 1, b)).flatten(), (a > 0).then(|| pos(a - 1, b)).flatten())
-                .or(cell_a);
-            let db = along((b + 1 < sub).then(|| pos(a, b + 1)).flatten(), (b > 0).then(|| pos(a, b - 1)).flatten())
-                .or(cell_b);
+            let da = along((a + 1 < sub).then(|| pos(a + 1, b)).flatten(), (a > 0).then(|| pos(a - 1, b)).flatten());
+            let db = along((b + 1 < sub).then(|| pos(a, b + 1)).flatten(), (b > 0).then(|| pos(a, b - 1)).flatten());
             let half = match (da, db) {
                 (Some(da), Some(db)) => box_half_widths(da, db),
                 // one direction known: the other as long, at right angles
                 (Some(e), None) | (None, Some(e)) => box_half_widths(e, e.perp()),
                 (None, None) => DVec2::ZERO,
             };
-            out.push((p, density * point_area, half));
+            out.push((p, density * h * h * cover, half));
         }
     }
     out

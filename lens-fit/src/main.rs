@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! petzval-fit MANIFEST -o FITTED.toml [--lrtf FITTED.lrtf] --report DIR [--time-limit S]
-//!             [--max-evaluations N] [--starts K] [--rays N] [--subsamples K] [--central-differences] [--quiet]
+//!             [--max-evaluations N] [--starts K] [--rays N] [--subsamples K] [--central-differences | --forward-differences] [--quiet]
 //! petzval-fit MANIFEST --evaluate DIR --report DIR2
 //! petzval-fit MANIFEST --check
 //! ```
@@ -42,14 +42,19 @@ struct Args {
     /// Traced rays per wavelength per capture (the pupil grid's corners, or the spiral's points).
     #[arg(long, default_value_t = petzval_fit::forward::DEFAULT_RAYS)]
     rays: usize,
-    /// Points per pupil-grid cell side: interpolated inside the aperture, traced on its edges
-    /// (0: a spiral of `--rays` points, each traced).
+    /// Points per pupil-grid cell side, interpolated from the cell's traced corners (twice as
+    /// many near a rim; 0: a spiral of `--rays` points, each traced).
     #[arg(long, default_value_t = petzval_fit::forward::DEFAULT_SUBSAMPLES)]
     subsamples: usize,
-    /// Levenberg–Marquardt's parameter Jacobian by central differences (twice the cost per
-    /// iteration; follows narrow valleys, e.g. several coupled radii, further).
-    #[arg(long)]
+    /// Levenberg–Marquardt's parameter Jacobian by central differences from the start: the
+    /// default (kept so that earlier command lines still run).
+    #[arg(long, conflicts_with = "forward_differences")]
     central_differences: bool,
+    /// Levenberg–Marquardt's parameter Jacobian by forward differences (half the cost per
+    /// iteration) until two steps gain under a tenth of their predicted decrease, then by
+    /// central differences.
+    #[arg(long)]
+    forward_differences: bool,
     /// No progress bar (it is drawn on stderr only when stderr is a terminal).
     #[arg(long, short = 'q')]
     quiet: bool,
@@ -117,7 +122,7 @@ fn run(args: &Args) -> petzval_fit::Result<()> {
         time_limit_s: args.time_limit,
         rays: args.rays,
         subsamples: args.subsamples,
-        central_differences: args.central_differences,
+        central_differences: args.central_differences || !args.forward_differences,
         max_evaluations: args.max_evaluations.unwrap_or(0),
         starts: args.starts,
         ..Default::default()

@@ -5,7 +5,7 @@
 //! a parameter the captures cannot determine), `captures` (list of `{image, residual,
 //! shift_px, scale, background, clipped_pixels, hot_pixels}`), `seconds`, `iterations`
 //! (objective evaluations per stage; a Jacobian counts one per parameter), `stage_seconds`
-//! (wall-clock per stage), `lm_stop` (`{reason, iterations}` of Levenberg–Marquardt), `correlations` (`{names, matrix}`), `history`
+//! (wall-clock per stage), `lm_stop` (`{reason, iterations, central_from_iteration}` of Levenberg–Marquardt: the last is the iteration from which its Jacobians were central differences, null for forward differences throughout), `correlations` (`{names, matrix}`), `history`
 //! (`[seconds, objective]` after each improvement), `camera` (the fitted camera parameters),
 //! `start_lens`, `manifest`.
 
@@ -80,7 +80,11 @@ pub fn write_report(dir: &Path, problem: &Problem, result: &FitResult, model: &M
         "seconds": result.seconds,
         "iterations": iterations,
         "stage_seconds": stage_seconds,
-        "lm_stop": { "reason": result.lm_stop.0, "iterations": result.lm_stop.1 },
+        "lm_stop": {
+            "reason": result.lm_stop.0,
+            "iterations": result.lm_stop.1,
+            "central_from_iteration": result.lm_central_from,
+        },
         "history": result.history,
     });
     let text = serde_json::to_string_pretty(&report).unwrap_or_default();

@@ -48,6 +48,9 @@ pub struct FitResult {
     /// Why Levenberg–Marquardt stopped (`ftol`, `xtol`, `gtol`, `patience`, `evaluation
     /// budget`, `time limit`, `singular`) and its iterations (Jacobians).
     pub lm_stop: (&'static str, usize),
+    /// The Levenberg–Marquardt iteration from which its Jacobians were central differences
+    /// (0: from the start, as asked; None: forward differences throughout).
+    pub lm_central_from: Option<usize>,
 }
 
 /// What the progress callback sees after each evaluation.
@@ -439,8 +442,8 @@ impl LmProblem<'_> {
     }
 
     /// Evaluations one Jacobian costs.
-    fn jacobian_cost(&self) -> usize {
-        self.problem.free.len() * if self.central { 2 } else { 1 }
+    fn jacobian_cost(&self, central: bool) -> usize {
+        self.problem.free.len() * if central { 2 } else { 1 }
     }
 
     fn split(&self, x: &[f64]) -> (Vec<f64>, Vec<DVec2>) {
@@ -462,10 +465,11 @@ impl LmProblem<'_> {
         (self.problem.residual_vector(landings.as_deref(), &shifts), landings)
     }
 
-    /// Forward-difference Jacobian at `x` (residuals `base`, landings `landings`): a parameter
-    /// column re-traces every capture (one evaluation each, in parallel over the parameters),
-    /// a shift column re-splats only its own capture (its rows alone are nonzero).
-    fn jacobian(&self, x: &[f64], base: &[f64], landings: Option<&[Vec<Landing>]>) -> Vec<Column> {
+    /// Forward-difference Jacobian at `x` (residuals `base`, landings `landings`; central
+    /// differences in the parameters with `central`): a parameter column re-traces every
+    /// capture (one evaluation each, in parallel over the parameters), a shift column re-splats
+    /// only its own capture (its rows alone are nonzero).
+    fn jacobian(&self, x: &[f64], base: &[f64], landings: Option<&[Vec<Landing>]>, central: bool) -> Vec<Column> {
         let n = self.problem.free.len();
         let (scaled, shifts) = self.split(x);
         let mut cols: Vec<Column> = (0..n)
@@ -476,7 +480,7 @@ impl LmProblem<'_> {
                 s[k] += h;
                 let l = self.landings_at(&s);
                 let r = self.problem.residual_vector(l.as_deref(), &shifts);
-                if self.central {
+                if central {
                     // central: the forward step's curvature error cancels (a narrow valley); at
                     // a bound the back point stays on it (a one-sided difference there)
                     s[k] = (scaled[k] - h).clamp(0.0, 1.0);
@@ -538,13 +542,30 @@ struct LmOutcome {
     evaluations: usize,
     iterations: usize,
     stop: &'static str,
+    /// The iteration from which the Jacobian was taken with central differences (forward
+    /// differences first, unless the fit asked for central ones from the start).
+    central_from: Option<usize>,
 }
+
+/// Poor steps (a gain ratio, actual over predicted decrease of Σr², under
+/// [`LM_POOR_GAIN`]), after which the forward-difference Jacobian is taken to be wrong and
+/// Levenberg–Marquardt goes on with central differences.
+const LM_POOR_STEPS: usize = 2;
+
+/// A gain ratio under which a step counts as poor.
+const LM_POOR_GAIN: f64 = 0.1;
 
 /// Marquardt's damped Gauss–Newton on the normal equations: `(JᵀJ + λ D²) δ = −Jᵀr` with D²
 /// the largest diagonal of JᵀJ seen so far (MINPACK's scaling), λ adapted from the gain ratio
 /// (Nielsen's rule); the parameters are kept in their bounds by clamping the step. Stops on
 /// the crate's tests (ftol, xtol, gtol, patience), the evaluation budget (a Jacobian costs one
-/// evaluation per parameter, two with central differences) or the deadline (no Jacobian or step after it).
+/// evaluation per parameter, two with central differences) or the deadline: no Jacobian or
+/// step that would leave less time than one more Jacobian (the uncertainty stage's) before it,
+/// at the times measured so far.
+/// Forward differences switch to central ones for good after [`LM_POOR_STEPS`] poor steps
+/// (the linear model promising ten times the decrease that came, or a rise): in a narrow,
+/// curved valley the forward step's curvature error outweighs the gradient, and no damping
+/// mends a gradient of the wrong sign.
 #[allow(clippy::too_many_arguments)]
 fn levenberg_marquardt(
     lm: &LmProblem,
@@ -563,7 +584,16 @@ fn levenberg_marquardt(
     let mut evaluations = 0usize;
     let mut residual_evals = 0usize;
     let mut x = x0;
+    let t0 = Instant::now();
     let (mut r, mut landings) = lm.residuals(&x);
+    // seconds per residual evaluation, and per evaluation inside a Jacobian (measured)
+    let eval_s = t0.elapsed().as_secs_f64();
+    let mut jacobian_eval_s = eval_s;
+    // whether `seconds` of work still end before the deadline (no estimate: yes)
+    let time_for = |seconds: f64| {
+        let need = std::time::Duration::try_from_secs_f64(seconds).unwrap_or_default();
+        Instant::now().checked_add(need).is_none_or(|end| end <= deadline)
+    };
     evaluations += 1;
     residual_evals += 1;
     let mut rr: f64 = r.iter().map(|v| v * v).sum();
@@ -582,20 +612,27 @@ fn levenberg_marquardt(
     let mut nu = 2.0;
     let mut normal: Option<(DMatrix<f64>, DVector<f64>)> = None;
     let mut iterations = 0;
+    let mut central_from = lm.central.then_some(0);
+    let mut poor_steps = 0;
     // PETZVAL_FIT_TRACE=1 prints every step on stderr
     let trace = std::env::var_os("PETZVAL_FIT_TRACE").is_some_and(|v| v == "1");
     let affordable = |evaluations: usize, cost: usize| budget.is_none_or(|b| evaluations + cost <= b);
     let stop = 'outer: loop {
         if normal.is_none() {
             // a new Jacobian at x
-            if !affordable(evaluations, lm.jacobian_cost() + 1) {
+            let central = central_from.is_some();
+            if !affordable(evaluations, lm.jacobian_cost(central) + 1) {
                 break 'outer "evaluation budget";
             }
-            if Instant::now() > deadline {
+            // this Jacobian, a step, and the uncertainty stage's Jacobian
+            let jac = jacobian_eval_s * lm.jacobian_cost(central) as f64;
+            if !time_for(2.0 * jac + eval_s) {
                 break 'outer "time limit";
             }
-            let cols = lm.jacobian(&x, &r, landings.as_deref());
-            evaluations += lm.jacobian_cost();
+            let tj = Instant::now();
+            let cols = lm.jacobian(&x, &r, landings.as_deref(), central);
+            jacobian_eval_s = tj.elapsed().as_secs_f64() / lm.jacobian_cost(central).max(1) as f64;
+            evaluations += lm.jacobian_cost(central);
             normal = Some(normal_equations(&cols, &r));
             report(evaluations, rr);
         }
@@ -622,7 +659,8 @@ fn levenberg_marquardt(
             if residual_evals >= max_fev {
                 break 'outer "patience";
             }
-            if Instant::now() > deadline {
+            let central = central_from.is_some();
+            if !time_for(eval_s + jacobian_eval_s * lm.jacobian_cost(central) as f64) {
                 break 'outer "time limit";
             }
             let mut m = a.clone();
@@ -684,12 +722,26 @@ fn levenberg_marquardt(
             if dx <= LM_TOL * xn {
                 break 'outer "xtol";
             }
+            // descents the model promised and that did not come: the slope is wrong
+            if predicted > 0.0 && ratio < LM_POOR_GAIN {
+                poor_steps += 1;
+            }
+            if poor_steps >= LM_POOR_STEPS && central_from.is_none() {
+                central_from = Some(iterations);
+                normal = None;
+                if trace {
+                    eprintln!(
+                        "LM {iterations}: the forward-difference slope is poor here: central differences from now on"
+                    );
+                }
+                break;
+            }
             if accepted {
                 break;
             }
         }
     };
-    LmOutcome { x, r, normal, evaluations, iterations, stop }
+    LmOutcome { x, r, normal, evaluations, iterations, stop, central_from }
 }
 
 /// Runs the fit.
@@ -743,8 +795,9 @@ pub fn run_with_progress(problem: &Problem, options: &FitOptions, progress: Prog
         Some((a, _)) => (a, 0),
         None => {
             let (_, landings) = lm.residuals(&outcome.x);
-            let cols = lm.jacobian(&outcome.x, &outcome.r, landings.as_deref());
-            (normal_equations(&cols, &outcome.r).0, lm.jacobian_cost() + 1)
+            let central = outcome.central_from.is_some();
+            let cols = lm.jacobian(&outcome.x, &outcome.r, landings.as_deref(), central);
+            (normal_equations(&cols, &outcome.r).0, lm.jacobian_cost(central) + 1)
         }
     };
     evaluations.push(("uncertainty".to_string(), extra));
@@ -782,6 +835,7 @@ pub fn run_with_progress(problem: &Problem, options: &FitOptions, progress: Prog
         seconds: elapsed_s(start),
         scaled,
         lm_stop: (outcome.stop, outcome.iterations),
+        lm_central_from: outcome.central_from,
     }
 }
 

@@ -47,7 +47,7 @@ pub struct Shot {
     pub source_m: [f64; 3],
     /// Focus distance (m, from the sensor).
     pub focus_m: f64,
-    /// Working f-number.
+    /// Working f-number; 0 (or less): the stop fully open (the manifest's `"open"`).
     pub f_number: f64,
 }
 
@@ -107,7 +107,12 @@ pub fn write_captures(
     manifest.push_str(free);
     let mut noise = Noise(options.seed);
     for (i, s) in shots.iter().enumerate() {
-        let l = lens.stopped_down(s.f_number)?;
+        let l = if s.f_number > 0.0 {
+            lens.stopped_down(s.f_number)?
+        } else {
+            lens.with_stop_semi_diameter(lens.max_stop_semi_diameter_mm())?
+        };
+        let f_number = if s.f_number > 0.0 { s.f_number.to_string() } else { "\"open\"".to_string() };
         let g = Geometry::new(&l, &truth.camera, s.source_m, s.focus_m, DistancesFrom::Sensor)?;
         let aim = Aim::find(&l, g.source_mm, 550.0).ok_or_else(|| {
             Error::manifest(
@@ -146,7 +151,7 @@ pub fn write_captures(
         }
         manifest.push_str(&format!(
             "[[capture]]\nimage = \"{name}\"\ncrop_origin_px = [{}, {}]\nsource_m = [{}, {}, {}]\nfocus_m = {}\nf_number = {}\nwavelength_nm = 550\n\n",
-            origin[0], origin[1], s.source_m[0], s.source_m[1], s.source_m[2], s.focus_m, s.f_number
+            origin[0], origin[1], s.source_m[0], s.source_m[1], s.source_m[2], s.focus_m, f_number
         ));
     }
     let path = dir.join("manifest.toml");

@@ -149,6 +149,23 @@ impl Aperture {
         }
     }
 
+    /// How far (mm) the point (x, y) on the stop plane is inside the opening of circumradius
+    /// `radius_mm` (negative outside; measured in the unsqueezed frame, so exact in its sign
+    /// and approximate in size for an anamorphic opening), with the grey level that stays in
+    /// the transmission (a mask's, whose clearance is +∞; 1 for circles and blades). Continuous
+    /// in (x, y): the soft-clipping trace ([`crate::Lens::trace_soft`]) weights rays by it.
+    pub fn clearance_mm(&self, x: f64, y: f64, radius_mm: f64) -> (f64, f64) {
+        let u = x * self.anamorphic_ratio / radius_mm;
+        let v = y / radius_mm;
+        match &self.shape {
+            ApertureShape::Circle => ((1.0 - (u * u + v * v).sqrt()) * radius_mm, 1.0),
+            ApertureShape::Blades { count, curvature } => {
+                (blade_clearance(u, v, *count, *curvature, self.rotation_rad) * radius_mm, 1.0)
+            }
+            ApertureShape::Mask(_) => (f64::INFINITY, self.transmission(x, y, radius_mm)),
+        }
+    }
+
     /// Whether the opening is symmetric under every rotation about the axis.
     pub fn is_circular(&self) -> bool {
         matches!(self.shape, ApertureShape::Circle) && self.anamorphic_ratio == 1.0
@@ -190,6 +207,28 @@ fn inside_blades(u: f64, v: f64, count: u32, curvature: f64, rotation: f64) -> b
     let d = apothem - (rho * rho - s * s).sqrt(); // arc centre along the normal
     let across = r * alpha.sin();
     (along - d).powi(2) + across * across <= rho * rho
+}
+
+/// The signed distance (in circumradii, positive inside) of (u, v) from the blade opening of
+/// [`inside_blades`]: from the nearest straight edge's line, or for curved blades the smaller
+/// of the arc's and the circumcircle's clearance. Continuous across sectors.
+fn blade_clearance(u: f64, v: f64, count: u32, curvature: f64, rotation: f64) -> f64 {
+    let r = (u * u + v * v).sqrt();
+    let half = std::f64::consts::PI / count as f64;
+    // 1. Angle to the nearest edge normal, as in `inside_blades`.
+    let phi = v.atan2(u) - rotation;
+    let alpha = phi - (phi / (2.0 * half)).round() * 2.0 * half;
+    let along = r * alpha.cos();
+    let apothem = half.cos();
+    if curvature <= 0.0 {
+        return apothem - along;
+    }
+    // 2. Curved blade: inside the arc of radius 1/curvature and inside the circumcircle.
+    let rho = 1.0 / curvature;
+    let s = half.sin();
+    let d = apothem - (rho * rho - s * s).sqrt();
+    let across = r * alpha.sin();
+    (rho - ((along - d).powi(2) + across * across).sqrt()).min(1.0 - r)
 }
 
 impl Aperture {

@@ -534,11 +534,62 @@ impl Lens {
         stop: StopMode,
         mut visit: F,
     ) -> Result<Traced, Absorbed> {
+        self.trace_kernel::<false, _>(ray, wavelength_nm, direction, stop, &[], |_, p, _| visit(p)).map(|(t, _)| t)
+    }
+
+    /// Traces a ray through every surface without stopping at any rim (soft clipping): the
+    /// result carries the smallest weighted clearance `min_i weights[i] · c_i`, where `c_i` is
+    /// how far (mm) inside surface `i`'s rim the ray crossed (negative outside; at the stop, the
+    /// smaller of its housing's and its opening's clearance). `weights` has one entry per
+    /// surface (front to back); a mask stop's grey level stays in the transmission. Only a
+    /// missed surface or total internal reflection ends the trace. The clearance is a
+    /// continuous function of the ray, so it can weight a ray smoothly across a rim.
+    pub fn trace_soft(
+        &self,
+        ray: &Ray,
+        wavelength_nm: f64,
+        direction: TraceDirection,
+        weights: &[f64],
+    ) -> Result<(Traced, f64), Absorbed> {
+        debug_assert_eq!(weights.len(), self.surfaces.len());
+        self.trace_kernel::<true, _>(ray, wavelength_nm, direction, StopMode::Apply, weights, |_, _, _| {})
+    }
+
+    /// Traces a ray without stopping at any rim and returns where it crossed each surface, in
+    /// that surface's own frame (x, y), front to back whatever the direction.
+    pub fn trace_unclipped_hits(
+        &self,
+        ray: &Ray,
+        wavelength_nm: f64,
+        direction: TraceDirection,
+    ) -> Result<Vec<DVec2>, Absorbed> {
+        let mut hits = vec![DVec2::ZERO; self.surfaces.len()];
+        let ones = vec![1.0; self.surfaces.len()];
+        self.trace_kernel::<true, _>(ray, wavelength_nm, direction, StopMode::Open, &ones, |i, _, local| {
+            hits[i] = local
+        })?;
+        Ok(hits)
+    }
+
+    /// The trace kernel: `visit` sees each surface's index, hit point (lens frame) and hit
+    /// point in the surface's frame (x, y). `SOFT`: rims do not stop the ray, they lower the
+    /// returned clearance (see [`Lens::trace_soft`]); otherwise the clearance is +∞.
+    #[inline]
+    fn trace_kernel<const SOFT: bool, F: FnMut(usize, DVec3, DVec2)>(
+        &self,
+        ray: &Ray,
+        wavelength_nm: f64,
+        direction: TraceDirection,
+        stop: StopMode,
+        weights: &[f64],
+        mut visit: F,
+    ) -> Result<(Traced, f64), Absorbed> {
         let n = self.surfaces.len();
         let mut o = ray.origin;
         let mut d = ray.direction;
         let mut transmission = 1.0;
         let mut stop_point = DVec2::ZERO;
+        let mut clearance = f64::INFINITY;
         for step in 0..n {
             let i = match direction {
                 TraceDirection::SceneToFilm => step,
@@ -554,10 +605,22 @@ impl Lens {
             let t = s.shape.intersect(local, d).ok_or(Absorbed::Missed(i))?;
             let p = local + t * d;
             let hit = DVec3::new(p.x, p.y, p.z + s.z_mm);
-            visit(s.placement.as_ref().map_or(hit, |pl| pl.point_to_lens(hit)));
+            visit(i, s.placement.as_ref().map_or(hit, |pl| pl.point_to_lens(hit)), DVec2::new(p.x, p.y));
             let r2 = p.x * p.x + p.y * p.y;
-            // 2. Clip by the housing / clear aperture.
-            if s.is_stop {
+            // 2. Clip by the housing / clear aperture (soft: lower the clearance instead).
+            if SOFT {
+                let rim = if s.is_stop { s.housing_semi_diameter_mm } else { s.semi_diameter_mm };
+                let mut c = rim - r2.sqrt();
+                if s.is_stop {
+                    stop_point = DVec2::new(p.x, p.y);
+                    if stop == StopMode::Apply {
+                        let (opening, tr) = self.aperture.clearance_mm(p.x, p.y, self.stop_semi_diameter_mm);
+                        c = c.min(opening);
+                        transmission *= tr;
+                    }
+                }
+                clearance = clearance.min(c * weights[i]);
+            } else if s.is_stop {
                 if r2 > s.housing_semi_diameter_mm * s.housing_semi_diameter_mm {
                     return Err(Absorbed::Clipped(i));
                 }
@@ -595,7 +658,7 @@ impl Lens {
         if !(o.is_finite() && d.is_finite()) {
             return Err(Absorbed::Missed(n));
         }
-        Ok(Traced { ray: Ray { origin: o, direction: d }, transmission, stop_point })
+        Ok((Traced { ray: Ray { origin: o, direction: d }, transmission, stop_point }, clearance))
     }
 
     /// Paraxial image distance from the last vertex for an object `distance_mm` in front of
