@@ -147,7 +147,7 @@ pub(super) fn bench_lens_models(only: Option<String>, rays: usize, resolutions: 
                 let table =
                     LrtfTable::bake(&lens, &BakeOptions { resolution: res, ..BakeOptions::default() }, &|_| {})?;
                 let bake_s = t0.elapsed().as_secs_f64();
-                let map = |r: &Ray| match table.lookup(r, wl) {
+                let resolve = |r: &Ray, found: LrtfLookup| match found {
                     LrtfLookup::Hit(h) => {
                         (lens.aperture().transmission(h.stop_point.x, h.stop_point.y, lens.stop_semi_diameter_mm())
                             > 0.0)
@@ -156,12 +156,26 @@ pub(super) fn bench_lens_models(only: Option<String>, rays: usize, resolutions: 
                     LrtfLookup::Miss => None,
                     LrtfLookup::Uncertain => lens.trace(r, wl, TraceDirection::FilmToScene).map(|t| t.ray),
                 };
+                let map = |r: &Ray| resolve(r, table.lookup(r, wl));
                 let with_fallback = |r: &Ray| map(r).map_or(0.0, |o| o.direction.x);
+                // the same compiled for the baseline instruction set only (the lookup picks
+                // AVX2 + FMA at run time where the CPU has them: `simd_level`)
+                let with_fallback_baseline =
+                    |r: &Ray| resolve(r, table.lookup_baseline(r, wl)).map_or(0.0, |o| o.direction.x);
+                let alone_baseline = |r: &Ray| {
+                    if let LrtfLookup::Hit(h) = table.lookup_baseline(r, wl) {
+                        h.ray.direction.x
+                    } else {
+                        0.0
+                    }
+                };
                 // the table lookup alone (no exact fallback, no stop test)
                 let alone =
                     |r: &Ray| if let LrtfLookup::Hit(h) = table.lookup(r, wl) { h.ray.direction.x } else { 0.0 };
                 let ns = best_ns_per_ray(&samples, with_fallback);
                 let lookup_ns = best_ns_per_ray(&samples, alone);
+                let ns_baseline = best_ns_per_ray(&samples, with_fallback_baseline);
+                let lookup_ns_baseline = best_ns_per_ray(&samples, alone_baseline);
                 let ns_raster = best_ns_per_ray(&raster, with_fallback);
                 let lookup_ns_raster = best_ns_per_ray(&raster, alone);
                 let out: Vec<Option<Ray>> = samples.iter().map(map).collect();
@@ -198,7 +212,7 @@ pub(super) fn bench_lens_models(only: Option<String>, rays: usize, resolutions: 
                     sum_px / nb,
                     max_px,
                     Some(mis as f64 / samples.len().max(1) as f64),
-                    serde_json::json!({"lookup_ns": lookup_ns, "ns_per_ray_raster": ns_raster, "lookup_ns_raster": lookup_ns_raster, "speedup_vs_exact_raster": exact_ns / ns_raster, "uncertain_fraction": uncertain as f64 / samples.len().max(1) as f64, "table_mib": table.data_bytes() as f64 / (1 << 20) as f64, "bake_seconds": bake_s, "speedup_vs_exact": exact_ns / ns}),
+                    serde_json::json!({"lookup_ns": lookup_ns, "ns_per_ray_baseline_isa": ns_baseline, "lookup_ns_baseline_isa": lookup_ns_baseline, "simd": format!("{:?}", petzval_renderer::optics::lrtf::simd_level()), "ns_per_ray_raster": ns_raster, "lookup_ns_raster": lookup_ns_raster, "speedup_vs_exact_raster": exact_ns / ns_raster, "uncertain_fraction": uncertain as f64 / samples.len().max(1) as f64, "table_mib": table.data_bytes() as f64 / (1 << 20) as f64, "bake_seconds": bake_s, "speedup_vs_exact": exact_ns / ns}),
                 );
             }
         }
@@ -210,17 +224,24 @@ pub(super) fn bench_lens_models(only: Option<String>, rays: usize, resolutions: 
         println!();
         println!("Times: best of {REPEATS} runs, one thread; \"raster\": the same rays sorted by film pixel, as a renderer generates them.");
         println!();
-        println!("| lens | model | res | ns/ray | lookup alone ns | speed-up | ns/ray raster | lookup alone raster | speed-up raster | pos µm | dir mrad | mean px | max px | misclassified | uncertain (exact fallback) | MiB |");
-        println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+        println!(
+            "LRTF lookups use {:?} on this CPU (detected at run time); \"baseline\": the same lookup compiled for the baseline instruction set.",
+            petzval_renderer::optics::lrtf::simd_level()
+        );
+        println!();
+        println!("| lens | model | res | ns/ray | ns/ray baseline | lookup alone ns | lookup alone baseline | speed-up | ns/ray raster | lookup alone raster | speed-up raster | pos µm | dir mrad | mean px | max px | misclassified | uncertain (exact fallback) | MiB |");
+        println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
         for r in &rows {
             let f = |k: &str| r[k].as_f64();
             println!(
-                "| {} | {} | {} | {:.0} | {} | {} | {} | {} | {} | {} | {:.4} | {:.3} | {:.3} | {} | {} | {} |",
+                "| {} | {} | {} | {:.0} | {} | {} | {} | {} | {} | {} | {} | {} | {:.4} | {:.3} | {:.3} | {} | {} | {} |",
                 r["lens"].as_str().unwrap_or(""),
                 r["model"].as_str().unwrap_or(""),
                 r["resolution"].as_u64().map(|v| v.to_string()).unwrap_or_default(),
                 f("ns_per_ray").unwrap_or(0.0),
+                f("ns_per_ray_baseline_isa").map(|v| format!("{v:.0}")).unwrap_or_default(),
                 f("lookup_ns").map(|v| format!("{v:.0}")).unwrap_or_default(),
+                f("lookup_ns_baseline_isa").map(|v| format!("{v:.0}")).unwrap_or_default(),
                 f("speedup_vs_exact").map(|v| format!("{v:.1}×")).unwrap_or_default(),
                 f("ns_per_ray_raster").map(|v| format!("{v:.0}")).unwrap_or_default(),
                 f("lookup_ns_raster").map(|v| format!("{v:.0}")).unwrap_or_default(),

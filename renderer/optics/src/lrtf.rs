@@ -217,6 +217,56 @@ fn blend(e: &[&Entry; 8], w: &[f32; 8], c: usize) -> Vec4 {
         + ((e[4][c] * w[4] + e[5][c] * w[5]) + (e[6][c] * w[6] + e[7][c] * w[7]))
 }
 
+/// The instruction set the LRTF lookup runs with on this CPU.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SimdLevel {
+    /// The build's baseline (SSE2 on x86-64).
+    Baseline,
+    /// x86-64 with AVX2 and FMA.
+    Avx2Fma,
+}
+
+/// Detected once per process; `PETZVAL_SIMD=baseline` forces the baseline.
+static SIMD_LEVEL: std::sync::LazyLock<SimdLevel> = std::sync::LazyLock::new(|| {
+    if std::env::var("PETZVAL_SIMD").is_ok_and(|v| v == "baseline") {
+        return SimdLevel::Baseline;
+    }
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        return SimdLevel::Avx2Fma;
+    }
+    SimdLevel::Baseline
+});
+
+/// The instruction set [`LrtfTable::lookup`] uses on this CPU (detected at its first call).
+pub fn simd_level() -> SimdLevel {
+    *SIMD_LEVEL
+}
+
+/// [`blend`] of both halves at once, in 8-lane AVX operations: each lane's products and sums
+/// in [`blend`]'s order (no fused operations), so the result is bit-identical to it.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn blend_both_avx(e: &[&Entry; 8], w: &[f32; 8]) -> (Vec4, Vec4) {
+    use std::arch::x86_64::{_mm256_add_ps, _mm256_loadu_ps, _mm256_mul_ps, _mm256_set1_ps, _mm256_storeu_ps};
+    // an entry's two Vec4s are 8 contiguous f32s
+    let term = |k: usize| {
+        // SAFETY: `Entry` is `[Vec4; 2]`, 32 contiguous bytes.
+        let v = unsafe { _mm256_loadu_ps(e[k].as_ptr() as *const f32) };
+        _mm256_mul_ps(v, _mm256_set1_ps(w[k]))
+    };
+    let s01 = _mm256_add_ps(term(0), term(1));
+    let s23 = _mm256_add_ps(term(2), term(3));
+    let s45 = _mm256_add_ps(term(4), term(5));
+    let s67 = _mm256_add_ps(term(6), term(7));
+    let sum = _mm256_add_ps(_mm256_add_ps(s01, s23), _mm256_add_ps(s45, s67));
+    let mut out = [0.0f32; 8];
+    // SAFETY: `out` holds 8 f32s.
+    unsafe { _mm256_storeu_ps(out.as_mut_ptr(), sum) };
+    (Vec4::new(out[0], out[1], out[2], out[3]), Vec4::new(out[4], out[5], out[6], out[7]))
+}
+
 /// What a lookup returns.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LrtfRay {
@@ -667,8 +717,39 @@ impl LrtfTable {
     /// The lookup runs in f32 (the table's precision): no trigonometry (the rotation into the
     /// key's frame uses the dome point's (x, y)/ρ; the stereographic maps need one division
     /// each), four cache-line reads, and the blend as 4-lane products.
+    ///
+    /// On x86-64 CPUs with AVX2 and FMA (detected once, at the first lookup; [`simd_level`])
+    /// the same code runs compiled for them; the results are bit-identical to
+    /// [`LrtfTable::lookup_baseline`]'s (no operation is fused), so images do not depend on the
+    /// machine.
     #[inline]
     pub fn lookup(&self, ray: &Ray, wavelength_nm: f64) -> LrtfLookup {
+        #[cfg(target_arch = "x86_64")]
+        if *SIMD_LEVEL == SimdLevel::Avx2Fma {
+            // SAFETY: the CPU was checked for AVX2 and FMA (`SIMD_LEVEL`).
+            return unsafe { self.lookup_avx2(ray, wavelength_nm) };
+        }
+        self.lookup_body::<false>(ray, wavelength_nm)
+    }
+
+    /// [`LrtfTable::lookup`] compiled for the baseline target only (SSE2 on x86-64), whatever
+    /// the CPU: for benchmarks and checks.
+    pub fn lookup_baseline(&self, ray: &Ray, wavelength_nm: f64) -> LrtfLookup {
+        self.lookup_body::<false>(ray, wavelength_nm)
+    }
+
+    /// The lookup compiled with AVX2 and FMA enabled.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn lookup_avx2(&self, ray: &Ray, wavelength_nm: f64) -> LrtfLookup {
+        self.lookup_body::<true>(ray, wavelength_nm)
+    }
+
+    /// The lookup's body (inlined into each instruction-set build); `AVX`: the blend of both
+    /// halves of the eight entries in 8-lane operations (the same products and sums in the
+    /// same order, so the same bits).
+    #[inline(always)]
+    fn lookup_body<const AVX: bool>(&self, ray: &Ray, wavelength_nm: f64) -> LrtfLookup {
         let k = &self.key;
         // 1. Where the ray enters the input dome (relative to the dome's centre).
         let (ox, oy, oz) = (ray.origin.x as f32, ray.origin.y as f32, (ray.origin.z - k.in_centre_z) as f32);
@@ -744,7 +825,16 @@ impl LrtfTable {
         if !(m_max > 0.0) {
             return LrtfLookup::Miss;
         }
-        let st = blend(&e, &w, 1); // stop.x, stop.y, margin
+        #[cfg(target_arch = "x86_64")]
+        let (a, st) = if AVX {
+            // SAFETY: `AVX` is true only inside `lookup_avx2`, on a CPU with AVX2 and FMA.
+            unsafe { blend_both_avx(&e, &w) }
+        } else {
+            (Vec4::ZERO, blend(&e, &w, 1))
+        };
+        #[cfg(not(target_arch = "x86_64"))]
+        let (a, st) = (Vec4::ZERO, blend(&e, &w, 1));
+        // stop.x, stop.y, margin in `st`
         let margin = st.z;
         if !(m_min > 0.0) {
             // The rim boundary crosses this cell. The margin is smooth there (one rim clips), so
@@ -759,7 +849,7 @@ impl LrtfTable {
             }
         }
         // 5. Blend of the outputs.
-        let a = blend(&e, &w, 0);
+        let a = if AVX { a } else { blend(&e, &w, 0) };
         let (wx, wy_, ex, ey) = (a.x, a.y, a.z, a.w);
         let (stx, sty) = (st.x, st.y);
         // 6. Back to the lens frame: undo the mirror, the stereographic maps and the rotation.
