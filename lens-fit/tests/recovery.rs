@@ -40,7 +40,7 @@ fn recovers_a_radius_a_sensor_tilt_and_offset() {
     let manifest = Manifest::load(&manifest_path).unwrap();
     // an evaluation budget ends the fit (the time limit is only a cap far beyond it), so the
     // end point does not depend on the machine's load
-    let options = FitOptions { time_limit_s: 600.0, rays: 32_768, max_evaluations: 400, ..Default::default() };
+    let options = FitOptions { time_limit_s: 600.0, max_evaluations: 400, ..Default::default() };
     let problem = Problem::new(&manifest, &options).unwrap();
     let result = solve::run(&problem, &options);
     let values: Vec<f64> = result.params.iter().map(|p| p.value).collect();
