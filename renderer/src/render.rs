@@ -16,7 +16,7 @@
 //! | `bokeh_paths` | f32: light paths from emitters through the lens per pixel per sample, combined with camera paths by MIS (see [`crate::bokeh`]); a real lens, exact or LRTF model | — | 0 (off; the CLI's and the Python module's auto gives 1 where it applies) |
 
 use crate::bokeh::{BokehTracer, LightPathSettings};
-use crate::camera::{Camera, CameraRay};
+use crate::camera::{Camera, CameraRay, CAMERA_BATCH};
 use crate::error::{Error, Result};
 use crate::film::{Film, FilterSampler, Image, PixelFilter};
 use crate::integrator::{PathSample, PathTracer, RenderScene, SurfaceHit};
@@ -302,25 +302,44 @@ pub(crate) fn render_samples(
                 return;
             }
             let y = row_index + y0 as usize;
-            for (col, px) in row.iter_mut().enumerate() {
-                let x = col + x0 as usize;
-                for s in range.clone() {
-                    // 2. Camera sample: filter offset, lens point, wavelength.
+            // The row's samples, pixel by pixel, in batches of CAMERA_BATCH camera rays (the
+            // LRTF model looks a batch up at once); each sample keeps its own sampler, so the
+            // results are those of one sample at a time.
+            let items: Vec<(usize, u32)> =
+                (0..row.len()).flat_map(|col| range.clone().map(move |s| (col, s))).collect();
+            for chunk in items.chunks(CAMERA_BATCH) {
+                // 2. Camera samples: filter offset, lens point, wavelength.
+                let mut samplers: [Option<PixelSampler>; CAMERA_BATCH] = std::array::from_fn(|_| None);
+                let mut film_uv = [DVec2::ZERO; CAMERA_BATCH];
+                let mut lens_u = [DVec2::ZERO; CAMERA_BATCH];
+                let mut offsets = [glam::Vec2::ZERO; CAMERA_BATCH];
+                let mut lambdas = [(wavelength_primary, Vec3::ONE); CAMERA_BATCH];
+                for (i, &(col, s)) in chunk.iter().enumerate() {
+                    let x = col + x0 as usize;
                     let mut sampler = PixelSampler::new(x as u32, y as u32, s, settings.seed);
                     let off = filter.sample(sampler.next_2d());
-                    let film_uv = DVec2::new(
+                    film_uv[i] = DVec2::new(
                         (x as f64 + 0.5 + off.x as f64) / w as f64,
                         (y as f64 + 0.5 + off.y as f64) / h as f64,
                     );
-                    let lens_u = shader.lens_sample(s, sampler.next_2d().as_dvec2());
+                    lens_u[i] = shader.lens_sample(s, sampler.next_2d().as_dvec2());
                     let u_lambda = sampler.next_1d();
-                    let (lambda, lambda_weight) = if settings.spectral {
-                        spectral::sample_wavelength(u_lambda)
+                    lambdas[i] = if settings.spectral {
+                        let (l, wt) = spectral::sample_wavelength(u_lambda);
+                        (l as f64, wt)
                     } else {
-                        (wavelength_primary as f32, Vec3::ONE)
+                        (wavelength_primary as f32 as f64, Vec3::ONE)
                     };
+                    offsets[i] = off;
+                    samplers[i] = Some(sampler);
+                }
+                let wavelengths: [f64; CAMERA_BATCH] = std::array::from_fn(|i| lambdas[i].0);
+                let rays = rig.camera.generate_ray_batch(&film_uv, &lens_u, &wavelengths);
+                for (i, &(col, _)) in chunk.iter().enumerate() {
+                    let (Some(mut sampler), px) = (samplers[i].take(), &mut row[col]) else { continue };
+                    let lambda_weight = lambdas[i].1;
                     px.samples += 1;
-                    let Some(ray) = rig.camera.generate_ray(film_uv, lens_u, lambda as f64) else {
+                    let Some(ray) = rays[i] else {
                         continue;
                     };
                     // 3. World ray, clipping planes (along the view axis) and the path.
@@ -328,7 +347,7 @@ pub(crate) fn render_samples(
                     let d = rig.to_world.transform_vector3(ray.direction).normalize().as_vec3();
                     let axial = (-ray.direction.z / ray.direction.length()).max(1e-6);
                     let clip = ((clip_near / axial) as f32, (clip_far / axial) as f32);
-                    let camera_density = bokeh.map_or(0.0, |b| b.camera_density(film_uv, lens_u, off));
+                    let camera_density = bokeh.map_or(0.0, |b| b.camera_density(film_uv[i], lens_u[i], offsets[i]));
                     let sample = shader.shade(&ray, o, d, clip, camera_density, &mut sampler);
                     let value = sample.radiance * lambda_weight * ray.weight as f32;
                     if !value.is_finite() || sample.dropped {

@@ -267,6 +267,20 @@ fn blend_both_avx(e: &[&Entry; 8], w: &[f32; 8]) -> (Vec4, Vec4) {
     (Vec4::new(out[0], out[1], out[2], out[3]), Vec4::new(out[4], out[5], out[6], out[7]))
 }
 
+/// Rays per [`LrtfTable::lookup_batch`].
+pub const LRTF_BATCH: usize = 8;
+
+/// A ray's cell: the entry indices of its four σy-adjacent corner pairs, the interpolation
+/// weights along (u, σx, σy), the key frame's rotation and whether σy was mirrored.
+#[derive(Debug, Clone, Copy)]
+struct Cell {
+    idx: [usize; 4],
+    t: [f32; 3],
+    cs: f32,
+    sn: f32,
+    mirrored: bool,
+}
+
 /// What a lookup returns.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LrtfRay {
@@ -745,11 +759,220 @@ impl LrtfTable {
         self.lookup_body::<true>(ray, wavelength_nm)
     }
 
-    /// The lookup's body (inlined into each instruction-set build); `AVX`: the blend of both
-    /// halves of the eight entries in 8-lane operations (the same products and sums in the
-    /// same order, so the same bits).
+    /// The lookup's body (inlined into each instruction-set build): [`LrtfTable::cell`], then
+    /// [`LrtfTable::finish`].
     #[inline(always)]
     fn lookup_body<const AVX: bool>(&self, ray: &Ray, wavelength_nm: f64) -> LrtfLookup {
+        match self.cell(ray, wavelength_nm) {
+            Ok(c) => self.finish::<AVX>(&c),
+            Err(outcome) => outcome,
+        }
+    }
+
+    /// Looks up [`LRTF_BATCH`] rays at once: the same results, bit for bit, as
+    /// [`LrtfTable::lookup`] of each (the same two steps per ray), but every ray's cell is found
+    /// and its cache lines are prefetched before the first cell is read, so the table's memory
+    /// latencies overlap instead of adding up. Pad a short batch with any ray and ignore its
+    /// result.
+    #[inline]
+    pub fn lookup_batch(
+        &self,
+        rays: &[Ray; LRTF_BATCH],
+        wavelengths_nm: &[f64; LRTF_BATCH],
+    ) -> [LrtfLookup; LRTF_BATCH] {
+        #[cfg(target_arch = "x86_64")]
+        if *SIMD_LEVEL == SimdLevel::Avx2Fma {
+            // SAFETY: the CPU was checked for AVX2 and FMA (`SIMD_LEVEL`).
+            return unsafe { self.lookup_batch_avx2(rays, wavelengths_nm) };
+        }
+        self.lookup_batch_body::<false>(rays, wavelengths_nm)
+    }
+
+    /// [`LrtfTable::lookup_batch`] compiled for the baseline target only, whatever the CPU.
+    pub fn lookup_batch_baseline(
+        &self,
+        rays: &[Ray; LRTF_BATCH],
+        wavelengths_nm: &[f64; LRTF_BATCH],
+    ) -> [LrtfLookup; LRTF_BATCH] {
+        self.lookup_batch_body::<false>(rays, wavelengths_nm)
+    }
+
+    /// The batched lookup compiled with AVX2 and FMA enabled.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn lookup_batch_avx2(
+        &self,
+        rays: &[Ray; LRTF_BATCH],
+        wavelengths_nm: &[f64; LRTF_BATCH],
+    ) -> [LrtfLookup; LRTF_BATCH] {
+        self.lookup_batch_body::<true>(rays, wavelengths_nm)
+    }
+
+    /// The batched lookup's body: every ray's cell and prefetches first, then the blends.
+    #[inline(always)]
+    fn lookup_batch_body<const AVX: bool>(
+        &self,
+        rays: &[Ray; LRTF_BATCH],
+        wavelengths_nm: &[f64; LRTF_BATCH],
+    ) -> [LrtfLookup; LRTF_BATCH] {
+        // 1. Cells, all lanes at once (branch-free, so the compiler runs the lanes as vectors;
+        //    the same operations per lane as `cell`), and their lines fetched.
+        let cells = self.cells(rays, wavelengths_nm);
+        for c in cells.iter().flatten() {
+            self.prefetch(c);
+        }
+        // 2. Blends, lane by lane (the corners' reads and margin tests), then every lane's
+        //    way back to the lens frame at once.
+        const N: usize = LRTF_BATCH;
+        let mut out = [LrtfLookup::Miss; N];
+        let mut blended = [(Vec4::ZERO, Vec4::ZERO); N];
+        let mut hit = [false; N];
+        for i in 0..N {
+            match &cells[i] {
+                Ok(c) => match self.blend_cell::<AVX>(c) {
+                    Ok(b) => (blended[i], hit[i]) = (b, true),
+                    Err(o) => out[i] = o,
+                },
+                Err(o) => out[i] = *o,
+            }
+        }
+        let rays: [(Ray, DVec2, f64); N] = self.unmap_lanes(&cells, &blended);
+        for i in 0..N {
+            if hit[i] {
+                let (ray, stop_point, margin) = rays[i];
+                out[i] = LrtfLookup::Hit(LrtfRay { ray, stop_point, margin });
+            }
+        }
+        out
+    }
+
+    /// Step 6 of [`LrtfTable::finish`] for every lane (lanes without a cell give any value).
+    #[inline(always)]
+    fn unmap_lanes(
+        &self,
+        cells: &[std::result::Result<Cell, LrtfLookup>; LRTF_BATCH],
+        blended: &[(Vec4, Vec4); LRTF_BATCH],
+    ) -> [(Ray, DVec2, f64); LRTF_BATCH] {
+        const N: usize = LRTF_BATCH;
+        let k = &self.key;
+        let pick = |f: &dyn Fn(&Cell) -> f32| -> [f32; N] { std::array::from_fn(|i| cells[i].as_ref().map_or(0.0, f)) };
+        let (cs, sn) = (pick(&|c| c.cs), pick(&|c| c.sn));
+        let sign = pick(&|c| if c.mirrored { -1.0 } else { 1.0 });
+        let mut res = [(Ray { origin: DVec3::ZERO, direction: DVec3::ZERO }, DVec2::ZERO, 0.0); N];
+        for i in 0..N {
+            let (a, st) = blended[i];
+            let (wx, wy_, ex, ey) = (a.x, a.y, a.z, a.w);
+            let (stx, sty) = (st.x, st.y);
+            let (wy_, ey, sty) = (sign[i] * wy_, sign[i] * ey, sign[i] * sty);
+            let (s2w, s2e) = (wx * wx + wy_ * wy_, ex * ex + ey * ey);
+            let (kw, ke) = (k.out_radius / (1.0 + s2w), 1.0 / (1.0 + s2e));
+            let (qx, qy, qz) = (2.0 * wx * kw, 2.0 * wy_ * kw, (s2w - 1.0) * kw);
+            let (vx, vy, vz) = (2.0 * ex * ke, 2.0 * ey * ke, (s2e - 1.0) * ke);
+            let (c, s) = (cs[i], sn[i]);
+            res[i] = (
+                Ray {
+                    origin: DVec3::new((c * qx - s * qy) as f64, (s * qx + c * qy) as f64, qz as f64 + k.out_centre_z),
+                    direction: DVec3::new((c * vx - s * vy) as f64, (s * vx + c * vy) as f64, vz as f64),
+                },
+                DVec2::new((c * stx - s * sty) as f64, (s * stx + c * sty) as f64),
+                st.z as f64,
+            );
+        }
+        res
+    }
+
+    /// [`LrtfTable::cell`] of [`LRTF_BATCH`] rays, lane by lane in straight-line loops: every
+    /// lane computes every step (selects instead of early returns), and each lane's outcome is
+    /// the first test it fails, so the results equal `cell`'s bit for bit.
+    #[inline(always)]
+    fn cells(
+        &self,
+        rays: &[Ray; LRTF_BATCH],
+        wavelengths_nm: &[f64; LRTF_BATCH],
+    ) -> [std::result::Result<Cell, LrtfLookup>; LRTF_BATCH] {
+        const N: usize = LRTF_BATCH;
+        let k = &self.key;
+        let lane = |f: &dyn Fn(&Ray) -> f32| -> [f32; N] { std::array::from_fn(|i| f(&rays[i])) };
+        let (ox, oy, oz) = (
+            lane(&|r| r.origin.x as f32),
+            lane(&|r| r.origin.y as f32),
+            lane(&|r| (r.origin.z - k.in_centre_z) as f32),
+        );
+        let (dx, dy, dz) =
+            (lane(&|r| r.direction.x as f32), lane(&|r| r.direction.y as f32), lane(&|r| r.direction.z as f32));
+        // 0: a cell; 1: miss; 2: outside the baked domain
+        let mut code = [0u8; N];
+        let (mut fu, mut fx, mut fy) = ([0f32; N], [0f32; N], [0f32; N]);
+        let (mut cs, mut sn, mut neg) = ([0f32; N], [0f32; N], [false; N]);
+        for i in 0..N {
+            // 1. Where the ray enters the input dome.
+            let b = ox[i] * dx[i] + oy[i] * dy[i] + oz[i] * dz[i];
+            let disc = b * b - (ox[i] * ox[i] + oy[i] * oy[i] + oz[i] * oz[i] - k.in_radius_sq);
+            let t = -b - disc.sqrt();
+            let (px, py, pz) = (ox[i] + t * dx[i], oy[i] + t * dy[i], oz[i] + t * dz[i]);
+            let missed = !(disc >= 0.0) || !(t >= 0.0) || pz < k.base_dz;
+            // 2. Key.
+            let rho2 = px * px + py * py;
+            let round = rho2 > 1e-20;
+            let inv_r = 1.0 / rho2.sqrt();
+            let (c, s, rho) = if round { (px * inv_r, py * inv_r, rho2 * inv_r) } else { (1.0, 0.0, 0.0) };
+            let inv = 1.0 / (1.0 - dz[i]).max(1e-12);
+            let sx = (c * dx[i] + s * dy[i]) * inv;
+            let sy = (c * dy[i] - s * dx[i]) * inv;
+            fu[i] = rho * k.scale_u;
+            fx[i] = sx * k.scale_x + k.half;
+            fy[i] = sy.abs() * k.scale_y;
+            let inside = fu[i] <= k.max_x && fx[i] >= 0.0 && fx[i] <= k.max_x && fy[i] <= k.max_y;
+            code[i] = if missed {
+                1
+            } else if !inside {
+                2
+            } else {
+                0
+            };
+            (cs[i], sn[i], neg[i]) = (c, s, sy < 0.0);
+        }
+        // 3. The cells.
+        std::array::from_fn(|i| {
+            match code[i] {
+                1 => return Err(LrtfLookup::Miss),
+                2 => return Err(LrtfLookup::Uncertain),
+                _ => {}
+            }
+            let wi = self.nearest_wavelength(wavelengths_nm[i]);
+            let (iu, ix, iy) =
+                ((fu[i] as i32).min(k.last_cell), (fx[i] as i32).min(k.last_cell), (fy[i] as i32).min(k.last_cell_y));
+            let (tu, tx, ty) = (fu[i] - iu as f32, fx[i] - ix as f32, fy[i] - iy as f32);
+            let base = wi * k.stride_w + iu as usize * k.stride_u + ix as usize * k.stride_x + iy as usize;
+            if (base + k.stride_u + k.stride_x + 1).div_ceil(2) >= self.lines.len() {
+                return Err(LrtfLookup::Miss);
+            }
+            let idx = [base, base + k.stride_x, base + k.stride_u, base + k.stride_u + k.stride_x];
+            Ok(Cell { idx, t: [tu, tx, ty], cs: cs[i], sn: sn[i], mirrored: neg[i] })
+        })
+    }
+
+    /// Asks the memory system for a cell's cache lines (a hint; no effect on results).
+    #[inline(always)]
+    fn prefetch(&self, c: &Cell) {
+        #[cfg(target_arch = "x86_64")]
+        for i in c.idx {
+            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+            // SAFETY: `cell` checked that every index of the cell lies inside `lines`;
+            // prefetching never faults.
+            unsafe {
+                _mm_prefetch(self.lines.as_ptr().add(i / 2) as *const i8, _MM_HINT_T0);
+                _mm_prefetch(self.lines.as_ptr().add(i.div_ceil(2)) as *const i8, _MM_HINT_T0);
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = c;
+    }
+
+    /// Steps 1–3 of a lookup: the ray's cell and its interpolation weights, or the outcome when
+    /// the ray never reaches a cell.
+    #[inline(always)]
+    fn cell(&self, ray: &Ray, wavelength_nm: f64) -> std::result::Result<Cell, LrtfLookup> {
         let k = &self.key;
         // 1. Where the ray enters the input dome (relative to the dome's centre).
         let (ox, oy, oz) = (ray.origin.x as f32, ray.origin.y as f32, (ray.origin.z - k.in_centre_z) as f32);
@@ -757,15 +980,15 @@ impl LrtfTable {
         let b = ox * dx + oy * dy + oz * dz;
         let disc = b * b - (ox * ox + oy * oy + oz * oz - k.in_radius_sq);
         if !(disc >= 0.0) {
-            return LrtfLookup::Miss;
+            return Err(LrtfLookup::Miss);
         }
         let t = -b - disc.sqrt();
         if !(t >= 0.0) {
-            return LrtfLookup::Miss;
+            return Err(LrtfLookup::Miss);
         }
         let (px, py, pz) = (ox + t * dx, oy + t * dy, oz + t * dz);
         if pz < k.base_dz {
-            return LrtfLookup::Miss;
+            return Err(LrtfLookup::Miss);
         }
         // 2. Key: rotate the direction into the frame where the point lies on +x (cos φ, sin φ
         //    = (x, y)/ρ), stereographic projection, mirror σy ≥ 0.
@@ -784,7 +1007,7 @@ impl LrtfTable {
         let fy = sy.abs() * k.scale_y;
         if !(fu <= k.max_x && fx >= 0.0 && fx <= k.max_x && fy <= k.max_y) {
             // outside the baked domain: only the exact trace can say
-            return LrtfLookup::Uncertain;
+            return Err(LrtfLookup::Uncertain);
         }
         // 3. The cell: four σy-adjacent pairs of entries (one or two cache lines each).
         let wi = self.nearest_wavelength(wavelength_nm);
@@ -793,10 +1016,51 @@ impl LrtfTable {
         let (tu, tx, ty) = (fu - iu as f32, fx - ix as f32, fy - iy as f32);
         let base = wi * k.stride_w + iu as usize * k.stride_u + ix as usize * k.stride_x + iy as usize;
         if (base + k.stride_u + k.stride_x + 1).div_ceil(2) >= self.lines.len() {
-            return LrtfLookup::Miss;
+            return Err(LrtfLookup::Miss);
         }
-        let at = |i: usize| &self.lines[i / 2].0[i % 2];
         let idx = [base, base + k.stride_x, base + k.stride_u, base + k.stride_u + k.stride_x];
+        Ok(Cell { idx, t: [tu, tx, ty], cs, sn, mirrored: sy < 0.0 })
+    }
+
+    /// Steps 4–6 of a lookup: [`LrtfTable::blend_cell`], then the outgoing ray taken back to
+    /// the lens frame.
+    #[inline(always)]
+    fn finish<const AVX: bool>(&self, c: &Cell) -> LrtfLookup {
+        let (a, st) = match self.blend_cell::<AVX>(c) {
+            Ok(b) => b,
+            Err(o) => return o,
+        };
+        let k = &self.key;
+        let (cs, sn) = (c.cs, c.sn);
+        let (wx, wy_, ex, ey) = (a.x, a.y, a.z, a.w);
+        let (stx, sty) = (st.x, st.y);
+        let margin = st.z;
+        // 6. Back to the lens frame: undo the mirror, the stereographic maps and the rotation.
+        let sign = if c.mirrored { -1.0 } else { 1.0 };
+        let (wy_, ey, sty) = (sign * wy_, sign * ey, sign * sty);
+        let (s2w, s2e) = (wx * wx + wy_ * wy_, ex * ex + ey * ey);
+        let (kw, ke) = (k.out_radius / (1.0 + s2w), 1.0 / (1.0 + s2e));
+        let (qx, qy, qz) = (2.0 * wx * kw, 2.0 * wy_ * kw, (s2w - 1.0) * kw);
+        let (vx, vy, vz) = (2.0 * ex * ke, 2.0 * ey * ke, (s2e - 1.0) * ke);
+        LrtfLookup::Hit(LrtfRay {
+            ray: Ray {
+                origin: DVec3::new((cs * qx - sn * qy) as f64, (sn * qx + cs * qy) as f64, qz as f64 + k.out_centre_z),
+                // unit to f32 precision (~1e-7)
+                direction: DVec3::new((cs * vx - sn * vy) as f64, (sn * vx + cs * vy) as f64, vz as f64),
+            },
+            stop_point: DVec2::new((cs * stx - sn * sty) as f64, (sn * stx + cs * sty) as f64),
+            margin: margin as f64,
+        })
+    }
+
+    /// Steps 4–5 of a lookup: the cell's corners read, tested and blended: the outputs
+    /// (w, e) and (stop, margin, validity), or the outcome when the corners say so. `AVX`:
+    /// the blend of both halves of the eight entries in 8-lane operations (the same products
+    /// and sums in the same order, so the same bits).
+    #[inline(always)]
+    fn blend_cell<const AVX: bool>(&self, c: &Cell) -> std::result::Result<(Vec4, Vec4), LrtfLookup> {
+        let at = |i: usize| &self.lines[i / 2].0[i % 2];
+        let idx = c.idx;
         let e = [
             at(idx[0]),
             at(idx[0] + 1),
@@ -807,6 +1071,7 @@ impl LrtfTable {
             at(idx[3]),
             at(idx[3] + 1),
         ];
+        let [tu, tx, ty] = c.t;
         let (su, sx_, sy_) = (1.0 - tu, 1.0 - tx, 1.0 - ty);
         let w = [
             su * sx_ * sy_,
@@ -823,11 +1088,11 @@ impl LrtfTable {
         let hi = e[0][1].max(e[1][1]).max(e[2][1].max(e[3][1])).max(e[4][1].max(e[5][1]).max(e[6][1].max(e[7][1])));
         let (m_min, m_max) = (lo.z, hi.z);
         if !(m_max > 0.0) {
-            return LrtfLookup::Miss;
+            return Err(LrtfLookup::Miss);
         }
         #[cfg(target_arch = "x86_64")]
         let (a, st) = if AVX {
-            // SAFETY: `AVX` is true only inside `lookup_avx2`, on a CPU with AVX2 and FMA.
+            // SAFETY: `AVX` is true only inside the AVX2 builds, on a CPU with AVX2 and FMA.
             unsafe { blend_both_avx(&e, &w) }
         } else {
             (Vec4::ZERO, blend(&e, &w, 1))
@@ -842,32 +1107,15 @@ impl LrtfTable {
             // around zero where the exact trace does. Entries whose trace failed carry
             // extrapolated outputs.
             if margin.abs() < BOUNDARY_BAND * (m_max - m_min) {
-                return LrtfLookup::Uncertain;
+                return Err(LrtfLookup::Uncertain);
             }
             if margin <= 0.0 {
-                return LrtfLookup::Miss;
+                return Err(LrtfLookup::Miss);
             }
         }
         // 5. Blend of the outputs.
         let a = if AVX { a } else { blend(&e, &w, 0) };
-        let (wx, wy_, ex, ey) = (a.x, a.y, a.z, a.w);
-        let (stx, sty) = (st.x, st.y);
-        // 6. Back to the lens frame: undo the mirror, the stereographic maps and the rotation.
-        let sign = if sy < 0.0 { -1.0 } else { 1.0 };
-        let (wy_, ey, sty) = (sign * wy_, sign * ey, sign * sty);
-        let (s2w, s2e) = (wx * wx + wy_ * wy_, ex * ex + ey * ey);
-        let (kw, ke) = (k.out_radius / (1.0 + s2w), 1.0 / (1.0 + s2e));
-        let (qx, qy, qz) = (2.0 * wx * kw, 2.0 * wy_ * kw, (s2w - 1.0) * kw);
-        let (vx, vy, vz) = (2.0 * ex * ke, 2.0 * ey * ke, (s2e - 1.0) * ke);
-        LrtfLookup::Hit(LrtfRay {
-            ray: Ray {
-                origin: DVec3::new((cs * qx - sn * qy) as f64, (sn * qx + cs * qy) as f64, qz as f64 + k.out_centre_z),
-                // unit to f32 precision (~1e-7)
-                direction: DVec3::new((cs * vx - sn * vy) as f64, (sn * vx + cs * vy) as f64, vz as f64),
-            },
-            stop_point: DVec2::new((cs * stx - sn * sty) as f64, (sn * stx + cs * sty) as f64),
-            margin: margin as f64,
-        })
+        Ok((a, st))
     }
 
     #[inline]

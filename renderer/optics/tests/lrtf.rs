@@ -158,3 +158,44 @@ fn the_run_time_simd_lookup_matches_the_baseline_bit_for_bit() {
     );
     assert!(hits > 10_000);
 }
+
+/// The batched lookup (cells of every lane first, prefetched, then the blends) gives the same
+/// bits as one lookup per ray, in the run-time and the baseline builds, with the lanes'
+/// wavelengths mixed and with hits, misses and uncertain rays side by side in a batch.
+#[test]
+fn the_batched_lookup_matches_single_lookups_bit_for_bit() {
+    use petzval_optics::lrtf::LRTF_BATCH;
+    let lens = library_lens("double-gauss-50mm").unwrap();
+    let options = BakeOptions { resolution: 32, wavelengths_nm: Some(vec![486.1, 587.6, 656.3]), ..Default::default() };
+    let table = LrtfTable::bake(&lens, &options, &|_| {}).unwrap();
+    let wls = [480.0, 587.6, 600.0, 656.3, 700.0];
+    let mut rays = camera_rays(&lens, 40_000, 12);
+    for k in 0..2_000 {
+        let a = k as f64 * 0.0137;
+        rays.push(Ray::new(DVec3::new(30.0 * a.cos(), 30.0 * a.sin(), 60.0), DVec3::new(-a.sin(), a.cos(), -0.3)));
+    }
+    // shuffle the off-domain rays in among the camera rays
+    let n = rays.len();
+    for i in 0..2_000 {
+        rays.swap(n - 1 - i, (i * 7919) % (n - 2_000));
+    }
+    let (mut kinds, mut batches) = ([0usize; 3], 0);
+    for chunk in rays.chunks(LRTF_BATCH) {
+        let batch: [Ray; LRTF_BATCH] = std::array::from_fn(|i| *chunk.get(i).unwrap_or(&chunk[0]));
+        let wl: [f64; LRTF_BATCH] = std::array::from_fn(|i| wls[(i + batches) % wls.len()]);
+        let (fast, base) = (table.lookup_batch(&batch, &wl), table.lookup_batch_baseline(&batch, &wl));
+        for i in 0..LRTF_BATCH {
+            let one = table.lookup(&batch[i], wl[i]);
+            assert_eq!(format!("{:?}", fast[i]), format!("{one:?}"), "lane {i} of batch {batches}");
+            assert_eq!(format!("{:?}", base[i]), format!("{one:?}"), "lane {i} of batch {batches} (baseline)");
+            kinds[match one {
+                LrtfLookup::Hit(_) => 0,
+                LrtfLookup::Miss => 1,
+                LrtfLookup::Uncertain => 2,
+            }] += 1;
+        }
+        batches += 1;
+    }
+    println!("{batches} batches over {} wavelengths: hits, misses, uncertain {kinds:?}", wls.len());
+    assert!(kinds.iter().all(|&k| k > 100), "every outcome occurs: {kinds:?}");
+}

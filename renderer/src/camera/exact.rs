@@ -124,16 +124,34 @@ impl ExactCamera {
         through_lens: impl Fn(&Ray) -> Option<(Ray, f64)>,
     ) -> Option<CameraRay> {
         // 1. Film point and a rear-plane point inside the exit-pupil bounds.
+        let (ray, geometric) = self.film_ray(film, lens_u)?;
+        // 2. Through the lens towards the scene.
+        let (out, transmission) = through_lens(&ray)?;
+        // 3. Irradiance weight and stop transmission, in camera space.
+        Some(self.leaving_ray(out, geometric, transmission))
+    }
+
+    /// Step 1 of a camera ray: the ray from the film point towards a rear-plane point inside
+    /// the exit-pupil bounds, and its geometric weight cosθ_film cosθ_rear / d² / pdf. None
+    /// when the pupil sample is not drawn.
+    #[inline]
+    pub(super) fn film_ray(&self, film: DVec2, lens_u: DVec2) -> Option<(Ray, f64)> {
         let p = self.sensor.film_point(film, self.film_z_mm);
         let s = self.pupil.sample(DVec2::new(p.x, p.y), lens_u)?;
-        // 2. Through the lens towards the scene.
-        let ray = Ray::new(p, s.point - p);
-        let (out, transmission) = through_lens(&ray)?;
-        // 3. Irradiance weight cosθ_film cosθ_rear / d² / pdf and stop transmission.
-        let weight = geometric_factor(p, s.point, self.sensor.normal()) / s.pdf_area * transmission;
+        Some((Ray::new(p, s.point - p), geometric_factor(p, s.point, self.sensor.normal()) / s.pdf_area))
+    }
+
+    /// Step 3 of a camera ray: the ray `out` that left the lens (lens frame, mm) in camera
+    /// space (m, origin at the entrance pupil), weighted by `geometric` × `transmission`.
+    #[inline]
+    pub(super) fn leaving_ray(&self, out: Ray, geometric: f64, transmission: f64) -> CameraRay {
         let z_ep = self.lens.paraxial().entrance_pupil_z_mm;
         let o = out.origin;
-        Some(CameraRay { origin: DVec3::new(o.x, o.y, o.z - z_ep) * 1e-3, direction: out.direction, weight })
+        CameraRay {
+            origin: DVec3::new(o.x, o.y, o.z - z_ep) * 1e-3,
+            direction: out.direction,
+            weight: geometric * transmission,
+        }
     }
 
     /// The camera strategy's density for the sample (`film`, `lens_u`) in the ray (étendue)

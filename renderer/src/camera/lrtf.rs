@@ -8,9 +8,9 @@
 //! | `exact` | [`ExactCamera`]: sensor, lens, focus | — | — |
 //! | `table` | [`LrtfTable`] baked for the lens, covering the sensor | — | baked at 96 on demand |
 
-use super::{CameraRay, ExactCamera, Sensor};
+use super::{CameraRay, ExactCamera, Sensor, CAMERA_BATCH};
 use crate::error::{Error, Result};
-use crate::optics::lens::{Lens, TraceDirection};
+use crate::optics::lens::{Lens, Ray, TraceDirection};
 use crate::optics::lrtf::{LrtfLookup, LrtfTable};
 use glam::DVec2;
 use std::sync::Arc;
@@ -80,5 +80,43 @@ impl LrtfCamera {
 
     pub(super) fn generate_ray(&self, film: DVec2, lens_u: DVec2, wavelength_nm: f64) -> Option<CameraRay> {
         self.raw_ray(film, lens_u, wavelength_nm).map(|r| CameraRay { weight: r.weight * self.exact.exposure(), ..r })
+    }
+
+    /// [`LrtfCamera::generate_ray`] of [`CAMERA_BATCH`] samples through one batched table
+    /// lookup ([`LrtfTable::lookup_batch`]): the same rays, bit for bit.
+    pub(super) fn generate_ray_batch(
+        &self,
+        film: &[DVec2; CAMERA_BATCH],
+        lens_u: &[DVec2; CAMERA_BATCH],
+        wavelength_nm: &[f64; CAMERA_BATCH],
+    ) -> [Option<CameraRay>; CAMERA_BATCH] {
+        let lens = self.exact.lens();
+        // 1. Film rays (a lane whose pupil sample is not drawn looks up a stand-in ray).
+        let film_rays: [Option<(Ray, f64)>; CAMERA_BATCH] =
+            std::array::from_fn(|i| self.exact.film_ray(film[i], lens_u[i]));
+        let Some(stand_in) = film_rays.iter().flatten().next().map(|(r, _)| *r) else {
+            return [None; CAMERA_BATCH];
+        };
+        let rays: [Ray; CAMERA_BATCH] = std::array::from_fn(|i| film_rays[i].map_or(stand_in, |(r, _)| r));
+        // 2. Through the table, every lane at once; uncertain lanes traced exactly.
+        let found = self.table.lookup_batch(&rays, wavelength_nm);
+        std::array::from_fn(|i| {
+            let (ray, geometric) = film_rays[i]?;
+            let (out, transmission) = match found[i] {
+                LrtfLookup::Hit(hit) => {
+                    let tr =
+                        lens.aperture().transmission(hit.stop_point.x, hit.stop_point.y, lens.stop_semi_diameter_mm());
+                    (tr > 0.0).then_some((hit.ray, tr))?
+                }
+                LrtfLookup::Miss => return None,
+                LrtfLookup::Uncertain => {
+                    let t = lens.trace(&ray, wavelength_nm[i], TraceDirection::FilmToScene)?;
+                    (t.ray, t.transmission)
+                }
+            };
+            // 3. In camera space, with the exposure.
+            let r = self.exact.leaving_ray(out, geometric, transmission);
+            Some(CameraRay { weight: r.weight * self.exact.exposure(), ..r })
+        })
     }
 }

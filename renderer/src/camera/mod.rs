@@ -147,6 +147,9 @@ pub(crate) fn check_positive(field: &str, v: f64) -> Result<()> {
     }
 }
 
+/// Samples per [`Camera::generate_ray_batch`] (the LRTF table's batch).
+pub const CAMERA_BATCH: usize = crate::optics::lrtf::LRTF_BATCH;
+
 impl Camera {
     /// Generates a ray for image position `film` in [0,1]² (top left = (0,0)), lens sample
     /// `lens_u` in [0,1)² and wavelength. `None` when the sample is blocked.
@@ -158,6 +161,22 @@ impl Camera {
             Camera::Thick(c) => c.generate_ray(film, lens_u),
             Camera::Exact(c) => c.generate_ray(film, lens_u, wavelength_nm),
             Camera::Lrtf(c) => c.generate_ray(film, lens_u, wavelength_nm),
+        }
+    }
+
+    /// [`Camera::generate_ray`] of [`CAMERA_BATCH`] samples at once: the same rays, bit for
+    /// bit; the LRTF model looks its lanes up in one batched table lookup (their cells found
+    /// and prefetched first), the other models ray by ray.
+    #[inline]
+    pub fn generate_ray_batch(
+        &self,
+        film: &[DVec2; CAMERA_BATCH],
+        lens_u: &[DVec2; CAMERA_BATCH],
+        wavelength_nm: &[f64; CAMERA_BATCH],
+    ) -> [Option<CameraRay>; CAMERA_BATCH] {
+        match self {
+            Camera::Lrtf(c) => c.generate_ray_batch(film, lens_u, wavelength_nm),
+            _ => std::array::from_fn(|i| self.generate_ray(film[i], lens_u[i], wavelength_nm[i])),
         }
     }
 
