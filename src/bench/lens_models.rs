@@ -258,19 +258,19 @@ pub(super) fn bench_lens_models(only: Option<String>, rays: usize, resolutions: 
     } else {
         println!("Errors against the exact trace for the camera's own rays (film points over a 36×24 mm sensor, rear points in the exit-pupil bounds, focus at infinity); image error = EFL × angle, in pixels of 36 mm / 1920 px. Pinhole/thin/thick: chief-ray distortion on a 15×10 film grid.");
         println!();
-        println!("Times: best of {REPEATS} runs, one thread; \"raster\": the same rays sorted by film pixel, as a renderer generates them.");
+        println!("Times: best of {REPEATS} runs, one thread; \"raster\": the same rays sorted by film pixel; \"batched\": {LRTF_BATCH} rays per lookup (`lookup_batch`), as the renderer's camera generates them.");
         println!();
         println!(
             "LRTF lookups use {:?} on this CPU (detected at run time); \"baseline\": the same lookup compiled for the baseline instruction set.",
             petzval_renderer::optics::lrtf::simd_level()
         );
         println!();
-        println!("| lens | model | res | ns/ray | ns/ray baseline | lookup alone ns | lookup alone baseline | speed-up | ns/ray raster | lookup alone raster | speed-up raster | pos µm | dir mrad | mean px | max px | misclassified | uncertain (exact fallback) | MiB |");
-        println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+        println!("| lens | model | res | ns/ray | ns/ray baseline | lookup alone ns | lookup alone baseline | speed-up | ns/ray raster | lookup alone raster | speed-up raster | ns/ray batched | lookup alone batched | speed-up batched | pos µm | dir mrad | mean px | max px | misclassified | uncertain (exact fallback) | MiB |");
+        println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
         for r in &rows {
             let f = |k: &str| r[k].as_f64();
             println!(
-                "| {} | {} | {} | {:.0} | {} | {} | {} | {} | {} | {} | {} | {} | {:.4} | {:.3} | {:.3} | {} | {} | {} |",
+                "| {} | {} | {} | {:.0} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.4} | {:.3} | {:.3} | {} | {} | {} |",
                 r["lens"].as_str().unwrap_or(""),
                 r["model"].as_str().unwrap_or(""),
                 r["resolution"].as_u64().map(|v| v.to_string()).unwrap_or_default(),
@@ -282,6 +282,9 @@ pub(super) fn bench_lens_models(only: Option<String>, rays: usize, resolutions: 
                 f("ns_per_ray_raster").map(|v| format!("{v:.0}")).unwrap_or_default(),
                 f("lookup_ns_raster").map(|v| format!("{v:.0}")).unwrap_or_default(),
                 f("speedup_vs_exact_raster").map(|v| format!("{v:.1}×")).unwrap_or_default(),
+                f("ns_per_ray_batched").map(|v| format!("{v:.0}")).unwrap_or_default(),
+                f("lookup_ns_batched").map(|v| format!("{v:.0}")).unwrap_or_default(),
+                f("speedup_vs_exact_batched").map(|v| format!("{v:.1}×")).unwrap_or_default(),
                 f("mean_position_error_um").map(|v| format!("{v:.2}")).unwrap_or_else(|| "–".into()),
                 f("mean_direction_error_mrad").unwrap_or(0.0),
                 f("mean_image_error_px").unwrap_or(0.0),
