@@ -305,9 +305,15 @@ pub(crate) fn render_samples(
             // The row's samples, pixel by pixel, in batches of CAMERA_BATCH camera rays (the
             // LRTF model looks a batch up at once); each sample keeps its own sampler, so the
             // results are those of one sample at a time.
-            let items: Vec<(usize, u32)> =
-                (0..row.len()).flat_map(|col| range.clone().map(move |s| (col, s))).collect();
-            for chunk in items.chunks(CAMERA_BATCH) {
+            let per_pixel = n as usize;
+            let total = row.len() * per_pixel;
+            for first in (0..total).step_by(CAMERA_BATCH) {
+                // (pixel column, sample index) of each lane
+                let lanes: [(usize, u32); CAMERA_BATCH] = std::array::from_fn(|i| {
+                    let k = (first + i).min(total - 1);
+                    (k / per_pixel, range.start + (k % per_pixel) as u32)
+                });
+                let chunk = &lanes[..CAMERA_BATCH.min(total - first)];
                 // 2. Camera samples: filter offset, lens point, wavelength.
                 let mut samplers: [Option<PixelSampler>; CAMERA_BATCH] = std::array::from_fn(|_| None);
                 let mut film_uv = [DVec2::ZERO; CAMERA_BATCH];

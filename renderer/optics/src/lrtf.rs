@@ -281,6 +281,17 @@ struct Cell {
     mirrored: bool,
 }
 
+/// A ray's key: its outcome when it never reaches a cell, else its cell coordinates along
+/// (u, σx, σy), the key frame's rotation and whether σy was mirrored.
+#[derive(Debug, Clone, Copy)]
+struct RayKey {
+    outcome: Option<LrtfLookup>,
+    f: [f32; 3],
+    cs: f32,
+    sn: f32,
+    mirrored: bool,
+}
+
 /// What a lookup returns.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LrtfRay {
@@ -854,31 +865,10 @@ impl LrtfTable {
         blended: &[(Vec4, Vec4); LRTF_BATCH],
     ) -> [(Ray, DVec2, f64); LRTF_BATCH] {
         const N: usize = LRTF_BATCH;
-        let k = &self.key;
         let pick = |f: &dyn Fn(&Cell) -> f32| -> [f32; N] { std::array::from_fn(|i| cells[i].as_ref().map_or(0.0, f)) };
         let (cs, sn) = (pick(&|c| c.cs), pick(&|c| c.sn));
         let sign = pick(&|c| if c.mirrored { -1.0 } else { 1.0 });
-        let mut res = [(Ray { origin: DVec3::ZERO, direction: DVec3::ZERO }, DVec2::ZERO, 0.0); N];
-        for i in 0..N {
-            let (a, st) = blended[i];
-            let (wx, wy_, ex, ey) = (a.x, a.y, a.z, a.w);
-            let (stx, sty) = (st.x, st.y);
-            let (wy_, ey, sty) = (sign[i] * wy_, sign[i] * ey, sign[i] * sty);
-            let (s2w, s2e) = (wx * wx + wy_ * wy_, ex * ex + ey * ey);
-            let (kw, ke) = (k.out_radius / (1.0 + s2w), 1.0 / (1.0 + s2e));
-            let (qx, qy, qz) = (2.0 * wx * kw, 2.0 * wy_ * kw, (s2w - 1.0) * kw);
-            let (vx, vy, vz) = (2.0 * ex * ke, 2.0 * ey * ke, (s2e - 1.0) * ke);
-            let (c, s) = (cs[i], sn[i]);
-            res[i] = (
-                Ray {
-                    origin: DVec3::new((c * qx - s * qy) as f64, (s * qx + c * qy) as f64, qz as f64 + k.out_centre_z),
-                    direction: DVec3::new((c * vx - s * vy) as f64, (s * vx + c * vy) as f64, vz as f64),
-                },
-                DVec2::new((c * stx - s * sty) as f64, (s * stx + c * sty) as f64),
-                st.z as f64,
-            );
-        }
-        res
+        std::array::from_fn(|i| self.unmap(cs[i], sn[i], sign[i], blended[i]))
     }
 
     /// [`LrtfTable::cell`] of [`LRTF_BATCH`] rays, lane by lane in straight-line loops: every
@@ -900,56 +890,11 @@ impl LrtfTable {
         );
         let (dx, dy, dz) =
             (lane(&|r| r.direction.x as f32), lane(&|r| r.direction.y as f32), lane(&|r| r.direction.z as f32));
-        // 0: a cell; 1: miss; 2: outside the baked domain
-        let mut code = [0u8; N];
-        let (mut fu, mut fx, mut fy) = ([0f32; N], [0f32; N], [0f32; N]);
-        let (mut cs, mut sn, mut neg) = ([0f32; N], [0f32; N], [false; N]);
+        let mut keys = [RayKey { outcome: None, f: [0.0; 3], cs: 0.0, sn: 0.0, mirrored: false }; N];
         for i in 0..N {
-            // 1. Where the ray enters the input dome.
-            let b = ox[i] * dx[i] + oy[i] * dy[i] + oz[i] * dz[i];
-            let disc = b * b - (ox[i] * ox[i] + oy[i] * oy[i] + oz[i] * oz[i] - k.in_radius_sq);
-            let t = -b - disc.sqrt();
-            let (px, py, pz) = (ox[i] + t * dx[i], oy[i] + t * dy[i], oz[i] + t * dz[i]);
-            let missed = !(disc >= 0.0) || !(t >= 0.0) || pz < k.base_dz;
-            // 2. Key.
-            let rho2 = px * px + py * py;
-            let round = rho2 > 1e-20;
-            let inv_r = 1.0 / rho2.sqrt();
-            let (c, s, rho) = if round { (px * inv_r, py * inv_r, rho2 * inv_r) } else { (1.0, 0.0, 0.0) };
-            let inv = 1.0 / (1.0 - dz[i]).max(1e-12);
-            let sx = (c * dx[i] + s * dy[i]) * inv;
-            let sy = (c * dy[i] - s * dx[i]) * inv;
-            fu[i] = rho * k.scale_u;
-            fx[i] = sx * k.scale_x + k.half;
-            fy[i] = sy.abs() * k.scale_y;
-            let inside = fu[i] <= k.max_x && fx[i] >= 0.0 && fx[i] <= k.max_x && fy[i] <= k.max_y;
-            code[i] = if missed {
-                1
-            } else if !inside {
-                2
-            } else {
-                0
-            };
-            (cs[i], sn[i], neg[i]) = (c, s, sy < 0.0);
+            keys[i] = self.ray_key([ox[i], oy[i], oz[i]], [dx[i], dy[i], dz[i]]);
         }
-        // 3. The cells.
-        std::array::from_fn(|i| {
-            match code[i] {
-                1 => return Err(LrtfLookup::Miss),
-                2 => return Err(LrtfLookup::Uncertain),
-                _ => {}
-            }
-            let wi = self.nearest_wavelength(wavelengths_nm[i]);
-            let (iu, ix, iy) =
-                ((fu[i] as i32).min(k.last_cell), (fx[i] as i32).min(k.last_cell), (fy[i] as i32).min(k.last_cell_y));
-            let (tu, tx, ty) = (fu[i] - iu as f32, fx[i] - ix as f32, fy[i] - iy as f32);
-            let base = wi * k.stride_w + iu as usize * k.stride_u + ix as usize * k.stride_x + iy as usize;
-            if (base + k.stride_u + k.stride_x + 1).div_ceil(2) >= self.lines.len() {
-                return Err(LrtfLookup::Miss);
-            }
-            let idx = [base, base + k.stride_x, base + k.stride_u, base + k.stride_u + k.stride_x];
-            Ok(Cell { idx, t: [tu, tx, ty], cs: cs[i], sn: sn[i], mirrored: neg[i] })
-        })
+        std::array::from_fn(|i| self.cell_at(&keys[i], wavelengths_nm[i]))
     }
 
     /// Asks the memory system for a cell's cache lines (a hint; no effect on results).
@@ -973,45 +918,59 @@ impl LrtfTable {
     /// the ray never reaches a cell.
     #[inline(always)]
     fn cell(&self, ray: &Ray, wavelength_nm: f64) -> std::result::Result<Cell, LrtfLookup> {
+        let (o, d) = (ray.origin, ray.direction);
+        let key = self.ray_key(
+            [o.x as f32, o.y as f32, (o.z - self.key.in_centre_z) as f32],
+            [d.x as f32, d.y as f32, d.z as f32],
+        );
+        self.cell_at(&key, wavelength_nm)
+    }
+
+    /// Steps 1–2 of a lookup, branch-free (every step computed, selects instead of early
+    /// returns, so that [`LrtfTable::cells`] runs its lanes as vectors): the key of the ray
+    /// from `o` (relative to the input dome's centre) along `d`, or its outcome when it misses
+    /// the dome or leaves the baked domain.
+    #[inline(always)]
+    fn ray_key(&self, [ox, oy, oz]: [f32; 3], [dx, dy, dz]: [f32; 3]) -> RayKey {
         let k = &self.key;
-        // 1. Where the ray enters the input dome (relative to the dome's centre).
-        let (ox, oy, oz) = (ray.origin.x as f32, ray.origin.y as f32, (ray.origin.z - k.in_centre_z) as f32);
-        let (dx, dy, dz) = (ray.direction.x as f32, ray.direction.y as f32, ray.direction.z as f32);
+        // 1. Where the ray enters the input dome.
         let b = ox * dx + oy * dy + oz * dz;
         let disc = b * b - (ox * ox + oy * oy + oz * oz - k.in_radius_sq);
-        if !(disc >= 0.0) {
-            return Err(LrtfLookup::Miss);
-        }
         let t = -b - disc.sqrt();
-        if !(t >= 0.0) {
-            return Err(LrtfLookup::Miss);
-        }
         let (px, py, pz) = (ox + t * dx, oy + t * dy, oz + t * dz);
-        if pz < k.base_dz {
-            return Err(LrtfLookup::Miss);
-        }
+        let missed = !(disc >= 0.0) || !(t >= 0.0) || pz < k.base_dz;
         // 2. Key: rotate the direction into the frame where the point lies on +x (cos φ, sin φ
         //    = (x, y)/ρ), stereographic projection, mirror σy ≥ 0.
         let rho2 = px * px + py * py;
-        let (cs, sn, rho) = if rho2 > 1e-20 {
-            let inv = 1.0 / rho2.sqrt();
-            (px * inv, py * inv, rho2 * inv)
-        } else {
-            (1.0, 0.0, 0.0)
-        };
+        let inv_r = 1.0 / rho2.sqrt();
+        let (cs, sn, rho) = if rho2 > 1e-20 { (px * inv_r, py * inv_r, rho2 * inv_r) } else { (1.0, 0.0, 0.0) };
         let inv = 1.0 / (1.0 - dz).max(1e-12);
         let sx = (cs * dx + sn * dy) * inv;
         let sy = (cs * dy - sn * dx) * inv;
-        let fu = rho * k.scale_u;
-        let fx = sx * k.scale_x + k.half;
-        let fy = sy.abs() * k.scale_y;
-        if !(fu <= k.max_x && fx >= 0.0 && fx <= k.max_x && fy <= k.max_y) {
-            // outside the baked domain: only the exact trace can say
-            return Err(LrtfLookup::Uncertain);
+        let f = [rho * k.scale_u, sx * k.scale_x + k.half, sy.abs() * k.scale_y];
+        let inside = f[0] <= k.max_x && f[1] >= 0.0 && f[1] <= k.max_x && f[2] <= k.max_y;
+        // outside the baked domain: only the exact trace can say
+        let outcome = if missed {
+            Some(LrtfLookup::Miss)
+        } else if !inside {
+            Some(LrtfLookup::Uncertain)
+        } else {
+            None
+        };
+        RayKey { outcome, f, cs, sn, mirrored: sy < 0.0 }
+    }
+
+    /// Step 3 of a lookup: the cell of a key (four σy-adjacent pairs of entries, one or two
+    /// cache lines each) and its interpolation weights.
+    #[inline(always)]
+    fn cell_at(&self, key: &RayKey, wavelength_nm: f64) -> std::result::Result<Cell, LrtfLookup> {
+        if let Some(outcome) = key.outcome {
+            return Err(outcome);
         }
-        // 3. The cell: four σy-adjacent pairs of entries (one or two cache lines each).
+        let k = &self.key;
+        let [fu, fx, fy] = key.f;
         let wi = self.nearest_wavelength(wavelength_nm);
-        // (i32 conversions: one instruction each; the domain test above excluded NaN and < 0)
+        // (i32 conversions: one instruction each; the domain test excluded NaN and < 0)
         let (iu, ix, iy) = ((fu as i32).min(k.last_cell), (fx as i32).min(k.last_cell), (fy as i32).min(k.last_cell_y));
         let (tu, tx, ty) = (fu - iu as f32, fx - ix as f32, fy - iy as f32);
         let base = wi * k.stride_w + iu as usize * k.stride_u + ix as usize * k.stride_x + iy as usize;
@@ -1019,7 +978,7 @@ impl LrtfTable {
             return Err(LrtfLookup::Miss);
         }
         let idx = [base, base + k.stride_x, base + k.stride_u, base + k.stride_u + k.stride_x];
-        Ok(Cell { idx, t: [tu, tx, ty], cs, sn, mirrored: sy < 0.0 })
+        Ok(Cell { idx, t: [tu, tx, ty], cs: key.cs, sn: key.sn, mirrored: key.mirrored })
     }
 
     /// Steps 4–6 of a lookup: [`LrtfTable::blend_cell`], then the outgoing ray taken back to
@@ -1030,27 +989,32 @@ impl LrtfTable {
             Ok(b) => b,
             Err(o) => return o,
         };
+        let (ray, stop_point, margin) = self.unmap(c.cs, c.sn, if c.mirrored { -1.0 } else { 1.0 }, (a, st));
+        LrtfLookup::Hit(LrtfRay { ray, stop_point, margin })
+    }
+
+    /// Step 6 of a lookup: the blended outputs (w, e) and (stop, margin) back in the lens frame
+    /// (undo the mirror `sign`, the stereographic maps and the rotation by (`cs`, `sn`)): the
+    /// outgoing ray, the stop crossing and the margin.
+    #[inline(always)]
+    fn unmap(&self, cs: f32, sn: f32, sign: f32, (a, st): (Vec4, Vec4)) -> (Ray, DVec2, f64) {
         let k = &self.key;
-        let (cs, sn) = (c.cs, c.sn);
         let (wx, wy_, ex, ey) = (a.x, a.y, a.z, a.w);
         let (stx, sty) = (st.x, st.y);
-        let margin = st.z;
-        // 6. Back to the lens frame: undo the mirror, the stereographic maps and the rotation.
-        let sign = if c.mirrored { -1.0 } else { 1.0 };
         let (wy_, ey, sty) = (sign * wy_, sign * ey, sign * sty);
         let (s2w, s2e) = (wx * wx + wy_ * wy_, ex * ex + ey * ey);
         let (kw, ke) = (k.out_radius / (1.0 + s2w), 1.0 / (1.0 + s2e));
         let (qx, qy, qz) = (2.0 * wx * kw, 2.0 * wy_ * kw, (s2w - 1.0) * kw);
         let (vx, vy, vz) = (2.0 * ex * ke, 2.0 * ey * ke, (s2e - 1.0) * ke);
-        LrtfLookup::Hit(LrtfRay {
-            ray: Ray {
+        (
+            Ray {
                 origin: DVec3::new((cs * qx - sn * qy) as f64, (sn * qx + cs * qy) as f64, qz as f64 + k.out_centre_z),
                 // unit to f32 precision (~1e-7)
                 direction: DVec3::new((cs * vx - sn * vy) as f64, (sn * vx + cs * vy) as f64, vz as f64),
             },
-            stop_point: DVec2::new((cs * stx - sn * sty) as f64, (sn * stx + cs * sty) as f64),
-            margin: margin as f64,
-        })
+            DVec2::new((cs * stx - sn * sty) as f64, (sn * stx + cs * sty) as f64),
+            st.z as f64,
+        )
     }
 
     /// Steps 4–5 of a lookup: the cell's corners read, tested and blended: the outputs
