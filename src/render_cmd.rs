@@ -139,6 +139,15 @@ pub struct RenderArgs {
     /// auto: 1 where the camera can trace light and the scene has emissive surfaces, else 0.
     #[arg(long, default_value = "auto")]
     pub bokeh_paths: String,
+    /// Adaptive sampling's noise threshold, as Cycles' "Noise Threshold" (same test, same
+    /// scale): a pixel stops taking samples once its error estimate over its 3×3 neighbourhood
+    /// is below it; --spp becomes the most a pixel takes. 0 = off (--method mc only).
+    #[arg(long, default_value_t = 0.0)]
+    pub adaptive_threshold: f32,
+    /// Samples every pixel takes before adaptive sampling may stop it (0 = auto, as Cycles:
+    /// max(4, ⌈16 / threshold^0.3⌉), 64 at 0.01).
+    #[arg(long, default_value_t = 0)]
+    pub adaptive_min_samples: u32,
     /// Depth-of-field method: mc (Monte Carlo through the lens, the reference), multiview
     /// (pinhole views through pupil samples), ibrt (rays traced against depth-peeled layers) or
     /// spread (PSFs spread from the layers). --spp stays the camera rays per pixel.
@@ -629,6 +638,8 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
         } else {
             PixelFilter::Box { width_px: 1.0 }
         },
+        adaptive_threshold: args.adaptive_threshold,
+        adaptive_min_samples: args.adaptive_min_samples,
         ..RenderSettings::default()
     };
     let (method, preview) = method_settings(&args)?;
@@ -657,6 +668,15 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
     let result = dof::render_method(method, &render_scene, &rig, &settings, &preview, &progress, &|_, _| {})?;
     bar.finish_and_clear();
     crate::signals::enter(crate::signals::Phase::Writing);
+    let pixels =
+        settings.crop.map_or(width as u64 * height as u64, |[x0, y0, x1, y1]| (x1 - x0) as u64 * (y1 - y0) as u64);
+    let mean_spp = result.camera_rays as f64 / pixels.max(1) as f64;
+    if let Some(min_spp) = settings.adaptive_min_spp() {
+        eprintln!(
+            "adaptive sampling: threshold {}, at least {min_spp} spp: {mean_spp:.1} spp on average",
+            settings.adaptive_threshold
+        );
+    }
     eprintln!(
         "rendered {}x{} at {} spp in {:.2} s ({}, {:.2} M camera rays/s){}",
         width,
@@ -688,6 +708,8 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
         ("pixelAspectRatio".into(), format!("{}", args.pixel_aspect.unwrap_or(1.0))),
         ("spp".into(), format!("{}", result.spp_done)),
         ("sppRequested".into(), format!("{}", args.spp)),
+        ("sppMean".into(), format!("{mean_spp:.3}")),
+        ("adaptiveThreshold".into(), format!("{}", settings.adaptive_threshold)),
         ("seed".into(), format!("{}", args.seed)),
         ("spectral".into(), format!("{spectral}")),
         (

@@ -177,4 +177,7 @@ def render_kwargs(scene, frame: int) -> dict:
         "filter_width_px": float(s.filter_width),
         "spectral": bool(s.spectral),
         "threads": int(r.threads) if r.threads_mode == "FIXED" else 0,
+        # Cycles' noise threshold (off: every pixel takes every sample)
+        "adaptive_threshold": float(s.adaptive_threshold) if s.use_adaptive_sampling else 0.0,
+        "adaptive_min_samples": int(s.adaptive_min_samples),
     }

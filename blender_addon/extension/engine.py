@@ -259,6 +259,8 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
                 kw = self._view_kwargs(context, depsgraph)
                 render_kw = camera_mod.render_kwargs(scene, scene.frame_current)
                 render_kw.pop("spp")
+                # the preview methods have no adaptive sampling; the viewport refines every pixel
+                render_kw["adaptive_threshold"] = 0.0
                 render_kw["method"] = settings.viewport_method.lower()
                 key = viewport_mod.view_key({**kw, **render_kw}, w, h)
                 if key != getattr(self, "_vp_key", None):

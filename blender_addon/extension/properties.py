@@ -106,6 +106,22 @@ VIEWPORT_METHODS = [
 
 class PetzvalRenderSettings(bpy.types.PropertyGroup):
     samples: IntProperty(name="Samples", description="Samples per pixel", default=64, min=1, soft_max=4096)
+    use_adaptive_sampling: BoolProperty(
+        name="Noise Threshold",
+        description="Adaptive sampling, as Cycles': pixels stop taking samples once their noise is below the "
+        "threshold (Samples becomes the most a pixel takes); final renders only",
+        default=False,
+    )
+    adaptive_threshold: FloatProperty(
+        name="Noise Threshold",
+        description="Cycles' noise threshold (the same test and scale): lower is cleaner and slower",
+        default=0.01, min=0.0, max=1.0, soft_min=0.001, precision=4,
+    )
+    adaptive_min_samples: IntProperty(
+        name="Min Samples",
+        description="Samples every pixel takes before it may stop (0: automatic, as Cycles)",
+        default=0, min=0, soft_max=4096,
+    )
     viewport_samples: IntProperty(
         name="Viewport Samples",
         description="Samples per pixel of the viewport's Rendered shading",

@@ -138,7 +138,15 @@ class PETZVAL_PT_sampling(PetzvalPanel, bpy.types.Panel):
         s = context.scene.petzval
         _native_problem(layout)
         col = layout.column()
-        col.prop(s, "samples")
+        row = col.row(heading="Noise Threshold", align=True)
+        row.prop(s, "use_adaptive_sampling", text="")
+        sub = row.row()
+        sub.active = s.use_adaptive_sampling
+        sub.prop(s, "adaptive_threshold", text="")
+        col.prop(s, "samples", text="Max Samples" if s.use_adaptive_sampling else "Samples")
+        sub = col.column()
+        sub.active = s.use_adaptive_sampling
+        sub.prop(s, "adaptive_min_samples")
         row = col.row(align=True)
         row.prop(s, "seed")
         row.prop(s, "use_animated_seed", text="", icon="TIME")

@@ -36,7 +36,7 @@ pub(crate) fn image_arrays(py: Python<'_>, img: &Image) -> (Py<PyAny>, Py<PyAny>
 
 /// Renders a scene through a camera (see the stub for every argument).
 #[pyfunction]
-#[pyo3(signature = (scene, camera, width, height, *, crop = None, spp = 64, seed = 0, max_depth = 8, filter_width_px = 1.5, spectral = false, threads = 0, progress = None, progress_interval_s = 0.1, method = "mc", layers = 4, layer_spp = 4, bokeh_paths = None))]
+#[pyo3(signature = (scene, camera, width, height, *, crop = None, spp = 64, seed = 0, max_depth = 8, filter_width_px = 1.5, spectral = false, threads = 0, progress = None, progress_interval_s = 0.1, method = "mc", layers = 4, layer_spp = 4, bokeh_paths = None, adaptive_threshold = 0.0, adaptive_min_samples = 0))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn render(
     py: Python<'_>,
@@ -57,6 +57,8 @@ pub(crate) fn render(
     layers: usize,
     layer_spp: u32,
     bokeh_paths: Option<f32>,
+    adaptive_threshold: f32,
+    adaptive_min_samples: u32,
 ) -> PyResult<Py<PyDict>> {
     guard(|| {
         // 1. Settings, checked before any work.
@@ -81,6 +83,8 @@ pub(crate) fn render(
             clip_end_m,
             crop: crop.map(|(x0, y0, x1, y1)| [x0, y0, x1, y1]),
             bokeh_paths: bokeh_paths.unwrap_or(0.0),
+            adaptive_threshold,
+            adaptive_min_samples,
         };
         settings.validate().map_err(py_err)?;
         let method: dof::Method = method.parse().map_err(py_err)?;

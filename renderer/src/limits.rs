@@ -51,8 +51,9 @@ pub const MAX_NODE_INSTANCES: usize = 10_000_000;
 pub const MAX_FILE_BYTES: u64 = 1 << 30;
 
 /// Peak memory per image pixel during a render: the film's sums, the image of the last pass
-/// kept for interrupts, the finished image, and the output's channel copies.
-pub const FILM_BYTES_PER_PIXEL: u64 = PIXEL_SUMS_BYTES + 3 * IMAGE_BYTES_PER_PIXEL + 16;
+/// kept for interrupts, the finished image, the output's channel copies, and adaptive
+/// sampling's flags (the converged pixels and each step's tests, one byte each).
+pub const FILM_BYTES_PER_PIXEL: u64 = PIXEL_SUMS_BYTES + 3 * IMAGE_BYTES_PER_PIXEL + 16 + 3;
 
 /// Peak memory per texel of one depth-peeled layer of the preview methods: depth, radiance,
 /// coverage, tangent plane and shaded flag (37 B), the surfaces and radiance rows while they are
@@ -60,7 +61,7 @@ pub const FILM_BYTES_PER_PIXEL: u64 = PIXEL_SUMS_BYTES + 3 * IMAGE_BYTES_PER_PIX
 pub const LAYER_BYTES_PER_TEXEL: u64 = 96;
 
 /// Bytes of one pixel's sums on the film (`film::PixelSums`; the film asserts it at compile time).
-pub const PIXEL_SUMS_BYTES: u64 = 15 * 4;
+pub const PIXEL_SUMS_BYTES: u64 = 18 * 4;
 
 /// Bytes of one pixel of a finished [`crate::film::Image`] (RGBA, depth, normal, albedo).
 const IMAGE_BYTES_PER_PIXEL: u64 = (4 + 1 + 3 + 3) * 4;

@@ -13,6 +13,8 @@
 //! | `filter` | [`PixelFilter`] | px | Blackman–Harris spanning 3 px (Cycles' default) |
 //! | `clip_start_m`, `clip_end_m` | f64: clipping planes perpendicular to the view axis (Cycles) | m | 0, ∞ |
 //! | `crop` | optional `[x0, y0, x1, y1)` window of the frame to render (row 0 = top) | px | whole frame |
+//! | `adaptive_threshold` | f32: adaptive sampling's noise threshold, as Cycles' "Noise Threshold" (a pixel stops once its error estimate, over its 3×3 neighbourhood, is below it; see [`adaptive_converged`]); path tracing (`mc`) only | — | 0 (off: every pixel takes `spp`) |
+//! | `adaptive_min_samples` | u32: samples every pixel takes before adaptive sampling may stop it | — | 0 (auto, as Cycles: max(4, ⌈16 / threshold^0.3⌉)) |
 //! | `bokeh_paths` | f32: light paths from emitters through the lens per pixel per sample, combined with camera paths by MIS (see [`crate::bokeh`]); a real lens, exact or LRTF model | — | 0 (off; the CLI's and the Python module's auto gives 1 where it applies) |
 
 use crate::bokeh::{BokehTracer, LightPathSettings};
@@ -64,6 +66,10 @@ pub struct RenderSettings {
     pub crop: Option<[u32; 4]>,
     /// Light paths from emissive triangles through the lens per pixel per sample (0 = none).
     pub bokeh_paths: f32,
+    /// Adaptive sampling's noise threshold (Cycles' "Noise Threshold"); 0 turns it off.
+    pub adaptive_threshold: f32,
+    /// Samples every pixel takes before adaptive sampling may stop it (0: automatic).
+    pub adaptive_min_samples: u32,
 }
 
 impl Default for RenderSettings {
@@ -81,6 +87,8 @@ impl Default for RenderSettings {
             clip_end_m: f64::INFINITY,
             crop: None,
             bokeh_paths: 0.0,
+            adaptive_threshold: 0.0,
+            adaptive_min_samples: 0,
         }
     }
 }
@@ -133,6 +141,15 @@ impl RenderSettings {
                 format!("{} must be in 0..=64 light paths per pixel per sample", self.bokeh_paths),
             );
         }
+        if !(self.adaptive_threshold.is_finite() && (0.0..=1.0).contains(&self.adaptive_threshold)) {
+            return bad(
+                "adaptive_threshold",
+                format!("{} must be in 0..=1 (0 turns adaptive sampling off)", self.adaptive_threshold),
+            );
+        }
+        if self.adaptive_min_samples > limits::MAX_SPP {
+            return bad("adaptive_min_samples", format!("{} must be in 0..=1048576", self.adaptive_min_samples));
+        }
         if let Some([x0, y0, x1, y1]) = self.crop {
             if !(x0 < x1 && y0 < y1 && x1 <= self.width && y1 <= self.height) {
                 return bad(
@@ -146,6 +163,63 @@ impl RenderSettings {
         }
         Ok(())
     }
+
+    /// The samples every pixel takes before adaptive sampling may stop it: the setting, or
+    /// when it is 0 Cycles' automatic choice, max(4, ⌈16 / threshold^0.3⌉) (threshold 0.1 → 32,
+    /// 0.01 → 64, 0.001 → 128). None when adaptive sampling is off.
+    pub fn adaptive_min_spp(&self) -> Option<u32> {
+        if !(self.adaptive_threshold > 0.0) {
+            return None;
+        }
+        Some(match self.adaptive_min_samples {
+            0 => ((16.0 / self.adaptive_threshold.powf(0.3)).ceil() as u32).max(4),
+            n => n,
+        })
+    }
+}
+
+/// Adaptive sampling's test of one pixel, as Cycles' (`film_adaptive_sampling_convergence_check`,
+/// after Dammertz et al. 2010, "A hierarchical automatic stopping condition for Monte Carlo
+/// global illumination", §2.1): `sum` is the sum of its `samples` samples, `sum_odd` that of its
+/// odd-numbered ones; with I = r + g + b of the mean, the error is
+/// |mean − mean of the odd half|₁ / (10⁻⁴ + √I below I = 1, else I) (Cycles' rule: brighter
+/// pixels are highly exposed and need fewer samples), and the pixel passes when it is below
+/// `threshold`.
+pub fn adaptive_converged(sum: Vec3, sum_odd: Vec3, samples: u32, threshold: f32) -> bool {
+    if samples < 2 {
+        return false;
+    }
+    let n = samples as f32;
+    // the odd half is estimated as 2·Σ_odd / n (Cycles' auxiliary buffer holds 2× each odd sample)
+    let (mean, half) = (sum / n, sum_odd * (2.0 / n));
+    let difference = (mean - half).abs();
+    let intensity = (mean.x + mean.y + mean.z).max(0.0);
+    let normalize = if intensity < 1.0 { intensity.sqrt() } else { intensity };
+    let error = (difference.x + difference.y + difference.z) / (1e-4 + normalize);
+    error < threshold
+}
+
+/// One adaptive-sampling step over the film: a pixel converges when every pixel of its 3×3
+/// neighbourhood (clipped at the film's edges) has converged already or passes
+/// [`adaptive_converged`] (Cycles' test, then its dilation of unconverged pixels by one in x and
+/// y); a converged pixel stays converged.
+fn adaptive_step(film: &Film, converged: &[bool], threshold: f32) -> Vec<bool> {
+    let (w, h) = (film.width as usize, film.height as usize);
+    let passes: Vec<bool> = film
+        .pixels
+        .par_iter()
+        .zip(converged)
+        .map(|(p, &c)| c || adaptive_converged(p.rgb, p.rgb_odd, p.samples, threshold))
+        .collect();
+    (0..w * h)
+        .into_par_iter()
+        .map(|i| {
+            let (x, y) = (i % w, i / w);
+            converged[i]
+                || (y.saturating_sub(1)..(y + 2).min(h))
+                    .all(|yy| (x.saturating_sub(1)..(x + 2).min(w)).all(|xx| passes[yy * w + xx]))
+        })
+        .collect()
 }
 
 /// What a render produced.
@@ -153,9 +227,11 @@ impl RenderSettings {
 pub struct RenderResult {
     /// The image.
     pub image: Image,
-    /// Samples per pixel completed in every pixel.
+    /// Samples per pixel completed in every pixel (with adaptive sampling: in every pixel still
+    /// sampled at the end; `camera_rays` over the pixel count is the mean).
     pub spp_done: u32,
-    /// False when stopped early (time limit or cancel).
+    /// False when stopped early (time limit or cancel); true when adaptive sampling found every
+    /// pixel converged before `spp`.
     pub complete: bool,
     /// Wall time.
     pub seconds: f64,
@@ -289,6 +365,10 @@ pub(crate) fn render_samples(
     let dropped = AtomicU64::new(0);
     let wavelength_primary =
         rig.camera.real_lens().map_or(crate::optics::glass::WAVELENGTH_D_NM, |l| l.primary_wavelength_nm());
+    // Adaptive sampling: pixels that have converged take no more samples (row-major flags).
+    let adaptive_min = settings.adaptive_min_spp();
+    let mut converged = vec![false; if adaptive_min.is_some() { film.pixels.len() } else { 0 }];
+    let mut all_converged = false;
     // 1. Progressive passes: 1, 1, 2, 4, ... samples, at most 16 spp per pass.
     let mut done = 0u32;
     let mut pass_spp = 1u32;
@@ -297,21 +377,29 @@ pub(crate) fn render_samples(
     while done < settings.spp && !cancelled.load(Ordering::Relaxed) {
         let n = pass_spp.min(settings.spp - done);
         let range = done..done + n;
+        let flags = &converged;
         film.pixels.par_chunks_mut(cw as usize).enumerate().for_each(|(row_index, row)| {
             if cancelled.load(Ordering::Relaxed) {
                 return;
             }
             let y = row_index + y0 as usize;
+            // The row's pixels still sampled (every one unless adaptive sampling stopped some).
+            let active: Option<Vec<usize>> = (!flags.is_empty()).then(|| {
+                let row_flags = &flags[row_index * row.len()..(row_index + 1) * row.len()];
+                (0..row.len()).filter(|&c| !row_flags[c]).collect()
+            });
+            let columns = active.as_ref().map_or(row.len(), |a| a.len());
             // The row's samples, pixel by pixel, in batches of CAMERA_BATCH camera rays (the
             // LRTF model looks a batch up at once); each sample keeps its own sampler, so the
             // results are those of one sample at a time.
             let per_pixel = n as usize;
-            let total = row.len() * per_pixel;
+            let total = columns * per_pixel;
             for first in (0..total).step_by(CAMERA_BATCH) {
                 // (pixel column, sample index) of each lane
                 let lanes: [(usize, u32); CAMERA_BATCH] = std::array::from_fn(|i| {
                     let k = (first + i).min(total - 1);
-                    (k / per_pixel, range.start + (k % per_pixel) as u32)
+                    let col = active.as_ref().map_or(k / per_pixel, |a| a[k / per_pixel]);
+                    (col, range.start + (k % per_pixel) as u32)
                 });
                 let chunk = &lanes[..CAMERA_BATCH.min(total - first)];
                 // 2. Camera samples: filter offset, lens point, wavelength.
@@ -341,7 +429,7 @@ pub(crate) fn render_samples(
                 }
                 let wavelengths: [f64; CAMERA_BATCH] = std::array::from_fn(|i| lambdas[i].0);
                 let rays = rig.camera.generate_ray_batch(&film_uv, &lens_u, &wavelengths);
-                for (i, &(col, _)) in chunk.iter().enumerate() {
+                for (i, &(col, s)) in chunk.iter().enumerate() {
                     let (Some(mut sampler), px) = (samplers[i].take(), &mut row[col]) else { continue };
                     let lambda_weight = lambdas[i].1;
                     px.samples += 1;
@@ -361,6 +449,9 @@ pub(crate) fn render_samples(
                         continue;
                     }
                     px.rgb += value;
+                    if s % 2 == 1 {
+                        px.rgb_odd += value;
+                    }
                     // Coverage over the light that reaches the film: a sample blocked by the
                     // lens carries no light and says nothing about coverage, and rays are
                     // weighted as their radiance is (so compositing with alpha is exact).
@@ -378,7 +469,7 @@ pub(crate) fn render_samples(
                     }
                 }
             }
-            camera_rays.fetch_add(row.len() as u64 * n as u64, Ordering::Relaxed);
+            camera_rays.fetch_add(columns as u64 * n as u64, Ordering::Relaxed);
             let r = rows_done.fetch_add(n as u64, Ordering::Relaxed) + n as u64;
             if !progress((r as f64 / total_work) as f32) {
                 cancelled.store(true, Ordering::Relaxed);
@@ -394,6 +485,16 @@ pub(crate) fn render_samples(
             on_pass(&film.image(), done);
         }
         pass_spp = (pass_spp * 2).min(16);
+        // 5. Adaptive sampling: stop the pixels whose 3×3 neighbourhood has converged.
+        if let Some(min_spp) = adaptive_min {
+            if done >= min_spp && done < settings.spp && !cancelled.load(Ordering::Relaxed) {
+                converged = adaptive_step(&film, &converged, settings.adaptive_threshold);
+                if converged.iter().all(|&c| c) {
+                    all_converged = true;
+                    break;
+                }
+            }
+        }
         if let Some(limit) = settings.time_limit {
             if start.elapsed() >= limit && done < settings.spp {
                 break;
@@ -406,7 +507,7 @@ pub(crate) fn render_samples(
     Ok(RenderResult {
         image: film.image(),
         spp_done: done,
-        complete: done == settings.spp,
+        complete: done == settings.spp || all_converged,
         seconds: start.elapsed().as_secs_f64(),
         camera_rays: camera_rays.load(Ordering::Relaxed),
         dropped_samples: dropped.load(Ordering::Relaxed),

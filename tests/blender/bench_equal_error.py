@@ -5,9 +5,10 @@
 On tests/blender's scene (MainCam, 240x160, 2 threads each), each renderer renders a converged
 reference of its own (fixed samples, no adaptive sampling); then Cycles with its default
 adaptive sampling (noise threshold 0.01 by default, here a ladder of thresholds) and petzval over
-a ladder of samples, and each run's relative RMSE against its own renderer's reference (the two
-references differ by the renderers' small systematic differences, which tests/blender bounds;
-this measures convergence). The time to the target error is interpolated in log-log between the
+a ladder of samples and a ladder of its own adaptive thresholds (`--adaptive-threshold`), and
+each run's relative RMSE against its own renderer's reference (the two references differ by
+the renderers' small systematic differences, which tests/blender bounds; this measures
+convergence). The time to the target error is interpolated in log-log between the
 two runs that bracket it (extrapolated with error ∝ time^-1/2 when none does). Prints a Markdown
 table; docs/performance.md records it.
 """
@@ -56,8 +57,12 @@ def cycles(workdir: Path, spp: int, seed: int, threshold: float | None) -> tuple
     return read_rgb(out), dt
 
 
-def petzval(binary: Path, glb: Path, workdir: Path, spp: int, seed: int) -> tuple[np.ndarray, float]:
-    out = workdir / f"petzval_{spp}_{seed}.exr"
+def petzval(
+    binary: Path, glb: Path, workdir: Path, spp: int, seed: int, threshold: float | None = None
+) -> tuple[np.ndarray, float]:
+    """A petzval render: fixed `spp` (threshold None) or adaptive (`--adaptive-threshold`, the
+    same test and scale as Cycles' noise threshold) with at most `spp` samples."""
+    out = workdir / f"petzval_{spp}_{seed}_{threshold}.exr"
     w, h = S.RESOLUTION
     cmd = [
         str(binary), "render", str(glb), "-o", str(out), "--no-png",
@@ -66,6 +71,8 @@ def petzval(binary: Path, glb: Path, workdir: Path, spp: int, seed: int) -> tupl
         "--max-depth", str(S.PETZVAL_MAX_DEPTH),
         "--resolution", f"{w}x{h}", "--spp", str(spp), "--seed", str(seed), "--threads", "2",
     ]  # fmt: skip
+    if threshold is not None:
+        cmd += ["--adaptive-threshold", str(threshold)]
     t0 = time.perf_counter()
     subprocess.run(cmd, check=True, capture_output=True, text=True)
     return read_rgb(out), time.perf_counter() - t0
@@ -109,6 +116,12 @@ def main() -> None:
         e = rel_rmse(ref_p, img)
         p_runs.append((t, e))
         rows.append(("petzval", f"{spp} spp", t, e))
+    a_runs = []
+    for thr in (0.3, 0.2, 0.1, 0.05):
+        img, t = petzval(binary, glb, workdir, 4096, 1, thr)
+        e = rel_rmse(ref_p, img)
+        a_runs.append((t, e))
+        rows.append(("petzval", f"adaptive, threshold {thr} (≤ 4096 spp)", t, e))
     w, h = S.RESOLUTION
     print(f"tests/blender's scene, MainCam {w}x{h}, 2 threads each; references {args.reference_spp} spp "
           "(seed 99), runs seed 1; wall seconds of the render call (Cycles, in process) and of the "
@@ -119,8 +132,10 @@ def main() -> None:
         print(f"| {r[0]} | {r[1]} | {r[2]:.2f} | {r[3]:.4f} |")
     tc, how_c = time_to(c_runs, args.target)
     tp, how_p = time_to(p_runs, args.target)
-    print(f"\nTime to a relative RMSE of {args.target}: Cycles {tc:.1f} s ({how_c}), petzval {tp:.1f} s "
-          f"({how_p}); ratio petzval/Cycles {tp / tc:.2f}.")  # fmt: skip
+    ta, how_a = time_to(a_runs, args.target)
+    print(f"\nTime to a relative RMSE of {args.target}: Cycles (adaptive) {tc:.1f} s ({how_c}); "
+          f"petzval fixed samples {tp:.1f} s ({how_p}), ratio {tp / tc:.2f}; "
+          f"petzval adaptive {ta:.1f} s ({how_a}), ratio {ta / tc:.2f}.")  # fmt: skip
 
 
 if __name__ == "__main__":

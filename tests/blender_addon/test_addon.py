@@ -809,6 +809,16 @@ def test_camera_settings_mapping(addon):
     with pytest.raises(mod.camera.SettingsError, match="perspective"):
         kwargs()
 
+    # sampling: Cycles' noise threshold, off unless switched on
+    s = scene.petzval
+    rkw = mod.camera.render_kwargs(scene, scene.frame_current)
+    assert rkw["adaptive_threshold"] == 0.0 and rkw["adaptive_min_samples"] == 0
+    s.use_adaptive_sampling = True
+    s.adaptive_threshold = 0.02
+    s.adaptive_min_samples = 12
+    rkw = mod.camera.render_kwargs(scene, scene.frame_current)
+    assert rkw["adaptive_threshold"] == pytest.approx(0.02) and rkw["adaptive_min_samples"] == 12
+
 
 class _Layout:
     """Stands in for a UI layout: records labels, checks every drawn property exists."""

@@ -111,6 +111,23 @@ def test_render_thin_lens_exposure_depth_and_determinism(petzval):
     assert np.all(r1["depth"][-1] < r1["depth"][0])
 
 
+def test_adaptive_sampling_spends_samples_where_the_noise_is(petzval):
+    """With a noise threshold, the sky (noiseless) stops at the minimum while the lit ground
+    keeps sampling: fewer camera rays than fixed sampling, more than the minimum everywhere, the
+    same image on 1 and 2 threads, and the render reports itself complete."""
+    s = ground_scene(petzval)
+    cam = petzval.Camera(camera(), lens="thin", focal_length_mm=20.0, fstop=None)
+    kw = dict(spp=256, seed=2, adaptive_threshold=0.05, adaptive_min_samples=8)
+    a1 = petzval.render(s, cam, 48, 32, threads=1, **kw)
+    a2 = petzval.render(s, cam, 48, 32, threads=2, **kw)
+    assert np.array_equal(a1["rgba"], a2["rgba"]), "thread count changed the adaptive image"
+    assert a1["complete"]
+    pixels = 48 * 32
+    assert 8 * pixels < a1["camera_rays"] < 0.75 * 256 * pixels, a1["camera_rays"]
+    fixed = petzval.render(s, cam, 48, 32, spp=8, seed=2)
+    assert fixed["camera_rays"] == 8 * pixels
+
+
 def test_progress_images_and_cancel(petzval):
     s = ground_scene(petzval)
     seen = []
@@ -278,6 +295,16 @@ def test_instances_render_like_copies(petzval):
             ["aperture_rotation_rad"],
         ),
         (lambda pz: pz.Camera(np.eye(4), aperture_ratio=0.0), "InvalidSettingsError", ["aperture_ratio"]),
+        (
+            lambda pz: pz.render(pz.Scene(), pz.Camera(np.eye(4)), 10, 10, adaptive_threshold=float("nan")),
+            "InvalidSettingsError",
+            ["adaptive_threshold"],
+        ),
+        (
+            lambda pz: pz.render(pz.Scene(), pz.Camera(np.eye(4)), 10, 10, adaptive_threshold=0.01, method="ibrt"),
+            "InvalidSettingsError",
+            ["adaptive_threshold", "mc"],
+        ),
         (lambda pz: pz.Camera(np.eye(4), sensor_fit="diagonal"), "InvalidSettingsError", ["sensor_fit"]),
         (lambda pz: pz.Camera(np.eye(4), clip_start_m=2.0, clip_end_m=1.0), "InvalidSettingsError", ["clip"]),
         (lambda pz: pz.Camera(np.eye(4), focal_length_mm=-5.0), "InvalidSettingsError", ["focal_length_mm"]),

@@ -247,6 +247,8 @@ def render(
     layers: int = 4,
     layer_spp: int = 4,
     bokeh_paths: float | None = None,
+    adaptive_threshold: float = 0.0,
+    adaptive_min_samples: int = 0,
 ) -> dict:
     """Renders ``scene`` through ``camera`` and returns ``{"rgba": (H, W, 4) float32,
     "depth": (H, W) float32, "spp": int, "complete": bool, "seconds": float, "lens_model": str,
@@ -279,4 +281,10 @@ def render(
     paths by multiple importance sampling, as ``petzval render --bokeh-paths``: small bright
     defocused emitters converge several times faster; 0 turns them off, and ``None`` (auto)
     traces one where the camera can (a real lens, exact or LRTF model, ``"mc"``) and the scene
-    has emissive surfaces."""
+    has emissive surfaces.
+
+    ``adaptive_threshold`` > 0 turns on adaptive sampling (``"mc"`` only), as ``petzval render
+    --adaptive-threshold`` and Cycles' Noise Threshold (the same test and scale): a pixel stops
+    once its error estimate over its 3x3 neighbourhood is below the threshold, after at least
+    ``adaptive_min_samples`` samples (0: Cycles' automatic choice, 64 at 0.01); ``spp`` becomes
+    the most a pixel takes, and ``camera_rays`` / pixels is the mean."""

@@ -98,6 +98,12 @@ pub fn render_method(
     let start = Instant::now();
     let mut result = match method {
         Method::Mc => return crate::render::render_observed(scene, rig, settings, progress, on_pass),
+        _ if settings.adaptive_threshold > 0.0 => {
+            return Err(crate::error::Error::settings(
+                "adaptive_threshold",
+                format!("adaptive sampling is path tracing's (method mc), not the {method} preview's"),
+            ))
+        }
         Method::Ibrt => {
             let Some(layers) = make_layers(scene, rig, settings, preview, progress)? else {
                 return Ok(cancelled(settings, start));
