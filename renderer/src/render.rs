@@ -180,18 +180,20 @@ impl RenderSettings {
 
 /// Adaptive sampling's test of one pixel, as Cycles' (`film_adaptive_sampling_convergence_check`,
 /// after Dammertz et al. 2010, "A hierarchical automatic stopping condition for Monte Carlo
-/// global illumination", §2.1): `sum` is the sum of its `samples` samples, `sum_odd` that of its
-/// odd-numbered ones; with I = r + g + b of the mean, the error is
-/// |mean − mean of the odd half|₁ / (10⁻⁴ + √I below I = 1, else I) (Cycles' rule: brighter
+/// global illumination", §2.1): `sum` is the sum of its `samples` samples (numbered from 0),
+/// `sum_odd` that of its odd-numbered ones; with I = r + g + b of the mean, the error is
+/// |mean − mean of the odd ones|₁ / (10⁻⁴ + √I below I = 1, else I) (Cycles' rule: brighter
 /// pixels are highly exposed and need fewer samples), and the pixel passes when it is below
 /// `threshold`.
 pub fn adaptive_converged(sum: Vec3, sum_odd: Vec3, samples: u32, threshold: f32) -> bool {
     if samples < 2 {
         return false;
     }
-    let n = samples as f32;
-    // the odd half is estimated as 2·Σ_odd / n (Cycles' auxiliary buffer holds 2× each odd sample)
-    let (mean, half) = (sum / n, sum_odd * (2.0 / n));
+    // The samples are numbered 0..samples, so ⌊samples / 2⌋ of them are odd; Cycles' 2·Σ_odd / n
+    // is this mean for an even count (its checks fall on even counts), and for an odd count it
+    // would be biased by 1/n, which alone keeps a noiseless pixel from stopping below n = 1/T.
+    let (n, n_odd) = (samples as f32, (samples / 2) as f32);
+    let (mean, half) = (sum / n, sum_odd / n_odd);
     let difference = (mean - half).abs();
     let intensity = (mean.x + mean.y + mean.z).max(0.0);
     let normalize = if intensity < 1.0 { intensity.sqrt() } else { intensity };
@@ -369,13 +371,15 @@ pub(crate) fn render_samples(
     let adaptive_min = settings.adaptive_min_spp();
     let mut converged = vec![false; if adaptive_min.is_some() { film.pixels.len() } else { 0 }];
     let mut all_converged = false;
-    // 1. Progressive passes: 1, 1, 2, 4, ... samples, at most 16 spp per pass.
+    // 1. Progressive passes: 1, 2, 4, ... samples, at most 16 spp per pass (with adaptive
+    //    sampling, one pass ends at its minimum, where the first test is made).
     let mut done = 0u32;
     let mut pass_spp = 1u32;
     let total_work = settings.spp as f64 * ch as f64;
     let rows_done = AtomicU64::new(0);
     while done < settings.spp && !cancelled.load(Ordering::Relaxed) {
-        let n = pass_spp.min(settings.spp - done);
+        let to_min = adaptive_min.filter(|&m| m > done).map_or(u32::MAX, |m| m - done);
+        let n = pass_spp.min(settings.spp - done).min(to_min);
         let range = done..done + n;
         let flags = &converged;
         film.pixels.par_chunks_mut(cw as usize).enumerate().for_each(|(row_index, row)| {

@@ -1259,6 +1259,9 @@ fn adaptive_test_is_cycles_error_estimate() {
     assert!(!adaptive_converged(Vec3::splat(0.8), odd, 8, 0.018));
     assert!(adaptive_converged(Vec3::splat(0.8), odd, 8, 0.0185));
     assert!(!adaptive_converged(Vec3::ONE, Vec3::ZERO, 1, 1.0), "one sample says nothing about noise");
+    // an odd count: 15 noiseless samples of 0.7 hold 7 odd ones, so the error is 0 (the
+    // estimate 2·Σ_odd / n would say 1/15 and keep the pixel sampling)
+    assert!(adaptive_converged(Vec3::splat(15.0 * 0.7), Vec3::splat(7.0 * 0.7), 15, 0.01));
     // automatic minimum, Cycles' table: 0.1 → 32, 0.01 → 64, 0.001 → 128
     for (t, min) in [(0.1, 32), (0.01, 64), (0.001, 128)] {
         let s = RenderSettings { adaptive_threshold: t, ..RenderSettings::default() };
@@ -1270,7 +1273,6 @@ fn adaptive_test_is_cycles_error_estimate() {
 /// A frame of constant sky has no noise: with adaptive sampling every pixel stops at its first
 /// check (the minimum), the render reports itself complete, and the image is the sky's value.
 #[test]
-#[ignore = "fails as of 2026-12-03: pixels took 111 spp on average, not 8; not yet understood (issue 14 note)"]
 fn adaptive_sampling_stops_noiseless_pixels_at_the_minimum() {
     let rs = scene_of(&[], vec![diffuse(Vec3::ONE)], Environment::Constant(Vec3::splat(0.7)));
     let cam = PinholeCamera::new(Sensor::default(), 50.0).unwrap().with_natural_vignetting(false);
@@ -1285,10 +1287,12 @@ fn adaptive_sampling_stops_noiseless_pixels_at_the_minimum() {
 /// A ground lit by a small lamp (noisy) under a constant sky (noiseless): adaptive sampling
 /// spends its samples on the ground, stays deterministic across thread counts, and reaches a
 /// lower error against a converged reference than fixed sampling with the same number of camera
-/// rays. The error is the relative RMSE over the frame; 400+ noisy pixels estimate it to a few
-/// per cent, and the expected gain (samples moved off the sky) is about 25 %.
+/// rays. The error is the relative RMSE over the frame, pooled over 6 seeds: one seed's is
+/// carried by a few rare bright samples near the lamp and varies by ±40 % from seed to seed.
+/// The minimum is Cycles' automatic one (40 at threshold 0.05): at a minimum of 16, pixels of
+/// the dim far ground that had not yet seen a rare bright sample stopped early and the frame's
+/// error was 1.3× fixed sampling's (measured 2026-12-04).
 #[test]
-#[ignore = "fails as of 2026-12-03: adaptive 0.0040 against fixed 0.0031 rel. RMSE at 138 spp; the relative noise test does not minimise this frame's RMSE (issue 14 note)"]
 fn adaptive_sampling_beats_fixed_sampling_at_equal_camera_rays() {
     let ground = {
         Mesh {
@@ -1321,20 +1325,14 @@ fn adaptive_sampling_beats_fixed_sampling_at_equal_camera_rays() {
     let (w, h) = (32u32, 24u32);
     let base = RenderSettings { max_depth: 3, ..settings(w, h, 512, 1, BOX1) };
     let reference = render(&rs, &rig, &RenderSettings { spp: 4096, seed: 99, ..base.clone() }, &|_| true).unwrap();
-    let adaptive_settings = RenderSettings { adaptive_threshold: 0.05, adaptive_min_samples: 16, ..base.clone() };
+    let adaptive_settings = RenderSettings { adaptive_threshold: 0.05, ..base.clone() };
     let run = |threads: usize, s: &RenderSettings| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
         pool.install(|| render(&rs, &rig, s, &|_| true).unwrap())
     };
-    let adaptive = run(2, &adaptive_settings);
-    assert!(bits(&adaptive.image) == bits(&run(1, &adaptive_settings).image), "1 vs 2 threads differ");
-    let pixels = (w * h) as u64;
-    let mean_spp = adaptive.camera_rays as f64 / pixels as f64;
-    eprintln!("adaptive: {mean_spp:.1} spp on average (min 16, max 512)");
-    // the sky (upper half) stops at 16, the ground needs more
-    assert!(mean_spp > 24.0 && mean_spp < 0.75 * 512.0, "mean spp {mean_spp}");
-    let fixed = render(&rs, &rig, &RenderSettings { spp: mean_spp.round() as u32, ..base.clone() }, &|_| true).unwrap();
-    let rel_rmse = |img: &Image| {
+    let first = run(2, &adaptive_settings);
+    assert!(bits(&first.image) == bits(&run(1, &adaptive_settings).image), "1 vs 2 threads differ");
+    let squared_error = |img: &Image| -> (f64, f64) {
         let (mut se, mut s2) = (0.0, 0.0);
         for (a, b) in img.rgba.iter().zip(&reference.image.rgba) {
             for k in 0..3 {
@@ -1342,10 +1340,26 @@ fn adaptive_sampling_beats_fixed_sampling_at_equal_camera_rays() {
                 s2 += (b[k] as f64).powi(2);
             }
         }
-        (se / s2).sqrt()
+        (se, s2)
     };
-    let (e_adaptive, e_fixed) = (rel_rmse(&adaptive.image), rel_rmse(&fixed.image));
-    eprintln!("rel. RMSE at {mean_spp:.1} spp: adaptive {e_adaptive:.4}, fixed {e_fixed:.4}");
+    let pixels = (w * h) as f64;
+    let (mut se_adaptive, mut se_fixed, mut s2, mut rays) = (0.0, 0.0, 0.0, 0u64);
+    for seed in 1..=6 {
+        let adaptive = run(2, &RenderSettings { seed, ..adaptive_settings.clone() });
+        let spp = (adaptive.camera_rays as f64 / pixels).round() as u32;
+        let fixed = render(&rs, &rig, &RenderSettings { spp, seed, ..base.clone() }, &|_| true).unwrap();
+        let (a, r2) = squared_error(&adaptive.image);
+        se_adaptive += a;
+        se_fixed += squared_error(&fixed.image).0;
+        s2 += r2;
+        rays += adaptive.camera_rays;
+    }
+    let mean_spp = rays as f64 / (6.0 * pixels);
+    eprintln!("adaptive: {mean_spp:.1} spp on average (min 40, max 512)");
+    // the sky (upper half) stops at the minimum, the ground needs more
+    assert!(mean_spp > 48.0 && mean_spp < 0.75 * 512.0, "mean spp {mean_spp}");
+    let (e_adaptive, e_fixed) = ((se_adaptive / s2).sqrt(), (se_fixed / s2).sqrt());
+    eprintln!("rel. RMSE over 6 seeds at {mean_spp:.1} spp: adaptive {e_adaptive:.4}, fixed {e_fixed:.4}");
     assert!(e_adaptive < 0.9 * e_fixed, "adaptive {e_adaptive:.4} should beat fixed {e_fixed:.4}");
 }
 
