@@ -178,22 +178,46 @@ impl RenderSettings {
     }
 }
 
+/// Whether sample `index` of a pixel is in class A, the half of its samples that adaptive
+/// sampling compares with the whole: Cycles' split (`sample_is_class_A`: the parity of the set
+/// bits at odd positions, after Christensen et al. 2018, "Progressive Multi-Jittered Sample
+/// Sequences", §10.2.1). Both halves of an Owen-scrambled Sobol prefix stay well stratified, so
+/// their difference measures the estimate's error. Odd-numbered samples would not do: with
+/// `sobol_burley`'s index shuffle they all share one half of the first dimension (the filter's
+/// x offset), and the half's mean then differs from the whole by the pixel's gradient.
+pub fn adaptive_class_a(index: u32) -> bool {
+    (index & 0xaaaa_aaaa).count_ones() & 1 == 1
+}
+
+/// How many of the samples 0..`samples` are in class A ([`adaptive_class_a`]): half of each
+/// aligned group of 4 (bit 1 flips the class, bit 0 does not), then the remainder's.
+pub fn adaptive_class_a_count(samples: u32) -> u32 {
+    let rest = samples % 4;
+    let c = adaptive_class_a(samples - rest) as u32;
+    (samples - rest) / 2
+        + match rest {
+            0 => 0,
+            1 => c,
+            2 => 2 * c,
+            _ => 2 * c + (1 - c),
+        }
+}
+
 /// Adaptive sampling's test of one pixel, as Cycles' (`film_adaptive_sampling_convergence_check`,
 /// after Dammertz et al. 2010, "A hierarchical automatic stopping condition for Monte Carlo
 /// global illumination", §2.1): `sum` is the sum of its `samples` samples (numbered from 0),
-/// `sum_odd` that of its odd-numbered ones; with I = r + g + b of the mean, the error is
-/// |mean − mean of the odd ones|₁ / (10⁻⁴ + √I below I = 1, else I) (Cycles' rule: brighter
+/// `sum_a` that of its class-A ones ([`adaptive_class_a`]); with I = r + g + b of the mean, the
+/// error is |mean − mean of class A|₁ / (10⁻⁴ + √I below I = 1, else I) (Cycles' rule: brighter
 /// pixels are highly exposed and need fewer samples), and the pixel passes when it is below
 /// `threshold`.
-pub fn adaptive_converged(sum: Vec3, sum_odd: Vec3, samples: u32, threshold: f32) -> bool {
-    if samples < 2 {
+pub fn adaptive_converged(sum: Vec3, sum_a: Vec3, samples: u32, threshold: f32) -> bool {
+    // Cycles' 2·Σ_A / n is class A's mean when A holds exactly half; the exact count keeps a
+    // noiseless pixel from being held back by a 1/n bias at other counts.
+    let n_a = adaptive_class_a_count(samples);
+    if samples < 2 || n_a == 0 {
         return false;
     }
-    // The samples are numbered 0..samples, so ⌊samples / 2⌋ of them are odd; Cycles' 2·Σ_odd / n
-    // is this mean for an even count (its checks fall on even counts), and for an odd count it
-    // would be biased by 1/n, which alone keeps a noiseless pixel from stopping below n = 1/T.
-    let (n, n_odd) = (samples as f32, (samples / 2) as f32);
-    let (mean, half) = (sum / n, sum_odd / n_odd);
+    let (mean, half) = (sum / samples as f32, sum_a / n_a as f32);
     let difference = (mean - half).abs();
     let intensity = (mean.x + mean.y + mean.z).max(0.0);
     let normalize = if intensity < 1.0 { intensity.sqrt() } else { intensity };
@@ -211,7 +235,7 @@ fn adaptive_step(film: &Film, converged: &[bool], threshold: f32) -> Vec<bool> {
         .pixels
         .par_iter()
         .zip(converged)
-        .map(|(p, &c)| c || adaptive_converged(p.rgb, p.rgb_odd, p.samples, threshold))
+        .map(|(p, &c)| c || adaptive_converged(p.rgb, p.rgb_class_a, p.samples, threshold))
         .collect();
     (0..w * h)
         .into_par_iter()
@@ -453,8 +477,8 @@ pub(crate) fn render_samples(
                         continue;
                     }
                     px.rgb += value;
-                    if s % 2 == 1 {
-                        px.rgb_odd += value;
+                    if adaptive_class_a(s) {
+                        px.rgb_class_a += value;
                     }
                     // Coverage over the light that reaches the film: a sample blocked by the
                     // lens carries no light and says nothing about coverage, and rays are

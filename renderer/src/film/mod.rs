@@ -129,8 +129,9 @@ impl FilterSampler {
 pub struct PixelSums {
     /// Σ radiance.
     pub rgb: Vec3,
-    /// Σ radiance of the odd-numbered samples (adaptive sampling's error estimate).
-    pub rgb_odd: Vec3,
+    /// Σ radiance of the class-A samples (see [`crate::render::adaptive_class_a`]; adaptive
+    /// sampling's error estimate).
+    pub rgb_class_a: Vec3,
     /// Σ alpha × camera-ray weight, over the samples the lens let through.
     pub alpha: f32,
     /// Σ camera-ray weight of those samples (alpha = `alpha / alpha_weight`).
