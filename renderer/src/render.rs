@@ -182,9 +182,9 @@ impl RenderSettings {
 /// sampling compares with the whole: Cycles' split (`sample_is_class_A`: the parity of the set
 /// bits at odd positions, after Christensen et al. 2018, "Progressive Multi-Jittered Sample
 /// Sequences", §10.2.1). Both halves of an Owen-scrambled Sobol prefix stay well stratified, so
-/// their difference measures the estimate's error. Odd-numbered samples would not do: with
-/// `sobol_burley`'s index shuffle they all share one half of the first dimension (the filter's
-/// x offset), and the half's mean then differs from the whole by the pixel's gradient.
+/// their difference follows the estimate's error. Odd-numbered samples are no such half: with
+/// them, pixels took several times more samples to pass the same threshold, for a lower error
+/// than Cycles' at that threshold (docs/performance.md).
 pub fn adaptive_class_a(index: u32) -> bool {
     (index & 0xaaaa_aaaa).count_ones() & 1 == 1
 }
