@@ -178,6 +178,11 @@ impl RenderSettings {
     }
 }
 
+/// Cycles' factor between the Noise Threshold a user sets and the one its test uses
+/// (`Integrator::get_adaptive_sampling`: "arbitrary factor that makes the threshold more similar
+/// to what it was before"); the automatic minimum is chosen from the unscaled threshold.
+pub const ADAPTIVE_THRESHOLD_SCALE: f32 = 5.0;
+
 /// Whether sample `index` of a pixel is in class A, the half of its samples that adaptive
 /// sampling compares with the whole: Cycles' split (`sample_is_class_A`: the parity of the set
 /// bits at odd positions, after Christensen et al. 2018, "Progressive Multi-Jittered Sample
@@ -209,7 +214,7 @@ pub fn adaptive_class_a_count(samples: u32) -> u32 {
 /// `sum_a` that of its class-A ones ([`adaptive_class_a`]); with I = r + g + b of the mean, the
 /// error is |mean − mean of class A|₁ / (10⁻⁴ + √I below I = 1, else I) (Cycles' rule: brighter
 /// pixels are highly exposed and need fewer samples), and the pixel passes when it is below
-/// `threshold`.
+/// `threshold` (the test's threshold: the user's times [`ADAPTIVE_THRESHOLD_SCALE`], as Cycles').
 pub fn adaptive_converged(sum: Vec3, sum_a: Vec3, samples: u32, threshold: f32) -> bool {
     // Cycles' 2·Σ_A / n is class A's mean when A holds exactly half; the exact count keeps a
     // noiseless pixel from being held back by a 1/n bias at other counts.
@@ -223,6 +228,18 @@ pub fn adaptive_converged(sum: Vec3, sum_a: Vec3, samples: u32, threshold: f32) 
     let normalize = if intensity < 1.0 { intensity.sqrt() } else { intensity };
     let error = (difference.x + difference.y + difference.z) / (1e-4 + normalize);
     error < threshold
+}
+
+/// Samples between adaptive sampling's tests (Cycles' `adaptive_step`).
+pub const ADAPTIVE_STEP: u32 = 16;
+
+/// The sample count after `done` at which adaptive sampling next tests its pixels, as Cycles
+/// schedules it (`AdaptiveSampling::need_filter`): at multiples of [`ADAPTIVE_STEP`] that exceed
+/// the minimum `min_spp` by at least 2 (the first at 16 for a minimum of 8, at 80 for 64). The
+/// tests then always see a whole number of groups of 4 samples, which class A splits in half.
+pub fn adaptive_next_check(done: u32, min_spp: u32) -> u32 {
+    let first = (min_spp + 2).div_ceil(ADAPTIVE_STEP) * ADAPTIVE_STEP;
+    first.max((done + 1).div_ceil(ADAPTIVE_STEP) * ADAPTIVE_STEP)
 }
 
 /// One adaptive-sampling step over the film: a pixel converges when every pixel of its 3×3
@@ -396,14 +413,14 @@ pub(crate) fn render_samples(
     let mut converged = vec![false; if adaptive_min.is_some() { film.pixels.len() } else { 0 }];
     let mut all_converged = false;
     // 1. Progressive passes: 1, 2, 4, ... samples, at most 16 spp per pass (with adaptive
-    //    sampling, one pass ends at its minimum, where the first test is made).
+    //    sampling, passes end where the tests are made: see `adaptive_next_check`).
     let mut done = 0u32;
     let mut pass_spp = 1u32;
     let total_work = settings.spp as f64 * ch as f64;
     let rows_done = AtomicU64::new(0);
     while done < settings.spp && !cancelled.load(Ordering::Relaxed) {
-        let to_min = adaptive_min.filter(|&m| m > done).map_or(u32::MAX, |m| m - done);
-        let n = pass_spp.min(settings.spp - done).min(to_min);
+        let to_check = adaptive_min.map_or(u32::MAX, |m| adaptive_next_check(done, m) - done);
+        let n = pass_spp.min(settings.spp - done).min(to_check);
         let range = done..done + n;
         let flags = &converged;
         film.pixels.par_chunks_mut(cw as usize).enumerate().for_each(|(row_index, row)| {
@@ -515,8 +532,9 @@ pub(crate) fn render_samples(
         pass_spp = (pass_spp * 2).min(16);
         // 5. Adaptive sampling: stop the pixels whose 3×3 neighbourhood has converged.
         if let Some(min_spp) = adaptive_min {
-            if done >= min_spp && done < settings.spp && !cancelled.load(Ordering::Relaxed) {
-                converged = adaptive_step(&film, &converged, settings.adaptive_threshold);
+            let at_check = done.checked_sub(1).is_some_and(|d| adaptive_next_check(d, min_spp) == done);
+            if at_check && done < settings.spp && !cancelled.load(Ordering::Relaxed) {
+                converged = adaptive_step(&film, &converged, settings.adaptive_threshold * ADAPTIVE_THRESHOLD_SCALE);
                 if converged.iter().all(|&c| c) {
                     all_converged = true;
                     break;

@@ -117,7 +117,7 @@ def main() -> None:
         p_runs.append((t, e))
         rows.append(("petzval", f"{spp} spp", t, e))
     a_runs = []
-    for thr in (0.2, 0.1, 0.07, 0.05, 0.03, 0.02):
+    for thr in (0.1, 0.05, 0.02, 0.01):
         img, t = petzval(binary, glb, workdir, 4096, 1, thr)
         e = rel_rmse(ref_p, img)
         a_runs.append((t, e))

@@ -121,13 +121,14 @@ def test_adaptive_sampling_spends_samples_where_the_noise_is(petzval):
     s.add_mesh(quad, np.array([[0, 2, 1], [0, 3, 2]]), material_ids=np.array([grey, grey]), name="ground")
     s.set_environment_color((1.0, 1.0, 1.0))
     cam = petzval.Camera(camera(), lens="thin", focal_length_mm=20.0, fstop=None)
-    kw = dict(spp=256, seed=2, adaptive_threshold=0.05, adaptive_min_samples=8)
+    kw = dict(spp=256, seed=2, adaptive_threshold=0.01, adaptive_min_samples=8)
     a1 = petzval.render(s, cam, 48, 32, threads=1, **kw)
     a2 = petzval.render(s, cam, 48, 32, threads=2, **kw)
     assert np.array_equal(a1["rgba"], a2["rgba"]), "thread count changed the adaptive image"
     assert a1["complete"]
     pixels = 48 * 32
-    assert 8 * pixels < a1["camera_rays"] < 0.75 * 256 * pixels, a1["camera_rays"]
+    # more than the first test's 16 samples (Cycles' schedule for a minimum of 8) on the ground
+    assert 16 * pixels < a1["camera_rays"] < 0.75 * 256 * pixels, a1["camera_rays"]
     fixed = petzval.render(s, cam, 48, 32, spp=8, seed=2)
     assert fixed["camera_rays"] == 8 * pixels
 
