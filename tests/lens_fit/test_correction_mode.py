@@ -19,7 +19,7 @@ from conftest import OUT, RADIUS_SURFACE, REPO
 from optiland_captures import manifest
 
 TERMS = ["defocus", "spherical", "coma", "astigmatism", "field_curvature", "pupil_scale"]
-# measured (docs/lens-fit.md): 0.9–2.1 % with 160 evaluations (the parametric fit: 0.1–0.4 %); stated bound
+# measured (docs/lens-fit.md): 0.8–1.5 % with 320 evaluations (the parametric fit: 0.1–0.4 %); stated bound
 RESIDUAL_MAX = 0.03
 RENDER_ARGS = ["--resolution", "64x48", "--spp", "2"]
 
@@ -47,8 +47,12 @@ def test_correction_mode_fits_a_wrong_start_lens_and_renders(optiland_fit, petzv
     (OUT / "correction.toml").write_text(manifest("cooke_wrong.zmx", free, train["capture"]))
     lens, table, report = OUT / "corrected.toml", OUT / "corrected.lrtf", OUT / "correction"
     cmd = [str(petzval_fit_bin), str(OUT / "correction.toml"), "-o", str(lens), "--lrtf", str(table)]
-    # an evaluation budget (deterministic on any machine; the time limit is only a cap)
-    budget = ["--max-evaluations", "160", "--rays", "16384", "--time-limit", "120"]
+    # an evaluation budget (deterministic on any machine; the time limit is only a cap). 160
+    # evaluations were enough on the captures of earlier hosts (0.9–2.1 %), but not on those of
+    # an AMD EPYC host (2026-12-04: 0.7–3.8 %, the same with petzval-fit built from older
+    # commits, so the captures or the host's maths libraries differ, not the fit code); 320 gives
+    # 0.8–1.5 % there, 640 the same
+    budget = ["--max-evaluations", "320", "--rays", "16384", "--time-limit", "120"]
     p = subprocess.run([*cmd, "--report", str(report), *budget], capture_output=True, text=True)
     assert p.returncode == 0, p.stdout + p.stderr
     fit = json.loads((report / "fit.json").read_text())
