@@ -140,8 +140,9 @@ pub struct RenderArgs {
     #[arg(long, default_value = "auto")]
     pub bokeh_paths: String,
     /// Adaptive sampling's noise threshold, as Cycles' "Noise Threshold" (same test, same
-    /// scale): a pixel stops taking samples once its error estimate over its 3×3 neighbourhood
-    /// is below it; --spp becomes the most a pixel takes. 0 = off (--method mc only).
+    /// scale, same schedule): a pixel stops taking samples once its error estimate over its 3×3
+    /// neighbourhood passes, tested every 16 samples from just past --adaptive-min-samples;
+    /// --spp becomes the most a pixel takes. 0 = off (--method mc only).
     #[arg(long, default_value_t = 0.0)]
     pub adaptive_threshold: f32,
     /// Samples every pixel takes before adaptive sampling may stop it (0 = auto, as Cycles:

@@ -285,6 +285,6 @@ def render(
 
     ``adaptive_threshold`` > 0 turns on adaptive sampling (``"mc"`` only), as ``petzval render
     --adaptive-threshold`` and Cycles' Noise Threshold (the same test and scale): a pixel stops
-    once its error estimate over its 3x3 neighbourhood is below the threshold, after at least
-    ``adaptive_min_samples`` samples (0: Cycles' automatic choice, 64 at 0.01); ``spp`` becomes
+    once its error estimate over its 3x3 neighbourhood passes, tested every 16 samples from just
+    past ``adaptive_min_samples`` (0: Cycles' automatic choice, 64 at 0.01); ``spp`` becomes
     the most a pixel takes, and ``camera_rays`` / pixels is the mean."""
