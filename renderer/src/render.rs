@@ -349,7 +349,32 @@ pub(crate) trait SampleShader: Sync {
         camera_density: f64,
         sampler: &mut PixelSampler,
     ) -> PathSample;
+
+    /// The scene whose first hits [`SampleShader::shade_from_hit`] takes: the render loop then
+    /// finds a batch's first hits together ([`RenderScene::intersect_packet`]). None: `shade`.
+    fn packet_scene(&self) -> Option<&RenderScene> {
+        None
+    }
+
+    /// [`SampleShader::shade`] given the camera ray's first hit (what `intersect` gives for
+    /// [`PathTracer::camera_query`]'s query).
+    #[allow(clippy::too_many_arguments)]
+    fn shade_from_hit(
+        &self,
+        ray: &CameraRay,
+        origin: Vec3,
+        dir: Vec3,
+        clip: (f32, f32),
+        camera_density: f64,
+        sampler: &mut PixelSampler,
+        _first_hit: Option<SurfaceHit>,
+    ) -> PathSample {
+        self.shade(ray, origin, dir, clip, camera_density, sampler)
+    }
 }
+
+/// A camera ray in the world: origin, unit direction, clipping distances along it.
+type WorldRay = (Vec3, Vec3, (f32, f32));
 
 /// Monte Carlo: every camera ray is path traced.
 struct PathShader<'a> {
@@ -379,6 +404,28 @@ impl SampleShader for PathShader<'_> {
                 self.tracer.trace_weighted(self.scene, origin, dir, clip, sampler, Some(&weight))
             }
         }
+    }
+
+    fn packet_scene(&self) -> Option<&RenderScene> {
+        Some(self.scene)
+    }
+
+    fn shade_from_hit(
+        &self,
+        _ray: &CameraRay,
+        origin: Vec3,
+        dir: Vec3,
+        clip: (f32, f32),
+        camera_density: f64,
+        sampler: &mut PixelSampler,
+        first_hit: Option<SurfaceHit>,
+    ) -> PathSample {
+        let weight = self
+            .bokeh
+            .as_ref()
+            .map(|b| move |hit: &SurfaceHit, d: Vec3| b.camera_weight(camera_density, origin, d, hit));
+        let direct = weight.as_ref().map(|w| w as &dyn Fn(&SurfaceHit, Vec3) -> f32);
+        self.tracer.trace_weighted_from_hit(self.scene, origin, dir, clip, sampler, direct, first_hit)
     }
 }
 
@@ -474,20 +521,37 @@ pub(crate) fn render_samples(
                 }
                 let wavelengths: [f64; CAMERA_BATCH] = std::array::from_fn(|i| lambdas[i].0);
                 let rays = rig.camera.generate_ray_batch(&film_uv, &lens_u, &wavelengths);
+                // 3. World rays and clipping planes (along the view axis); the batch's first hits
+                //    found together when the shader starts from them.
+                let world: [Option<WorldRay>; CAMERA_BATCH] = std::array::from_fn(|i| {
+                    let ray = rays[i].as_ref()?;
+                    let o = rig.to_world.transform_point3(ray.origin).as_vec3();
+                    let d = rig.to_world.transform_vector3(ray.direction).normalize().as_vec3();
+                    let axial = (-ray.direction.z / ray.direction.length()).max(1e-6);
+                    Some((o, d, ((clip_near / axial) as f32, (clip_far / axial) as f32)))
+                });
+                let first_hits = shader.packet_scene().map(|scene| {
+                    let queries: [(Vec3, Vec3, f32); CAMERA_BATCH] = std::array::from_fn(|i| {
+                        world[i]
+                            .filter(|_| i < chunk.len())
+                            .and_then(|(o, d, clip)| PathTracer::camera_query(o, d, clip))
+                            .unwrap_or((Vec3::ZERO, Vec3::ZERO, 0.0))
+                    });
+                    scene.intersect_packet(&queries)
+                });
                 for (i, &(col, s)) in chunk.iter().enumerate() {
                     let (Some(mut sampler), px) = (samplers[i].take(), &mut row[col]) else { continue };
                     let lambda_weight = lambdas[i].1;
                     px.samples += 1;
-                    let Some(ray) = rays[i] else {
+                    let (Some(ray), Some((o, d, clip))) = (rays[i], world[i]) else {
                         continue;
                     };
-                    // 3. World ray, clipping planes (along the view axis) and the path.
-                    let o = rig.to_world.transform_point3(ray.origin).as_vec3();
-                    let d = rig.to_world.transform_vector3(ray.direction).normalize().as_vec3();
-                    let axial = (-ray.direction.z / ray.direction.length()).max(1e-6);
-                    let clip = ((clip_near / axial) as f32, (clip_far / axial) as f32);
+                    // 4. The path.
                     let camera_density = bokeh.map_or(0.0, |b| b.camera_density(film_uv[i], lens_u[i], offsets[i]));
-                    let sample = shader.shade(&ray, o, d, clip, camera_density, &mut sampler);
+                    let sample = match &first_hits {
+                        Some(hits) => shader.shade_from_hit(&ray, o, d, clip, camera_density, &mut sampler, hits[i]),
+                        None => shader.shade(&ray, o, d, clip, camera_density, &mut sampler),
+                    };
                     let value = sample.radiance * lambda_weight * ray.weight as f32;
                     if !value.is_finite() || sample.dropped {
                         px.dropped += 1;

@@ -60,7 +60,7 @@ pub(super) fn dense_scene(triangles: usize) -> petzval_renderer::scene::Scene {
 }
 
 pub(super) fn bench_render(resolution: &str, spp: u32, triangles: usize) -> Result<(), Error> {
-    use petzval_renderer::integrator::{primary_ray_throughput, RenderScene};
+    use petzval_renderer::integrator::{primary_ray_throughput, primary_ray_throughput_packets, RenderScene};
     use petzval_renderer::render::{render, CameraRig, RenderSettings};
     use petzval_renderer::scene::demo;
     use petzval_renderer::{Aperture, Camera, ExactCamera, PinholeCamera, ThickCamera, ThinCamera};
@@ -78,17 +78,22 @@ pub(super) fn bench_render(resolution: &str, spp: u32, triangles: usize) -> Resu
     let total = t0.elapsed().as_secs_f64();
     let _ = primary_ray_throughput(&rs, 100_000);
     let rps = primary_ray_throughput(&rs, 2_000_000);
+    let _ = primary_ray_throughput_packets(&rs, 100_000);
+    let rps_packets = primary_ray_throughput_packets(&rs, 2_000_000);
     println!("## Scene throughput ({} triangles)", rs.triangle_count());
     println!();
-    println!("| BVH build | RenderScene::new | BVH memory | bytes/triangle | primary rays, 1 thread |");
-    println!("|---|---|---|---|---|");
     println!(
-        "| {:.3} s | {:.3} s | {:.1} MB | {:.1} | {:.2} M rays/s |",
+        "| BVH build | RenderScene::new | BVH memory | bytes/triangle | primary rays, 1 thread | in packets of 8 |"
+    );
+    println!("|---|---|---|---|---|---|");
+    println!(
+        "| {:.3} s | {:.3} s | {:.1} MB | {:.1} | {:.2} M rays/s | {:.2} M rays/s |",
         rs.bvh_build_time().as_secs_f64(),
         total,
         rs.bvh_memory_bytes() as f64 / 1e6,
         rs.bvh_memory_bytes() as f64 / rs.triangle_count() as f64,
-        rps / 1e6
+        rps / 1e6,
+        rps_packets / 1e6
     );
     println!();
     // 2. Camera models on the demo, same scene, resolution and spp.

@@ -54,6 +54,7 @@ use obvhs::{
 };
 
 use super::lights::{EmitterGroup, LightSet};
+use super::packet::{self, PACKET};
 use crate::sampler::hash_u32;
 use crate::scene::{cofactor, AlphaMode, Material, Mesh, Scene, TextureRef};
 use crate::Result;
@@ -959,18 +960,7 @@ impl RenderScene {
     /// Closest hit along `origin + t·dir`, 0 < t < `t_max` (`dir` is normalised here; `t` is in
     /// world units). Alpha cut-outs are skipped. None for no hit or a non-finite ray.
     pub fn intersect(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<SurfaceHit> {
-        let dir = dir.normalize_or_zero();
-        if (self.world.tris.is_empty() && self.tlas_leaves.is_empty())
-            || dir == Vec3::ZERO
-            || !origin.is_finite()
-            || !(t_max > 0.0)
-        {
-            return None;
-        }
-        // −0.0 → +0.0: obvhs takes the octant from `d < 0` but the inverse from the sign bit,
-        // so a −0.0 component would make every node test miss.
-        let dir = dir + Vec3::ZERO;
-        let ray_hash = if self.any_stochastic { Self::ray_hash(origin, dir) } else { 0 };
+        let (dir, ray_hash) = self.query_ray(origin, dir, t_max)?;
         let mut best: Option<(Candidate, f32, f32)> = None;
         let mut t_best = t_max;
         if !self.world.tris.is_empty() {
@@ -994,6 +984,97 @@ impl RenderScene {
                 t_best = hit.t;
             }
         }
+        self.finish_intersect(origin, dir, t_max, ray_hash, best, t_best)
+    }
+
+    /// Closest hits of up to [`PACKET`] rays at once, each as [`RenderScene::intersect`] gives
+    /// it (`rays[i]` = (origin, direction, `t_max`); lanes past `rays.len()` are unused). The
+    /// world BVH is traversed by the whole packet together (`packet.rs`), instances ray by ray.
+    /// Coherent rays (camera rays of one pixel or of a row) share most of their nodes.
+    pub fn intersect_packet(&self, rays: &[(Vec3, Vec3, f32)]) -> [Option<SurfaceHit>; PACKET] {
+        let mut out: [Option<SurfaceHit>; PACKET] = std::array::from_fn(|_| None);
+        // 1. Each lane's query ray, as `intersect` sets it up; invalid lanes stay inactive.
+        let mut query = [None; PACKET];
+        let mut active = 0u8;
+        for (i, &(o, d, t)) in rays.iter().take(PACKET).enumerate() {
+            query[i] = self.query_ray(o, d, t);
+            active |= (query[i].is_some() as u8) << i;
+        }
+        let lane = |i: usize| {
+            let (o, _, t) = rays.get(i).copied().unwrap_or((Vec3::ZERO, Vec3::Z, 0.0));
+            let (d, hash) = query[i].unwrap_or((Vec3::Z, 0));
+            (o, d, t, hash)
+        };
+        let mut best: [Option<(Candidate, f32, f32)>; PACKET] = [None; PACKET];
+        let mut t_best: [f32; PACKET] = std::array::from_fn(|i| lane(i).2);
+        // 2. The world BVH, the packet together (the closure is `intersect`'s, per lane).
+        if !self.world.tris.is_empty() && active != 0 {
+            let wrays: [WatertightRay; PACKET] = std::array::from_fn(|i| WatertightRay::new(lane(i).0, lane(i).1));
+            let obrays: [Ray; PACKET] = std::array::from_fn(|i| {
+                let (o, d, t, _) = lane(i);
+                Ray::new(o.to_array().into(), d.to_array().into(), 0.0, t)
+            });
+            let hashes: [u32; PACKET] = std::array::from_fn(|i| lane(i).3);
+            let tris = &self.world.tris;
+            let t = packet::closest_hits(&self.world.bvh, &obrays, active, |i, id, t_max| {
+                let tri = &tris[id];
+                if let Some((t, b1, b2)) = wrays[i].intersect(&tri.v, t_max) {
+                    let c = Candidate::Baked(tri.prim & !ALPHA_BIT);
+                    if tri.prim & ALPHA_BIT != 0 && !self.alpha_passes(c, b1, b2, hashes[i]) {
+                        return f32::INFINITY;
+                    }
+                    best[i] = Some((c, b1, b2));
+                    return t;
+                }
+                f32::INFINITY
+            });
+            for i in 0..PACKET {
+                if best[i].is_some() && t[i] < t_best[i] {
+                    t_best[i] = t[i];
+                }
+            }
+        }
+        // 3. Instances and the hit records, lane by lane.
+        for (i, slot) in out.iter_mut().enumerate() {
+            if active & (1 << i) != 0 {
+                let (o, d, t, hash) = lane(i);
+                *slot = self.finish_intersect(o, d, t, hash, best[i], t_best[i]);
+            }
+        }
+        out
+    }
+
+    /// `intersect`'s query ray: the unit direction (−0.0 made +0.0) and the alpha hash, or None
+    /// when nothing can be hit.
+    #[inline]
+    fn query_ray(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<(Vec3, u32)> {
+        let dir = dir.normalize_or_zero();
+        if (self.world.tris.is_empty() && self.tlas_leaves.is_empty())
+            || dir == Vec3::ZERO
+            || !origin.is_finite()
+            || !(t_max > 0.0)
+        {
+            return None;
+        }
+        // −0.0 → +0.0: obvhs takes the octant from `d < 0` but the inverse from the sign bit,
+        // so a −0.0 component would make every node test miss.
+        let dir = dir + Vec3::ZERO;
+        let ray_hash = if self.any_stochastic { Self::ray_hash(origin, dir) } else { 0 };
+        Some((dir, ray_hash))
+    }
+
+    /// The rest of `intersect` after the world BVH (best candidate so far at `t_best`): the
+    /// instances' top level, then the hit record.
+    #[inline]
+    fn finish_intersect(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_max: f32,
+        ray_hash: u32,
+        mut best: Option<(Candidate, f32, f32)>,
+        mut t_best: f32,
+    ) -> Option<SurfaceHit> {
         if !self.tlas_leaves.is_empty() {
             let ray = Ray::new(origin.to_array().into(), dir.to_array().into(), 0.0, t_best);
             let mut hit = RayHit::none();

@@ -8,12 +8,14 @@ pub mod accel;
 pub mod bsdf;
 mod light_sampling;
 pub mod lights;
+mod packet;
 pub mod path;
 
 pub use accel::{offset_ray_origin, BvhQuality, RenderScene, SurfaceHit};
 pub use bsdf::{Bsdf, BsdfSample, SurfaceBsdf};
 pub use light_sampling::spot_attenuation;
 pub use lights::{LightSample, LightSelection};
+pub use packet::PACKET;
 pub use path::{LightStrategy, PathSample, PathTracer};
 
 use glam::Vec3;
@@ -25,6 +27,16 @@ use std::time::Instant;
 /// per pixel of a square image of `rays` pixels, in scanline order, through
 /// [`RenderScene::intersect`] (full hit records). Rays are generated before timing.
 pub fn primary_ray_throughput(scene: &RenderScene, rays: usize) -> f64 {
+    primary_ray_throughput_in(scene, rays, false)
+}
+
+/// [`primary_ray_throughput`] with the same rays traced [`PACKET`] at a time (consecutive pixels
+/// of a row) through [`RenderScene::intersect_packet`].
+pub fn primary_ray_throughput_packets(scene: &RenderScene, rays: usize) -> f64 {
+    primary_ray_throughput_in(scene, rays, true)
+}
+
+fn primary_ray_throughput_in(scene: &RenderScene, rays: usize, packets: bool) -> f64 {
     let (bmin, bmax) = scene.bounds();
     let center = 0.5 * (bmin + bmax);
     let radius = (0.5 * (bmax - bmin).length()).max(1e-3);
@@ -49,9 +61,21 @@ pub fn primary_ray_throughput(scene: &RenderScene, rays: usize) -> f64 {
     }
     let start = Instant::now();
     let mut hits = 0usize;
-    for &d in &dirs {
-        if let Some(h) = scene.intersect(eye, d, f32::INFINITY) {
-            hits += (h.t > 0.0) as usize;
+    if packets {
+        let mut batch = [(eye, Vec3::Z, f32::INFINITY); PACKET];
+        for chunk in dirs.chunks(PACKET) {
+            for (b, &d) in batch.iter_mut().zip(chunk) {
+                b.1 = d;
+            }
+            for h in scene.intersect_packet(&batch[..chunk.len()]).iter().flatten() {
+                hits += (h.t > 0.0) as usize;
+            }
+        }
+    } else {
+        for &d in &dirs {
+            if let Some(h) = scene.intersect(eye, d, f32::INFINITY) {
+                hits += (h.t > 0.0) as usize;
+            }
         }
     }
     let secs = start.elapsed().as_secs_f64();

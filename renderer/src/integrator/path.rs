@@ -150,14 +150,55 @@ impl PathTracer {
         sampler: &mut PixelSampler,
         direct_weight: Option<DirectWeight>,
     ) -> PathSample {
-        let mut out = PathSample::miss(Vec3::ZERO);
-        let mut d = dir.normalize_or_zero();
+        self.trace_from(scene, origin, dir, clip, sampler, direct_weight, None)
+    }
+
+    /// The camera ray's first query in [`PathTracer::trace_weighted`]: (start, unit direction,
+    /// `t_max`) as passed to [`RenderScene::intersect`], or None when nothing is traced. The
+    /// render loop finds these first hits a packet at a time ([`RenderScene::intersect_packet`]).
+    pub fn camera_query(origin: Vec3, dir: Vec3, clip: (f32, f32)) -> Option<(Vec3, Vec3, f32)> {
+        let d = dir.normalize_or_zero();
         if d == Vec3::ZERO || !origin.is_finite() || !d.is_finite() {
-            return out;
+            return None;
         }
         let (t_near, t_far) = (clip.0.max(0.0), clip.1);
-        let mut o = origin + d * t_near;
-        let mut t_max = if t_far > t_near { t_far - t_near } else { 0.0 };
+        let t_max = if t_far > t_near { t_far - t_near } else { 0.0 };
+        Some((origin + d * t_near, d, t_max))
+    }
+
+    /// [`PathTracer::trace_weighted`] given the camera ray's first hit, found already for the
+    /// query [`PathTracer::camera_query`] returns (`first_hit`: what `intersect` gives for it).
+    #[allow(clippy::too_many_arguments)]
+    pub fn trace_weighted_from_hit(
+        &self,
+        scene: &RenderScene,
+        origin: Vec3,
+        dir: Vec3,
+        clip: (f32, f32),
+        sampler: &mut PixelSampler,
+        direct_weight: Option<DirectWeight>,
+        first_hit: Option<SurfaceHit>,
+    ) -> PathSample {
+        self.trace_from(scene, origin, dir, clip, sampler, direct_weight, Some(first_hit))
+    }
+
+    /// The path, with the first hit given (`Some`) or found here (`None`).
+    #[allow(clippy::too_many_arguments)]
+    fn trace_from(
+        &self,
+        scene: &RenderScene,
+        origin: Vec3,
+        dir: Vec3,
+        clip: (f32, f32),
+        sampler: &mut PixelSampler,
+        direct_weight: Option<DirectWeight>,
+        mut first_hit: Option<Option<SurfaceHit>>,
+    ) -> PathSample {
+        let mut out = PathSample::miss(Vec3::ZERO);
+        let Some((mut o, mut d, mut t_max)) = Self::camera_query(origin, dir, clip) else {
+            return out;
+        };
+        let t_near = clip.0.max(0.0);
         let env = &scene.scene().environment;
         let mut l = Vec3::ZERO;
         let mut beta = Vec3::ONE;
@@ -168,7 +209,11 @@ impl PathTracer {
         let mut depth = 0u32;
         let nee = self.strategy != LightStrategy::BsdfOnly;
         loop {
-            let found = if t_max > 0.0 { scene.intersect(o, d, t_max) } else { None };
+            let found = match first_hit.take() {
+                Some(given) => given,
+                None if t_max > 0.0 => scene.intersect(o, d, t_max),
+                None => None,
+            };
             let Some(hit) = found else {
                 let le = env_radiance(env, d);
                 if le != Vec3::ZERO {
