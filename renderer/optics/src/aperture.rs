@@ -261,6 +261,160 @@ impl Aperture {
     }
 }
 
+/// Blade counts up to which [`PreparedAperture`] keeps per-blade tables (the nearest-edge search
+/// is linear in the count); more blades use [`Aperture`]'s own formulas.
+const MAX_TABLED_BLADES: u32 = 32;
+
+/// Half-width of the band around a blade edge where [`PreparedAperture`]'s trigonometry-free
+/// test defers to [`Aperture::transmission`] (in circumradii, or in units of ρ² + 1 for curved
+/// blades): both compute the same edge distance to within ~10⁻¹⁵, so outside the band they agree.
+const BLADE_EDGE_BAND: f64 = 1e-9;
+
+/// An [`Aperture`] with its per-blade constants computed once (edge normals, triangle vertices,
+/// polygon area, a mask's rotation), for the cameras' and the lens's per-ray tests. Its
+/// [`PreparedAperture::transmission`] and [`PreparedAperture::sample_unit`] return the same
+/// bits as [`Aperture`]'s.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PreparedAperture {
+    aperture: Aperture,
+    blades: Option<BladeTables>,
+    /// A mask's rotation as (sin, cos).
+    mask_rotation: (f64, f64),
+}
+
+/// Per-blade constants of a regular polygon (edge middles at `rotation + k·2π/N`).
+#[derive(Debug, Clone, PartialEq)]
+struct BladeTables {
+    /// Unit edge normals, one per blade.
+    normals: Vec<glam::DVec2>,
+    /// Each sampling triangle's two outer vertices (k and its successor, as `sample_unit` makes them).
+    triangles: Vec<(glam::DVec2, glam::DVec2)>,
+    /// Polygon area for circumradius 1.
+    area: f64,
+    /// cos(π/N).
+    apothem: f64,
+    /// Curved blades: arc centre along the normal and arc radius (d, ρ).
+    arc: Option<(f64, f64)>,
+}
+
+impl PreparedAperture {
+    /// Precomputes `aperture`'s per-ray constants.
+    pub fn new(aperture: Aperture) -> Self {
+        use glam::DVec2;
+        use std::f64::consts::PI;
+        let blades = match aperture.shape {
+            ApertureShape::Blades { count, curvature } if (3..=MAX_TABLED_BLADES).contains(&count) => {
+                let n = count as f64;
+                let half = PI / n;
+                let rotation = aperture.rotation_rad;
+                // the same expressions as `sample_unit` and `inside_blades`, so the same bits
+                let triangles = (0..count)
+                    .map(|k| {
+                        let a0 = rotation + PI / n + 2.0 * PI * k as f64 / n;
+                        let a1 = a0 + 2.0 * PI / n;
+                        (DVec2::new(a0.cos(), a0.sin()), DVec2::new(a1.cos(), a1.sin()))
+                    })
+                    .collect();
+                let normals = (0..count)
+                    .map(|k| {
+                        let a = rotation + 2.0 * half * k as f64;
+                        DVec2::new(a.cos(), a.sin())
+                    })
+                    .collect();
+                let apothem = half.cos();
+                let arc = (curvature > 0.0).then(|| {
+                    let rho = 1.0 / curvature;
+                    let s = half.sin();
+                    (apothem - (rho * rho - s * s).sqrt(), rho)
+                });
+                Some(BladeTables { normals, triangles, area: 0.5 * n * (2.0 * PI / n).sin(), apothem, arc })
+            }
+            _ => None,
+        };
+        let mask_rotation = aperture.rotation_rad.sin_cos();
+        PreparedAperture { aperture, blades, mask_rotation }
+    }
+
+    /// The aperture it was made from.
+    pub fn aperture(&self) -> &Aperture {
+        &self.aperture
+    }
+
+    /// [`Aperture::transmission`], with the blade and mask constants precomputed.
+    #[inline]
+    pub fn transmission(&self, x: f64, y: f64, radius_mm: f64) -> f64 {
+        match (&self.aperture.shape, &self.blades) {
+            (ApertureShape::Blades { .. }, Some(t)) => {
+                // 1. Undo the squeeze and normalise, as `Aperture::transmission` does.
+                let u = x * self.aperture.anamorphic_ratio / radius_mm;
+                let v = y / radius_mm;
+                if u * u + v * v > 1.0 {
+                    return 0.0;
+                }
+                // 2. The nearest edge is the one whose normal has the largest projection.
+                let p = glam::DVec2::new(u, v);
+                let (mut along, mut k_best) = (f64::NEG_INFINITY, 0);
+                for (k, n) in t.normals.iter().enumerate() {
+                    let a = p.dot(*n);
+                    if a > along {
+                        (along, k_best) = (a, k);
+                    }
+                }
+                // 3. Signed distance past the edge (or the arc), and the exact test near it.
+                let past = match t.arc {
+                    None => along - t.apothem,
+                    Some((d, rho)) => {
+                        let across = t.normals[k_best].perp_dot(p);
+                        ((along - d).powi(2) + across * across - rho * rho) / (rho * rho + 1.0)
+                    }
+                };
+                if past.abs() <= BLADE_EDGE_BAND {
+                    self.aperture.transmission(x, y, radius_mm)
+                } else if past < 0.0 {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+            (ApertureShape::Mask(mask), _) => {
+                let u = x * self.aperture.anamorphic_ratio / radius_mm;
+                let v = y / radius_mm;
+                let (s, c) = self.mask_rotation;
+                mask.lookup(c * u + s * v, -s * u + c * v)
+            }
+            _ => self.aperture.transmission(x, y, radius_mm),
+        }
+    }
+
+    /// [`Aperture::sample_unit`], with the straight-blade triangles precomputed.
+    #[inline]
+    pub fn sample_unit(&self, u: glam::DVec2) -> (glam::DVec2, f64) {
+        match (&self.aperture.shape, &self.blades) {
+            (ApertureShape::Blades { count, curvature }, Some(t)) if *curvature == 0.0 => {
+                // 1. Choose a triangle, then a point in it, as `Aperture::sample_unit` does.
+                let n = *count as f64;
+                let k = (u.x * n).floor().min(n - 1.0);
+                let ux = u.x * n - k;
+                let (v0, v1) = t.triangles[k as usize];
+                let su = ux.sqrt();
+                let p = v0 * (su * (1.0 - u.y)) + v1 * (su * u.y);
+                // 2. The anamorphic squeeze.
+                let ratio = self.aperture.anamorphic_ratio;
+                (glam::DVec2::new(p.x / ratio, p.y), (1.0 / t.area) * ratio)
+            }
+            _ => self.aperture.sample_unit(u),
+        }
+    }
+
+    /// [`Aperture::clearance_mm`].
+    pub fn clearance_mm(&self, x: f64, y: f64, radius_mm: f64) -> (f64, f64) {
+        match self.aperture.shape {
+            ApertureShape::Mask(_) => (f64::INFINITY, self.transmission(x, y, radius_mm)),
+            _ => self.aperture.clearance_mm(x, y, radius_mm),
+        }
+    }
+}
+
 /// Shirley–Chiu concentric mapping of [0,1)² to the unit disc.
 pub fn concentric_disk(u: glam::DVec2) -> glam::DVec2 {
     let a = 2.0 * u.x - 1.0;

@@ -9,7 +9,7 @@
 //! | `stop_semi_diameter_mm` | f64, current stop opening (circumradius) | mm | file's `stop_semi_diameter_mm`, else widest |
 //! | `wavelength_nm` (per trace) | f64 | nm | primary wavelength |
 
-use super::aperture::{Aperture, ApertureMask, ApertureShape};
+use super::aperture::{Aperture, ApertureMask, ApertureShape, PreparedAperture};
 use super::glass::{Material, WAVELENGTH_D_NM};
 use super::paraxial::{self, ParaxialData};
 use super::prescription::{self, ApertureShapeSpec, Prescription, SourceMap, DEFAULT_WAVELENGTHS_NM};
@@ -154,7 +154,7 @@ pub struct Lens {
     surfaces: Vec<LensSurface>,
     stop_index: usize,
     stop_semi_diameter_mm: f64,
-    aperture: Aperture,
+    aperture: PreparedAperture,
     primary_wavelength_nm: f64,
     wavelengths_nm: Vec<f64>,
     /// Index after each surface at the primary wavelength.
@@ -247,7 +247,7 @@ impl Lens {
             surfaces,
             stop_index,
             stop_semi_diameter_mm: stop_open,
-            aperture,
+            aperture: PreparedAperture::new(aperture),
             primary_wavelength_nm: primary,
             wavelengths_nm: wavelengths,
             primary_index_after,
@@ -329,7 +329,7 @@ impl Lens {
             }
             lens.rotationally_symmetric = false;
         }
-        lens = lens.with_aperture(self.aperture.clone());
+        lens = lens.with_aperture(self.aperture().clone());
         lens.with_stop_semi_diameter(self.stop_semi_diameter_mm.min(lens.max_stop_semi_diameter_mm()))
     }
 
@@ -377,7 +377,7 @@ impl Lens {
     }
     /// The stop's shape.
     pub fn aperture(&self) -> &Aperture {
-        &self.aperture
+        self.aperture.aperture()
     }
     /// Primary wavelength.
     pub fn primary_wavelength_nm(&self) -> f64 {
@@ -456,8 +456,8 @@ impl Lens {
     /// sampling bounds of bladed, masked or anamorphic openings); the housing still clips.
     pub fn with_circumscribed_circular_stop(&self) -> Lens {
         let mut lens = self.clone();
-        lens.stop_semi_diameter_mm = self.stop_semi_diameter_mm * self.aperture.bounding_radius_factor();
-        lens.aperture = Aperture::default();
+        lens.stop_semi_diameter_mm = self.stop_semi_diameter_mm * self.aperture().bounding_radius_factor();
+        lens.aperture = PreparedAperture::new(Aperture::default());
         // The pupils grow with the stop (the paraxial data was the smaller opening's).
         lens.analysed()
     }
@@ -491,7 +491,7 @@ impl Lens {
     /// A copy with a different stop shape.
     pub fn with_aperture(&self, aperture: Aperture) -> Lens {
         let mut lens = self.clone();
-        lens.aperture = aperture;
+        lens.aperture = PreparedAperture::new(aperture);
         lens
     }
 

@@ -26,7 +26,7 @@ pub mod prescription;
 pub mod pupil;
 pub mod surface;
 
-pub use aperture::{Aperture, ApertureMask, ApertureShape};
+pub use aperture::{Aperture, ApertureMask, ApertureShape, PreparedAperture};
 pub use error::{Error, Result};
 pub use glass::Material;
 pub use import::{load_lens_file, read_prescription};

@@ -13,7 +13,7 @@
 use super::{centre_mean, check_positive, geometric_factor, thin_lens_direction, thin_lens_image_distance};
 use super::{CameraRay, Sensor};
 use crate::error::Result;
-use crate::optics::aperture::Aperture;
+use crate::optics::aperture::{Aperture, PreparedAperture};
 use crate::optics::lens::Lens;
 use glam::{DVec2, DVec3};
 
@@ -28,7 +28,7 @@ pub struct ThickCamera {
     entrance_pupil_z_mm: f64,
     f_number: f64,
     focus_distance_m: Option<f64>,
-    aperture: Aperture,
+    aperture: PreparedAperture,
     film_z_mm: f64,
     exposure: f64,
 }
@@ -65,7 +65,7 @@ impl ThickCamera {
             entrance_pupil_z_mm: p.entrance_pupil_z_mm,
             f_number,
             focus_distance_m,
-            aperture,
+            aperture: PreparedAperture::new(aperture),
             film_z_mm: p.rear_principal_z_mm + v,
             exposure: 1.0,
         };
@@ -111,7 +111,7 @@ impl ThickCamera {
 
     /// Aperture shape.
     pub fn aperture(&self) -> &Aperture {
-        &self.aperture
+        self.aperture.aperture()
     }
 
     /// Film pivot z (lens frame).

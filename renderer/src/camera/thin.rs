@@ -19,7 +19,7 @@
 
 use super::{centre_mean, check_positive, geometric_factor, thin_lens_direction, CameraRay, Sensor};
 use crate::error::Result;
-use crate::optics::aperture::Aperture;
+use crate::optics::aperture::{Aperture, PreparedAperture};
 use glam::{DVec2, DVec3};
 
 /// An ideal thin lens (see the module docs).
@@ -29,7 +29,7 @@ pub struct ThinCamera {
     focal_length_mm: f64,
     f_number: f64,
     focus_distance_m: Option<f64>,
-    aperture: Aperture,
+    aperture: PreparedAperture,
     natural_vignetting: bool,
     film_z_mm: f64,
     /// Focal length of the lens focused at the focus distance: F·s/(F + s).
@@ -64,7 +64,7 @@ impl ThinCamera {
             focal_length_mm,
             f_number,
             focus_distance_m,
-            aperture,
+            aperture: PreparedAperture::new(aperture),
             natural_vignetting: true,
             film_z_mm: focal_length_mm,
             lens_focal_mm,
@@ -106,7 +106,7 @@ impl ThinCamera {
 
     /// Aperture shape.
     pub fn aperture(&self) -> &Aperture {
-        &self.aperture
+        self.aperture.aperture()
     }
 
     /// Whether the cos⁴ falloff is applied.

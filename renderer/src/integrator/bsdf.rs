@@ -123,15 +123,17 @@ pub fn sample_cosine_hemisphere(u: Vec2) -> Vec3 {
 /// change within a width of about α).
 const TABLE_N: usize = 64;
 
-struct EnergyTables {
-    /// ∫ D·V·μi dωi (F = 1), [roughness][μ].
-    e1: [[f32; TABLE_N]; TABLE_N],
-    /// ∫ (1 − v·h)^5·D·V·μi dωi.
-    e2: [[f32; TABLE_N]; TABLE_N],
-    /// 2∫ E1(μ) μ dμ per roughness (of the interpolated table).
-    e1_avg: [f32; TABLE_N],
-    /// 2∫ E2(μ) μ dμ per roughness.
-    e2_avg: [f32; TABLE_N],
+/// One roughness row of the tables, built on first use (a scene touches only the rows of its
+/// materials' roughness values; a row costs 64 × 1024 visible-normal samples).
+struct EnergyRow {
+    /// ∫ D·V·μi dωi (F = 1) per μ node.
+    e1: [f32; TABLE_N],
+    /// ∫ (1 − v·h)^5·D·V·μi dωi per μ node.
+    e2: [f32; TABLE_N],
+    /// 2∫ E1(μ) μ dμ (of the interpolated row).
+    e1_avg: f32,
+    /// 2∫ E2(μ) μ dμ.
+    e2_avg: f32,
 }
 
 fn radical_inverse_vdc(mut bits: u32) -> f32 {
@@ -139,58 +141,53 @@ fn radical_inverse_vdc(mut bits: u32) -> f32 {
     bits as f32 * (1.0 / 4_294_967_296.0)
 }
 
-fn energy_tables() -> &'static EnergyTables {
-    static TABLES: OnceLock<EnergyTables> = OnceLock::new();
-    TABLES.get_or_init(|| {
-        let mut t = EnergyTables {
-            e1: [[0.0; TABLE_N]; TABLE_N],
-            e2: [[0.0; TABLE_N]; TABLE_N],
-            e1_avg: [0.0; TABLE_N],
-            e2_avg: [0.0; TABLE_N],
-        };
-        const N: u32 = 1024;
-        for ri in 0..TABLE_N {
-            let r = ri as f32 / (TABLE_N - 1) as f32;
-            let alpha = (r * r).max(MIN_ALPHA);
-            let a2 = alpha * alpha;
-            for mi in 0..TABLE_N {
-                let x = mi as f32 / (TABLE_N - 1) as f32;
-                let mu = (x * x).max(1e-5);
-                let wo = Vec3::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
-                let lo = smith_lambda(mu, a2);
-                let (mut s1, mut s2) = (0.0f64, 0.0f64);
-                for k in 0..N {
-                    let u = Vec2::new((k as f32 + 0.5) / N as f32, radical_inverse_vdc(k));
-                    let h = sample_vndf(wo, alpha, u);
-                    let voh = wo.dot(h);
-                    let wi = 2.0 * voh * h - wo;
-                    if wi.z <= 0.0 {
-                        continue;
-                    }
-                    // f·μi/pdf = G2/G1(wo)
-                    let w = (1.0 + lo) / (1.0 + lo + smith_lambda(wi.z, a2));
-                    s1 += w as f64;
-                    s2 += (w * schlick_weight(voh)) as f64;
-                }
-                t.e1[ri][mi] = (s1 / N as f64) as f32;
-                t.e2[ri][mi] = (s2 / N as f64) as f32;
+/// Row `ri` (roughness ri / (TABLE_N − 1)), computed once per process.
+fn energy_row(ri: usize) -> &'static EnergyRow {
+    static ROWS: [OnceLock<EnergyRow>; TABLE_N] = [const { OnceLock::new() }; TABLE_N];
+    ROWS[ri].get_or_init(|| build_energy_row(ri))
+}
+
+fn build_energy_row(ri: usize) -> EnergyRow {
+    let mut row = EnergyRow { e1: [0.0; TABLE_N], e2: [0.0; TABLE_N], e1_avg: 0.0, e2_avg: 0.0 };
+    // 1. Directional albedos by 1024 visible-normal samples per μ node.
+    const N: u32 = 1024;
+    let r = ri as f32 / (TABLE_N - 1) as f32;
+    let alpha = (r * r).max(MIN_ALPHA);
+    let a2 = alpha * alpha;
+    for mi in 0..TABLE_N {
+        let x = mi as f32 / (TABLE_N - 1) as f32;
+        let mu = (x * x).max(1e-5);
+        let wo = Vec3::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
+        let lo = smith_lambda(mu, a2);
+        let (mut s1, mut s2) = (0.0f64, 0.0f64);
+        for k in 0..N {
+            let u = Vec2::new((k as f32 + 0.5) / N as f32, radical_inverse_vdc(k));
+            let h = sample_vndf(wo, alpha, u);
+            let voh = wo.dot(h);
+            let wi = 2.0 * voh * h - wo;
+            if wi.z <= 0.0 {
+                continue;
             }
+            // f·μi/pdf = G2/G1(wo)
+            let w = (1.0 + lo) / (1.0 + lo + smith_lambda(wi.z, a2));
+            s1 += w as f64;
+            s2 += (w * schlick_weight(voh)) as f64;
         }
-        // Averages of the interpolated curves (what eval uses), by midpoint quadrature.
-        const M: usize = 2048;
-        for ri in 0..TABLE_N {
-            let (mut a1, mut a2) = (0.0f64, 0.0f64);
-            for k in 0..M {
-                let mu = (k as f32 + 0.5) / M as f32;
-                let (x1, x2) = interp_mu(&t.e1[ri], &t.e2[ri], mu);
-                a1 += (2.0 * x1 * mu) as f64;
-                a2 += (2.0 * x2 * mu) as f64;
-            }
-            t.e1_avg[ri] = (a1 / M as f64) as f32;
-            t.e2_avg[ri] = (a2 / M as f64) as f32;
-        }
-        t
-    })
+        row.e1[mi] = (s1 / N as f64) as f32;
+        row.e2[mi] = (s2 / N as f64) as f32;
+    }
+    // 2. Averages of the interpolated curves (what eval uses), by midpoint quadrature.
+    const M: usize = 2048;
+    let (mut a1, mut a2) = (0.0f64, 0.0f64);
+    for k in 0..M {
+        let mu = (k as f32 + 0.5) / M as f32;
+        let (x1, x2) = interp_mu(&row.e1, &row.e2, mu);
+        a1 += (2.0 * x1 * mu) as f64;
+        a2 += (2.0 * x2 * mu) as f64;
+    }
+    row.e1_avg = (a1 / M as f64) as f32;
+    row.e2_avg = (a2 / M as f64) as f32;
+    row
 }
 
 #[inline]
@@ -201,30 +198,37 @@ fn interp_mu(row1: &[f32; TABLE_N], row2: &[f32; TABLE_N], mu: f32) -> (f32, f32
     (row1[i] + (row1[i + 1] - row1[i]) * f, row2[i] + (row2[i + 1] - row2[i]) * f)
 }
 
-/// Roughness row index and weight for the tables.
-#[derive(Debug, Clone, Copy)]
+/// The two roughness rows around a roughness, and the weight between them.
+#[derive(Clone, Copy)]
 struct RoughnessRow {
-    i: usize,
+    lo: &'static EnergyRow,
+    hi: &'static EnergyRow,
     f: f32,
+}
+
+impl std::fmt::Debug for RoughnessRow {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RoughnessRow").field("f", &self.f).finish_non_exhaustive()
+    }
 }
 
 impl RoughnessRow {
     fn new(roughness: f32) -> Self {
         let x = roughness.clamp(0.0, 1.0) * (TABLE_N - 1) as f32;
         let i = (x as usize).min(TABLE_N - 2);
-        RoughnessRow { i, f: x - i as f32 }
+        RoughnessRow { lo: energy_row(i), hi: energy_row(i + 1), f: x - i as f32 }
     }
 
     /// (E1(μ), E2(μ)).
-    fn e(&self, t: &EnergyTables, mu: f32) -> (f32, f32) {
-        let (a1, a2) = interp_mu(&t.e1[self.i], &t.e2[self.i], mu);
-        let (b1, b2) = interp_mu(&t.e1[self.i + 1], &t.e2[self.i + 1], mu);
+    fn e(&self, mu: f32) -> (f32, f32) {
+        let (a1, a2) = interp_mu(&self.lo.e1, &self.lo.e2, mu);
+        let (b1, b2) = interp_mu(&self.hi.e1, &self.hi.e2, mu);
         (a1 + (b1 - a1) * self.f, a2 + (b2 - a2) * self.f)
     }
 
-    fn avg(&self, t: &EnergyTables) -> (f32, f32) {
-        let i = self.i;
-        (t.e1_avg[i] + (t.e1_avg[i + 1] - t.e1_avg[i]) * self.f, t.e2_avg[i] + (t.e2_avg[i + 1] - t.e2_avg[i]) * self.f)
+    fn avg(&self) -> (f32, f32) {
+        let (lo, hi) = (self.lo, self.hi);
+        (lo.e1_avg + (hi.e1_avg - lo.e1_avg) * self.f, lo.e2_avg + (hi.e2_avg - lo.e2_avg) * self.f)
     }
 }
 
@@ -256,7 +260,7 @@ impl Bsdf {
         let f90_d = specular;
         let alpha = (roughness * roughness).max(MIN_ALPHA);
         let row = RoughnessRow::new(roughness);
-        let (a1, a2) = row.avg(energy_tables());
+        let (a1, a2) = row.avg();
         let e_avg = (f0_d * a1 + (f90_d - f0_d) * a2).clamp(0.0, 1.0);
         let diffuse_scale = if 1.0 - e_avg > 1e-4 && metallic < 1.0 {
             base * ((1.0 - metallic) * FRAC_1_PI / (1.0 - e_avg))
@@ -277,7 +281,7 @@ impl Bsdf {
         if self.f90_d == 0.0 && self.f0_d == 0.0 {
             return 0.0;
         }
-        let (e1, e2) = self.row.e(energy_tables(), mu);
+        let (e1, e2) = self.row.e(mu);
         (self.f0_d * e1 + (self.f90_d - self.f0_d) * e2).clamp(0.0, 1.0)
     }
 
