@@ -8,6 +8,7 @@
 //! | `lens` | [`Lens`], already stopped down and with its stop shape | — | — |
 //! | `focus_distance_m` | optional f64 from the entrance pupil (None = infinity) | m | None |
 
+use super::sensor::PreparedSensor;
 use super::{centre_mean, check_positive, geometric_factor, CameraRay, FilmConnection, Sensor};
 use crate::error::{Error, Result};
 use crate::optics::lens::{Lens, Ray, TraceDirection};
@@ -18,7 +19,7 @@ use glam::{DVec2, DVec3};
 /// computed by [`ExactCamera::new`].
 #[derive(Debug, Clone)]
 pub struct ExactCamera {
-    sensor: Sensor,
+    sensor: PreparedSensor,
     lens: Lens,
     focus_distance_m: Option<f64>,
     film_z_mm: f64,
@@ -36,8 +37,16 @@ impl ExactCamera {
         let (r_max, dz) = sensor.extent();
         let pupil = ExitPupilBounds::compute(&lens, film_z_mm, dz, r_max * 1.001);
         let front_plane_z_mm = front_plane_z_mm(&lens);
-        let mut cam = ExactCamera { sensor, lens, focus_distance_m, film_z_mm, pupil, exposure: 1.0, front_plane_z_mm };
-        let centre = cam.sensor.axis_film_coord();
+        let mut cam = ExactCamera {
+            sensor: PreparedSensor::new(sensor),
+            lens,
+            focus_distance_m,
+            film_z_mm,
+            pupil,
+            exposure: 1.0,
+            front_plane_z_mm,
+        };
+        let centre = cam.sensor.sensor().axis_film_coord();
         let mean = centre_mean(|u| cam.raw_ray(centre, u, cam.lens.primary_wavelength_nm()).map(|r| r.weight));
         if !(mean > 0.0) {
             return Err(Error::camera(
@@ -80,7 +89,7 @@ impl ExactCamera {
 
     /// Sensor.
     pub fn sensor(&self) -> &Sensor {
-        &self.sensor
+        self.sensor.sensor()
     }
 
     /// The lens (stopped down).

@@ -6,6 +6,7 @@
 //! | `focal_length_mm` | f64: pinhole-to-film distance | mm | 50 |
 //! | `natural_vignetting` | bool: include the cos⁴ falloff | — | true |
 
+use super::sensor::PreparedSensor;
 use super::{check_positive, geometric_factor, CameraRay, Sensor};
 use crate::error::Result;
 use glam::{DVec2, DVec3};
@@ -13,7 +14,7 @@ use glam::{DVec2, DVec3};
 /// A pinhole camera.
 #[derive(Debug, Clone)]
 pub struct PinholeCamera {
-    sensor: Sensor,
+    sensor: PreparedSensor,
     focal_length_mm: f64,
     natural_vignetting: bool,
 }
@@ -23,7 +24,7 @@ impl PinholeCamera {
     pub fn new(sensor: Sensor, focal_length_mm: f64) -> Result<Self> {
         sensor.validate()?;
         check_positive("focal_length_mm", focal_length_mm)?;
-        Ok(PinholeCamera { sensor, focal_length_mm, natural_vignetting: true })
+        Ok(PinholeCamera { sensor: PreparedSensor::new(sensor), focal_length_mm, natural_vignetting: true })
     }
 
     /// The same camera with or without the cos⁴ falloff.
@@ -33,7 +34,7 @@ impl PinholeCamera {
 
     /// Sensor.
     pub fn sensor(&self) -> &Sensor {
-        &self.sensor
+        self.sensor.sensor()
     }
 
     /// Pinhole-to-film distance.

@@ -66,15 +66,27 @@ impl Sensor {
     /// with the sensor's pivot (where the axis meets it) at z = `film_z_mm`. The image is
     /// inverted on the film, so the upright image position maps to the mirrored film point.
     pub fn film_point(&self, film: DVec2, film_z_mm: f64) -> DVec3 {
+        self.film_point_rotated(&self.rotation(), film, film_z_mm)
+    }
+
+    /// [`Sensor::film_point`] with the sensor's [`Sensor::rotation`] given.
+    #[inline]
+    fn film_point_rotated(&self, rotation: &DMat3, film: DVec2, film_z_mm: f64) -> DVec3 {
         let sx = (film.x - 0.5) * self.width_mm + self.shift_mm.x;
         let sy = (0.5 - film.y) * self.height_mm + self.shift_mm.y;
-        DVec3::new(0.0, 0.0, film_z_mm) + self.rotation() * DVec3::new(-sx, -sy, 0.0)
+        DVec3::new(0.0, 0.0, film_z_mm) + *rotation * DVec3::new(-sx, -sy, 0.0)
     }
 
     /// The inverse of [`Sensor::film_point`]: the image position of lens-frame point `p` on
     /// the sensor plane (pivot at z = `film_z_mm`).
     pub fn film_coord(&self, p: DVec3, film_z_mm: f64) -> DVec2 {
-        let local = self.rotation().transpose() * (p - DVec3::new(0.0, 0.0, film_z_mm));
+        self.film_coord_rotated(&self.rotation(), p, film_z_mm)
+    }
+
+    /// [`Sensor::film_coord`] with the sensor's [`Sensor::rotation`] given.
+    #[inline]
+    fn film_coord_rotated(&self, rotation: &DMat3, p: DVec3, film_z_mm: f64) -> DVec2 {
+        let local = rotation.transpose() * (p - DVec3::new(0.0, 0.0, film_z_mm));
         let (sx, sy) = (-local.x, -local.y);
         DVec2::new((sx - self.shift_mm.x) / self.width_mm + 0.5, 0.5 - (sy - self.shift_mm.y) / self.height_mm)
     }
@@ -95,5 +107,46 @@ impl Sensor {
             dz = dz.max(p.z.abs());
         }
         (r, dz)
+    }
+}
+
+/// A [`Sensor`] with its rotation and normal computed once, for the cameras' per-ray work
+/// (the same bits as [`Sensor::film_point`] and [`Sensor::normal`], without their four
+/// sines and cosines per call).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PreparedSensor {
+    sensor: Sensor,
+    rotation: DMat3,
+    normal: DVec3,
+}
+
+impl PreparedSensor {
+    /// Precomputes `sensor`'s rotation and normal.
+    pub fn new(sensor: Sensor) -> Self {
+        let rotation = sensor.rotation();
+        PreparedSensor { sensor, rotation, normal: rotation * DVec3::Z }
+    }
+
+    /// The sensor.
+    pub fn sensor(&self) -> &Sensor {
+        &self.sensor
+    }
+
+    /// [`Sensor::normal`].
+    #[inline]
+    pub fn normal(&self) -> DVec3 {
+        self.normal
+    }
+
+    /// [`Sensor::film_point`].
+    #[inline]
+    pub fn film_point(&self, film: DVec2, film_z_mm: f64) -> DVec3 {
+        self.sensor.film_point_rotated(&self.rotation, film, film_z_mm)
+    }
+
+    /// [`Sensor::film_coord`].
+    #[inline]
+    pub fn film_coord(&self, p: DVec3, film_z_mm: f64) -> DVec2 {
+        self.sensor.film_coord_rotated(&self.rotation, p, film_z_mm)
     }
 }

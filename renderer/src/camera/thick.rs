@@ -10,6 +10,7 @@
 //! | `focus_distance_m` | optional f64 from the entrance pupil (None = infinity) | m | None |
 //! | `aperture` | [`Aperture`] shape | — | the lens's |
 
+use super::sensor::PreparedSensor;
 use super::{centre_mean, check_positive, geometric_factor, thin_lens_direction, thin_lens_image_distance};
 use super::{CameraRay, Sensor};
 use crate::error::Result;
@@ -21,7 +22,7 @@ use glam::{DVec2, DVec3};
 /// value is computed by [`ThickCamera::new`].
 #[derive(Debug, Clone)]
 pub struct ThickCamera {
-    sensor: Sensor,
+    sensor: PreparedSensor,
     focal_length_mm: f64,
     front_principal_z_mm: f64,
     rear_principal_z_mm: f64,
@@ -58,7 +59,7 @@ impl ThickCamera {
         };
         let v = thin_lens_image_distance(f, u)?;
         let mut cam = ThickCamera {
-            sensor,
+            sensor: PreparedSensor::new(sensor),
             focal_length_mm: f,
             front_principal_z_mm: p.front_principal_z_mm,
             rear_principal_z_mm: p.rear_principal_z_mm,
@@ -69,14 +70,14 @@ impl ThickCamera {
             film_z_mm: p.rear_principal_z_mm + v,
             exposure: 1.0,
         };
-        let centre = cam.sensor.axis_film_coord();
+        let centre = cam.sensor.sensor().axis_film_coord();
         cam.exposure = 1.0 / centre_mean(|u| cam.raw_ray(centre, u).map(|r| r.weight));
         Ok(cam)
     }
 
     /// Sensor.
     pub fn sensor(&self) -> &Sensor {
-        &self.sensor
+        self.sensor.sensor()
     }
 
     /// Focal length.

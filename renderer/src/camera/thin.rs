@@ -17,6 +17,7 @@
 //! camera is immutable afterwards ([`ThinCamera::with_natural_vignetting`] picks the other
 //! precomputed normalisation).
 
+use super::sensor::PreparedSensor;
 use super::{centre_mean, check_positive, geometric_factor, thin_lens_direction, CameraRay, Sensor};
 use crate::error::Result;
 use crate::optics::aperture::{Aperture, PreparedAperture};
@@ -25,7 +26,7 @@ use glam::{DVec2, DVec3};
 /// An ideal thin lens (see the module docs).
 #[derive(Debug, Clone)]
 pub struct ThinCamera {
-    sensor: Sensor,
+    sensor: PreparedSensor,
     focal_length_mm: f64,
     f_number: f64,
     focus_distance_m: Option<f64>,
@@ -60,7 +61,7 @@ impl ThinCamera {
             None => focal_length_mm,
         };
         let mut cam = ThinCamera {
-            sensor,
+            sensor: PreparedSensor::new(sensor),
             focal_length_mm,
             f_number,
             focus_distance_m,
@@ -70,7 +71,7 @@ impl ThinCamera {
             lens_focal_mm,
             exposure: [1.0; 2],
         };
-        let centre = cam.sensor.axis_film_coord();
+        let centre = cam.sensor.sensor().axis_film_coord();
         let natural = 1.0 / centre_mean(|u| cam.raw_ray(centre, u).map(|r| r.weight));
         cam.natural_vignetting = false;
         let flat = 1.0 / centre_mean(|u| cam.raw_ray(centre, u).map(|r| r.weight));
@@ -86,7 +87,7 @@ impl ThinCamera {
 
     /// Sensor.
     pub fn sensor(&self) -> &Sensor {
-        &self.sensor
+        self.sensor.sensor()
     }
 
     /// Focal length F (sets the field of view).
