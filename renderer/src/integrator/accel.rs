@@ -328,6 +328,122 @@ impl WatertightRay {
     }
 }
 
+/// The watertight test of one triangle against up to eight rays that share their axis
+/// permutation `k` (coherent rays: one pixel's camera rays), as the eight lanes of AVX
+/// operations: per lane the same products, differences and comparisons in the same order as
+/// [`WatertightRay::intersect`] (no fused operations), so the same bits.
+#[cfg(target_arch = "x86_64")]
+struct WatertightLanes {
+    k: [usize; 3],
+    /// Origins' components kx, ky, kz per lane.
+    org: [[f32; PACKET]; 3],
+    /// Shears sx, sy, sz per lane.
+    s: [[f32; PACKET]; 3],
+}
+
+/// What [`WatertightLanes::intersect`] finds for a lane mask.
+#[cfg(target_arch = "x86_64")]
+struct LaneHits {
+    /// Lanes with a hit at 0 < t < t_max.
+    hit: u8,
+    /// Lanes whose edge functions had an exact zero: [`WatertightRay::intersect`] decides them
+    /// (its double-precision retry).
+    retry: u8,
+    t: [f32; PACKET],
+    b1: [f32; PACKET],
+    b2: [f32; PACKET],
+}
+
+#[cfg(target_arch = "x86_64")]
+impl WatertightLanes {
+    /// The lanes of `rays` in `active`, when they all share one permutation.
+    fn new(rays: &[WatertightRay; PACKET], active: u8) -> Option<WatertightLanes> {
+        let lead = &rays[active.trailing_zeros() as usize % PACKET];
+        let mut lanes = WatertightLanes { k: lead.k, org: [[0.0; PACKET]; 3], s: [[0.0; PACKET]; 3] };
+        for (i, r) in rays.iter().enumerate() {
+            if active & (1 << i) == 0 {
+                continue;
+            }
+            if r.k != lead.k {
+                return None;
+            }
+            for a in 0..3 {
+                lanes.org[a][i] = r.org[lead.k[a]];
+                lanes.s[a][i] = r.s[a];
+            }
+        }
+        Some(lanes)
+    }
+
+    /// Tests triangle `v` against the lanes of `mask`, with each lane's `t_max`.
+    #[target_feature(enable = "avx2")]
+    fn intersect(&self, v: &[[f32; 3]; 3], t_max: &[f32; PACKET], mask: u8) -> LaneHits {
+        use std::arch::x86_64::*;
+        // SAFETY: whole [f32; 8] arrays, unaligned loads and stores.
+        let load = |x: &[f32; PACKET]| unsafe { _mm256_loadu_ps(x.as_ptr()) };
+        let [kx, ky, kz] = self.k;
+        let (ox, oy, oz) = (load(&self.org[0]), load(&self.org[1]), load(&self.org[2]));
+        let (sx, sy, sz) = (load(&self.s[0]), load(&self.s[1]), load(&self.s[2]));
+        // 1. Vertices relative to the origins, sheared (a[kx] − sx·a[kz], ...).
+        let rel = |p: &[f32; 3]| {
+            let (x, y, z) = (
+                _mm256_sub_ps(_mm256_set1_ps(p[kx]), ox),
+                _mm256_sub_ps(_mm256_set1_ps(p[ky]), oy),
+                _mm256_sub_ps(_mm256_set1_ps(p[kz]), oz),
+            );
+            (_mm256_sub_ps(x, _mm256_mul_ps(sx, z)), _mm256_sub_ps(y, _mm256_mul_ps(sy, z)), z)
+        };
+        let (ax, ay, az_) = rel(&v[0]);
+        let (bx, by, bz_) = rel(&v[1]);
+        let (cx, cy, cz_) = rel(&v[2]);
+        // 2. Edge functions; an exact zero goes to the scalar test's double-precision retry.
+        let u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
+        let vv = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
+        let w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
+        let zero = _mm256_setzero_ps();
+        let is_zero = _mm256_or_ps(
+            _mm256_or_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(u, zero), _mm256_cmp_ps::<_CMP_EQ_OQ>(vv, zero)),
+            _mm256_cmp_ps::<_CMP_EQ_OQ>(w, zero),
+        );
+        let any_neg = _mm256_or_ps(
+            _mm256_or_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(u, zero), _mm256_cmp_ps::<_CMP_LT_OQ>(vv, zero)),
+            _mm256_cmp_ps::<_CMP_LT_OQ>(w, zero),
+        );
+        let any_pos = _mm256_or_ps(
+            _mm256_or_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(u, zero), _mm256_cmp_ps::<_CMP_GT_OQ>(vv, zero)),
+            _mm256_cmp_ps::<_CMP_GT_OQ>(w, zero),
+        );
+        let mut fail = _mm256_and_ps(any_neg, any_pos);
+        // 3. Determinant and scaled distance, within (0, t_max) on the determinant's side.
+        let det = _mm256_add_ps(_mm256_add_ps(u, vv), w);
+        fail = _mm256_or_ps(fail, _mm256_cmp_ps::<_CMP_EQ_OQ>(det, zero));
+        let (az, bz, cz) = (_mm256_mul_ps(sz, az_), _mm256_mul_ps(sz, bz_), _mm256_mul_ps(sz, cz_));
+        let t_scaled = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(u, az), _mm256_mul_ps(vv, bz)), _mm256_mul_ps(w, cz));
+        let tm = load(t_max);
+        let limit = _mm256_mul_ps(tm, det);
+        let neg = _mm256_cmp_ps::<_CMP_LT_OQ>(det, zero);
+        let fail_neg =
+            _mm256_or_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(t_scaled, zero), _mm256_cmp_ps::<_CMP_LT_OQ>(t_scaled, limit));
+        let fail_pos =
+            _mm256_or_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t_scaled, zero), _mm256_cmp_ps::<_CMP_GT_OQ>(t_scaled, limit));
+        fail = _mm256_or_ps(fail, _mm256_blendv_ps(fail_pos, fail_neg, neg));
+        // 4. Distance and barycentrics.
+        let rcp = _mm256_div_ps(_mm256_set1_ps(1.0), det);
+        let t = _mm256_mul_ps(t_scaled, rcp);
+        let ok = _mm256_and_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(t, zero), _mm256_cmp_ps::<_CMP_LT_OQ>(t, tm));
+        let retry = _mm256_movemask_ps(is_zero) as u8 & mask;
+        let hit = (_mm256_movemask_ps(_mm256_andnot_ps(fail, ok)) as u8) & mask & !retry;
+        let mut out = LaneHits { hit, retry, t: [0.0; PACKET], b1: [0.0; PACKET], b2: [0.0; PACKET] };
+        // SAFETY: whole [f32; 8] arrays.
+        unsafe {
+            _mm256_storeu_ps(out.t.as_mut_ptr(), t);
+            _mm256_storeu_ps(out.b1.as_mut_ptr(), _mm256_mul_ps(vv, rcp));
+            _mm256_storeu_ps(out.b2.as_mut_ptr(), _mm256_mul_ps(w, rcp));
+        }
+        out
+    }
+}
+
 /// One bottom-level BVH: nodes and triangles in leaf order.
 #[derive(Default)]
 struct Blas {
@@ -1016,17 +1132,44 @@ impl RenderScene {
             });
             let hashes: [u32; PACKET] = std::array::from_fn(|i| lane(i).3);
             let tris = &self.world.tris;
-            let t = packet::closest_hits(&self.world.bvh, &obrays, active, |i, id, t_max| {
+            // Rays sharing one axis permutation take the 8-lane triangle test (AVX2 builds).
+            #[cfg(target_arch = "x86_64")]
+            let shared = if packet::avx2() { WatertightLanes::new(&wrays, active) } else { None };
+            let t = packet::closest_hits(&self.world.bvh, &obrays, active, |id, lanes, t_max| {
                 let tri = &tris[id];
-                if let Some((t, b1, b2)) = wrays[i].intersect(&tri.v, t_max) {
-                    let c = Candidate::Baked(tri.prim & !ALPHA_BIT);
+                let c = Candidate::Baked(tri.prim & !ALPHA_BIT);
+                // A hit of lane i: kept unless the alpha test lets the ray through.
+                let mut take = |i: usize, b1: f32, b2: f32| {
                     if tri.prim & ALPHA_BIT != 0 && !self.alpha_passes(c, b1, b2, hashes[i]) {
-                        return f32::INFINITY;
+                        return false;
                     }
                     best[i] = Some((c, b1, b2));
-                    return t;
+                    true
+                };
+                let mut scalar = lanes;
+                #[cfg(target_arch = "x86_64")]
+                if let Some(shared) = &shared {
+                    // SAFETY: `shared` exists only when AVX2 was detected.
+                    let h = unsafe { shared.intersect(&tri.v, t_max, lanes) };
+                    let mut left = h.hit;
+                    while left != 0 {
+                        let i = left.trailing_zeros() as usize;
+                        left &= left - 1;
+                        if take(i, h.b1[i], h.b2[i]) {
+                            t_max[i] = h.t[i];
+                        }
+                    }
+                    scalar = h.retry;
                 }
-                f32::INFINITY
+                while scalar != 0 {
+                    let i = scalar.trailing_zeros() as usize;
+                    scalar &= scalar - 1;
+                    if let Some((t, b1, b2)) = wrays[i].intersect(&tri.v, t_max[i]) {
+                        if take(i, b1, b2) {
+                            t_max[i] = t;
+                        }
+                    }
+                }
             });
             for i in 0..PACKET {
                 if best[i].is_some() && t[i] < t_best[i] {

@@ -183,11 +183,12 @@ impl Lanes {
     }
 }
 
-/// Closest hits of up to eight rays (`active`: bit i set = `rays[i]` is traced). `intersect(lane,
-/// id, t_max)` returns the distance to primitive `id` (leaf order) for that ray, or ∞ when it is
-/// missed or not closer than `t_max`. Returns each lane's final `t_max`: the closest hit's
-/// distance, or the ray's own `tmax` when nothing closer was hit.
-pub(crate) fn closest_hits<F: FnMut(usize, usize, f32) -> f32>(
+/// Closest hits of up to eight rays (`active`: bit i set = `rays[i]` is traced). `intersect(id,
+/// lanes, t_max)` tests primitive `id` (leaf order) against the rays of mask `lanes` and lowers
+/// `t_max[i]` to the distance of a closer hit of ray i (the packet's current distances, which
+/// it must only lower). Returns each lane's final `t_max`: the closest hit's distance, or the
+/// ray's own `tmax` when nothing closer was hit.
+pub(crate) fn closest_hits<F: FnMut(usize, u8, &mut [f32; PACKET])>(
     bvh: &CwBvh,
     rays: &[Ray; PACKET],
     active: u8,
@@ -201,6 +202,19 @@ pub(crate) fn closest_hits<F: FnMut(usize, usize, f32) -> f32>(
     closest_hits_any(bvh, rays, active, intersect, Lanes::child_masks)
 }
 
+/// Whether this process runs the AVX2 build of the packet code (see [`USE_AVX2`]).
+#[inline]
+pub(crate) fn avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        *USE_AVX2
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
 /// Whether this process runs the AVX2 build of the traversal (detected at first use;
 /// `PETZVAL_SIMD=baseline` forces the baseline). Both builds do the same operations.
 #[cfg(target_arch = "x86_64")]
@@ -211,7 +225,7 @@ static USE_AVX2: std::sync::LazyLock<bool> = std::sync::LazyLock::new(|| {
 /// [`closest_hits_any`] compiled with AVX2 (no FMA: the same bits).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn closest_hits_avx2<F: FnMut(usize, usize, f32) -> f32>(
+fn closest_hits_avx2<F: FnMut(usize, u8, &mut [f32; PACKET])>(
     bvh: &CwBvh,
     rays: &[Ray; PACKET],
     active: u8,
@@ -225,7 +239,10 @@ fn closest_hits_avx2<F: FnMut(usize, usize, f32) -> f32>(
 
 /// The traversal, for any instruction set.
 #[inline(always)]
-fn closest_hits_any<F: FnMut(usize, usize, f32) -> f32, M: Fn(&Lanes, &CwBvhNode, &[f32; PACKET], u8) -> [u8; 8]>(
+fn closest_hits_any<
+    F: FnMut(usize, u8, &mut [f32; PACKET]),
+    M: Fn(&Lanes, &CwBvhNode, &[f32; PACKET], u8) -> [u8; 8],
+>(
     bvh: &CwBvh,
     rays: &[Ray; PACKET],
     active: u8,
@@ -266,15 +283,7 @@ fn closest_hits_any<F: FnMut(usize, usize, f32) -> f32, M: Fn(&Lanes, &CwBvhNode
             }
             let (first, count) = node.child_primitives(c);
             for id in first..first + count {
-                let mut left = m;
-                while left != 0 {
-                    let i = left.trailing_zeros() as usize;
-                    left &= left - 1;
-                    let t = intersect(i, id as usize, t_max[i]);
-                    if t < t_max[i] {
-                        t_max[i] = t;
-                    }
-                }
+                intersect(id as usize, m, &mut t_max);
             }
         }
         // 2. Inner children, pushed lowest priority first so the highest is visited next.
