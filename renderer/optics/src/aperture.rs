@@ -348,8 +348,8 @@ impl PreparedAperture {
                 // 1. Undo the squeeze and normalise, as `Aperture::transmission` does.
                 let u = x * self.aperture.anamorphic_ratio / radius_mm;
                 let v = y / radius_mm;
-                if u * u + v * v > 1.0 {
-                    return 0.0;
+                if !(u * u + v * v <= 1.0) {
+                    return 0.0; // outside the circumcircle, or NaN (closed, as `Aperture` has it)
                 }
                 // 2. The nearest edge is the one whose normal has the largest projection.
                 let p = glam::DVec2::new(u, v);

@@ -95,7 +95,8 @@ fn image_mask_blocks_where_it_is_black() {
 /// `PreparedAperture` (per-blade tables, no trigonometry per point) gives the same bits as
 /// `Aperture`: transmission on random points and on points within 10⁻⁶ … 10⁻¹⁶ of the blade
 /// edges and vertices, and the samples of `sample_unit`, for straight and curved blades,
-/// rotations, anamorphic ratios, a mask, a circle, and a blade count past the tables.
+/// rotations, anamorphic ratios, a mask, a circle, a blade count past the tables, and
+/// non-finite points.
 #[test]
 fn prepared_apertures_match_the_plain_ones_bit_for_bit() {
     use glam::DVec2;
@@ -152,6 +153,11 @@ fn prepared_apertures_match_the_plain_ones_bit_for_bit() {
         for _ in 0..4000 {
             check((2.0 * next() - 1.0) * 1.1 * radius_mm, (2.0 * next() - 1.0) * 1.1 * radius_mm);
         }
+        // Non-finite points and a zero radius are closed in both.
+        for (x, y) in [(f64::NAN, 0.0), (0.0, f64::NAN), (f64::INFINITY, 0.0), (0.0, f64::NEG_INFINITY)] {
+            check(x, y);
+        }
+        assert_eq!(prepared.transmission(1.0, 1.0, 0.0).to_bits(), aperture.transmission(1.0, 1.0, 0.0).to_bits());
         // 2. Points on the sampled boundary, nudged in and out by tiny steps (the samples of
         //    `sample_unit` with u.y at a triangle's edge lie on the polygon's outline).
         for i in 0..400 {
