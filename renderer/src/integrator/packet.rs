@@ -61,15 +61,21 @@ struct Lanes {
     negative: [[bool; PACKET]; 3],
     /// `negative` as all-ones (−NaN) / zero floats, for blends.
     negative_mask: [[f32; PACKET]; 3],
+    /// Per axis, the direction sign every active ray shares (`Some(true)`: all negative), or
+    /// None when they differ. Where it is shared, near and far planes are chosen once per
+    /// node instead of per lane (the same values as the blends pick).
+    shared_negative: [Option<bool>; 3],
 }
 
 impl Lanes {
-    fn new(rays: &[Ray; PACKET]) -> Lanes {
+    /// The packet's lanes; `active` marks the rays whose signs count for `shared_negative`.
+    fn new(rays: &[Ray; PACKET], active: u8) -> Lanes {
         let mut l = Lanes {
             origin: [[0.0; PACKET]; 3],
             inv_dir: [[0.0; PACKET]; 3],
             negative: [[false; PACKET]; 3],
             negative_mask: [[0.0; PACKET]; 3],
+            shared_negative: [None; 3],
         };
         for (i, r) in rays.iter().enumerate() {
             for a in 0..3 {
@@ -78,6 +84,16 @@ impl Lanes {
                 l.negative[a][i] = r.direction[a] < 0.0;
                 l.negative_mask[a][i] = f32::from_bits(if l.negative[a][i] { u32::MAX } else { 0 });
             }
+        }
+        for a in 0..3 {
+            let neg = (0..PACKET).fold(0u8, |m, i| m | ((l.negative[a][i] as u8) << i)) & active;
+            l.shared_negative[a] = if neg == 0 {
+                Some(false)
+            } else if neg == active {
+                Some(true)
+            } else {
+                None
+            };
         }
         l
     }
@@ -88,6 +104,7 @@ impl Lanes {
     #[inline]
     fn child_masks_avx2(&self, node: &CwBvhNode, t_max: &[f32; PACKET], lanes: u8) -> [u8; 8] {
         use std::arch::x86_64::*;
+        // 1. Every ray in the node's quantised grid (obvhs: extent · 1/d, (p − o) · 1/d).
         let extent = node.compute_extent();
         // SAFETY: the loads read whole [f32; 8] arrays (unaligned loads).
         let load = |v: &[f32; PACKET]| unsafe { _mm256_loadu_ps(v.as_ptr()) };
@@ -102,26 +119,47 @@ impl Lanes {
         }
         let t_max = load(t_max);
         let eps = _mm256_set1_ps(NODE_T_MIN);
-        let planes = [
+        // 2. The children's quantised planes as floats, all eight at once per plane row (exact:
+        //    small integers). Where the packet shares a direction sign, the row is already the
+        //    near or the far one, so no lane needs a blend.
+        let bytes = [
             (&node.child_min_x, &node.child_max_x),
             (&node.child_min_y, &node.child_max_y),
             (&node.child_min_z, &node.child_max_z),
         ];
+        let mut rows = [[[0.0f32; 8]; 2]; 3];
+        for a in 0..3 {
+            let (lo, hi) = bytes[a];
+            let (first, second) = match self.shared_negative[a] {
+                Some(true) => (hi, lo),
+                _ => (lo, hi),
+            };
+            for (row, b) in rows[a].iter_mut().zip([first, second]) {
+                // SAFETY: reads the row's 8 bytes, writes 8 floats into an [f32; 8].
+                unsafe {
+                    let v = _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(b.as_ptr() as *const __m128i)));
+                    _mm256_storeu_ps(row.as_mut_ptr(), v);
+                }
+            }
+        }
         let mut masks = [0u8; 8];
         for (c, mask) in masks.iter_mut().enumerate() {
             if node.child_meta[c] == 0 {
                 continue;
             }
+            // 3. Slab distances per axis: near and far by the shared sign, else blended by
+            //    each lane's sign.
             let mut near = [_mm256_setzero_ps(); 3];
             let mut far = [_mm256_setzero_ps(); 3];
             for a in 0..3 {
-                let lo = _mm256_set1_ps(planes[a].0[c] as f32);
-                let hi = _mm256_set1_ps(planes[a].1[c] as f32);
-                let t_lo = _mm256_add_ps(_mm256_mul_ps(lo, scale[a]), offset[a]);
-                let t_hi = _mm256_add_ps(_mm256_mul_ps(hi, scale[a]), offset[a]);
-                near[a] = _mm256_blendv_ps(t_lo, t_hi, neg[a]);
-                far[a] = _mm256_blendv_ps(t_hi, t_lo, neg[a]);
+                let t_first = _mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(rows[a][0][c]), scale[a]), offset[a]);
+                let t_second = _mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(rows[a][1][c]), scale[a]), offset[a]);
+                (near[a], far[a]) = match self.shared_negative[a] {
+                    Some(_) => (t_first, t_second),
+                    None => (_mm256_blendv_ps(t_first, t_second, neg[a]), _mm256_blendv_ps(t_second, t_first, neg[a])),
+                };
             }
+            // 4. Overlap clamped to [ε, t_max], in obvhs's operand order.
             let t0 = _mm256_max_ps(near[0], _mm256_max_ps(near[1], near[2]));
             let t1 = _mm256_min_ps(far[0], _mm256_min_ps(far[1], far[2]));
             let t0 = _mm256_max_ps(t0, eps);
@@ -253,7 +291,7 @@ fn closest_hits_any<
     if bvh.nodes.is_empty() || active == 0 {
         return t_max;
     }
-    let lanes = Lanes::new(rays);
+    let lanes = Lanes::new(rays, active);
     // Child order: obvhs's for the packet's first ray (priority slot ^ (7 − octant), highest first).
     let lead = &rays[active.trailing_zeros() as usize];
     let oct_inv = (if lead.direction.x < 0.0 { 0 } else { 4 })
