@@ -25,7 +25,7 @@
 //!
 //! | name | type | unit | default |
 //! |---|---|---|---|
-//! | `bokeh_paths` | f32: light paths per pixel per sample (0 = off); exact and LRTF lens models | — | 0 |
+//! | `bokeh_paths` | f32: light paths per pixel per sample (0 = off); every model with a lens (thin, thick, exact, LRTF), not the pinhole | — | 0 |
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -38,7 +38,8 @@ use glam::{DAffine3, DVec2, DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 
 /// The `auto` choice of light paths per pixel per sample: 1 where `camera` can trace light onto
-/// its film (a real lens, exact or LRTF model) and `scene` has emissive triangles, else 0.
+/// its film (any model with a lens: thin, thick, exact or LRTF) and `scene` has emissive
+/// triangles, else 0.
 pub fn auto_paths(scene: &RenderScene, camera: &Camera) -> f32 {
     if camera.can_connect() && scene.has_emissive_triangles() {
         1.0
@@ -99,6 +100,129 @@ pub(crate) struct BokehTracer<'a> {
     primary_nm: f64,
     seed: u32,
     clip_m: (f64, f64),
+    defocus: Defocus,
+    emitters: EmitterChoice,
+}
+
+/// How light paths choose their emitter: among the emissive triangles that can blur into the
+/// window ([`Defocus::alpha`] > 0 at a vertex, and the chief rays of their vertices landing on
+/// the window grown by half their blur), in proportion to the flux they send into the lens
+/// (power over squared distance: a tiny near lamp blurs as visibly as a large far one). The light tree that
+/// next-event estimation uses picks by power and distance from the lens alone, so in a scene
+/// whose brightest emitters are out of view most light paths would land off the film.
+#[derive(Debug, Clone)]
+struct EmitterChoice {
+    /// (light index, cumulative probability), in light order.
+    cdf: Vec<(usize, f32)>,
+    /// Probability of each light index (0 for lights never chosen).
+    pmf: Vec<f32>,
+}
+
+impl EmitterChoice {
+    /// The choice for this render; None when no emitter qualifies.
+    fn new(
+        scene: &RenderScene,
+        camera: &Camera,
+        to_camera: &DAffine3,
+        defocus: &Defocus,
+        settings: &LightPathSettings,
+        wavelength_nm: f64,
+    ) -> Option<EmitterChoice> {
+        let (w, h) = (settings.width as f64, settings.height as f64);
+        let [x0, y0, x1, y1] = settings.crop.map(|c| c as f64);
+        let candidates: Vec<(usize, [Vec3; 3], f32)> = scene.emissive_triangles().collect();
+        let kept: Vec<(usize, f32)> = candidates
+            .par_iter()
+            .filter_map(|&(i, v, power)| {
+                if !(power > 0.0) {
+                    return None;
+                }
+                // 1. Blurred enough at some vertex.
+                let y = v.map(|p| to_camera.transform_point3(p.as_dvec3()));
+                if y.iter().all(|&p| p.z >= 0.0 || defocus.alpha(p) == 0.0) {
+                    return None;
+                }
+                // 2. In view: the vertices' chief rays, their bounding box grown by the blur,
+                //    overlapping the window (kept when a chief ray does not reach the film).
+                let blur = y.iter().map(|&p| defocus.blur_px(p)).fold(0.0, f64::max);
+                let (mut lo, mut hi) = (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY));
+                for &p in &y {
+                    let Some(c) = camera.connect(p, DVec3::ZERO, wavelength_nm) else { return Some((i, power)) };
+                    let px = DVec2::new(c.film.x * w, c.film.y * h);
+                    lo = lo.min(px);
+                    hi = hi.max(px);
+                }
+                let m = 0.5 * blur + 2.0;
+                let outside = hi.x + m < x0 || lo.x - m > x1 || hi.y + m < y0 || lo.y - m > y1;
+                // 3. Weighted by the flux it sends into the lens: power over squared distance.
+                let d2 = ((y[0] + y[1] + y[2]) / 3.0).length_squared().max(1e-12);
+                (!outside).then_some((i, (power as f64 / d2) as f32))
+            })
+            .collect();
+        let total: f64 = kept.iter().map(|&(_, p)| p as f64).sum();
+        if kept.is_empty() || !(total > 0.0) || !total.is_finite() {
+            return None;
+        }
+        let mut pmf = vec![0.0f32; scene.light_count()];
+        let mut cdf = Vec::with_capacity(kept.len());
+        let mut acc = 0.0f64;
+        for &(i, p) in &kept {
+            pmf[i] = (p as f64 / total) as f32;
+            acc += p as f64 / total;
+            cdf.push((i, acc as f32));
+        }
+        Some(EmitterChoice { cdf, pmf })
+    }
+
+    /// The emitter for sample `u` in [0, 1): (light index, probability).
+    fn pick(&self, u: f32) -> Option<(usize, f32)> {
+        let k = self.cdf.partition_point(|&(_, c)| c <= u).min(self.cdf.len() - 1);
+        let i = self.cdf[k].0;
+        let p = self.pmf[i];
+        (p > 0.0).then_some((i, p))
+    }
+}
+
+/// Blur diameters (film pixels) below which light paths take no share of an emitter point, and
+/// above which they take their full balance-heuristic share.
+const DEFOCUS_PX: (f64, f64) = (4.0, 12.0);
+
+/// The thin-lens estimate of how blurred a scene point is, for the light strategy's share.
+///
+/// Density-based MIS weights do not see that camera samples are stratified over pixels: inside
+/// the sharp image of an emitter every camera sample of a pixel hits it, so camera paths alone
+/// have next to no noise there, while light paths land a random number of times per pixel. Light
+/// paths pay where an emitter point is spread over a wide blur disc (where camera rays find it
+/// rarely). So the light strategy's density is scaled by a factor α of the point's blur diameter
+/// b: 0 below [`DEFOCUS_PX`].0, 1 above [`DEFOCUS_PX`].1, smooth between. Any α keeps the
+/// combination unbiased (the weights still sum to 1 for every path, and both strategies compute
+/// the same α from the same point); where α = 0 no light path is traced.
+#[derive(Debug, Clone, Copy)]
+struct Defocus {
+    /// Aperture (entrance pupil) diameter × image distance / pixel pitch (mm·px).
+    scale: f64,
+    /// The plane of sharp focus (camera space), None when unknown (then α = 1).
+    plane: Option<crate::camera::FocusPlane>,
+}
+
+impl Defocus {
+    /// Blur diameter (px) of camera-space point `y_m`: A·v·|1/z − 1/z_f| / pitch, with z the
+    /// point's depth and z_f the focus plane's along the same line of sight.
+    fn blur_px(&self, y_m: DVec3) -> f64 {
+        let Some(plane) = self.plane else { return f64::INFINITY };
+        let z = -y_m.z;
+        if !(z > 0.0) {
+            return f64::INFINITY; // behind the lens: never seen, so never shared
+        }
+        let inv_zf = plane.intersect(DVec3::ZERO, y_m).map_or(0.0, |t| 1.0 / (t * z));
+        self.scale * 1e-3 * (1.0 / z - inv_zf).abs()
+    }
+
+    /// The light strategy's share factor α for camera-space point `y_m`.
+    fn alpha(&self, y_m: DVec3) -> f64 {
+        let t = ((self.blur_px(y_m) - DEFOCUS_PX.0) / (DEFOCUS_PX.1 - DEFOCUS_PX.0)).clamp(0.0, 1.0);
+        t * t * (3.0 - 2.0 * t)
+    }
 }
 
 impl<'a> BokehTracer<'a> {
@@ -118,7 +242,7 @@ impl<'a> BokehTracer<'a> {
             return Err(Error::settings(
                 "bokeh_paths",
                 format!(
-                    "light paths through the lens need the exact or LRTF lens model (a real lens); this camera is {}",
+                    "light paths need a lens to trace through (the thin, thick, exact or LRTF model); this camera is {}",
                     camera.model()
                 ),
             ));
@@ -132,11 +256,24 @@ impl<'a> BokehTracer<'a> {
         let radius_m = 1.25 * ep_radius_m + 0.5e-3;
         let radius_mm = radius_m * 1e3;
         let sensor = camera.sensor();
+        let to_camera = to_world.inverse();
+        let defocus = Defocus {
+            scale: 2e3 * ep_radius_m * crate::camera::thin_lens_data(camera).map_or(0.0, |d| d.1)
+                / (sensor.width_mm / w as f64),
+            plane: camera.focus_plane(),
+        };
+        let primary_nm =
+            camera.real_lens().map_or(crate::optics::glass::WAVELENGTH_D_NM, |l| l.primary_wavelength_nm());
+        let Some(emitters) = EmitterChoice::new(scene, camera, &to_camera, &defocus, settings, primary_nm) else {
+            // No emitter blurred enough to share, or none in view: camera paths alone (the
+            // camera's weight is then 1 everywhere, as without light paths).
+            return Ok(None);
+        };
         Ok(Some(BokehTracer {
             scene,
             camera,
             to_world,
-            to_camera: to_world.inverse(),
+            to_camera,
             forward: to_world.transform_vector3(DVec3::NEG_Z).normalize().as_vec3(),
             radius_m,
             disc_pdf_mm2: 1.0 / (std::f64::consts::PI * radius_mm * radius_mm),
@@ -147,9 +284,11 @@ impl<'a> BokehTracer<'a> {
             crop,
             filter: FilterSampler::new(settings.filter),
             spectral: settings.spectral,
-            primary_nm: camera.real_lens().map_or(crate::optics::glass::WAVELENGTH_D_NM, |l| l.primary_wavelength_nm()),
+            primary_nm,
             seed: settings.seed ^ 0x5bd1_e995,
             clip_m: settings.clip_m,
+            defocus,
+            emitters,
         }))
     }
 
@@ -172,8 +311,13 @@ impl<'a> BokehTracer<'a> {
     }
 
     /// K times the light strategy's density (mm⁻² sr⁻¹, ray measure) for the ray `origin` +
-    /// t·`dir` ending on the emitter at `hit` (0 when its line misses the disc).
+    /// t·`dir` ending on the emitter at `hit` (0 when its line misses the disc), scaled by the
+    /// point's defocus share α ([`Defocus`]).
     fn light_density(&self, origin: Vec3, dir: Vec3, hit: &SurfaceHit) -> f64 {
+        let alpha = self.defocus.alpha(self.to_camera.transform_point3(hit.position.as_dvec3()));
+        if alpha == 0.0 {
+            return 0.0;
+        }
         // 1. Where the ray's line crosses the camera plane (it may be behind the ray's origin,
         //    inside the lens).
         let centre = self.to_world.translation.as_vec3();
@@ -187,8 +331,10 @@ impl<'a> BokehTracer<'a> {
         }
         // 2. The light tree's choice of this emitter point from p.
         let dist = (hit.position - p).length();
-        let pdf_w = self.scene.triangle_light_pdf_from(p, self.forward, hit, dir, dist) as f64;
-        self.paths_per_spp as f64 * self.disc_pdf_mm2 * pdf_w / cos_p.abs() as f64
+        let Some(light) = self.scene.triangle_light(hit.instance, hit.triangle) else { return 0.0 };
+        let pmf = self.emitters.pmf.get(light).copied().unwrap_or(0.0);
+        let pdf_w = self.scene.triangle_light_pdf_with_pmf(pmf, hit, dir, dist) as f64;
+        alpha * self.paths_per_spp as f64 * self.disc_pdf_mm2 * pdf_w / cos_p.abs() as f64
     }
 
     /// Traces the light paths of samples `spp` and adds their splats to `splat` (the window's
@@ -230,12 +376,18 @@ impl<'a> BokehTracer<'a> {
         let p_cam = DVec3::new(disc.x, disc.y, 0.0);
         let p_world = self.to_world.transform_point3(p_cam).as_vec3();
         // 2. An emitter point seen from p (punctual lights and the sky are not seen directly).
-        let Some(ls) = self.scene.sample_light_at(p_world, self.forward, u_pick, u_light) else { return };
+        let Some((light, pmf)) = self.emitters.pick(u_pick) else { return };
+        let Some(ls) = self.scene.sample_chosen_light(p_world, light, pmf, u_light) else { return };
         let Some(y) = ls.target.filter(|_| !ls.delta) else { return };
         let (lambda, lambda_weight) =
             if self.spectral { spectral::sample_wavelength(u_lambda) } else { (self.primary_nm as f32, Vec3::ONE) };
-        // 3. Through the lens onto the film; inside the clipping planes; unoccluded.
+        // 3. Only where the point is blurred enough to share it; through the lens onto the
+        //    film; inside the clipping planes; unoccluded.
         let y_cam = self.to_camera.transform_point3(y.as_dvec3());
+        let alpha = self.defocus.alpha(y_cam);
+        if alpha == 0.0 {
+            return;
+        }
         let Some(conn) = self.camera.connect(y_cam, p_cam, lambda as f64) else { return };
         let axial = conn.entry_m.z - y_cam.z;
         if !(axial >= self.clip_m.0 && axial <= self.clip_m.1) {
@@ -250,7 +402,7 @@ impl<'a> BokehTracer<'a> {
         if !(cos_p > 1e-9) {
             return;
         }
-        let light_density = self.paths_per_spp as f64 * self.disc_pdf_mm2 * ls.pdf as f64 / cos_p;
+        let light_density = alpha * self.paths_per_spp as f64 * self.disc_pdf_mm2 * ls.pdf as f64 / cos_p;
         let base = ls.radiance * lambda_weight * conn.importance as f32;
         // 5. Splat into the window's pixels under the filter.
         let (fx, fy) = (conn.film.x * self.width as f64, conn.film.y * self.height as f64);
@@ -268,7 +420,7 @@ impl<'a> BokehTracer<'a> {
                 if !(f > 0.0) {
                     continue;
                 }
-                let v = base * (f / (light_density + f * conn.camera_density)) as f32;
+                let v = base * (alpha * f / (light_density + f * conn.camera_density)) as f32;
                 if v.is_finite() {
                     out.push((((iy - y0 as i64) * cw + (ix - x0 as i64)) as u32, v));
                 }

@@ -15,7 +15,7 @@
 //! | `crop` | optional `[x0, y0, x1, y1)` window of the frame to render (row 0 = top) | px | whole frame |
 //! | `adaptive_threshold` | f32: adaptive sampling's noise threshold, as Cycles' "Noise Threshold" (a pixel stops once its error estimate, over its 3×3 neighbourhood, is below it; see [`adaptive_converged`]); path tracing (`mc`) only | — | 0 (off: every pixel takes `spp`) |
 //! | `adaptive_min_samples` | u32: samples every pixel takes before adaptive sampling may stop it | — | 0 (auto, as Cycles: max(4, ⌈16 / threshold^0.3⌉)) |
-//! | `bokeh_paths` | f32: light paths from emitters through the lens per pixel per sample, combined with camera paths by MIS (see [`crate::bokeh`]); a real lens, exact or LRTF model | — | 0 (off; the CLI's and the Python module's auto gives 1 where it applies) |
+//! | `bokeh_paths` | f32: light paths from emitters through the lens per pixel per sample, combined with camera paths by MIS (see [`crate::bokeh`]); any model with a lens (thin, thick, exact, LRTF), not the pinhole | — | 0 (off; the CLI's and the Python module's auto gives 1 where it applies) |
 
 use crate::bokeh::{BokehTracer, LightPathSettings};
 use crate::camera::{Camera, CameraRay, CAMERA_BATCH};

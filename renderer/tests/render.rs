@@ -18,7 +18,9 @@ use petzval_renderer::integrator::RenderScene;
 use petzval_renderer::render::{render, CameraRig, RenderResult, RenderSettings};
 use petzval_renderer::scene::texture::Wrap;
 use petzval_renderer::scene::{demo, Environment, Material, Mesh, Scene, Texture, TextureRef};
-use petzval_renderer::{library_lens, Aperture, ApertureShape, Camera, ExactCamera, PinholeCamera, Sensor, ThinCamera};
+use petzval_renderer::{
+    library_lens, Aperture, ApertureShape, Camera, ExactCamera, PinholeCamera, Sensor, ThickCamera, ThinCamera,
+};
 
 // ------------------------------------------------------------------------------------------
 // Scene helpers.
@@ -660,16 +662,49 @@ fn render_bokeh_cats_eye_double_gauss() {
 #[test]
 fn bokeh_light_paths_match_camera_paths_with_less_noise() {
     let lens = library_lens("double-gauss-50mm").unwrap();
+    let exact = |sensor: Sensor| Camera::Exact(ExactCamera::new(sensor, lens.clone(), Some(2.0)).unwrap());
+    check_bokeh_light_paths(
+        "exact",
+        &exact,
+        &[(DVec2::ZERO, false), (DVec2::new(15.0, 10.0), false), (DVec2::ZERO, true)],
+    );
+}
+
+/// Bokeh light paths through Blender's thin lens and the thick-lens model: the same checks as
+/// for the real lens, on the axis and off it (where the thin lens's slope mapping departs most
+/// from étendue conservation, which the light tracer's Jacobian accounts for), with and without
+/// natural vignetting, a 6-bladed stop, and a tilted sensor.
+#[test]
+fn bokeh_light_paths_through_thin_and_thick_lenses() {
+    let blades = Aperture { shape: ApertureShape::Blades { count: 6, curvature: 0.0 }, ..Aperture::default() };
+    let thin_vignetting = |sensor: Sensor| thin(sensor, 50.0, 2.0, 10.0, Aperture::default(), true);
+    let thin_flat_blades = |sensor: Sensor| thin(sensor, 50.0, 2.0, 10.0, blades.clone(), false);
+    let thin_tilted =
+        |sensor: Sensor| thin(Sensor { tilt_x_deg: 5.0, ..sensor }, 50.0, 2.0, 10.0, Aperture::default(), true);
+    let lens = library_lens("double-gauss-50mm").unwrap();
+    let thick = |sensor: Sensor| {
+        Camera::Thick(ThickCamera::new(sensor, &lens, Some(2.0), Some(10.0), Aperture::default()).unwrap())
+    };
+    let cases = [(DVec2::ZERO, false), (DVec2::new(15.0, 10.0), false)];
+    check_bokeh_light_paths("thin", &thin_vignetting, &cases);
+    check_bokeh_light_paths("thin, no vignetting, 6 blades", &thin_flat_blades, &cases);
+    check_bokeh_light_paths("thin, tilted 5°", &thin_tilted, &cases[..1]);
+    check_bokeh_light_paths("thick", &thick, &[(DVec2::new(15.0, 10.0), false), (DVec2::ZERO, true)]);
+}
+
+/// The checks of the two tests above for the camera `make(sensor)` makes, one per (sensor
+/// shift, occluder) case: an emitter 0.7 m deep on the window centre's ray, far out of focus.
+fn check_bokeh_light_paths(name: &str, make: &dyn Fn(Sensor) -> Camera, cases: &[(DVec2, bool)]) {
     let pitch = 0.0625;
     let w = 64u32;
     let to_world = DAffine3::from_rotation_translation(
         glam::DQuat::from_euler(glam::EulerRot::YXZ, 0.4, -0.2, 0.1),
         DVec3::new(1.0, 0.5, -2.0),
     );
-    for (shift, occluded) in [(DVec2::ZERO, false), (DVec2::new(15.0, 10.0), false), (DVec2::ZERO, true)] {
+    for &(shift, occluded) in cases {
         let sensor =
             Sensor { width_mm: w as f64 * pitch, height_mm: w as f64 * pitch, shift_mm: shift, ..Sensor::default() };
-        let cam = Camera::Exact(ExactCamera::new(sensor, lens.clone(), Some(2.0)).unwrap());
+        let cam = make(sensor);
         let ray =
             cam.generate_ray(DVec2::new(0.5, 0.5), DVec2::new(0.5, 0.5), 587.56).expect("window centre sees the scene");
         let dist = 0.7 / -ray.direction.z;
@@ -708,29 +743,53 @@ fn bokeh_light_paths_match_camera_paths_with_less_noise() {
         let err = rms(&mean_light, &reference);
         let expected = ((noise_light * noise_light / 4.0) + noise_camera * noise_camera / 128.0).sqrt();
         eprintln!(
-            "bokeh paths, shift {shift}, occluded {occluded}: flux {flux_light:.2} vs {flux_ref:.2}, noise {noise_light:.4} vs camera {noise_camera:.4}, rms vs reference {err:.4} (noise alone {expected:.4})"
+            "bokeh paths, {name}, shift {shift}, occluded {occluded}: flux {flux_light:.2} vs {flux_ref:.2}, noise {noise_light:.4} vs camera {noise_camera:.4}, rms vs reference {err:.4} (noise alone {expected:.4})"
         );
-        assert!(flux_ref > 1.0, "the emitter is not in the window");
+        assert!(flux_ref > 1.0, "{name}: the emitter is not in the window");
         // flux: within 2.5 % (the 1024-spp camera reference's flux is itself noisy to about 1 %:
         // on the axis it reads 1.9 % below the light paths' at 1024 spp and 0.9 % at 8192)
-        assert!((flux_light / flux_ref - 1.0).abs() < 0.025, "flux {flux_light} vs {flux_ref}");
+        assert!((flux_light / flux_ref - 1.0).abs() < 0.025, "{name}: flux {flux_light} vs {flux_ref}");
         // per pixel: the difference is the noise, not a bias pattern (within 1.5× the noise)
-        assert!(err < 1.5 * expected, "rms {err} against noise {expected}");
+        assert!(err < 1.5 * expected, "{name}: rms {err} against noise {expected}");
         // and the light paths make it at least 3× less noisy at equal samples
-        assert!(noise_light * 3.0 < noise_camera, "noise {noise_light} vs {noise_camera}");
+        assert!(noise_light * 3.0 < noise_camera, "{name}: noise {noise_light} vs {noise_camera}");
     }
 }
 
-/// Light paths need a camera that can trace light onto its film: asked of a thin lens, the
+/// An emitter in focus, large on the film (Blender's thin lens): inside its sharp image every
+/// camera sample hits it, so camera paths alone are nearly noiseless there; light paths would
+/// land a random number of times per pixel. Its points are blurred by less than the defocus
+/// threshold, so no light path is traced and the image is the camera paths' alone, bit for bit.
+#[test]
+fn bokeh_light_paths_leave_sharp_emitters_to_camera_paths() {
+    let cam = thin(square_sensor(4.0), 50.0, 2.8, 1.0, Aperture::default(), true);
+    // 1.05 m deep: a blur of 17.9 mm × 50 mm × |1/1050 − 1/1000| ≈ 0.04 mm ≈ 0.6 px at 64 px
+    let rs = scene_of(&[icosphere(Vec3::new(0.0, 0.0, -1.05), 0.02, 3, 0)], vec![emitter(1.0)], Environment::Black);
+    let st = |paths: f32| RenderSettings {
+        width: 64,
+        height: 64,
+        spp: 8,
+        seed: 4,
+        max_depth: 1,
+        bokeh_paths: paths,
+        ..RenderSettings::default()
+    };
+    let with = shoot(&rs, cam.clone(), DAffine3::IDENTITY, &st(1.0)).image;
+    let without = shoot(&rs, cam, DAffine3::IDENTITY, &st(0.0)).image;
+    assert!(red(&without).iter().sum::<f64>() > 10.0, "the emitter is not in view");
+    assert_eq!(with.rgba, without.rgba);
+}
+
+/// Light paths need a camera that can trace light onto its film: asked of a pinhole, the
 /// render says so.
 #[test]
-fn bokeh_light_paths_need_the_exact_model() {
+fn bokeh_light_paths_need_a_lens() {
     let rs = scene_of(&[icosphere(Vec3::new(0.0, 0.0, -2.0), 0.05, 1, 0)], vec![emitter(1.0)], Environment::Black);
-    let cam = thin(square_sensor(36.0), 50.0, 2.0, 1.0, Aperture::default(), true);
+    let cam = Camera::Pinhole(PinholeCamera::new(square_sensor(36.0), 50.0).unwrap());
     let s = RenderSettings { width: 8, height: 8, spp: 1, bokeh_paths: 1.0, ..RenderSettings::default() };
     let rig = CameraRig { camera: cam, to_world: DAffine3::IDENTITY };
     let err = render(&rs, &rig, &s, &|_| true).unwrap_err().to_string();
-    assert!(err.contains("bokeh_paths") && err.contains("exact"), "{err}");
+    assert!(err.contains("bokeh_paths") && err.contains("pinhole"), "{err}");
 }
 
 // ------------------------------------------------------------------------------------------

@@ -406,6 +406,13 @@ impl PreparedAperture {
         }
     }
 
+    /// The density of [`PreparedAperture::sample_unit`]'s points, per unit area of the unit
+    /// aperture: uniform over its sampling domain (the polygon, the disc, or a mask's square,
+    /// squeezed), which holds every point the stop transmits.
+    pub fn sample_pdf_unit(&self) -> f64 {
+        self.sample_unit(glam::DVec2::splat(0.5)).1
+    }
+
     /// [`Aperture::clearance_mm`].
     pub fn clearance_mm(&self, x: f64, y: f64, radius_mm: f64) -> (f64, f64) {
         match self.aperture.shape {

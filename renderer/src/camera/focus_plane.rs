@@ -47,10 +47,11 @@ fn real_lens_data(c: &ExactCamera) -> (f64, f64, f64) {
     (p.efl_mm, c.film_z_mm() - p.rear_principal_z_mm, p.front_principal_z_mm - p.entrance_pupil_z_mm)
 }
 
-pub(super) fn focus_plane(cam: &Camera) -> Option<FocusPlane> {
-    // 1. Thin-lens data: focal length, film pivot relative to the rear principal plane, and the
-    //    front principal point in camera space.
-    let (f, film_z, front_cam_z_mm) = match cam {
+/// Thin-lens data of a camera with a lens: focal length as focused, film pivot relative to the
+/// rear principal plane (the image distance), and the front principal point in camera space (all
+/// mm). None for the pinhole.
+pub(crate) fn thin_lens_data(cam: &Camera) -> Option<(f64, f64, f64)> {
+    Some(match cam {
         Camera::Pinhole(_) => return None,
         Camera::Thin(c) => (c.lens_focal_length_mm(), c.film_distance_mm(), 0.0),
         Camera::Thick(c) => (
@@ -60,7 +61,13 @@ pub(super) fn focus_plane(cam: &Camera) -> Option<FocusPlane> {
         ),
         Camera::Exact(c) => real_lens_data(c),
         Camera::Lrtf(c) => real_lens_data(c.exact()),
-    };
+    })
+}
+
+pub(super) fn focus_plane(cam: &Camera) -> Option<FocusPlane> {
+    // 1. Thin-lens data: focal length, film pivot relative to the rear principal plane, and the
+    //    front principal point in camera space.
+    let (f, film_z, front_cam_z_mm) = thin_lens_data(cam)?;
     let sensor = cam.sensor();
     let rot = sensor.rotation();
     let pivot = DVec3::new(0.0, 0.0, film_z);

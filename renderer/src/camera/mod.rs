@@ -32,6 +32,7 @@ mod builder;
 pub mod exact;
 mod focus_plane;
 pub mod host;
+mod ideal;
 pub mod lrtf;
 mod model;
 mod model_choice;
@@ -43,6 +44,7 @@ pub mod thin;
 
 pub use builder::BuiltCamera;
 pub use exact::ExactCamera;
+pub(crate) use focus_plane::thin_lens_data;
 pub use focus_plane::FocusPlane;
 pub use lrtf::LrtfCamera;
 pub use model::cached_lrtf;
@@ -180,11 +182,12 @@ impl Camera {
         }
     }
 
-    /// Whether light can be traced from the scene onto the film ([`Camera::connect`]): the
-    /// exact model, and the LRTF model, whose light paths are traced exactly (its table maps
-    /// film → scene only; the two agree within the table's error, a fraction of a pixel).
+    /// Whether light can be traced from the scene onto the film ([`Camera::connect`]): every
+    /// model with a lens. The thin and thick lenses map light exactly as they map camera rays;
+    /// the LRTF model's light paths are traced exactly (its table maps film → scene only; the
+    /// two agree within the table's error, a fraction of a pixel). Not the pinhole.
     pub fn can_connect(&self) -> bool {
-        matches!(self, Camera::Exact(_) | Camera::Lrtf(_))
+        !matches!(self, Camera::Pinhole(_))
     }
 
     /// The camera strategy's density for sample (`film`, `lens_u`) in the ray (étendue)
@@ -192,9 +195,11 @@ impl Camera {
     /// combining camera paths with light paths. None for models that cannot connect.
     pub fn sample_density(&self, film: DVec2, lens_u: DVec2) -> Option<f64> {
         match self {
+            Camera::Pinhole(_) => None,
+            Camera::Thin(c) => c.sample_density(film, lens_u),
+            Camera::Thick(c) => c.sample_density(film, lens_u),
             Camera::Exact(c) => c.sample_density(film, lens_u),
             Camera::Lrtf(c) => c.exact().sample_density(film, lens_u),
-            _ => None,
         }
     }
 
@@ -202,19 +207,23 @@ impl Camera {
     /// on the film, at `wavelength_nm`; None when blocked or for models that cannot connect.
     pub fn connect(&self, from_m: DVec3, to_m: DVec3, wavelength_nm: f64) -> Option<FilmConnection> {
         match self {
+            Camera::Pinhole(_) => None,
+            Camera::Thin(c) => c.connect(from_m, to_m),
+            Camera::Thick(c) => c.connect(from_m, to_m),
             Camera::Exact(c) => c.connect(from_m, to_m, wavelength_nm),
             Camera::Lrtf(c) => c.exact().connect(from_m, to_m, wavelength_nm),
-            _ => None,
         }
     }
 
     /// Radius of the entrance pupil (metres, paraxial, about the camera origin), for models
-    /// that can connect.
+    /// that can connect: the aperture's circumradius for the thin and thick lenses.
     pub fn entrance_pupil_radius_m(&self) -> Option<f64> {
         match self {
+            Camera::Pinhole(_) => None,
+            Camera::Thin(c) => Some(1e-3 * c.aperture_radius_mm()),
+            Camera::Thick(c) => Some(1e-3 * c.aperture_radius_mm()),
             Camera::Exact(c) => Some(0.5e-3 * c.lens().paraxial().entrance_pupil_diameter_mm),
             Camera::Lrtf(c) => Some(0.5e-3 * c.exact().lens().paraxial().entrance_pupil_diameter_mm),
-            _ => None,
         }
     }
 

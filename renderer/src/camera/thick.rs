@@ -10,9 +10,10 @@
 //! | `focus_distance_m` | optional f64 from the entrance pupil (None = infinity) | m | None |
 //! | `aperture` | [`Aperture`] shape | — | the lens's |
 
+use super::ideal::IdealLens;
 use super::sensor::PreparedSensor;
 use super::{centre_mean, check_positive, geometric_factor, thin_lens_direction, thin_lens_image_distance};
-use super::{CameraRay, Sensor};
+use super::{CameraRay, FilmConnection, Sensor};
 use crate::error::Result;
 use crate::optics::aperture::{Aperture, PreparedAperture};
 use crate::optics::lens::Lens;
@@ -123,7 +124,7 @@ impl ThickCamera {
     fn raw_ray(&self, film: DVec2, lens_u: DVec2) -> Option<CameraRay> {
         // 1. Thin lens at the rear principal plane.
         let p = self.sensor.film_point(film, self.film_z_mm) - DVec3::new(0.0, 0.0, self.rear_principal_z_mm);
-        let r = 0.5 * self.focal_length_mm / self.f_number;
+        let r = self.aperture_radius_mm();
         let (q, pdf_unit) = self.aperture.sample_unit(lens_u);
         let l = DVec3::new(q.x * r, q.y * r, 0.0);
         let transmission = self.aperture.transmission(l.x, l.y, r);
@@ -139,5 +140,35 @@ impl ThickCamera {
 
     pub(super) fn generate_ray(&self, film: DVec2, lens_u: DVec2) -> Option<CameraRay> {
         self.raw_ray(film, lens_u).map(|r| CameraRay { weight: r.weight * self.exposure, ..r })
+    }
+
+    /// Aperture circumradius at the principal planes: F / 2N.
+    pub fn aperture_radius_mm(&self) -> f64 {
+        0.5 * self.focal_length_mm / self.f_number
+    }
+
+    /// The lens as light tracing sees it (its two principal planes).
+    fn ideal(&self) -> IdealLens<'_> {
+        IdealLens {
+            sensor: &self.sensor,
+            aperture: &self.aperture,
+            radius_mm: self.aperture_radius_mm(),
+            focal_mm: self.focal_length_mm,
+            film_z_mm: self.film_z_mm,
+            rear_z_mm: self.rear_principal_z_mm,
+            front_z_m: (self.front_principal_z_mm - self.entrance_pupil_z_mm) * 1e-3,
+            natural_vignetting: true,
+            exposure: self.exposure,
+        }
+    }
+
+    /// The camera's density for a sample in the ray measure (see [`super::Camera::sample_density`]).
+    pub(super) fn sample_density(&self, film: DVec2, lens_u: DVec2) -> Option<f64> {
+        self.ideal().sample_density(film, lens_u)
+    }
+
+    /// Light tracing onto the film (see [`super::Camera::connect`]).
+    pub(super) fn connect(&self, from_m: DVec3, to_m: DVec3) -> Option<FilmConnection> {
+        self.ideal().connect(from_m, to_m)
     }
 }

@@ -17,8 +17,9 @@
 //! camera is immutable afterwards ([`ThinCamera::with_natural_vignetting`] picks the other
 //! precomputed normalisation).
 
+use super::ideal::IdealLens;
 use super::sensor::PreparedSensor;
-use super::{centre_mean, check_positive, geometric_factor, thin_lens_direction, CameraRay, Sensor};
+use super::{centre_mean, check_positive, geometric_factor, thin_lens_direction, CameraRay, FilmConnection, Sensor};
 use crate::error::Result;
 use crate::optics::aperture::{Aperture, PreparedAperture};
 use glam::{DVec2, DVec3};
@@ -152,5 +153,30 @@ impl ThinCamera {
     pub(super) fn generate_ray(&self, film: DVec2, lens_u: DVec2) -> Option<CameraRay> {
         let exposure = self.exposure[if self.natural_vignetting { 0 } else { 1 }];
         self.raw_ray(film, lens_u).map(|r| CameraRay { weight: r.weight * exposure, ..r })
+    }
+
+    /// The lens as light tracing sees it (one plane at the camera origin).
+    fn ideal(&self) -> IdealLens<'_> {
+        IdealLens {
+            sensor: &self.sensor,
+            aperture: &self.aperture,
+            radius_mm: self.aperture_radius_mm(),
+            focal_mm: self.lens_focal_mm,
+            film_z_mm: self.film_z_mm,
+            rear_z_mm: 0.0,
+            front_z_m: 0.0,
+            natural_vignetting: self.natural_vignetting,
+            exposure: self.exposure[if self.natural_vignetting { 0 } else { 1 }],
+        }
+    }
+
+    /// The camera's density for a sample in the ray measure (see [`super::Camera::sample_density`]).
+    pub(super) fn sample_density(&self, film: DVec2, lens_u: DVec2) -> Option<f64> {
+        self.ideal().sample_density(film, lens_u)
+    }
+
+    /// Light tracing onto the film (see [`super::Camera::connect`]).
+    pub(super) fn connect(&self, from_m: DVec3, to_m: DVec3) -> Option<FilmConnection> {
+        self.ideal().connect(from_m, to_m)
     }
 }

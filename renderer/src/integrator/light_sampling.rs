@@ -82,6 +82,12 @@ impl RenderScene {
     /// when nothing can be sampled. Lights wholly below `n` are never chosen.
     pub fn sample_light_at(&self, p: Vec3, n: Vec3, u_pick: f32, u: Vec2) -> Option<LightSample> {
         let (i, pmf) = self.lights.pick(p, n, u_pick)?;
+        self.sample_chosen_light(p, i, pmf, u)
+    }
+
+    /// Samples a point on light `i` (chosen with probability `pmf`) for shading point `p`, as
+    /// [`RenderScene::sample_light_at`] does once it has picked it.
+    pub(crate) fn sample_chosen_light(&self, p: Vec3, i: usize, pmf: f32, u: Vec2) -> Option<LightSample> {
         match self.lights.kinds[i] {
             LightKind::Punctual(li) => {
                 let light = self.scene().lights[li as usize];
@@ -197,6 +203,12 @@ impl RenderScene {
     /// hit along unit `dir` (not the ray's own origin): light paths start on the lens.
     pub fn triangle_light_pdf_from(&self, p: Vec3, n: Vec3, hit: &SurfaceHit, dir: Vec3, dist: f32) -> f32 {
         let pmf = self.lights.triangle_pmf(p, n, hit.instance, hit.triangle);
+        self.triangle_light_pdf_with_pmf(pmf, hit, dir, dist)
+    }
+
+    /// The solid-angle pdf of the point of `hit` on its emissive triangle, chosen with
+    /// probability `pmf`, seen from distance `dist` along unit `dir`.
+    pub(crate) fn triangle_light_pdf_with_pmf(&self, pmf: f32, hit: &SurfaceHit, dir: Vec3, dist: f32) -> f32 {
         if pmf == 0.0 {
             return 0.0;
         }
@@ -214,6 +226,20 @@ impl RenderScene {
     /// Whether any triangle emits (only those can be found by light paths through the lens).
     pub fn has_emissive_triangles(&self) -> bool {
         self.lights.kinds.iter().any(|k| matches!(k, LightKind::Triangle { .. }))
+    }
+
+    /// Every emissive triangle: (light index, world-space vertices, power: emission factor's
+    /// luminance × area, textures not counted).
+    pub(crate) fn emissive_triangles(&self) -> impl Iterator<Item = (usize, [Vec3; 3], f32)> + '_ {
+        self.lights.kinds.iter().enumerate().filter_map(|(i, k)| match *k {
+            LightKind::Triangle { instance, tri } => {
+                let v = self.world_triangle(instance, tri);
+                let e = self.scene().materials[self.material_of(instance, tri) as usize].emissive;
+                let area = 0.5 * (v[1] - v[0]).cross(v[2] - v[0]).length();
+                Some((i, v, (0.2126 * e.x + 0.7152 * e.y + 0.0722 * e.z) * area))
+            }
+            _ => None,
+        })
     }
 
     /// Pdf (selection × solid angle) of sampling the environment toward `dir` (the environment's
