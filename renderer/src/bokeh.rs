@@ -107,15 +107,66 @@ pub(crate) struct BokehTracer<'a> {
 /// How light paths choose their emitter: among the emissive triangles that can blur into the
 /// window ([`Defocus::alpha`] > 0 at a vertex, and the chief rays of their vertices landing on
 /// the window grown by half their blur), in proportion to the flux they send into the lens
-/// (power over squared distance: a tiny near lamp blurs as visibly as a large far one). The light tree that
-/// next-event estimation uses picks by power and distance from the lens alone, so in a scene
-/// whose brightest emitters are out of view most light paths would land off the film.
+/// (power over squared distance: a tiny near lamp blurs as visibly as a large far one) times
+/// the share α light paths take of them (no budget for emitters left mostly to camera paths,
+/// such as the night street's lit windows next to its lamps). The
+/// light tree that next-event estimation uses picks by power and distance from the lens alone,
+/// so in a scene whose brightest emitters are out of view most light paths would land off the
+/// film. Each triangle also carries the radius of its emitter ([`component_radii`]): the
+/// connected set of emissive triangles it belongs to (triangles joined by a shared vertex
+/// position, so flat-shaded meshes with split vertices stay one emitter).
 #[derive(Debug, Clone)]
 struct EmitterChoice {
     /// (light index, cumulative probability), in light order.
     cdf: Vec<(usize, f32)>,
     /// Probability of each light index (0 for lights never chosen).
     pmf: Vec<f32>,
+    /// Radius (m, world) of the emitter each light index belongs to (0 for other lights).
+    radius_m: Vec<f32>,
+}
+
+/// Radius (m) of each connected set of triangles, per triangle (sets: triangles sharing a
+/// vertex position, bit for bit; the radius: of the sphere with the set's area).
+fn component_radii(tris: &[[Vec3; 3]]) -> Vec<f32> {
+    // 1. Union-find over triangles, joined through their vertex positions.
+    let mut parent: Vec<usize> = (0..tris.len()).collect();
+    fn root(parent: &mut [usize], mut i: usize) -> usize {
+        while parent[i] != i {
+            parent[i] = parent[parent[i]];
+            i = parent[i];
+        }
+        i
+    }
+    let mut owner: std::collections::HashMap<[u32; 3], usize> = std::collections::HashMap::new();
+    for (t, v) in tris.iter().enumerate() {
+        for p in v {
+            let key = [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+            let other = *owner.entry(key).or_insert(t);
+            let (a, b) = (root(&mut parent, t), root(&mut parent, other));
+            if a != b {
+                parent[a.max(b)] = a.min(b);
+            }
+        }
+    }
+    // 2. Each set's bounds and area: the radius of the sphere of the same area (exact for a
+    //    ball, smaller for flat emitters), at most the bounds' half diagonal.
+    let roots: Vec<usize> = (0..tris.len()).map(|t| root(&mut parent, t)).collect();
+    let mut sets: std::collections::HashMap<usize, (Vec3, Vec3, f32)> = std::collections::HashMap::new();
+    for (t, v) in tris.iter().enumerate() {
+        let b = sets.entry(roots[t]).or_insert((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY), 0.0));
+        for p in v {
+            b.0 = b.0.min(*p);
+            b.1 = b.1.max(*p);
+        }
+        b.2 += 0.5 * (v[1] - v[0]).cross(v[2] - v[0]).length();
+    }
+    roots
+        .iter()
+        .map(|r| {
+            let (lo, hi, area) = sets[r];
+            (area / (4.0 * std::f32::consts::PI)).sqrt().min(0.5 * (hi - lo).length())
+        })
+        .collect()
 }
 
 impl EmitterChoice {
@@ -131,15 +182,22 @@ impl EmitterChoice {
         let (w, h) = (settings.width as f64, settings.height as f64);
         let [x0, y0, x1, y1] = settings.crop.map(|c| c as f64);
         let candidates: Vec<(usize, [Vec3; 3], f32)> = scene.emissive_triangles().collect();
+        let radii = component_radii(&candidates.iter().map(|c| c.1).collect::<Vec<_>>());
+        let mut radius_m = vec![0.0f32; scene.light_count()];
+        for (c, &r) in candidates.iter().zip(&radii) {
+            radius_m[c.0] = r;
+        }
         let kept: Vec<(usize, f32)> = candidates
             .par_iter()
-            .filter_map(|&(i, v, power)| {
+            .zip(radii.par_iter())
+            .filter_map(|(&(i, v, power), &radius)| {
                 if !(power > 0.0) {
                     return None;
                 }
-                // 1. Blurred enough at some vertex.
+                // 1. Blurred enough, for its size, at some vertex.
                 let y = v.map(|p| to_camera.transform_point3(p.as_dvec3()));
-                if y.iter().all(|&p| p.z >= 0.0 || defocus.alpha(p) == 0.0) {
+                let alpha = y.map(|p| if p.z < 0.0 { defocus.alpha(p, radius as f64) } else { 0.0 });
+                if alpha.iter().all(|&a| a == 0.0) {
                     return None;
                 }
                 // 2. In view: the vertices' chief rays, their bounding box grown by the blur,
@@ -154,9 +212,11 @@ impl EmitterChoice {
                 }
                 let m = 0.5 * blur + 2.0;
                 let outside = hi.x + m < x0 || lo.x - m > x1 || hi.y + m < y0 || lo.y - m > y1;
-                // 3. Weighted by the flux it sends into the lens: power over squared distance.
+                // 3. Weighted by the flux it sends into the lens (power over squared distance)
+                //    times the share light paths take of it (α, at the vertices on average).
                 let d2 = ((y[0] + y[1] + y[2]) / 3.0).length_squared().max(1e-12);
-                (!outside).then_some((i, (power as f64 / d2) as f32))
+                let share = (alpha[0] + alpha[1] + alpha[2]) / 3.0;
+                (!outside).then_some((i, (power as f64 / d2 * share) as f32))
             })
             .collect();
         let total: f64 = kept.iter().map(|&(_, p)| p as f64).sum();
@@ -171,7 +231,7 @@ impl EmitterChoice {
             acc += p as f64 / total;
             cdf.push((i, acc as f32));
         }
-        Some(EmitterChoice { cdf, pmf })
+        Some(EmitterChoice { cdf, pmf, radius_m })
     }
 
     /// The emitter for sample `u` in [0, 1): (light index, probability).
@@ -183,24 +243,31 @@ impl EmitterChoice {
     }
 }
 
-/// Blur diameters (film pixels) below which light paths take no share of an emitter point, and
-/// above which they take their full balance-heuristic share.
-const DEFOCUS_PX: (f64, f64) = (4.0, 12.0);
+/// Ratios ρ = (blur + 1 px) / (the emitter's sharp image size) below which light paths take no
+/// share of an emitter point, and above which they take their full balance-heuristic share.
+const DEFOCUS_RATIO: (f64, f64) = (0.45, 0.9);
 
-/// The thin-lens estimate of how blurred a scene point is, for the light strategy's share.
+/// How blurred a scene point is against the size of its emitter (thin-lens estimates), for the
+/// light strategy's share.
 ///
-/// Density-based MIS weights do not see that camera samples are stratified over pixels: inside
-/// the sharp image of an emitter every camera sample of a pixel hits it, so camera paths alone
-/// have next to no noise there, while light paths land a random number of times per pixel. Light
-/// paths pay where an emitter point is spread over a wide blur disc (where camera rays find it
-/// rarely). So the light strategy's density is scaled by a factor α of the point's blur diameter
-/// b: 0 below [`DEFOCUS_PX`].0, 1 above [`DEFOCUS_PX`].1, smooth between. Any α keeps the
-/// combination unbiased (the weights still sum to 1 for every path, and both strategies compute
-/// the same α from the same point); where α = 0 no light path is traced.
+/// Density-based MIS weights do not see that camera samples are stratified over pixels: where
+/// an emitter's blurred image is mostly its sharp image (an emitter large against its blur),
+/// nearly every camera sample of a pixel inside it hits it, so camera paths alone have next to
+/// no noise there, while light paths land a random number of times per pixel. Light paths pay
+/// where an emitter is small against its blur disc (and the pixel), where camera rays find it
+/// rarely. With ρ = (b + 1 px)/s, for blur diameter b and sharp image diameter s, the light
+/// strategy's density is scaled by a factor α(ρ): 0 below [`DEFOCUS_RATIO`].0 (an emitter
+/// larger than its blur), 1 above [`DEFOCUS_RATIO`].1, smooth between. (Measured on the night
+/// street's 8 cm lamps: light paths already win at ρ ≈ 1.7, and tests/blender's large emitters,
+/// ρ = 0.1 and 0.45, are better left to camera paths.) Any α keeps the combination unbiased (the weights still sum to 1
+/// for every path, and both strategies compute the same α from the same point and emitter);
+/// where α = 0 no light path is traced.
 #[derive(Debug, Clone, Copy)]
 struct Defocus {
-    /// Aperture (entrance pupil) diameter × image distance / pixel pitch (mm·px).
-    scale: f64,
+    /// Aperture (entrance pupil) diameter (mm).
+    aperture_mm: f64,
+    /// Image distance over pixel pitch (px per unit slope).
+    image_px: f64,
     /// The plane of sharp focus (camera space), None when unknown (then α = 1).
     plane: Option<crate::camera::FocusPlane>,
 }
@@ -212,15 +279,19 @@ impl Defocus {
         let Some(plane) = self.plane else { return f64::INFINITY };
         let z = -y_m.z;
         if !(z > 0.0) {
-            return f64::INFINITY; // behind the lens: never seen, so never shared
+            return f64::INFINITY; // behind the lens: never seen
         }
         let inv_zf = plane.intersect(DVec3::ZERO, y_m).map_or(0.0, |t| 1.0 / (t * z));
-        self.scale * 1e-3 * (1.0 / z - inv_zf).abs()
+        self.aperture_mm * 1e-3 * self.image_px * (1.0 / z - inv_zf).abs()
     }
 
-    /// The light strategy's share factor α for camera-space point `y_m`.
-    fn alpha(&self, y_m: DVec3) -> f64 {
-        let t = ((self.blur_px(y_m) - DEFOCUS_PX.0) / (DEFOCUS_PX.1 - DEFOCUS_PX.0)).clamp(0.0, 1.0);
+    /// The light strategy's share factor α for camera-space point `y_m` on an emitter of
+    /// radius `radius_m`.
+    fn alpha(&self, y_m: DVec3, radius_m: f64) -> f64 {
+        let z = -y_m.z;
+        let size_px = if z > 0.0 { 2.0 * radius_m / z * self.image_px } else { 0.0 };
+        let rho = (self.blur_px(y_m) + 1.0) / size_px.max(1e-9);
+        let t = ((rho - DEFOCUS_RATIO.0) / (DEFOCUS_RATIO.1 - DEFOCUS_RATIO.0)).clamp(0.0, 1.0);
         t * t * (3.0 - 2.0 * t)
     }
 }
@@ -258,8 +329,8 @@ impl<'a> BokehTracer<'a> {
         let sensor = camera.sensor();
         let to_camera = to_world.inverse();
         let defocus = Defocus {
-            scale: 2e3 * ep_radius_m * crate::camera::thin_lens_data(camera).map_or(0.0, |d| d.1)
-                / (sensor.width_mm / w as f64),
+            aperture_mm: 2e3 * ep_radius_m,
+            image_px: crate::camera::thin_lens_data(camera).map_or(0.0, |d| d.1) / (sensor.width_mm / w as f64),
             plane: camera.focus_plane(),
         };
         let primary_nm =
@@ -314,7 +385,13 @@ impl<'a> BokehTracer<'a> {
     /// t·`dir` ending on the emitter at `hit` (0 when its line misses the disc), scaled by the
     /// point's defocus share α ([`Defocus`]).
     fn light_density(&self, origin: Vec3, dir: Vec3, hit: &SurfaceHit) -> f64 {
-        let alpha = self.defocus.alpha(self.to_camera.transform_point3(hit.position.as_dvec3()));
+        let Some(light) = self.scene.triangle_light(hit.instance, hit.triangle) else { return 0.0 };
+        let pmf = self.emitters.pmf.get(light).copied().unwrap_or(0.0);
+        if pmf == 0.0 {
+            return 0.0;
+        }
+        let radius_m = self.emitters.radius_m[light] as f64;
+        let alpha = self.defocus.alpha(self.to_camera.transform_point3(hit.position.as_dvec3()), radius_m);
         if alpha == 0.0 {
             return 0.0;
         }
@@ -329,10 +406,8 @@ impl<'a> BokehTracer<'a> {
         if (p - centre).length() as f64 > self.radius_m {
             return 0.0;
         }
-        // 2. The light tree's choice of this emitter point from p.
+        // 2. The light paths' choice of this emitter point from p.
         let dist = (hit.position - p).length();
-        let Some(light) = self.scene.triangle_light(hit.instance, hit.triangle) else { return 0.0 };
-        let pmf = self.emitters.pmf.get(light).copied().unwrap_or(0.0);
         let pdf_w = self.scene.triangle_light_pdf_with_pmf(pmf, hit, dir, dist) as f64;
         alpha * self.paths_per_spp as f64 * self.disc_pdf_mm2 * pdf_w / cos_p.abs() as f64
     }
@@ -384,7 +459,7 @@ impl<'a> BokehTracer<'a> {
         // 3. Only where the point is blurred enough to share it; through the lens onto the
         //    film; inside the clipping planes; unoccluded.
         let y_cam = self.to_camera.transform_point3(y.as_dvec3());
-        let alpha = self.defocus.alpha(y_cam);
+        let alpha = self.defocus.alpha(y_cam, self.emitters.radius_m[light] as f64);
         if alpha == 0.0 {
             return;
         }
