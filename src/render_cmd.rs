@@ -135,8 +135,10 @@ pub struct RenderArgs {
     pub filter_width: f32,
     /// Bokeh light paths: light traced from emissive surfaces through the lens onto the film,
     /// this many per pixel per sample, combined with camera paths by MIS so that small bright
-    /// defocused emitters converge (a real lens, exact or LRTF model, --method mc; 0 = off).
-    /// auto: 1 where the camera can trace light and the scene has emissive surfaces, else 0.
+    /// defocused emitters converge (any lens model, not the pinhole; --method mc; 0 = off).
+    /// They serve only emitters small against their blur; large, nearly sharp emitters are
+    /// left to camera paths. auto: 1 where the camera has a lens and the scene has emissive
+    /// surfaces, else 0.
     #[arg(long, default_value = "auto")]
     pub bokeh_paths: String,
     /// Adaptive sampling's noise threshold, as Cycles' "Noise Threshold" (same test, same
@@ -654,7 +656,10 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
     };
     settings.validate()?;
     if settings.bokeh_paths > 0.0 {
-        eprintln!("bokeh light paths: {} per pixel per sample (--bokeh-paths)", settings.bokeh_paths);
+        eprintln!(
+            "bokeh light paths: {} per pixel per sample for emitters blurred enough to need them (--bokeh-paths)",
+            settings.bokeh_paths
+        );
     }
     crate::signals::enter(crate::signals::Phase::Rendering);
     let bar = ProgressBar::new(1000);
