@@ -270,26 +270,26 @@ fn blend_both_avx(e: &[&Entry; 8], w: &[f32; 8]) -> (Vec4, Vec4) {
 /// Rays per [`LrtfTable::lookup_batch`].
 pub const LRTF_BATCH: usize = 8;
 
-/// A ray's cell: the entry indices of its four σy-adjacent corner pairs, the interpolation
-/// weights along (u, σx, σy), the key frame's rotation and whether σy was mirrored.
-#[derive(Debug, Clone, Copy)]
+/// A ray's cell: the entry indices of its four σy-adjacent corner pairs and the interpolation
+/// weights along (u, σx, σy).
+#[derive(Debug, Clone, Copy, Default)]
 struct Cell {
     idx: [usize; 4],
     t: [f32; 3],
-    cs: f32,
-    sn: f32,
-    mirrored: bool,
 }
 
-/// A ray's key: its outcome when it never reaches a cell, else its cell coordinates along
-/// (u, σx, σy), the key frame's rotation and whether σy was mirrored.
+/// The keys of `N` rays as a structure of arrays, one lane per ray (so that the batched lookup
+/// runs its lanes as vectors): cell coordinates along (u, σx, σy), the key frame's rotation,
+/// the mirror of σy, and whether the ray missed the input dome or left the baked domain.
 #[derive(Debug, Clone, Copy)]
-struct RayKey {
-    outcome: Option<LrtfLookup>,
-    f: [f32; 3],
-    cs: f32,
-    sn: f32,
-    mirrored: bool,
+struct Keys<const N: usize> {
+    f: [[f32; N]; 3],
+    cs: [f32; N],
+    sn: [f32; N],
+    /// −1 where σy was mirrored, else 1.
+    sign: [f32; N],
+    missed: [bool; N],
+    inside: [bool; N],
 }
 
 /// What a lookup returns.
@@ -770,12 +770,20 @@ impl LrtfTable {
         self.lookup_body::<true>(ray, wavelength_nm)
     }
 
-    /// The lookup's body (inlined into each instruction-set build): [`LrtfTable::cell`], then
-    /// [`LrtfTable::finish`].
+    /// The lookup's body (inlined into each instruction-set build): the batched lookup's steps
+    /// for one lane.
     #[inline(always)]
     fn lookup_body<const AVX: bool>(&self, ray: &Ray, wavelength_nm: f64) -> LrtfLookup {
-        match self.cell(ray, wavelength_nm) {
-            Ok(c) => self.finish::<AVX>(&c),
+        let keys = self.ray_keys(std::array::from_ref(ray));
+        let cell = match self.cell_at(&keys, 0, wavelength_nm) {
+            Ok(c) => c,
+            Err(outcome) => return outcome,
+        };
+        match self.blend_cell::<AVX>(&cell) {
+            Ok(b) => {
+                let [(ray, stop_point, margin)] = self.unmap_lanes(&keys, &[b]);
+                LrtfLookup::Hit(LrtfRay { ray, stop_point, margin })
+            }
             Err(outcome) => outcome,
         }
     }
@@ -819,82 +827,49 @@ impl LrtfTable {
         self.lookup_batch_body::<true>(rays, wavelengths_nm)
     }
 
-    /// The batched lookup's body: every ray's cell and prefetches first, then the blends.
+    /// The batched lookup's body: every lane's key as vectors, every cell found and prefetched,
+    /// then the blends lane by lane, then every lane's way back to the lens frame as vectors.
     #[inline(always)]
     fn lookup_batch_body<const AVX: bool>(
         &self,
         rays: &[Ray; LRTF_BATCH],
         wavelengths_nm: &[f64; LRTF_BATCH],
     ) -> [LrtfLookup; LRTF_BATCH] {
-        // 1. Cells, all lanes at once (branch-free, so the compiler runs the lanes as vectors;
-        //    the same operations per lane as `cell`), and their lines fetched.
-        let cells = self.cells(rays, wavelengths_nm);
-        for c in cells.iter().flatten() {
-            self.prefetch(c);
-        }
-        // 2. Blends, lane by lane (the corners' reads and margin tests), then every lane's
-        //    way back to the lens frame at once.
         const N: usize = LRTF_BATCH;
+        // 1. Keys, all lanes at once (branch-free: the compiler runs the lanes as vectors).
+        let keys = self.ray_keys(rays);
+        // 2. Cells, and their lines fetched before the first is read.
         let mut out = [LrtfLookup::Miss; N];
-        let mut blended = [(Vec4::ZERO, Vec4::ZERO); N];
-        let mut hit = [false; N];
+        let mut cells = [Cell::default(); N];
+        let mut live = [false; N];
         for i in 0..N {
-            match &cells[i] {
-                Ok(c) => match self.blend_cell::<AVX>(c) {
-                    Ok(b) => (blended[i], hit[i]) = (b, true),
-                    Err(o) => out[i] = o,
-                },
-                Err(o) => out[i] = *o,
+            match self.cell_at(&keys, i, wavelengths_nm[i]) {
+                Ok(c) => {
+                    self.prefetch(&c);
+                    (cells[i], live[i]) = (c, true);
+                }
+                Err(o) => out[i] = o,
             }
         }
-        let rays: [(Ray, DVec2, f64); N] = self.unmap_lanes(&cells, &blended);
+        // 3. Blends, lane by lane (the corners' reads and margin tests).
+        let mut blended = [(Vec4::ZERO, Vec4::ZERO); N];
         for i in 0..N {
-            if hit[i] {
+            if live[i] {
+                match self.blend_cell::<AVX>(&cells[i]) {
+                    Ok(b) => blended[i] = b,
+                    Err(o) => (out[i], live[i]) = (o, false),
+                }
+            }
+        }
+        // 4. The way back to the lens frame, all lanes at once.
+        let rays = self.unmap_lanes(&keys, &blended);
+        for i in 0..N {
+            if live[i] {
                 let (ray, stop_point, margin) = rays[i];
                 out[i] = LrtfLookup::Hit(LrtfRay { ray, stop_point, margin });
             }
         }
         out
-    }
-
-    /// Step 6 of [`LrtfTable::finish`] for every lane (lanes without a cell give any value).
-    #[inline(always)]
-    fn unmap_lanes(
-        &self,
-        cells: &[std::result::Result<Cell, LrtfLookup>; LRTF_BATCH],
-        blended: &[(Vec4, Vec4); LRTF_BATCH],
-    ) -> [(Ray, DVec2, f64); LRTF_BATCH] {
-        const N: usize = LRTF_BATCH;
-        let pick = |f: &dyn Fn(&Cell) -> f32| -> [f32; N] { std::array::from_fn(|i| cells[i].as_ref().map_or(0.0, f)) };
-        let (cs, sn) = (pick(&|c| c.cs), pick(&|c| c.sn));
-        let sign = pick(&|c| if c.mirrored { -1.0 } else { 1.0 });
-        std::array::from_fn(|i| self.unmap(cs[i], sn[i], sign[i], blended[i]))
-    }
-
-    /// [`LrtfTable::cell`] of [`LRTF_BATCH`] rays, lane by lane in straight-line loops: every
-    /// lane computes every step (selects instead of early returns), and each lane's outcome is
-    /// the first test it fails, so the results equal `cell`'s bit for bit.
-    #[inline(always)]
-    fn cells(
-        &self,
-        rays: &[Ray; LRTF_BATCH],
-        wavelengths_nm: &[f64; LRTF_BATCH],
-    ) -> [std::result::Result<Cell, LrtfLookup>; LRTF_BATCH] {
-        const N: usize = LRTF_BATCH;
-        let k = &self.key;
-        let lane = |f: &dyn Fn(&Ray) -> f32| -> [f32; N] { std::array::from_fn(|i| f(&rays[i])) };
-        let (ox, oy, oz) = (
-            lane(&|r| r.origin.x as f32),
-            lane(&|r| r.origin.y as f32),
-            lane(&|r| (r.origin.z - k.in_centre_z) as f32),
-        );
-        let (dx, dy, dz) =
-            (lane(&|r| r.direction.x as f32), lane(&|r| r.direction.y as f32), lane(&|r| r.direction.z as f32));
-        let mut keys = [RayKey { outcome: None, f: [0.0; 3], cs: 0.0, sn: 0.0, mirrored: false }; N];
-        for i in 0..N {
-            keys[i] = self.ray_key([ox[i], oy[i], oz[i]], [dx[i], dy[i], dz[i]]);
-        }
-        std::array::from_fn(|i| self.cell_at(&keys[i], wavelengths_nm[i]))
     }
 
     /// Asks the memory system for a cell's cache lines (a hint; no effect on results).
@@ -903,7 +878,7 @@ impl LrtfTable {
         #[cfg(target_arch = "x86_64")]
         for i in c.idx {
             use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-            // SAFETY: `cell` checked that every index of the cell lies inside `lines`;
+            // SAFETY: `cell_at` checked that every index of the cell lies inside `lines`;
             // prefetching never faults.
             unsafe {
                 _mm_prefetch(self.lines.as_ptr().add(i / 2) as *const i8, _MM_HINT_T0);
@@ -914,61 +889,55 @@ impl LrtfTable {
         let _ = c;
     }
 
-    /// Steps 1–3 of a lookup: the ray's cell and its interpolation weights, or the outcome when
-    /// the ray never reaches a cell.
+    /// Steps 1–2 of a lookup for `N` rays, lane by lane in one straight-line loop (every step
+    /// computed, selects instead of early returns, so the lanes run as vectors): where each ray
+    /// enters the input dome and its key there.
     #[inline(always)]
-    fn cell(&self, ray: &Ray, wavelength_nm: f64) -> std::result::Result<Cell, LrtfLookup> {
-        let (o, d) = (ray.origin, ray.direction);
-        let key = self.ray_key(
-            [o.x as f32, o.y as f32, (o.z - self.key.in_centre_z) as f32],
-            [d.x as f32, d.y as f32, d.z as f32],
-        );
-        self.cell_at(&key, wavelength_nm)
-    }
-
-    /// Steps 1–2 of a lookup, branch-free (every step computed, selects instead of early
-    /// returns, so that [`LrtfTable::cells`] runs its lanes as vectors): the key of the ray
-    /// from `o` (relative to the input dome's centre) along `d`, or its outcome when it misses
-    /// the dome or leaves the baked domain.
-    #[inline(always)]
-    fn ray_key(&self, [ox, oy, oz]: [f32; 3], [dx, dy, dz]: [f32; 3]) -> RayKey {
+    fn ray_keys<const N: usize>(&self, rays: &[Ray; N]) -> Keys<N> {
         let k = &self.key;
-        // 1. Where the ray enters the input dome.
-        let b = ox * dx + oy * dy + oz * dz;
-        let disc = b * b - (ox * ox + oy * oy + oz * oz - k.in_radius_sq);
-        let t = -b - disc.sqrt();
-        let (px, py, pz) = (ox + t * dx, oy + t * dy, oz + t * dz);
-        let missed = !(disc >= 0.0) || !(t >= 0.0) || pz < k.base_dz;
-        // 2. Key: rotate the direction into the frame where the point lies on +x (cos φ, sin φ
-        //    = (x, y)/ρ), stereographic projection, mirror σy ≥ 0.
-        let rho2 = px * px + py * py;
-        let inv_r = 1.0 / rho2.sqrt();
-        let (cs, sn, rho) = if rho2 > 1e-20 { (px * inv_r, py * inv_r, rho2 * inv_r) } else { (1.0, 0.0, 0.0) };
-        let inv = 1.0 / (1.0 - dz).max(1e-12);
-        let sx = (cs * dx + sn * dy) * inv;
-        let sy = (cs * dy - sn * dx) * inv;
-        let f = [rho * k.scale_u, sx * k.scale_x + k.half, sy.abs() * k.scale_y];
-        let inside = f[0] <= k.max_x && f[1] >= 0.0 && f[1] <= k.max_x && f[2] <= k.max_y;
-        // outside the baked domain: only the exact trace can say
-        let outcome = if missed {
-            Some(LrtfLookup::Miss)
-        } else if !inside {
-            Some(LrtfLookup::Uncertain)
-        } else {
-            None
-        };
-        RayKey { outcome, f, cs, sn, mirrored: sy < 0.0 }
+        let mut keys =
+            Keys { f: [[0.0; N]; 3], cs: [0.0; N], sn: [0.0; N], sign: [1.0; N], missed: [false; N], inside: [false; N] };
+        for i in 0..N {
+            let (o, d) = (rays[i].origin, rays[i].direction);
+            // relative to the input dome's centre, in f32 (the table's precision)
+            let (ox, oy, oz) = (o.x as f32, o.y as f32, (o.z - k.in_centre_z) as f32);
+            let (dx, dy, dz) = (d.x as f32, d.y as f32, d.z as f32);
+            // 1. Where the ray enters the input dome.
+            let b = ox * dx + oy * dy + oz * dz;
+            let disc = b * b - (ox * ox + oy * oy + oz * oz - k.in_radius_sq);
+            let t = -b - disc.sqrt();
+            let (px, py, pz) = (ox + t * dx, oy + t * dy, oz + t * dz);
+            keys.missed[i] = !(disc >= 0.0) || !(t >= 0.0) || pz < k.base_dz;
+            // 2. Key: rotate the direction into the frame where the point lies on +x (cos φ,
+            //    sin φ = (x, y)/ρ), stereographic projection, mirror σy ≥ 0.
+            let rho2 = px * px + py * py;
+            let inv_r = 1.0 / rho2.sqrt();
+            let (cs, sn, rho) = if rho2 > 1e-20 { (px * inv_r, py * inv_r, rho2 * inv_r) } else { (1.0, 0.0, 0.0) };
+            let inv = 1.0 / (1.0 - dz).max(1e-12);
+            let sx = (cs * dx + sn * dy) * inv;
+            let sy = (cs * dy - sn * dx) * inv;
+            let f = [rho * k.scale_u, sx * k.scale_x + k.half, sy.abs() * k.scale_y];
+            keys.inside[i] = f[0] <= k.max_x && f[1] >= 0.0 && f[1] <= k.max_x && f[2] <= k.max_y;
+            (keys.f[0][i], keys.f[1][i], keys.f[2][i]) = (f[0], f[1], f[2]);
+            (keys.cs[i], keys.sn[i]) = (cs, sn);
+            keys.sign[i] = if sy < 0.0 { -1.0 } else { 1.0 };
+        }
+        keys
     }
 
-    /// Step 3 of a lookup: the cell of a key (four σy-adjacent pairs of entries, one or two
-    /// cache lines each) and its interpolation weights.
+    /// Step 3 of a lookup: lane `i`'s cell (four σy-adjacent pairs of entries, one or two cache
+    /// lines each) and its interpolation weights, or its outcome when it never reaches a cell
+    /// (missed the dome; outside the baked domain, where only the exact trace can say).
     #[inline(always)]
-    fn cell_at(&self, key: &RayKey, wavelength_nm: f64) -> std::result::Result<Cell, LrtfLookup> {
-        if let Some(outcome) = key.outcome {
-            return Err(outcome);
+    fn cell_at<const N: usize>(&self, keys: &Keys<N>, i: usize, wavelength_nm: f64) -> std::result::Result<Cell, LrtfLookup> {
+        if keys.missed[i] {
+            return Err(LrtfLookup::Miss);
+        }
+        if !keys.inside[i] {
+            return Err(LrtfLookup::Uncertain);
         }
         let k = &self.key;
-        let [fu, fx, fy] = key.f;
+        let [fu, fx, fy] = [keys.f[0][i], keys.f[1][i], keys.f[2][i]];
         let wi = self.nearest_wavelength(wavelength_nm);
         // (i32 conversions: one instruction each; the domain test excluded NaN and < 0)
         let (iu, ix, iy) = ((fu as i32).min(k.last_cell), (fx as i32).min(k.last_cell), (fy as i32).min(k.last_cell_y));
@@ -978,43 +947,48 @@ impl LrtfTable {
             return Err(LrtfLookup::Miss);
         }
         let idx = [base, base + k.stride_x, base + k.stride_u, base + k.stride_u + k.stride_x];
-        Ok(Cell { idx, t: [tu, tx, ty], cs: key.cs, sn: key.sn, mirrored: key.mirrored })
+        Ok(Cell { idx, t: [tu, tx, ty] })
     }
 
-    /// Steps 4–6 of a lookup: [`LrtfTable::blend_cell`], then the outgoing ray taken back to
-    /// the lens frame.
+    /// Step 6 of a lookup for `N` lanes at once, in one straight-line loop: the blended outputs
+    /// (w, e) and (stop, margin) back in the lens frame (undo the mirror, the stereographic
+    /// maps and the rotation of each lane's key): the outgoing ray, the stop crossing and the
+    /// margin. Lanes without a blend give any value.
     #[inline(always)]
-    fn finish<const AVX: bool>(&self, c: &Cell) -> LrtfLookup {
-        let (a, st) = match self.blend_cell::<AVX>(c) {
-            Ok(b) => b,
-            Err(o) => return o,
-        };
-        let (ray, stop_point, margin) = self.unmap(c.cs, c.sn, if c.mirrored { -1.0 } else { 1.0 }, (a, st));
-        LrtfLookup::Hit(LrtfRay { ray, stop_point, margin })
-    }
-
-    /// Step 6 of a lookup: the blended outputs (w, e) and (stop, margin) back in the lens frame
-    /// (undo the mirror `sign`, the stereographic maps and the rotation by (`cs`, `sn`)): the
-    /// outgoing ray, the stop crossing and the margin.
-    #[inline(always)]
-    fn unmap(&self, cs: f32, sn: f32, sign: f32, (a, st): (Vec4, Vec4)) -> (Ray, DVec2, f64) {
+    fn unmap_lanes<const N: usize>(&self, keys: &Keys<N>, blended: &[(Vec4, Vec4); N]) -> [(Ray, DVec2, f64); N] {
         let k = &self.key;
-        let (wx, wy_, ex, ey) = (a.x, a.y, a.z, a.w);
-        let (stx, sty) = (st.x, st.y);
-        let (wy_, ey, sty) = (sign * wy_, sign * ey, sign * sty);
-        let (s2w, s2e) = (wx * wx + wy_ * wy_, ex * ex + ey * ey);
-        let (kw, ke) = (k.out_radius / (1.0 + s2w), 1.0 / (1.0 + s2e));
-        let (qx, qy, qz) = (2.0 * wx * kw, 2.0 * wy_ * kw, (s2w - 1.0) * kw);
-        let (vx, vy, vz) = (2.0 * ex * ke, 2.0 * ey * ke, (s2e - 1.0) * ke);
-        (
-            Ray {
-                origin: DVec3::new((cs * qx - sn * qy) as f64, (sn * qx + cs * qy) as f64, qz as f64 + k.out_centre_z),
-                // unit to f32 precision (~1e-7)
-                direction: DVec3::new((cs * vx - sn * vy) as f64, (sn * vx + cs * vy) as f64, vz as f64),
-            },
-            DVec2::new((cs * stx - sn * sty) as f64, (sn * stx + cs * sty) as f64),
-            st.z as f64,
-        )
+        // 1. Channels as lanes.
+        let mut c = [[0f32; N]; 7];
+        for i in 0..N {
+            let (a, st) = blended[i];
+            (c[0][i], c[1][i], c[2][i], c[3][i]) = (a.x, a.y, a.z, a.w);
+            (c[4][i], c[5][i], c[6][i]) = (st.x, st.y, st.z);
+        }
+        // 2. Inverse maps, every lane.
+        let mut v = [[0f32; N]; 8];
+        for i in 0..N {
+            let (cs, sn, sign) = (keys.cs[i], keys.sn[i], keys.sign[i]);
+            let (wx, ex, stx) = (c[0][i], c[2][i], c[4][i]);
+            let (wy_, ey, sty) = (sign * c[1][i], sign * c[3][i], sign * c[5][i]);
+            let (s2w, s2e) = (wx * wx + wy_ * wy_, ex * ex + ey * ey);
+            let (kw, ke) = (k.out_radius / (1.0 + s2w), 1.0 / (1.0 + s2e));
+            let (qx, qy, qz) = (2.0 * wx * kw, 2.0 * wy_ * kw, (s2w - 1.0) * kw);
+            let (vx, vy, vz) = (2.0 * ex * ke, 2.0 * ey * ke, (s2e - 1.0) * ke);
+            (v[0][i], v[1][i], v[2][i]) = (cs * qx - sn * qy, sn * qx + cs * qy, qz);
+            (v[3][i], v[4][i], v[5][i]) = (cs * vx - sn * vy, sn * vx + cs * vy, vz);
+            (v[6][i], v[7][i]) = (cs * stx - sn * sty, sn * stx + cs * sty);
+        }
+        // 3. Back to f64 (directions unit to f32 precision, ~1e-7).
+        std::array::from_fn(|i| {
+            (
+                Ray {
+                    origin: DVec3::new(v[0][i] as f64, v[1][i] as f64, v[2][i] as f64 + k.out_centre_z),
+                    direction: DVec3::new(v[3][i] as f64, v[4][i] as f64, v[5][i] as f64),
+                },
+                DVec2::new(v[6][i] as f64, v[7][i] as f64),
+                c[6][i] as f64,
+            )
+        })
     }
 
     /// Steps 4–5 of a lookup: the cell's corners read, tested and blended: the outputs
