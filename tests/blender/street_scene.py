@@ -240,7 +240,8 @@ def build_scene(tmpdir: Path) -> S.BuiltScene:
     scene.collection.objects.link(obj)
     obj.location = (0.0, 0.0, 2.0)
     obj.rotation_mode = "QUATERNION"
-    obj.rotation_quaternion = S._look_at_quat(obj.location, tuple(a + b for a, b in zip(obj.location, MOON_DIRECTION)))
+    aim = tuple(a + b for a, b in zip(obj.location, MOON_DIRECTION, strict=True))
+    obj.rotation_quaternion = S._look_at_quat(obj.location, aim)
 
     # 6. The camera.
     built = S.BuiltScene(blender_version=bpy.app.version_string)

@@ -29,11 +29,11 @@ try:
 except Exception as e:  # ImportError, or a broken install
     pytest.skip(f"Blender's Python module cannot be imported ({type(e).__name__}: {e})", allow_module_level=True)
 
+import street_scene as T
 from test_cycles_match import MEAN_TOL, _block_verdict, _fmt_verdict, _passes
 
 import blender_compare as B
 import blender_scenes as S
-import street_scene as T
 
 HERE = Path(__file__).resolve().parent
 SPP = 128
