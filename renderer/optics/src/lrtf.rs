@@ -910,8 +910,8 @@ impl LrtfTable {
             missed: [false; N],
             inside: [false; N],
         };
-        for i in 0..N {
-            let (o, d) = (rays[i].origin, rays[i].direction);
+        for (i, ray) in rays.iter().enumerate() {
+            let (o, d) = (ray.origin, ray.direction);
             // relative to the input dome's centre, in f32 (the table's precision)
             let (ox, oy, oz) = (o.x as f32, o.y as f32, (o.z - k.in_centre_z) as f32);
             let (dx, dy, dz) = (d.x as f32, d.y as f32, d.z as f32);
