@@ -15,9 +15,6 @@
 
 from __future__ import annotations
 
-import hashlib
-import json
-import os
 import resource
 import subprocess
 import sys
@@ -32,6 +29,8 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[1]
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(REPO / "tests" / "optics"))
+
+from cycles_cache import cache_key, cached_render  # noqa: E402
 
 import petzval_cli  # noqa: E402  (binary location/build shared with the optics suite)
 
@@ -67,21 +66,20 @@ class BlenderRun:
     def cycles(self, camera: str, seed: int, spp: int, cache: bool = True) -> Path:
         """Path of a Cycles render (rendered now unless cached); its time is in `timings`."""
         name = f"cycles_{camera}_spp{spp}_seed{seed}"
-        exr = self.cache_dir / f"{name}.exr"
-        meta = self.cache_dir / f"{name}.json"
-        use_cache = cache and not os.environ.get("PETZVAL_BLENDER_NO_CACHE")
-        if use_cache and exr.is_file() and meta.is_file():
-            self.timings[name] = json.loads(meta.read_text())["seconds"]
-            return exr
-        if not cache:
-            exr = self.workdir / f"{name}.exr"
-        cpu0 = time.process_time()  # this process: Cycles renders in-process, on its own threads
-        secs = self.S.render_cycles(self.S.CyclesSettings(samples=spp, seed=seed), camera, exr)
-        self.cpu_times[name] = time.process_time() - cpu0
-        self.timings[name] = secs
-        self.fresh_cycles.add(name)
+
+        def render(exr: Path) -> float:
+            cpu0 = time.process_time()  # this process: Cycles renders in-process, on its own threads
+            secs = self.S.render_cycles(self.S.CyclesSettings(samples=spp, seed=seed), camera, exr)
+            self.cpu_times[name] = time.process_time() - cpu0
+            return secs
+
         if cache:
-            meta.write_text(json.dumps({"seconds": secs, "blender": self.bpy.app.version_string}))
+            exr, self.timings[name], fresh = cached_render(self.bpy, self.cache_dir, name, render)
+        else:
+            exr = self.workdir / f"{name}.exr"
+            self.timings[name], fresh = render(exr), True
+        if fresh:
+            self.fresh_cycles.add(name)
         return exr
 
     def petzval_cmd(self, args: list[str], seed: int, spp: int, out: Path) -> list[str]:
@@ -113,11 +111,7 @@ class BlenderRun:
 
 
 def _cache_key(bpy) -> str:
-    h = hashlib.sha256()
-    h.update((HERE / "blender_scenes.py").read_bytes())
-    h.update(bpy.app.version_string.encode())
-    h.update(bpy.app.build_hash if isinstance(bpy.app.build_hash, bytes) else str(bpy.app.build_hash).encode())
-    return h.hexdigest()[:16]
+    return cache_key(bpy, "blender_scenes.py")
 
 
 @pytest.fixture(scope="session")

@@ -23,10 +23,8 @@ pixels within 1 % per channel, and |z| ≤ 5 for the band sums.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
-import os
 import struct
 import subprocess
 import time
@@ -40,6 +38,7 @@ try:
 except Exception as e:  # ImportError, or a broken install
     pytest.skip(f"Blender's Python module cannot be imported ({type(e).__name__}: {e})", allow_module_level=True)
 
+from cycles_cache import cache_key, cached_render
 from test_cycles_match import MAX_ABS_Z, MEAN_TOL, _block_verdict, _fmt_verdict, _passes
 
 import blender_compare as B
@@ -50,15 +49,6 @@ HERE = Path(__file__).resolve().parent
 SPP = 64
 SEEDS = (0, 1)
 CONTROL_SEED = 7
-
-
-def _cache_key() -> str:
-    h = hashlib.sha256()
-    for f in ("spot_scenes.py", "blender_scenes.py"):
-        h.update((HERE / f).read_bytes())
-    h.update(bpy.app.version_string.encode())
-    h.update(bpy.app.build_hash if isinstance(bpy.app.build_hash, bytes) else str(bpy.app.build_hash).encode())
-    return h.hexdigest()[:16]
 
 
 def _read_glb(path: Path) -> tuple[dict, bytes]:
@@ -87,7 +77,8 @@ class SpotRun:
     def __init__(self, blender_run):
         self.binary = blender_run.binary
         self.workdir = blender_run.workdir / "spots"
-        self.cache_dir = blender_run.cache_dir.parent / f"cycles-spots-{_cache_key()}"
+        key = cache_key(bpy, "spot_scenes.py", "blender_scenes.py")
+        self.cache_dir = blender_run.cache_dir.parent / f"cycles-spots-{key}"
         self.workdir.mkdir(parents=True, exist_ok=True)
         self.cache_dir.mkdir(parents=True, exist_ok=True)
         SP.build_scene(self.workdir)
@@ -97,12 +88,9 @@ class SpotRun:
 
     def cycles(self, seed: int) -> np.ndarray:
         name = f"cycles_{SP.CAMERA.name}_spp{SPP}_seed{seed}"
-        exr, meta = self.cache_dir / f"{name}.exr", self.cache_dir / f"{name}.json"
-        if exr.is_file() and meta.is_file() and not os.environ.get("PETZVAL_BLENDER_NO_CACHE"):
-            self.timings[name] = json.loads(meta.read_text())["seconds"]
-        else:
-            self.timings[name] = SP.render_cycles(SPP, seed, exr)
-            meta.write_text(json.dumps({"seconds": self.timings[name], "blender": bpy.app.version_string}))
+        exr, self.timings[name], _ = cached_render(
+            bpy, self.cache_dir, name, lambda out: SP.render_cycles(SPP, seed, out)
+        )
         return B.read_rgb(exr)
 
     def petzval(self, seed: int, tag: str, glb: Path | None = None) -> np.ndarray:

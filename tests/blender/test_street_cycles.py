@@ -14,9 +14,6 @@ street_scene.py (built in Blender, exported as GLB, rendered by both through Ble
 
 from __future__ import annotations
 
-import hashlib
-import json
-import os
 import subprocess
 import time
 from pathlib import Path
@@ -30,6 +27,7 @@ except Exception as e:  # ImportError, or a broken install
     pytest.skip(f"Blender's Python module cannot be imported ({type(e).__name__}: {e})", allow_module_level=True)
 
 import street_scene as T
+from cycles_cache import cache_key, cached_render
 from test_cycles_match import MEAN_TOL, _block_verdict, _fmt_verdict, _passes
 
 import blender_compare as B
@@ -40,22 +38,14 @@ SPP = 128
 SEEDS = (0, 1)
 
 
-def _cache_key() -> str:
-    h = hashlib.sha256()
-    for f in ("street_scene.py", "blender_scenes.py"):
-        h.update((HERE / f).read_bytes())
-    h.update(bpy.app.version_string.encode())
-    h.update(bpy.app.build_hash if isinstance(bpy.app.build_hash, bytes) else str(bpy.app.build_hash).encode())
-    return h.hexdigest()[:16]
-
-
 class StreetRun:
     """The street's GLB, its Cycles renders (cached like the main scene's) and petzval renders."""
 
     def __init__(self, blender_run):
         self.binary = blender_run.binary
         self.workdir = blender_run.workdir / "street"
-        self.cache_dir = blender_run.cache_dir.parent / f"cycles-street-{_cache_key()}"
+        key = cache_key(bpy, "street_scene.py", "blender_scenes.py")
+        self.cache_dir = blender_run.cache_dir.parent / f"cycles-street-{key}"
         self.workdir.mkdir(parents=True, exist_ok=True)
         self.cache_dir.mkdir(parents=True, exist_ok=True)
         T.build_scene(self.workdir)
@@ -66,13 +56,12 @@ class StreetRun:
 
     def cycles(self, seed: int) -> np.ndarray:
         name = f"cycles_{T.CAMERA.name}_spp{SPP}_seed{seed}"
-        exr, meta = self.cache_dir / f"{name}.exr", self.cache_dir / f"{name}.json"
-        if exr.is_file() and meta.is_file() and not os.environ.get("PETZVAL_BLENDER_NO_CACHE"):
-            self.timings[name] = json.loads(meta.read_text())["seconds"]
-        else:
-            self.timings[name] = S.render_cycles(S.CyclesSettings(samples=SPP, seed=seed), T.CAMERA.name, exr)
+        settings = S.CyclesSettings(samples=SPP, seed=seed)
+        exr, self.timings[name], fresh = cached_render(
+            bpy, self.cache_dir, name, lambda out: S.render_cycles(settings, T.CAMERA.name, out)
+        )
+        if fresh:
             self.fresh.add(name)
-            meta.write_text(json.dumps({"seconds": self.timings[name], "blender": bpy.app.version_string}))
         return B.read_rgb(exr)
 
     def petzval(self, seed: int, bokeh_paths: str) -> np.ndarray:

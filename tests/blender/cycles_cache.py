@@ -1,0 +1,38 @@
+"""Cached Cycles renders for the Blender comparisons (tests/out is gitignored).
+
+A render is kept as ``NAME.exr`` with ``NAME.json`` (its wall seconds and Blender's version) in
+a cache folder whose name carries :func:`cache_key`: the hash of the scene-building modules and
+of Blender's version and build, so a change to a scene or to Blender renders anew.
+``PETZVAL_BLENDER_NO_CACHE=1`` renders anew regardless.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections.abc import Callable
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+
+def cache_key(bpy, *modules: str) -> str:
+    """16 hex digits of the hash of `modules` (file names beside this one) and of Blender."""
+    h = hashlib.sha256()
+    for f in modules:
+        h.update((HERE / f).read_bytes())
+    h.update(bpy.app.version_string.encode())
+    h.update(bpy.app.build_hash if isinstance(bpy.app.build_hash, bytes) else str(bpy.app.build_hash).encode())
+    return h.hexdigest()[:16]
+
+
+def cached_render(bpy, cache_dir: Path, name: str, render: Callable[[Path], float]) -> tuple[Path, float, bool]:
+    """The EXR of render `name` in `cache_dir`, its wall seconds and whether it was rendered now:
+    from the cache when there, else `render(exr_path)` (which returns its seconds) is run."""
+    exr, meta = cache_dir / f"{name}.exr", cache_dir / f"{name}.json"
+    if exr.is_file() and meta.is_file() and not os.environ.get("PETZVAL_BLENDER_NO_CACHE"):
+        return exr, json.loads(meta.read_text())["seconds"], False
+    seconds = render(exr)
+    meta.write_text(json.dumps({"seconds": seconds, "blender": bpy.app.version_string}))
+    return exr, seconds, True
