@@ -67,7 +67,7 @@ impl LensModel {
             LensModel::Pinhole => 30.0,
             LensModel::Thin => 50.0,
             LensModel::Thick => 60.0,
-            LensModel::Lrtf { .. } => 60.0 + 0.05 * exact,
+            LensModel::Lrtf { .. } => 30.0 + 0.02 * exact,
             LensModel::Exact | LensModel::Auto => exact,
         }
     }
