@@ -30,7 +30,7 @@ REPO = HERE.parents[1]
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(REPO / "tests" / "optics"))
 
-from cycles_cache import cache_key, cached_render  # noqa: E402
+from renders import cache_key, cached_render  # noqa: E402
 
 import petzval_cli  # noqa: E402  (binary location/build shared with the optics suite)
 

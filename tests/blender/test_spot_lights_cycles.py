@@ -26,8 +26,6 @@ from __future__ import annotations
 import json
 import math
 import struct
-import subprocess
-import time
 from pathlib import Path
 
 import numpy as np
@@ -38,7 +36,7 @@ try:
 except Exception as e:  # ImportError, or a broken install
     pytest.skip(f"Blender's Python module cannot be imported ({type(e).__name__}: {e})", allow_module_level=True)
 
-from cycles_cache import cache_key, cached_render
+from renders import cache_key, cached_render, run_petzval
 from test_cycles_match import MAX_ABS_Z, MEAN_TOL, _block_verdict, _fmt_verdict, _passes
 
 import blender_compare as B
@@ -95,16 +93,9 @@ class SpotRun:
 
     def petzval(self, seed: int, tag: str, glb: Path | None = None) -> np.ndarray:
         out = self.workdir / f"petzval_{tag}_spp{SPP}_seed{seed}.exr"
-        cmd = [
-            str(self.binary), "render", str(glb or self.glb), "-o", str(out), "--no-png", *SP.petzval_args(),
-            "--spp", str(SPP), "--seed", str(seed), "--threads", "2",
-        ]  # fmt: skip
-        t0 = time.perf_counter()
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
-        self.timings[out.stem] = time.perf_counter() - t0
-        if proc.returncode != 0 or not out.is_file():
-            raise AssertionError(f"`{' '.join(cmd)}` exited {proc.returncode}:\n{proc.stderr[-3000:]}")
-        self.stderr[out.stem] = proc.stderr
+        self.timings[out.stem], self.stderr[out.stem] = run_petzval(
+            self.binary, glb or self.glb, out, SP.petzval_args(), SPP, seed
+        )
         return B.read_rgb(out)
 
 

@@ -14,8 +14,6 @@ street_scene.py (built in Blender, exported as GLB, rendered by both through Ble
 
 from __future__ import annotations
 
-import subprocess
-import time
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +25,7 @@ except Exception as e:  # ImportError, or a broken install
     pytest.skip(f"Blender's Python module cannot be imported ({type(e).__name__}: {e})", allow_module_level=True)
 
 import street_scene as T
-from cycles_cache import cache_key, cached_render
+from renders import cache_key, cached_render, run_petzval
 from test_cycles_match import MEAN_TOL, _block_verdict, _fmt_verdict, _passes
 
 import blender_compare as B
@@ -66,15 +64,7 @@ class StreetRun:
 
     def petzval(self, seed: int, bokeh_paths: str) -> np.ndarray:
         out = self.workdir / f"petzval_paths{bokeh_paths}_spp{SPP}_seed{seed}.exr"
-        cmd = [
-            str(self.binary), "render", str(self.glb), "-o", str(out), "--no-png", *self.args[bokeh_paths],
-            "--spp", str(SPP), "--seed", str(seed), "--threads", "2",
-        ]  # fmt: skip
-        t0 = time.perf_counter()
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
-        self.timings[out.stem] = time.perf_counter() - t0
-        if proc.returncode != 0 or not out.is_file():
-            raise AssertionError(f"`{' '.join(cmd)}` exited {proc.returncode}:\n{proc.stderr[-3000:]}")
+        self.timings[out.stem], _ = run_petzval(self.binary, self.glb, out, self.args[bokeh_paths], SPP, seed)
         return B.read_rgb(out)
 
 

@@ -1,6 +1,7 @@
-"""Cached Cycles renders for the Blender comparisons (tests/out is gitignored).
+"""The renders of the Blender comparisons: cached Cycles renders (tests/out is gitignored) and
+petzval runs.
 
-A render is kept as ``NAME.exr`` with ``NAME.json`` (its wall seconds and Blender's version) in
+A Cycles render is kept as ``NAME.exr`` with ``NAME.json`` (its wall seconds and Blender's version) in
 a cache folder whose name carries :func:`cache_key`: the hash of the scene-building modules and
 of Blender's version and build, so a change to a scene or to Blender renders anew.
 ``PETZVAL_BLENDER_NO_CACHE=1`` renders anew regardless.
@@ -11,6 +12,8 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import subprocess
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -36,3 +39,18 @@ def cached_render(bpy, cache_dir: Path, name: str, render: Callable[[Path], floa
     seconds = render(exr)
     meta.write_text(json.dumps({"seconds": seconds, "blender": bpy.app.version_string}))
     return exr, seconds, True
+
+
+def run_petzval(binary: Path, glb: Path, out: Path, args: list[str], spp: int, seed: int) -> tuple[float, str]:
+    """Renders `glb` with `petzval render ARGS` at `spp` and `seed` on 2 threads into `out`
+    (no PNG); returns the process's wall seconds and its stderr, or fails naming the command."""
+    cmd = [
+        str(binary), "render", str(glb), "-o", str(out), "--no-png", *args,
+        "--spp", str(spp), "--seed", str(seed), "--threads", "2",
+    ]  # fmt: skip
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+    seconds = time.perf_counter() - t0
+    if proc.returncode != 0 or not out.is_file():
+        raise AssertionError(f"`{' '.join(cmd)}` exited {proc.returncode}:\n{proc.stderr[-3000:]}")
+    return seconds, proc.stderr
