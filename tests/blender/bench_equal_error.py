@@ -5,10 +5,10 @@
 On tests/blender's scene (MainCam, 240x160, 2 threads each; or with ``--scene street`` the
 miniature street of street_scene.py, a scene of the built-in demo's kind, StreetCam, where
 petzval's runs also trace bokeh light paths by default and a ladder without them is added),
-each renderer renders a converged
-reference of its own (fixed samples, no adaptive sampling, two seeds averaged: a run's error is
-measured against the truth by taking the reference's own noise, estimated from its two seeds,
-out of it; at 2048 spp Cycles' own noise on the street's bokeh is about 1.3 %); then Cycles with its default
+each renderer renders a converged reference of its own (fixed samples, no adaptive sampling,
+two seeds averaged: a run's error is measured against the truth by taking the reference's own
+noise, estimated from its two seeds, out of it; at 2048 spp Cycles' own noise on the street's
+bokeh is about 1.3 %); then Cycles with its default
 adaptive sampling (noise threshold 0.01 by default, here a ladder of thresholds) and petzval over
 a ladder of samples and a ladder of its own adaptive thresholds (`--adaptive-threshold`), and
 each run's relative RMSE against its own renderer's reference (the two references differ by
@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import itertools
 import math
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -36,6 +35,7 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(REPO / "tests" / "optics"))
 
 import street_scene as T  # noqa: E402
+from renders import run_petzval  # noqa: E402
 
 import blender_scenes as S  # noqa: E402
 import petzval_cli  # noqa: E402
@@ -89,22 +89,22 @@ def cycles(workdir: Path, camera: str, spp: int, seed: int, threshold: float | N
 
 
 def petzval(
-    binary: Path, glb: Path, workdir: Path, args: list[str], spp: int, seed: int, threshold: float | None = None
+    binary: Path,
+    glb: Path,
+    workdir: Path,
+    ladder: str,
+    args: list[str],
+    spp: int,
+    seed: int,
+    threshold: float | None = None,
 ) -> tuple[np.ndarray, float]:
-    """A petzval render with the scene's options `args`: fixed `spp` (threshold None) or adaptive
-    (`--adaptive-threshold`, the same test and scale as Cycles' noise threshold) with at most
-    `spp` samples."""
-    tag = "-".join(a.lstrip("-") for a in args[-2:])
-    out = workdir / f"petzval_{tag}_{spp}_{seed}_{threshold}.exr"
-    cmd = [
-        str(binary), "render", str(glb), "-o", str(out), "--no-png", *args,
-        "--spp", str(spp), "--seed", str(seed), "--threads", "2",
-    ]  # fmt: skip
-    if threshold is not None:
-        cmd += ["--adaptive-threshold", str(threshold)]
-    t0 = time.perf_counter()
-    subprocess.run(cmd, check=True, capture_output=True, text=True)
-    return read_rgb(out), time.perf_counter() - t0
+    """A petzval render with the scene's options `args` (`ladder` names them in the file name):
+    fixed `spp` (threshold None) or adaptive (`--adaptive-threshold`, the same test and scale as
+    Cycles' noise threshold) with at most `spp` samples."""
+    out = workdir / f"petzval_{ladder}_{spp}_{seed}_{threshold}.exr"
+    adaptive = [] if threshold is None else ["--adaptive-threshold", str(threshold)]
+    seconds, _ = run_petzval(binary, glb, out, [*args, *adaptive], spp, seed)
+    return read_rgb(out), seconds
 
 
 def time_to(runs: list[tuple[float, float]], target: float) -> tuple[float, str]:
@@ -130,9 +130,8 @@ def main() -> None:
     if args.scene == "main":
         S.build_scene(workdir)
         camera, (w, h) = S.MAIN_CAM.name, S.RESOLUTION
-        w_arg = ["--environment", S.world_rgb_arg(), "--max-depth", str(S.PETZVAL_MAX_DEPTH)]
-        res_arg = ["--resolution", f"{w}x{h}"]
-        ladders = {"": [*S.petzval_cycles_args(S.MAIN_CAM), *w_arg, *res_arg]}
+        world = ["--environment", S.world_rgb_arg(), "--max-depth", str(S.PETZVAL_MAX_DEPTH)]
+        ladders = {"": [*S.petzval_cycles_args(S.MAIN_CAM), *world, "--resolution", f"{w}x{h}"]}
     else:
         T.build_scene(workdir)
         camera, (w, h) = T.CAMERA.name, T.RESOLUTION
@@ -141,7 +140,7 @@ def main() -> None:
     binary = petzval_cli.ensure_binary()
     cycles(workdir, camera, 1, 0, None)  # warm-up (kernels, scene sync)
     (c_a, t_rc), (c_b, _) = (cycles(workdir, camera, args.reference_spp, s, None) for s in (99, 98))
-    (p_a, t_rp), (p_b, _) = (petzval(binary, glb, workdir, ladders[""], args.reference_spp, s) for s in (99, 98))
+    (p_a, t_rp), (p_b, _) = (petzval(binary, glb, workdir, "ref", ladders[""], args.reference_spp, s) for s in (99, 98))
     ref_c, ref_p = Reference(c_a, c_b), Reference(p_a, p_b)
     print(f"references: Cycles {args.reference_spp} spp {t_rc:.1f} s, petzval {t_rp:.1f} s; "
           f"the two differ by rel. RMSE {rel_rmse(ref_c.image, ref_p.image):.4f}; their own noise "
@@ -152,15 +151,15 @@ def main() -> None:
         e = ref_c.rel_rmse(img)
         c_runs.append((t, e))
         rows.append(("Cycles", f"adaptive, threshold {thr} (≤ 4096 spp)", t, e))
-    for name, pargs in ladders.items():
+    for k, (name, pargs) in enumerate(ladders.items()):
         for spp in (16, 32, 64, 128, 256, 512):
-            img, t = petzval(binary, glb, workdir, pargs, spp, 1)
+            img, t = petzval(binary, glb, workdir, f"ladder{k}", pargs, spp, 1)
             e = ref_p.rel_rmse(img)
             p_runs[name].append((t, e))
             rows.append(("petzval", f"{spp} spp{name}", t, e))
     a_runs = []
     for thr in (0.1, 0.05, 0.02, 0.01):
-        img, t = petzval(binary, glb, workdir, ladders[""], 4096, 1, thr)
+        img, t = petzval(binary, glb, workdir, "adaptive", ladders[""], 4096, 1, thr)
         e = ref_p.rel_rmse(img)
         a_runs.append((t, e))
         rows.append(("petzval", f"adaptive, threshold {thr} (≤ 4096 spp)", t, e))
