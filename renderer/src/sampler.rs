@@ -17,6 +17,7 @@ pub struct PixelSampler {
     dimension: u32,
     /// The sample index as Sobol-Burley shuffles it for this pixel (bit-reversed, top 16 bits:
     /// the digits the Sobol matrices see), the same for every dimension of the sample.
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     index_rev: u32,
     /// Dimensions 8⌊(dimension − 1)/8⌋ to +7, valid once `dimension` has passed their first.
     block: [f32; 8],
@@ -44,6 +45,7 @@ static USE_AVX2: std::sync::LazyLock<bool> = std::sync::LazyLock::new(|| {
 /// eight lanes of one vector per index digit: `SOBOL_PAIRS[k][p]` holds digit `p` of dimensions
 /// 8k … 8k + 7. Read out of `sobol_burley` itself (the Sobol value of an index with only digit
 /// `p` set is that digit's vector), so the values are the crate's.
+#[cfg(target_arch = "x86_64")]
 static SOBOL_PAIRS: std::sync::LazyLock<Vec<[[u32; 8]; 16]>> = std::sync::LazyLock::new(|| {
     use sobol_burley::parts::sobol_int4_rev;
     (0..sobol_burley::NUM_DIMENSION_SETS_4D / 2)
@@ -58,6 +60,7 @@ static SOBOL_PAIRS: std::sync::LazyLock<Vec<[[u32; 8]; 16]>> = std::sync::LazyLo
 });
 
 /// Per-lane constants of Sobol-Burley's Owen scramble (`sobol_burley::sample_4d`).
+#[cfg(target_arch = "x86_64")]
 const SCRAMBLE_LANES: [u32; 4] = [0x912f_69ba, 0x174f_18ab, 0x691e_72ca, 0xb40c_c1b8];
 
 /// Dimensions 8k … 8k + 7 of a sample whose shuffled index is `index_rev`, with AVX2: the

@@ -24,8 +24,9 @@
 //! see docs/speed-vs-error.md), not a timing, so the choice — and the image — is the same on
 //! every run and thread count: exact 40 ns per surface, LRTF 30 ns plus its exact fallback
 //! (2 % of an exact trace; batched lookups measured at 26–32 ns with 0.5–1.6 % of rays traced
-//! exactly on double-gauss-50mm, nikon-normal-52mm and angenieux-double-gauss-100mm), thick lens 60 ns, thin lens 50 ns, pinhole 30 ns, times the render's camera
-//! rays (width × height × spp); an LRTF adds its bake (about five exact traces per table entry)
+//! exactly on double-gauss-50mm, nikon-normal-52mm and angenieux-double-gauss-100mm), thick
+//! lens 60 ns, thin lens 50 ns, pinhole 30 ns, times the render's camera rays
+//! (width × height × spp); an LRTF adds its bake (about five exact traces per table entry)
 //! and is only baked when it can pay off. Baked tables are cached for the process.
 //!
 //! | name | type | unit | default |
