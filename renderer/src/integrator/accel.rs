@@ -55,6 +55,7 @@ use obvhs::{
 
 use super::lights::{EmitterGroup, LightSet};
 use super::packet::{self, PACKET};
+use super::traverse;
 use crate::sampler::hash_u32;
 use crate::scene::{cofactor, AlphaMode, Material, Mesh, Scene, TextureRef};
 use crate::Result;
@@ -1084,7 +1085,7 @@ impl RenderScene {
             let ray = Ray::new(origin.to_array().into(), dir.to_array().into(), 0.0, t_best);
             let mut hit = RayHit::none();
             let tris = &self.world.tris;
-            self.world.bvh.ray_traverse(ray, &mut hit, |r, id| {
+            traverse::closest_hit(&self.world.bvh, ray, &mut hit, |r, id| {
                 let tri = &tris[id];
                 if let Some((t, b1, b2)) = wray.intersect(&tri.v, r.tmax) {
                     let c = Candidate::Baked(tri.prim & !ALPHA_BIT);
@@ -1221,7 +1222,7 @@ impl RenderScene {
         if !self.tlas_leaves.is_empty() {
             let ray = Ray::new(origin.to_array().into(), dir.to_array().into(), 0.0, t_best);
             let mut hit = RayHit::none();
-            self.tlas.ray_traverse(ray, &mut hit, |r, id| {
+            traverse::closest_hit(&self.tlas, ray, &mut hit, |r, id| {
                 let leaf = &self.tlas_leaves[id];
                 let o = leaf.world_to_object.transform_point3(origin);
                 let d = leaf.world_to_object.transform_vector3(dir) + Vec3::ZERO;
@@ -1230,7 +1231,7 @@ impl RenderScene {
                 let blas = &self.blases[leaf.blas as usize];
                 let mut h = RayHit::none();
                 let mut found = None;
-                blas.bvh.ray_traverse(oray, &mut h, |r2, id2| {
+                traverse::closest_hit(&blas.bvh, oray, &mut h, |r2, id2| {
                     let tri = &blas.tris[id2];
                     if let Some((t, b1, b2)) = wray.intersect(&tri.v, r2.tmax) {
                         let c = Candidate::Instanced(leaf.instance, tri.prim & !ALPHA_BIT);
@@ -1286,7 +1287,7 @@ impl RenderScene {
         if !self.world.tris.is_empty() {
             let wray = WatertightRay::new(origin, dir);
             let tris = &self.world.tris;
-            let miss = self.world.bvh.ray_traverse_miss(ray, |r, id| {
+            let miss = traverse::misses(&self.world.bvh, ray, |r, id| {
                 let tri = &tris[id];
                 if let Some((t, b1, b2)) = wray.intersect(&tri.v, r.tmax) {
                     let c = Candidate::Baked(tri.prim & !ALPHA_BIT);
@@ -1304,7 +1305,7 @@ impl RenderScene {
         if self.tlas_leaves.is_empty() {
             return false;
         }
-        !self.tlas.ray_traverse_miss(ray, |r, id| {
+        !traverse::misses(&self.tlas, ray, |r, id| {
             let leaf = &self.tlas_leaves[id];
             let o = leaf.world_to_object.transform_point3(origin);
             let d = leaf.world_to_object.transform_vector3(dir) + Vec3::ZERO;
@@ -1312,7 +1313,7 @@ impl RenderScene {
             let oray = Ray::new(o.to_array().into(), d.to_array().into(), 0.0, r.tmax);
             let blas = &self.blases[leaf.blas as usize];
             let mut t_hit = f32::INFINITY;
-            let miss = blas.bvh.ray_traverse_miss(oray, |r2, id2| {
+            let miss = traverse::misses(&blas.bvh, oray, |r2, id2| {
                 let tri = &blas.tris[id2];
                 if let Some((t, b1, b2)) = wray.intersect(&tri.v, r2.tmax) {
                     let c = Candidate::Instanced(leaf.instance, tri.prim & !ALPHA_BIT);

@@ -10,6 +10,7 @@ mod light_sampling;
 pub mod lights;
 mod packet;
 pub mod path;
+mod traverse;
 
 pub use accel::{offset_ray_origin, BvhQuality, RenderScene, SurfaceHit};
 pub use bsdf::{Bsdf, BsdfSample, SurfaceBsdf};

@@ -268,7 +268,7 @@ pub fn demo_scene() -> (Scene, DemoShot) {
     // 6. The camera: low over the table, looking down the street.
     let eye = Vec3::new(0.0, 0.09, 0.55);
     let target = Vec3::new(0.0, 0.02, -0.4);
-    let view = Affine3A::look_at_rh(eye, target, Vec3::Y);
+    let view = glam::camera::rh::view::look_at_affine3a(eye, target, Vec3::Y);
     scene.cameras.push(SceneCamera {
         name: "demo".into(),
         to_world: view.inverse(),
