@@ -1,7 +1,7 @@
 //! `--lens-model auto`: the choice on cases whose answer is known, and the consistency of the
 //! choice with the measurements it reports.
 
-use petzval_renderer::{CameraSpec, LensModel, Sensor, ShotContext};
+use petzval_renderer::{Camera, CameraSpec, LensModel, Sensor, ShotContext};
 
 fn shot(width: u32, height: u32, spp: u32, depth: Option<(f64, f64)>) -> ShotContext {
     ShotContext { width, height, spp, depth_range_m: depth, spectral: false }
@@ -96,4 +96,33 @@ fn lens_model_names_parse_and_bad_ones_name_the_field() {
     };
     let e = spec.build(&ShotContext::default()).unwrap_err().to_string();
     assert!(e.contains("needs a real lens"), "{e}");
+}
+
+/// A spectral render of a dispersive lens samples exit-pupil bounds that also hold the spectral
+/// range's ends (the renderer's own range), whichever model `auto` picks; a render at one
+/// wavelength gets the tighter bounds of the primary wavelength.
+#[test]
+fn spectral_shots_get_bounds_for_the_spectral_range() {
+    use petzval_renderer::optics::pupil::SPECTRAL_RANGE_NM;
+    use petzval_renderer::spectral::{LAMBDA_MAX_NM, LAMBDA_MIN_NM};
+    assert_eq!(SPECTRAL_RANGE_NM, [LAMBDA_MIN_NM as f64, LAMBDA_MAX_NM as f64]);
+    assert!(petzval_renderer::library_lens("nikon-normal-52mm").unwrap().has_dispersion());
+    for model in [LensModel::Exact, LensModel::Auto] {
+        let spec = CameraSpec {
+            lens: "nikon-normal-52mm".into(),
+            focus_distance_m: Some(2.0),
+            model,
+            ..CameraSpec::default()
+        };
+        for spectral in [false, true] {
+            let built = spec.build(&ShotContext { spectral, ..shot(320, 200, 16, Some((1.0, 10.0))) }).unwrap();
+            let exact = match &built.camera {
+                Camera::Exact(c) => c,
+                Camera::Lrtf(c) => c.exact(),
+                other => panic!("{model:?}: a real lens built a {:?} camera", other.model()),
+            };
+            let ends = if spectral { SPECTRAL_RANGE_NM.to_vec() } else { Vec::new() };
+            assert_eq!(exact.pupil().wavelength_ends_nm, ends, "{model:?}, spectral {spectral}");
+        }
+    }
 }

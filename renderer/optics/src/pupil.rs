@@ -11,15 +11,29 @@
 //! boxes let 36–61 % of the sampled rays be absorbed): a star-shaped polygon about a point inside
 //! the region, whose radius at each of [`OUTLINE_ANGLES`] angles is the farthest passing point
 //! along that direction over the interval's film points (a coarse march, then bisection to the
-//! failing side), grown by [`OUTLINE_GROWTH`] of the region's size. Rays are sampled uniformly in
+//! failing side; for dispersive lenses also stepped on past that radius at the ends of the
+//! spectral range, [`SPECTRAL_RANGE_NM`], since spectral renders sample the same domain at every
+//! wavelength), grown by [`OUTLINE_GROWTH`] of the region's size. Rays are sampled uniformly in
 //! the polygon (a triangle picked by area, then a point in it). Where the region is not
 //! star-shaped about its centre for some film point of the interval, that interval keeps its box.
+//!
+//! Lenses without rotational symmetry (anamorphic, decentred) get outlines per **film cell**
+//! instead ([`CellOutlines`]): the film square is cut into [`FILM_CELLS`]² cells, the passing
+//! region's centroid is found at every cell corner, and each film point's region is taken about
+//! its own centre, the corners' centroids interpolated bilinearly. The region mostly slides with
+//! the film point, so one outline about that moving centre (the farthest passing point per angle
+//! over the cell's corners and centre) fits every point of the cell far tighter than the union
+//! box. A cell without an outline (at the rim of the image circle, where a corner or a film
+//! point's centre is absorbed) gets the box of the rays that pass from its film points, grown
+//! by two grid cells; radii where nothing passes at any traced azimuth stay empty.
 //!
 //! | name | type | unit | default |
 //! |---|---|---|---|
 //! | `intervals` | usize, radial intervals over the film | — | 64 |
 //! | `film_samples` | usize, film points per interval | — | 16 |
 //! | `grid` | usize, rear-plane grid per side | — | 48 |
+//! | [`FILM_CELLS`] | usize, film cells per side (no rotational symmetry) | — | 16 |
+//! | [`SPECTRAL_RANGE_NM`] | wavelengths the outlines of dispersive lenses also hold | nm | 380, 780 |
 
 use super::lens::{Lens, Ray, StopMode, TraceDirection};
 use glam::{DVec2, DVec3};
@@ -69,10 +83,18 @@ pub const OUTLINE_ANGLES: usize = 64;
 /// vertices, film points between the sampled ones, and the region's shift with wavelength).
 pub const OUTLINE_GROWTH: f64 = 0.03;
 
-/// A star-shaped polygon about `centre` (film point on +x), sampled uniformly.
+/// The ends of the spectral renderer's wavelength range (nm): outlines of dispersive lenses
+/// hold the passing region at these as well as at the primary wavelength.
+pub const SPECTRAL_RANGE_NM: [f64; 2] = [380.0, 780.0];
+
+/// Film cells per side of the square a lens without rotational symmetry is outlined over.
+pub const FILM_CELLS: usize = 16;
+
+/// A star-shaped polygon about `centre`, sampled uniformly (radial intervals: in the frame of a
+/// film point on +x; film cells: about the origin, moved to each film point's own centre).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Outline {
-    /// A point inside the region, on the x axis.
+    /// A point inside the region (radial intervals: on the x axis; film cells: the origin).
     pub centre: DVec2,
     /// Radius of vertex k at angle 2πk/[`OUTLINE_ANGLES`] about `centre`.
     pub radii: Vec<f64>,
@@ -141,6 +163,92 @@ impl Outline {
     }
 }
 
+/// Outlines per film cell for lenses without rotational symmetry: each film point samples the
+/// outline of its cell about its own centre, the bilinear interpolation of the passing
+/// region's centroids at the cell's corners.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CellOutlines {
+    /// Half the side of the film square covered (mm): cells span [−h, h]².
+    pub half_side_mm: f64,
+    /// Cells per side.
+    pub cells: usize,
+    /// The passing region's centroid on the rear plane at each cell corner (row-major,
+    /// `(cells + 1)²`); None where no traced ray passes.
+    pub corner_centres: Vec<Option<DVec2>>,
+    /// Per cell (row-major), the outline about the film point's centre (the outline's own
+    /// centre is the origin), where one was found.
+    pub outlines: Vec<Option<Outline>>,
+    /// Per cell without an outline, the box of the rays from its film points that pass,
+    /// grown by two rear-grid cells (empty: nothing passes there); unused where there is one.
+    pub boxes: Vec<Box2>,
+}
+
+/// The sampling domain of one film point of a [`CellOutlines`] cell.
+#[derive(Debug, Clone, Copy)]
+pub enum CellDomain<'a> {
+    /// The cell's outline, about the film point's centre.
+    Outline(&'a Outline, DVec2),
+    /// The cell's box (empty when no ray passes there).
+    Box(Box2),
+}
+
+impl CellDomain<'_> {
+    /// The domain's area (mm²).
+    pub fn area(&self) -> f64 {
+        match self {
+            CellDomain::Outline(o, _) => o.area,
+            CellDomain::Box(b) => b.area(),
+        }
+    }
+
+    /// Whether rear-plane point `p` is inside.
+    pub fn contains(&self, p: DVec2) -> bool {
+        match self {
+            CellDomain::Outline(o, centre) => o.contains(p - *centre),
+            CellDomain::Box(b) => b.contains(p),
+        }
+    }
+
+    /// A uniform point of the domain from `u` in [0,1)² (None when it is empty).
+    pub fn sample(&self, u: DVec2) -> Option<DVec2> {
+        match self {
+            CellDomain::Outline(o, centre) => Some(*centre + o.sample(u)),
+            CellDomain::Box(b) => (!b.is_empty()).then(|| b.min + (b.max - b.min) * u),
+        }
+    }
+}
+
+impl CellOutlines {
+    /// The cell of film point `film` and its place in it ([0, 1]²); None outside the square.
+    fn cell(&self, film: DVec2) -> Option<(usize, usize, DVec2)> {
+        let u = (film + DVec2::splat(self.half_side_mm)) / (2.0 * self.half_side_mm) * self.cells as f64;
+        if !(u.x >= 0.0 && u.y >= 0.0 && u.x <= self.cells as f64 && u.y <= self.cells as f64) {
+            return None;
+        }
+        let (i, j) = ((u.x as usize).min(self.cells - 1), (u.y as usize).min(self.cells - 1));
+        Some((i, j, u - DVec2::new(i as f64, j as f64)))
+    }
+
+    /// The centre of film point `film`'s region: its cell corners' centroids, interpolated.
+    fn centre_in(&self, i: usize, j: usize, t: DVec2) -> Option<DVec2> {
+        let n = self.cells + 1;
+        let c = |a: usize, b: usize| self.corner_centres[(j + b) * n + i + a];
+        let (c00, c10, c01, c11) = (c(0, 0)?, c(1, 0)?, c(0, 1)?, c(1, 1)?);
+        Some((c00 * (1.0 - t.x) + c10 * t.x) * (1.0 - t.y) + (c01 * (1.0 - t.x) + c11 * t.x) * t.y)
+    }
+
+    /// The domain serving film point `film`: its cell's outline about the point's centre, or the
+    /// cell's box; None outside the square.
+    pub fn at(&self, film: DVec2) -> Option<CellDomain<'_>> {
+        let (i, j, t) = self.cell(film)?;
+        let k = j * self.cells + i;
+        Some(match (&self.outlines[k], self.centre_in(i, j, t)) {
+            (Some(o), Some(centre)) => CellDomain::Outline(o, centre),
+            _ => CellDomain::Box(self.boxes[k]),
+        })
+    }
+}
+
 /// Per-radius bounds of the rays leaving the film that pass the lens.
 #[derive(Debug, Clone)]
 pub struct ExitPupilBounds {
@@ -157,6 +265,12 @@ pub struct ExitPupilBounds {
     /// The region's outline per interval (film point on +x), where one was found; sampling
     /// uses it instead of the box.
     pub outlines: Vec<Option<Outline>>,
+    /// Lenses without rotational symmetry: outlines per film cell (sampling uses them instead
+    /// of the union box where a cell has one).
+    pub cells: Option<CellOutlines>,
+    /// Wavelengths besides the primary one whose passing rays the bounds also hold (nm; empty
+    /// for [`ExitPupilBounds::compute`]).
+    pub wavelength_ends_nm: Vec<f64>,
 }
 
 /// A sampled point on the rear plane.
@@ -174,16 +288,33 @@ impl ExitPupilBounds {
     /// largest distance any film point has from the axis; the bounds are per radius, and a
     /// tilted film's z varies, so they are computed over the span `film_z_mm ± dz`.
     pub fn compute(lens: &Lens, film_z_mm: f64, film_dz_mm: f64, max_film_radius_mm: f64) -> Self {
+        Self::compute_for(lens, film_z_mm, film_dz_mm, max_film_radius_mm, &[])
+    }
+
+    /// [`ExitPupilBounds::compute`] for spectral renders: for a dispersive lens the bounds also
+    /// hold every passing ray at the ends of the spectral range ([`SPECTRAL_RANGE_NM`]; the image
+    /// circle and the passing region shift with the wavelength). Larger than the primary
+    /// wavelength's bounds, so renders at one wavelength use those.
+    pub fn compute_spectral(lens: &Lens, film_z_mm: f64, film_dz_mm: f64, max_film_radius_mm: f64) -> Self {
+        let ends: &[f64] = if lens.has_dispersion() { &SPECTRAL_RANGE_NM } else { &[] };
+        Self::compute_for(lens, film_z_mm, film_dz_mm, max_film_radius_mm, ends)
+    }
+
+    /// The bounds at the primary wavelength and at the wavelengths `ends`.
+    fn compute_for(lens: &Lens, film_z_mm: f64, film_dz_mm: f64, max_film_radius_mm: f64, ends: &[f64]) -> Self {
         if lens.is_rotationally_symmetric() {
             // A bladed, masked or squeezed opening lies inside its circumscribed circle, which
             // keeps the bounds rotationally symmetric (and conservative).
             let circular =
                 if lens.aperture().is_circular() { lens.clone() } else { lens.with_circumscribed_circular_stop() };
-            Self::compute_with(&circular, film_z_mm, film_dz_mm, max_film_radius_mm, 64, 16, 48)
+            Self::compute_with_ends(&circular, film_z_mm, film_dz_mm, max_film_radius_mm, [64, 16, 48], ends)
         } else {
             // One union box serves every film point, so fewer intervals lose nothing; each
-            // traces 8 azimuths.
-            Self::compute_with(lens, film_z_mm, film_dz_mm, max_film_radius_mm, 16, 8, 48)
+            // traces 8 azimuths. Outlines per film cell then tighten it.
+            let mut bounds =
+                Self::compute_with_ends(lens, film_z_mm, film_dz_mm, max_film_radius_mm, [16, 8, 48], ends);
+            bounds.cells = bounds.film_cells(lens, film_dz_mm, FILM_CELLS, 48);
+            bounds
         }
     }
 
@@ -197,6 +328,20 @@ impl ExitPupilBounds {
         film_samples: usize,
         grid: usize,
     ) -> Self {
+        Self::compute_with_ends(lens, film_z_mm, film_dz_mm, max_film_radius_mm, [intervals, film_samples, grid], &[])
+    }
+
+    /// [`ExitPupilBounds::compute_with`] also holding the wavelengths `ends`; `resolution` is
+    /// (intervals, film samples per interval, rear grid per side).
+    fn compute_with_ends(
+        lens: &Lens,
+        film_z_mm: f64,
+        film_dz_mm: f64,
+        max_film_radius_mm: f64,
+        resolution: [usize; 3],
+        spectral_ends: &[f64],
+    ) -> Self {
+        let [intervals, film_samples, grid] = resolution;
         let rear_z = lens.last_vertex_z_mm();
         let half = 1.5 * lens.rear_semi_diameter_mm();
         let cell = 2.0 * half / grid as f64;
@@ -253,6 +398,28 @@ impl ExitPupilBounds {
                                     }
                                 }
                             }
+                            // Dispersive lenses: the spectral range's ends on a grid of half the
+                            // resolution (the image circle and the region shift with the
+                            // wavelength), grown by two of its cells.
+                            for &wl_end in spectral_ends {
+                                let coarse = 2.0 * cell;
+                                for i in 0..grid / 2 {
+                                    for j in 0..grid / 2 {
+                                        let q = DVec2::new(
+                                            -half + (i as f64 + 0.5) * coarse,
+                                            -half + (j as f64 + 0.5) * coarse,
+                                        );
+                                        let ray = Ray::new(fp, DVec3::new(q.x, q.y, rear_z) - fp);
+                                        if lens
+                                            .trace_detailed(&ray, wl_end, TraceDirection::FilmToScene, StopMode::Apply)
+                                            .is_ok()
+                                        {
+                                            b.grow(q - DVec2::splat(cell));
+                                            b.grow(q + DVec2::splat(cell));
+                                        }
+                                    }
+                                }
+                            }
                         }
                     }
                 }
@@ -272,7 +439,9 @@ impl ExitPupilBounds {
             // symmetric about both axes (the film point may sit at any azimuth)
             let m = all.min.abs().max(all.max.abs());
             let m = DVec2::splat(m.x.max(m.y));
-            boxes = boxes.iter().map(|_| Box2 { min: -m, max: m }).collect();
+            // Radii where no traced film point at any of the 8 azimuths has a passing ray lie
+            // beyond the image circle: they stay empty.
+            boxes = boxes.iter().map(|b| if b.is_empty() { *b } else { Box2 { min: -m, max: m } }).collect();
         }
         // 3. Outlines (symmetric lenses): the region's polygon per interval.
         let outlines: Vec<Option<Outline>> = if symmetric {
@@ -283,14 +452,118 @@ impl ExitPupilBounds {
                     if b.is_empty() {
                         None
                     } else {
-                        outline_of(lens, wl, rear_z, *b, pts, DVec2::new(centroid.x, 0.0))
+                        outline_of(lens, [wl, rear_z], *b, pts, DVec2::new(centroid.x, 0.0), spectral_ends)
                     }
                 })
                 .collect()
         } else {
             vec![None; boxes.len()]
         };
-        ExitPupilBounds { film_z_mm, rear_z_mm: rear_z, max_film_radius_mm, boxes, union_only: !symmetric, outlines }
+        ExitPupilBounds {
+            film_z_mm,
+            rear_z_mm: rear_z,
+            max_film_radius_mm,
+            boxes,
+            union_only: !symmetric,
+            outlines,
+            cells: None,
+            wavelength_ends_nm: spectral_ends.to_vec(),
+        }
+    }
+
+    /// Outlines per film cell (see [`CellOutlines`]) for a lens whose bounds are the union box:
+    /// `cells`² cells over the film square that holds the radii with passing rays, corner
+    /// centroids from a `grid`² trace of the rear plane. None when no ray passes.
+    fn film_cells(&self, lens: &Lens, film_dz_mm: f64, cells: usize, grid: usize) -> Option<CellOutlines> {
+        // The union box, and the square's half side: the largest radius with passing rays.
+        let last = self.boxes.iter().rposition(|b| !b.is_empty())?;
+        let union = self.boxes[last];
+        let h = self.max_film_radius_mm * (last + 1) as f64 / self.boxes.len() as f64;
+        let wl = lens.primary_wavelength_nm();
+        let rear_z = self.rear_z_mm;
+        let ends = &self.wavelength_ends_nm;
+        let n = cells + 1;
+        let film_xy = |i: f64, j: f64| DVec2::new(-h + 2.0 * h * i / cells as f64, -h + 2.0 * h * j / cells as f64);
+        // 1. The passing region's centroid at every cell corner (the film plane's middle z).
+        let cell = (union.max - union.min) / grid as f64;
+        let corner_centres: Vec<Option<DVec2>> = (0..n * n)
+            .into_par_iter()
+            .map(|k| {
+                let f = film_xy((k % n) as f64, (k / n) as f64);
+                let fp = DVec3::new(f.x, f.y, self.film_z_mm);
+                let (mut sum, mut count) = (DVec2::ZERO, 0usize);
+                for i in 0..grid {
+                    for j in 0..grid {
+                        let q = union.min + cell * DVec2::new(i as f64 + 0.5, j as f64 + 0.5);
+                        let ray = Ray::new(fp, DVec3::new(q.x, q.y, rear_z) - fp);
+                        if lens.trace_detailed(&ray, wl, TraceDirection::FilmToScene, StopMode::Apply).is_ok() {
+                            sum += q;
+                            count += 1;
+                        }
+                    }
+                }
+                (count > 0).then(|| sum / count as f64)
+            })
+            .collect();
+        let mut grid_cells = CellOutlines {
+            half_side_mm: h,
+            cells,
+            corner_centres,
+            outlines: vec![None; cells * cells],
+            boxes: vec![Box2::EMPTY; cells * cells],
+        };
+        // 2. Each cell's outline about its film points' own centres (corners and centre per film z).
+        let z_levels: Vec<f64> = if film_dz_mm > 0.0 {
+            vec![self.film_z_mm - film_dz_mm, self.film_z_mm, self.film_z_mm + film_dz_mm]
+        } else {
+            vec![self.film_z_mm]
+        };
+        let outlines: Vec<(Option<Outline>, Box2)> = (0..cells * cells)
+            .into_par_iter()
+            .map(|k| {
+                let (i, j) = (k % cells, k / cells);
+                let mut pts = Vec::with_capacity(9 * z_levels.len());
+                for &z in &z_levels {
+                    for (a, b) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0), (0.5, 0.5)] {
+                        let f = film_xy(i as f64 + a, j as f64 + b);
+                        pts.push(DVec3::new(f.x, f.y, z));
+                    }
+                }
+                let centre_of = |fp: DVec3| {
+                    let (ci, cj, t) = grid_cells.cell(DVec2::new(fp.x, fp.y))?;
+                    // a point on the cell's upper edges belongs to this cell, not the next
+                    let (ci, cj, t) = if (ci, cj) == (i, j) {
+                        (ci, cj, t)
+                    } else {
+                        let u = (DVec2::new(fp.x, fp.y) + DVec2::splat(h)) / (2.0 * h) * cells as f64;
+                        (i, j, u - DVec2::new(i as f64, j as f64))
+                    };
+                    grid_cells.centre_in(ci, cj, t)
+                };
+                if let Some(o) = outline_radii(lens, [wl, rear_z], union, &pts, &centre_of, false, ends)
+                    .and_then(|radii| Outline::new(DVec2::ZERO, radii))
+                {
+                    return (Some(o), Box2::EMPTY);
+                }
+                // 3. No outline (the rim of the image circle): the box of the passing rays.
+                let mut b = Box2::EMPTY;
+                for &fp in &pts {
+                    for a in 0..grid {
+                        for c in 0..grid {
+                            let q = union.min + cell * DVec2::new(a as f64 + 0.5, c as f64 + 0.5);
+                            let ray = Ray::new(fp, DVec3::new(q.x, q.y, rear_z) - fp);
+                            if lens.trace_detailed(&ray, wl, TraceDirection::FilmToScene, StopMode::Apply).is_ok() {
+                                b.grow(q);
+                            }
+                        }
+                    }
+                }
+                let margin = 2.0 * cell;
+                (None, if b.is_empty() { b } else { Box2 { min: b.min - margin, max: b.max + margin } })
+            })
+            .collect();
+        (grid_cells.outlines, grid_cells.boxes) = outlines.into_iter().unzip();
+        Some(grid_cells)
     }
 
     /// The interval index of film radius `r` (None beyond the covered radius).
@@ -302,12 +575,28 @@ impl ExitPupilBounds {
         Some(k.min(self.boxes.len() - 1))
     }
 
-    /// The sampling domain's area for a film point at radius `r` (mm²; 0 outside the bounds).
+    /// The sampling domain's area for a film point at radius `r` on +x (mm²; 0 outside the
+    /// bounds). Lenses without rotational symmetry need the point: [`Self::domain_area_at`].
     pub fn domain_area(&self, r: f64) -> f64 {
-        match self.interval(r) {
-            None => 0.0,
-            Some(k) => self.outlines[k].as_ref().map_or(self.boxes[k].area(), |o| o.area),
+        self.domain_area_at(DVec2::new(r, 0.0))
+    }
+
+    /// The sampling domain's area for film point `film` (mm²; 0 outside the bounds).
+    pub fn domain_area_at(&self, film: DVec2) -> f64 {
+        let Some(k) = self.interval(film.length()) else { return 0.0 };
+        if self.boxes[k].is_empty() {
+            return 0.0;
         }
+        if let Some(d) = self.cell_domain(film) {
+            return d.area();
+        }
+        self.outlines[k].as_ref().filter(|_| !self.union_only).map_or(self.boxes[k].area(), |o| o.area)
+    }
+
+    /// The film cell's domain serving `film` (lenses without rotational symmetry), inside the
+    /// cells' square.
+    fn cell_domain(&self, film: DVec2) -> Option<CellDomain<'_>> {
+        self.cells.as_ref().filter(|_| self.union_only)?.at(film)
     }
 
     /// The box for a film point at radius `r` on +x (empty beyond the covered radius).
@@ -321,7 +610,13 @@ impl ExitPupilBounds {
         let Some(k) = self.interval(r) else { return false };
         let b = self.boxes[k];
         if self.union_only {
-            return b.contains(p);
+            if b.is_empty() {
+                return false;
+            }
+            return match self.cell_domain(film) {
+                Some(d) => d.contains(p),
+                None => b.contains(p),
+            };
         }
         // rotate p into the frame where the film point lies on +x
         let (s, c) = if r > 0.0 { (film.y / r, film.x / r) } else { (0.0, 1.0) };
@@ -340,6 +635,10 @@ impl ExitPupilBounds {
         if b.is_empty() {
             return None;
         }
+        if let Some(d) = self.cell_domain(film) {
+            let p = d.sample(u)?;
+            return Some(PupilSample { point: DVec3::new(p.x, p.y, self.rear_z_mm), pdf_area: 1.0 / d.area() });
+        }
         let (q, area) = match (&self.outlines[k], self.union_only) {
             (Some(o), false) => (o.sample(u), o.area),
             _ => (b.min + (b.max - b.min) * u, b.area()),
@@ -357,16 +656,14 @@ impl ExitPupilBounds {
 /// The outline of the passing region over film points `film_pts` (on the +x half-plane's axis),
 /// about `centre`, inside the box `b`; None when the region is not star-shaped about `centre`
 /// for some film point (the centre does not pass), or degenerate.
-fn outline_of(lens: &Lens, wl: f64, rear_z: f64, b: Box2, film_pts: &[DVec3], centre: DVec2) -> Option<Outline> {
-    const MARCH: usize = 8;
-    const BISECT: usize = 10;
-    let passes = |fp: DVec3, q: DVec2| {
-        let p = DVec3::new(q.x, q.y, rear_z);
-        lens.trace_detailed(&Ray::new(fp, p - fp), wl, TraceDirection::FilmToScene, StopMode::Apply).is_ok()
-    };
-    if !film_pts.iter().all(|&fp| passes(fp, centre)) {
-        return None;
-    }
+fn outline_of(
+    lens: &Lens,
+    [wl, rear_z]: [f64; 2],
+    b: Box2,
+    film_pts: &[DVec3],
+    centre: DVec2,
+    ends: &[f64],
+) -> Option<Outline> {
     // Every fourth film point and the last (the interval's ends are first and last): the region
     // moves smoothly with the film radius, and the growth covers the points between.
     let stride = (film_pts.len() / 4).max(1);
@@ -374,31 +671,62 @@ fn outline_of(lens: &Lens, wl: f64, rear_z: f64, b: Box2, film_pts: &[DVec3], ce
     if !(film_pts.len() - 1).is_multiple_of(stride) {
         chosen.extend(film_pts.last());
     }
-    let film_pts = chosen;
+    // The region is mirror-symmetric about the x axis.
+    let radii = outline_radii(lens, [wl, rear_z], b, &chosen, &|_| Some(centre), true, ends)?;
+    Outline::new(centre, radii)
+}
+
+/// The grown radii of an outline of the passing region over film points `film_pts`, each point's
+/// region taken about its own centre `centre_of(point)`, inside the box `b`, at
+/// [`OUTLINE_ANGLES`] angles (only the upper half traced when `mirror`: the region is symmetric
+/// about the x axis). None when some film point's centre is missing or absorbed (the region is
+/// not star-shaped about it).
+fn outline_radii(
+    lens: &Lens,
+    [wl, rear_z]: [f64; 2],
+    b: Box2,
+    film_pts: &[DVec3],
+    centre_of: &(dyn Fn(DVec3) -> Option<DVec2> + Sync),
+    mirror: bool,
+    extra_wavelengths: &[f64],
+) -> Option<Vec<f64>> {
+    const MARCH: usize = 8;
+    const BISECT: usize = 10;
+    /// Strides past the primary wavelength's radius, as shares of the way to the box's edge.
+    const SPECTRAL_STEPS: [f64; 5] = [0.015, 0.03, 0.06, 0.12, 0.24];
+    let passes_at = |fp: DVec3, q: DVec2, wl: f64| {
+        let p = DVec3::new(q.x, q.y, rear_z);
+        lens.trace_detailed(&Ray::new(fp, p - fp), wl, TraceDirection::FilmToScene, StopMode::Apply).is_ok()
+    };
+    let passes = |fp: DVec3, q: DVec2| passes_at(fp, q, wl);
+    let centres: Vec<DVec2> = film_pts.iter().map(|&fp| centre_of(fp)).collect::<Option<_>>()?;
+    if !film_pts.iter().zip(&centres).all(|(&fp, &c)| passes(fp, c)) {
+        return None;
+    }
     let n = OUTLINE_ANGLES;
-    // The region is mirror-symmetric about the x axis: angles 0..=n/2, mirrored.
-    let half: Vec<f64> = (0..=n / 2)
+    let traced = if mirror { n / 2 + 1 } else { n };
+    let half: Vec<f64> = (0..traced)
         .map(|k| {
             let phi = std::f64::consts::TAU * k as f64 / n as f64;
             let dir = DVec2::new(phi.cos(), phi.sin());
-            // distance from the centre to the box's edge along dir
-            let t_x = if dir.x > 1e-12 {
-                (b.max.x - centre.x) / dir.x
-            } else if dir.x < -1e-12 {
-                (b.min.x - centre.x) / dir.x
-            } else {
-                f64::INFINITY
-            };
-            let t_y = if dir.y > 1e-12 {
-                (b.max.y - centre.y) / dir.y
-            } else if dir.y < -1e-12 {
-                (b.min.y - centre.y) / dir.y
-            } else {
-                f64::INFINITY
-            };
-            let t_far = t_x.min(t_y).max(0.0);
             let mut r_max = 0.0f64;
-            for &fp in &film_pts {
+            for (&fp, &centre) in film_pts.iter().zip(&centres) {
+                // distance from the centre to the box's edge along dir
+                let t_x = if dir.x > 1e-12 {
+                    (b.max.x - centre.x) / dir.x
+                } else if dir.x < -1e-12 {
+                    (b.min.x - centre.x) / dir.x
+                } else {
+                    f64::INFINITY
+                };
+                let t_y = if dir.y > 1e-12 {
+                    (b.max.y - centre.y) / dir.y
+                } else if dir.y < -1e-12 {
+                    (b.min.y - centre.y) / dir.y
+                } else {
+                    f64::INFINITY
+                };
+                let t_far = t_x.min(t_y).max(0.0);
                 // 1. March out to the last passing step; 2. bisect towards the failing side.
                 let mut last = 0usize;
                 for i in 1..=MARCH {
@@ -421,19 +749,45 @@ fn outline_of(lens: &Lens, wl: f64, rear_z: f64, b: Box2, film_pts: &[DVec3], ce
                     }
                     hi
                 };
+                // 3. The spectral range's ends (dispersive lenses): the region shifts with the
+                //    wavelength, so step on past r in growing strides, then bisect the last gap.
+                let mut r = r;
+                for &wl_end in extra_wavelengths {
+                    let pass_end = |t: f64| passes_at(fp, centre + dir * t, wl_end);
+                    let mut gap = None;
+                    for (i, f) in SPECTRAL_STEPS.iter().enumerate() {
+                        if pass_end(r + f * t_far) {
+                            gap = Some(i);
+                        }
+                    }
+                    if let Some(i) = gap {
+                        let (mut lo, mut hi) = (r + SPECTRAL_STEPS[i] * t_far, r + SPECTRAL_STEPS[i] * t_far * 2.0);
+                        for _ in 0..BISECT / 2 {
+                            let mid = 0.5 * (lo + hi);
+                            if pass_end(mid) {
+                                lo = mid;
+                            } else {
+                                hi = mid;
+                            }
+                        }
+                        r = hi;
+                    }
+                }
                 r_max = r_max.max(r);
             }
             r_max
         })
         .collect();
-    let radii: Vec<f64> = (0..n).map(|k| half[if k <= n / 2 { k } else { n - k }]).collect();
+    let radii: Vec<f64> =
+        if mirror { (0..n).map(|k| half[if k <= n / 2 { k } else { n - k }]).collect() } else { half };
     // Grown: each vertex takes its neighbours' radius too (a chord cannot cut the region), plus
     // a share of the largest radius.
     let largest = radii.iter().cloned().fold(0.0, f64::max);
-    let grown: Vec<f64> = (0..n)
-        .map(|k| radii[(k + n - 1) % n].max(radii[k]).max(radii[(k + 1) % n]) + OUTLINE_GROWTH * largest)
-        .collect();
-    Outline::new(centre, grown)
+    Some(
+        (0..n)
+            .map(|k| radii[(k + n - 1) % n].max(radii[k]).max(radii[(k + 1) % n]) + OUTLINE_GROWTH * largest)
+            .collect(),
+    )
 }
 
 /// The chief ray from film point `film` (lens frame, x, y, z): the ray through the centre of

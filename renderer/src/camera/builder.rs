@@ -51,7 +51,7 @@ impl CameraSpec {
         let SpecLens::Real(l) = &lens else {
             // ideal lenses build at no cost
             let model = if self.model == LensModel::Auto { LensModel::Thin } else { self.model };
-            return build_model(self, &lens, model, None).map(|_| ());
+            return build_model(self, &lens, model, None, false).map(|_| ());
         };
         l.check_forms_image()?;
         match self.model {
@@ -65,7 +65,7 @@ impl CameraSpec {
                 }
             }
             m @ (LensModel::Thick | LensModel::Thin | LensModel::Pinhole) => {
-                build_model(self, &lens, m, None)?;
+                build_model(self, &lens, m, None, false)?;
             }
         }
         Ok(())
@@ -82,7 +82,7 @@ impl CameraSpec {
         };
         let camera = match camera {
             Some(c) => c,
-            None => build_model(self, &lens, choice.model, None)?,
+            None => build_model(self, &lens, choice.model, None, shot.spectral)?,
         };
         let (lens_label, focal_length_mm, f_number) = match &lens {
             SpecLens::Ideal if self.is_pinhole() => ("pinhole".to_string(), self.focal_length_mm, f64::INFINITY),

@@ -33,9 +33,20 @@ impl ExactCamera {
     /// A camera tracing `lens` (already stopped down), focused at `focus_distance_m` from the
     /// entrance pupil.
     pub fn new(sensor: Sensor, lens: Lens, focus_distance_m: Option<f64>) -> Result<Self> {
+        Self::with_bounds_for(sensor, lens, focus_distance_m, false)
+    }
+
+    /// [`ExactCamera::new`]; with `spectral`, the exit-pupil bounds also hold every passing ray
+    /// at the ends of the spectral range (a spectral render of a dispersive lens samples them
+    /// at every wavelength), else at the primary wavelength only (tighter).
+    pub fn with_bounds_for(sensor: Sensor, lens: Lens, focus_distance_m: Option<f64>, spectral: bool) -> Result<Self> {
         let film_z_mm = Self::film_position_mm(&sensor, &lens, focus_distance_m)?;
         let (r_max, dz) = sensor.extent();
-        let pupil = ExitPupilBounds::compute(&lens, film_z_mm, dz, r_max * 1.001);
+        let pupil = if spectral {
+            ExitPupilBounds::compute_spectral(&lens, film_z_mm, dz, r_max * 1.001)
+        } else {
+            ExitPupilBounds::compute(&lens, film_z_mm, dz, r_max * 1.001)
+        };
         let front_plane_z_mm = front_plane_z_mm(&lens);
         let mut cam = ExactCamera {
             sensor: PreparedSensor::new(sensor),
@@ -210,7 +221,7 @@ impl ExactCamera {
         let s = r.origin + r.direction * ts;
         let camera_density = if self.pupil.contains(fxy, DVec2::new(s.x, s.y)) {
             let g = geometric_factor(x, s, n);
-            let area = self.pupil.domain_area(fxy.length());
+            let area = self.pupil.domain_area_at(fxy);
             if g > 0.0 && area > 0.0 {
                 1.0 / (area * g)
             } else {

@@ -10,12 +10,14 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
 /// The camera of one `model` (not `Auto`) of `spec` with its loaded `lens`; `exact` is the
-/// exact camera when already built (its exit-pupil bounds are costly), for the LRTF.
+/// exact camera when already built (its exit-pupil bounds are costly), for the LRTF; `spectral`:
+/// the render traces more than one wavelength (the exit-pupil bounds must hold at all of them).
 pub(crate) fn build_model(
     spec: &CameraSpec,
     lens: &SpecLens,
     model: LensModel,
     exact: Option<&ExactCamera>,
+    spectral: bool,
 ) -> Result<Camera> {
     let sensor = spec.sensor;
     let focus = spec.focus_distance_m;
@@ -38,7 +40,9 @@ pub(crate) fn build_model(
             )),
         },
         SpecLens::Real(lens) => match model {
-            LensModel::Exact | LensModel::Auto => Ok(Camera::Exact(ExactCamera::new(sensor, (**lens).clone(), focus)?)),
+            LensModel::Exact | LensModel::Auto => {
+                Ok(Camera::Exact(ExactCamera::with_bounds_for(sensor, (**lens).clone(), focus, spectral)?))
+            }
             LensModel::Lrtf { resolution } => {
                 let table = match &spec.lrtf_file {
                     Some(path) => Arc::new(LrtfTable::load(path, lens)?),
@@ -46,7 +50,7 @@ pub(crate) fn build_model(
                 };
                 let exact = match exact {
                     Some(e) => e.clone(),
-                    None => ExactCamera::new(sensor, (**lens).clone(), focus)?,
+                    None => ExactCamera::with_bounds_for(sensor, (**lens).clone(), focus, spectral)?,
                 };
                 Ok(Camera::Lrtf(LrtfCamera::with_exact(exact, table)?))
             }

@@ -267,7 +267,7 @@ fn compare(model: &[Landing], exact: &[Landing], footprint: &dyn Fn(usize, DVec3
 fn choose_real(spec: &CameraSpec, lens: &SpecLens, shot: &ShotContext) -> Result<(ModelChoice, Option<Camera>)> {
     let SpecLens::Real(real) = lens else { return Err(Error::Internal("choose_real takes a real lens".into())) };
     // 1. The reference: the exact camera, and the surfaces rays are followed to.
-    let exact = build_model(spec, lens, LensModel::Exact, None)?;
+    let exact = build_model(spec, lens, LensModel::Exact, None, shot.spectral)?;
     let Camera::Exact(exact_cam) = &exact else {
         return Err(Error::Internal("the exact model of a real lens is not an exact camera".into()));
     };
@@ -341,7 +341,7 @@ fn choose_real(spec: &CameraSpec, lens: &SpecLens, shot: &ShotContext) -> Result
                 continue;
             }
         }
-        let camera = match build_model(spec, lens, model, Some(exact_cam)) {
+        let camera = match build_model(spec, lens, model, Some(exact_cam), shot.spectral) {
             Ok(c) => c,
             Err(e) => {
                 report.note = format!("not applicable: {e}");
