@@ -24,9 +24,11 @@
 //! its own centre, the corners' centroids interpolated bilinearly. The region mostly slides with
 //! the film point, so one outline about that moving centre (the farthest passing point per angle
 //! over the cell's corners and centre) fits every point of the cell far tighter than the union
-//! box. A cell without an outline (at the rim of the image circle, where a corner or a film
-//! point's centre is absorbed) gets the box of the rays that pass from its film points, grown
-//! by two grid cells; radii where nothing passes at any traced azimuth stay empty.
+//! box. On a tilted sensor whose plane is known ([`ExitPupilBounds::compute_on_plane`]) each
+//! film point is traced at its own z. A cell without an outline (at the rim of the image
+//! circle, where a corner or a film point's centre is absorbed) gets the box of the rays that
+//! pass from its film points, grown by two grid cells; radii where nothing passes at any traced
+//! azimuth stay empty.
 //!
 //! | name | type | unit | default |
 //! |---|---|---|---|
@@ -289,7 +291,23 @@ impl ExitPupilBounds {
     /// largest distance any film point has from the axis; the bounds are per radius, and a
     /// tilted film's z varies, so they are computed over the span `film_z_mm ± dz`.
     pub fn compute(lens: &Lens, film_z_mm: f64, film_dz_mm: f64, max_film_radius_mm: f64) -> Self {
-        Self::compute_for(lens, film_z_mm, film_dz_mm, max_film_radius_mm, &[])
+        Self::compute_for(lens, film_z_mm, film_dz_mm, max_film_radius_mm, &[], None)
+    }
+
+    /// [`ExitPupilBounds::compute`] (with `spectral`, [`ExitPupilBounds::compute_spectral`]) for a
+    /// sensor plane through (0, 0, `film_z_mm`) whose z changes by `film_slope` (dz/dx, dz/dy)
+    /// across the film: the film cells then trace each film point at its own z instead of at
+    /// z ± `film_dz_mm` (a third of the work, and tighter outlines on a tilted sensor).
+    pub fn compute_on_plane(
+        lens: &Lens,
+        film_z_mm: f64,
+        film_dz_mm: f64,
+        film_slope: DVec2,
+        max_film_radius_mm: f64,
+        spectral: bool,
+    ) -> Self {
+        let ends: &[f64] = if spectral && lens.has_dispersion() { &SPECTRAL_RANGE_NM } else { &[] };
+        Self::compute_for(lens, film_z_mm, film_dz_mm, max_film_radius_mm, ends, Some(film_slope))
     }
 
     /// [`ExitPupilBounds::compute`] for spectral renders: for a dispersive lens the bounds also
@@ -298,11 +316,19 @@ impl ExitPupilBounds {
     /// wavelength's bounds, so renders at one wavelength use those.
     pub fn compute_spectral(lens: &Lens, film_z_mm: f64, film_dz_mm: f64, max_film_radius_mm: f64) -> Self {
         let ends: &[f64] = if lens.has_dispersion() { &SPECTRAL_RANGE_NM } else { &[] };
-        Self::compute_for(lens, film_z_mm, film_dz_mm, max_film_radius_mm, ends)
+        Self::compute_for(lens, film_z_mm, film_dz_mm, max_film_radius_mm, ends, None)
     }
 
-    /// The bounds at the primary wavelength and at the wavelengths `ends`.
-    fn compute_for(lens: &Lens, film_z_mm: f64, film_dz_mm: f64, max_film_radius_mm: f64, ends: &[f64]) -> Self {
+    /// The bounds at the primary wavelength and at the wavelengths `ends`; `film_slope`: the
+    /// sensor plane's, where known.
+    fn compute_for(
+        lens: &Lens,
+        film_z_mm: f64,
+        film_dz_mm: f64,
+        max_film_radius_mm: f64,
+        ends: &[f64],
+        film_slope: Option<DVec2>,
+    ) -> Self {
         if lens.is_rotationally_symmetric() && lens.aperture().is_circular() {
             Self::compute_with_ends(lens, film_z_mm, film_dz_mm, max_film_radius_mm, [64, 16, 48], ends)
         } else {
@@ -314,7 +340,7 @@ impl ExitPupilBounds {
             // outlines).
             let mut bounds =
                 Self::compute_with_ends(lens, film_z_mm, film_dz_mm, max_film_radius_mm, [16, 4, 48], ends);
-            bounds.cells = bounds.film_cells(lens, film_dz_mm, FILM_CELLS, 48);
+            bounds.cells = bounds.film_cells(lens, film_dz_mm, film_slope, FILM_CELLS, 48);
             bounds
         }
     }
@@ -475,7 +501,14 @@ impl ExitPupilBounds {
     /// Outlines per film cell (see [`CellOutlines`]) for a lens whose bounds are the union box:
     /// `cells`² cells over the film square that holds the radii with passing rays, corner
     /// centroids from a `grid`² trace of the rear plane. None when no ray passes.
-    fn film_cells(&self, lens: &Lens, film_dz_mm: f64, cells: usize, grid: usize) -> Option<CellOutlines> {
+    fn film_cells(
+        &self,
+        lens: &Lens,
+        film_dz_mm: f64,
+        film_slope: Option<DVec2>,
+        cells: usize,
+        grid: usize,
+    ) -> Option<CellOutlines> {
         // The union box, and the square's half side: the largest radius with passing rays.
         let last = self.boxes.iter().rposition(|b| !b.is_empty())?;
         let union = self.boxes[last];
@@ -485,13 +518,24 @@ impl ExitPupilBounds {
         let ends = &self.wavelength_ends_nm;
         let n = cells + 1;
         let film_xy = |i: f64, j: f64| DVec2::new(-h + 2.0 * h * i / cells as f64, -h + 2.0 * h * j / cells as f64);
-        // 1. The passing region's centroid at every cell corner (the film plane's middle z).
+        // The film points' z: on the sensor plane where it is known, else the span's ends and
+        // middle.
+        let z_levels = |f: DVec2| -> Vec<f64> {
+            match film_slope {
+                Some(slope) => vec![self.film_z_mm + slope.dot(f)],
+                None if film_dz_mm > 0.0 => {
+                    vec![self.film_z_mm - film_dz_mm, self.film_z_mm, self.film_z_mm + film_dz_mm]
+                }
+                None => vec![self.film_z_mm],
+            }
+        };
+        // 1. The passing region's centroid at every cell corner (on the plane, or its middle z).
         let cell = (union.max - union.min) / grid as f64;
         let corner_centres: Vec<Option<DVec2>> = (0..n * n)
             .into_par_iter()
             .map(|k| {
                 let f = film_xy((k % n) as f64, (k / n) as f64);
-                let fp = DVec3::new(f.x, f.y, self.film_z_mm);
+                let fp = DVec3::new(f.x, f.y, film_slope.map_or(self.film_z_mm, |slope| self.film_z_mm + slope.dot(f)));
                 let (mut sum, mut count) = (DVec2::ZERO, 0usize);
                 for i in 0..grid {
                     for j in 0..grid {
@@ -514,21 +558,14 @@ impl ExitPupilBounds {
             boxes: vec![Box2::EMPTY; cells * cells],
         };
         // 2. Each cell's outline about its film points' own centres (corners and centre per film z).
-        let z_levels: Vec<f64> = if film_dz_mm > 0.0 {
-            vec![self.film_z_mm - film_dz_mm, self.film_z_mm, self.film_z_mm + film_dz_mm]
-        } else {
-            vec![self.film_z_mm]
-        };
         let outlines: Vec<(Option<Outline>, Box2)> = (0..cells * cells)
             .into_par_iter()
             .map(|k| {
                 let (i, j) = (k % cells, k / cells);
-                let mut pts = Vec::with_capacity(9 * z_levels.len());
-                for &z in &z_levels {
-                    for (a, b) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0), (0.5, 0.5)] {
-                        let f = film_xy(i as f64 + a, j as f64 + b);
-                        pts.push(DVec3::new(f.x, f.y, z));
-                    }
+                let mut pts = Vec::with_capacity(15);
+                for (a, b) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0), (0.5, 0.5)] {
+                    let f = film_xy(i as f64 + a, j as f64 + b);
+                    pts.extend(z_levels(f).into_iter().map(|z| DVec3::new(f.x, f.y, z)));
                 }
                 let centre_of = |fp: DVec3| {
                     let (ci, cj, t) = grid_cells.cell(DVec2::new(fp.x, fp.y))?;

@@ -42,11 +42,10 @@ impl ExactCamera {
     pub fn with_bounds_for(sensor: Sensor, lens: Lens, focus_distance_m: Option<f64>, spectral: bool) -> Result<Self> {
         let film_z_mm = Self::film_position_mm(&sensor, &lens, focus_distance_m)?;
         let (r_max, dz) = sensor.extent();
-        let pupil = if spectral {
-            ExitPupilBounds::compute_spectral(&lens, film_z_mm, dz, r_max * 1.001)
-        } else {
-            ExitPupilBounds::compute(&lens, film_z_mm, dz, r_max * 1.001)
-        };
+        // The sensor plane through (0, 0, film_z) with normal n: z = film_z − (n.x·x + n.y·y)/n.z.
+        let n = sensor.normal();
+        let slope = DVec2::new(-n.x / n.z, -n.y / n.z);
+        let pupil = ExitPupilBounds::compute_on_plane(&lens, film_z_mm, dz, slope, r_max * 1.001, spectral);
         let front_plane_z_mm = front_plane_z_mm(&lens);
         let mut cam = ExactCamera {
             sensor: PreparedSensor::new(sensor),
