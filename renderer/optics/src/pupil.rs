@@ -330,7 +330,7 @@ impl ExitPupilBounds {
         film_slope: Option<DVec2>,
     ) -> Self {
         if lens.is_rotationally_symmetric() && lens.aperture().is_circular() {
-            Self::compute_with_ends(lens, film_z_mm, film_dz_mm, max_film_radius_mm, [64, 16, 48], ends)
+            Self::compute_with_ends(lens, film_z_mm, film_dz_mm, max_film_radius_mm, [64, 16, 48], ends, None)
         } else {
             // No rotational symmetry (the lens, or a bladed, masked or squeezed stop, whose
             // region does not turn with the film point): one union box serves every film point
@@ -339,7 +339,7 @@ impl ExitPupilBounds {
             // double-gauss-50mm: 14 % absorbed, 29 % in the circumscribed circle's radial
             // outlines).
             let mut bounds =
-                Self::compute_with_ends(lens, film_z_mm, film_dz_mm, max_film_radius_mm, [16, 4, 48], ends);
+                Self::compute_with_ends(lens, film_z_mm, film_dz_mm, max_film_radius_mm, [16, 4, 48], ends, film_slope);
             bounds.cells = bounds.film_cells(lens, film_dz_mm, film_slope, FILM_CELLS, 48);
             bounds
         }
@@ -355,11 +355,20 @@ impl ExitPupilBounds {
         film_samples: usize,
         grid: usize,
     ) -> Self {
-        Self::compute_with_ends(lens, film_z_mm, film_dz_mm, max_film_radius_mm, [intervals, film_samples, grid], &[])
+        Self::compute_with_ends(
+            lens,
+            film_z_mm,
+            film_dz_mm,
+            max_film_radius_mm,
+            [intervals, film_samples, grid],
+            &[],
+            None,
+        )
     }
 
     /// [`ExitPupilBounds::compute_with`] also holding the wavelengths `ends`; `resolution` is
-    /// (intervals, film samples per interval, rear grid per side).
+    /// (intervals, film samples per interval, rear grid per side); `film_slope`: the sensor
+    /// plane, where known, on which the union box (no rotational symmetry) is traced.
     fn compute_with_ends(
         lens: &Lens,
         film_z_mm: f64,
@@ -367,6 +376,7 @@ impl ExitPupilBounds {
         max_film_radius_mm: f64,
         resolution: [usize; 3],
         spectral_ends: &[f64],
+        film_slope: Option<DVec2>,
     ) -> Self {
         let [intervals, film_samples, grid] = resolution;
         let rear_z = lens.last_vertex_z_mm();
@@ -374,7 +384,9 @@ impl ExitPupilBounds {
         let cell = 2.0 * half / grid as f64;
         let wl = lens.primary_wavelength_nm();
         let symmetric = lens.is_rotationally_symmetric() && lens.aperture().is_circular();
-        let z_levels: Vec<f64> = if film_dz_mm > 0.0 {
+        // The union box over a known sensor plane needs its points only; else the z span.
+        let on_plane = film_slope.filter(|_| !symmetric);
+        let z_levels: Vec<f64> = if film_dz_mm > 0.0 && on_plane.is_none() {
             vec![film_z_mm - film_dz_mm, film_z_mm, film_z_mm + film_dz_mm]
         } else {
             vec![film_z_mm]
@@ -405,7 +417,10 @@ impl ExitPupilBounds {
                                 film_pts.push(DVec3::new(r * phi.cos(), r * phi.sin(), fz));
                             }
                         }
-                        for fp in film_pts {
+                        for mut fp in film_pts {
+                            if let Some(slope) = on_plane {
+                                fp.z = film_z_mm + slope.x * fp.x + slope.y * fp.y;
+                            }
                             all_pts.push(fp);
                             for i in 0..grid {
                                 for j in 0..grid {
