@@ -422,45 +422,21 @@ impl ExitPupilBounds {
                                 fp.z = film_z_mm + slope.x * fp.x + slope.y * fp.y;
                             }
                             all_pts.push(fp);
-                            for i in 0..grid {
-                                for j in 0..grid {
-                                    let p = DVec3::new(
-                                        -half + (i as f64 + 0.5) * cell,
-                                        -half + (j as f64 + 0.5) * cell,
-                                        rear_z,
-                                    );
-                                    let ray = Ray::new(fp, p - fp);
-                                    if lens
-                                        .trace_detailed(&ray, wl, TraceDirection::FilmToScene, StopMode::Apply)
-                                        .is_ok()
-                                    {
-                                        b.grow(DVec2::new(p.x, p.y));
-                                        sum += DVec2::new(p.x, p.y);
-                                        count += 1;
-                                    }
-                                }
-                            }
+                            for_each_passing(lens, wl, fp, [rear_z, -half, -half], DVec2::splat(cell), grid, |q| {
+                                b.grow(q);
+                                sum += q;
+                                count += 1;
+                            });
                             // Dispersive lenses: the spectral range's ends on a grid of half the
                             // resolution (the image circle and the region shift with the
-                            // wavelength), grown by two of its cells.
+                            // wavelength), each passing point grown by half its cell (with the
+                            // margin below, one and a half).
                             for &wl_end in spectral_ends {
-                                let coarse = 2.0 * cell;
-                                for i in 0..grid / 2 {
-                                    for j in 0..grid / 2 {
-                                        let q = DVec2::new(
-                                            -half + (i as f64 + 0.5) * coarse,
-                                            -half + (j as f64 + 0.5) * coarse,
-                                        );
-                                        let ray = Ray::new(fp, DVec3::new(q.x, q.y, rear_z) - fp);
-                                        if lens
-                                            .trace_detailed(&ray, wl_end, TraceDirection::FilmToScene, StopMode::Apply)
-                                            .is_ok()
-                                        {
-                                            b.grow(q - DVec2::splat(cell));
-                                            b.grow(q + DVec2::splat(cell));
-                                        }
-                                    }
-                                }
+                                let coarse = DVec2::splat(2.0 * cell);
+                                for_each_passing(lens, wl_end, fp, [rear_z, -half, -half], coarse, grid / 2, |q| {
+                                    b.grow(q - DVec2::splat(cell));
+                                    b.grow(q + DVec2::splat(cell));
+                                });
                             }
                         }
                     }
@@ -552,16 +528,10 @@ impl ExitPupilBounds {
                 let f = film_xy((k % n) as f64, (k / n) as f64);
                 let fp = DVec3::new(f.x, f.y, film_slope.map_or(self.film_z_mm, |slope| self.film_z_mm + slope.dot(f)));
                 let (mut sum, mut count) = (DVec2::ZERO, 0usize);
-                for i in 0..grid {
-                    for j in 0..grid {
-                        let q = union.min + cell * DVec2::new(i as f64 + 0.5, j as f64 + 0.5);
-                        let ray = Ray::new(fp, DVec3::new(q.x, q.y, rear_z) - fp);
-                        if lens.trace_detailed(&ray, wl, TraceDirection::FilmToScene, StopMode::Apply).is_ok() {
-                            sum += q;
-                            count += 1;
-                        }
-                    }
-                }
+                for_each_passing(lens, wl, fp, [rear_z, union.min.x, union.min.y], cell, grid, |q| {
+                    sum += q;
+                    count += 1;
+                });
                 (count > 0).then(|| sum / count as f64)
             })
             .collect();
@@ -582,33 +552,22 @@ impl ExitPupilBounds {
                     let f = film_xy(i as f64 + a, j as f64 + b);
                     pts.extend(z_levels(f).into_iter().map(|z| DVec3::new(f.x, f.y, z)));
                 }
+                // (the cell's points, those on its upper edges too, are placed in this cell)
                 let centre_of = |fp: DVec3| {
-                    let (ci, cj, t) = grid_cells.cell(DVec2::new(fp.x, fp.y))?;
-                    // a point on the cell's upper edges belongs to this cell, not the next
-                    let (ci, cj, t) = if (ci, cj) == (i, j) {
-                        (ci, cj, t)
-                    } else {
-                        let u = (DVec2::new(fp.x, fp.y) + DVec2::splat(h)) / (2.0 * h) * cells as f64;
-                        (i, j, u - DVec2::new(i as f64, j as f64))
-                    };
-                    grid_cells.centre_in(ci, cj, t)
+                    let u = (DVec2::new(fp.x, fp.y) + DVec2::splat(h)) / (2.0 * h) * cells as f64;
+                    grid_cells.centre_in(i, j, u - DVec2::new(i as f64, j as f64))
                 };
                 if let Some(o) = outline_radii(lens, [wl, rear_z], union, &pts, &centre_of, false, ends)
                     .and_then(|radii| Outline::new(DVec2::ZERO, radii))
                 {
                     return (Some(o), Box2::EMPTY);
                 }
-                // 3. No outline (the rim of the image circle): the box of the passing rays.
+                // 3. No outline (the rim of the image circle): the box of the passing rays, at
+                //    the bounds' other wavelengths too.
                 let mut b = Box2::EMPTY;
                 for &fp in &pts {
-                    for a in 0..grid {
-                        for c in 0..grid {
-                            let q = union.min + cell * DVec2::new(a as f64 + 0.5, c as f64 + 0.5);
-                            let ray = Ray::new(fp, DVec3::new(q.x, q.y, rear_z) - fp);
-                            if lens.trace_detailed(&ray, wl, TraceDirection::FilmToScene, StopMode::Apply).is_ok() {
-                                b.grow(q);
-                            }
-                        }
+                    for &w in std::iter::once(&wl).chain(ends) {
+                        for_each_passing(lens, w, fp, [rear_z, union.min.x, union.min.y], cell, grid, |q| b.grow(q));
                     }
                 }
                 let margin = 2.0 * cell;
@@ -706,6 +665,29 @@ impl ExitPupilBounds {
     }
 }
 
+/// Calls `pass` with every point of a `grid`² grid of cells `cell` on the rear plane (z, and the
+/// grid's lower corner: `[rear_z, x0, y0]`; points at the cells' centres) whose ray from film
+/// point `fp` passes the lens at `wl`.
+fn for_each_passing(
+    lens: &Lens,
+    wl: f64,
+    fp: DVec3,
+    [rear_z, x0, y0]: [f64; 3],
+    cell: DVec2,
+    grid: usize,
+    mut pass: impl FnMut(DVec2),
+) {
+    for i in 0..grid {
+        for j in 0..grid {
+            let q = DVec2::new(x0, y0) + cell * DVec2::new(i as f64 + 0.5, j as f64 + 0.5);
+            let ray = Ray::new(fp, DVec3::new(q.x, q.y, rear_z) - fp);
+            if lens.trace_detailed(&ray, wl, TraceDirection::FilmToScene, StopMode::Apply).is_ok() {
+                pass(q);
+            }
+        }
+    }
+}
+
 /// The outline of the passing region over film points `film_pts` (on the +x half-plane's axis),
 /// about `centre`, inside the box `b`; None when the region is not star-shaped about `centre`
 /// for some film point (the centre does not pass), or degenerate.
@@ -765,21 +747,17 @@ fn outline_radii(
             let mut r_max = 0.0f64;
             for (&fp, &centre) in film_pts.iter().zip(&centres) {
                 // distance from the centre to the box's edge along dir
-                let t_x = if dir.x > 1e-12 {
-                    (b.max.x - centre.x) / dir.x
-                } else if dir.x < -1e-12 {
-                    (b.min.x - centre.x) / dir.x
-                } else {
-                    f64::INFINITY
+                let exit = |lo: f64, hi: f64, c: f64, d: f64| {
+                    if d > 1e-12 {
+                        (hi - c) / d
+                    } else if d < -1e-12 {
+                        (lo - c) / d
+                    } else {
+                        f64::INFINITY
+                    }
                 };
-                let t_y = if dir.y > 1e-12 {
-                    (b.max.y - centre.y) / dir.y
-                } else if dir.y < -1e-12 {
-                    (b.min.y - centre.y) / dir.y
-                } else {
-                    f64::INFINITY
-                };
-                let t_far = t_x.min(t_y).max(0.0);
+                let t_far =
+                    exit(b.min.x, b.max.x, centre.x, dir.x).min(exit(b.min.y, b.max.y, centre.y, dir.y)).max(0.0);
                 // 1. March out to the last passing step; 2. bisect towards the failing side.
                 let mut last = 0usize;
                 for i in 1..=MARCH {
