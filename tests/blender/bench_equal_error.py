@@ -1,6 +1,7 @@
 """Time to equal error against Cycles (issue 14): a benchmark, not a test (pytest does not collect it).
 
     .venv/bin/python tests/blender/bench_equal_error.py [--scene main|street] [--target 0.02] [--reference-spp 2048]
+        [--display-target 0.05] [--adaptive-thresholds 0.1,0.05,0.02,0.01] [--skip-cycles]
 
 On tests/blender's scene (MainCam, 240x160, 2 threads each; or with ``--scene street`` the
 miniature street of street_scene.py, a scene of the built-in demo's kind, StreetCam, where
@@ -14,8 +15,12 @@ a ladder of samples and a ladder of its own adaptive thresholds (`--adaptive-thr
 each run's relative RMSE against its own renderer's reference (the two references differ by
 the renderers' small systematic differences, which tests/blender bounds; this measures
 convergence). The time to the target error is interpolated in log-log between the
-two runs that bracket it (extrapolated with error ∝ time^-1/2 when none does). Prints a Markdown
-table; docs/performance.md records it.
+two runs that bracket it (extrapolated with error ∝ time^-1/2 when none does). Each run's error
+is also given display-referred (every image clipped to [0, 1] and raised to 1/2.2 before the
+same relative RMSE; the linear figure is carried by the few pixels far above 1, such as lamp
+cores, which a display clips), with its own target. Prints a Markdown table;
+docs/performance.md records it. `--skip-cycles` renders petzval's runs alone (to compare two
+petzval binaries: PETZVAL_BIN names the one to run).
 """
 
 from __future__ import annotations
@@ -64,6 +69,11 @@ class Reference:
         below a tenth of the raw figure)."""
         raw2 = float(np.mean((img - self.image) ** 2)) / self.norm2
         return math.sqrt(max(raw2 - self.noise2, raw2 / 100))
+
+
+def display(img: np.ndarray) -> np.ndarray:
+    """Display-referred values: clipped to [0, 1], gamma 1/2.2."""
+    return np.clip(img, 0.0, 1.0) ** (1 / 2.2)
 
 
 def rel_rmse(ref: np.ndarray, img: np.ndarray) -> float:
@@ -124,7 +134,11 @@ def main() -> None:
     ap.add_argument("--target", type=float, default=0.02)
     ap.add_argument("--reference-spp", type=int, default=2048)
     ap.add_argument("--scene", choices=("main", "street"), default="main")
+    ap.add_argument("--display-target", type=float, default=0.05)
+    ap.add_argument("--adaptive-thresholds", default="0.1,0.05,0.02,0.01")
+    ap.add_argument("--skip-cycles", action="store_true")
     args = ap.parse_args()
+    thresholds = [float(t) for t in args.adaptive_thresholds.split(",")]
     workdir = REPO / "tests" / "out" / f"bench-equal-error-{args.scene}"
     workdir.mkdir(parents=True, exist_ok=True)
     if args.scene == "main":
@@ -138,48 +152,69 @@ def main() -> None:
         ladders = {"": T.petzval_args("auto"), ", no light paths": T.petzval_args("0")}
     glb = S.export_glb(workdir / "scene.glb")
     binary = petzval_cli.ensure_binary()
-    cycles(workdir, camera, 1, 0, None)  # warm-up (kernels, scene sync)
-    (c_a, t_rc), (c_b, _) = (cycles(workdir, camera, args.reference_spp, s, None) for s in (99, 98))
     (p_a, t_rp), (p_b, _) = (petzval(binary, glb, workdir, "ref", ladders[""], args.reference_spp, s) for s in (99, 98))
-    ref_c, ref_p = Reference(c_a, c_b), Reference(p_a, p_b)
-    print(f"references: Cycles {args.reference_spp} spp {t_rc:.1f} s, petzval {t_rp:.1f} s; "
-          f"the two differ by rel. RMSE {rel_rmse(ref_c.image, ref_p.image):.4f}; their own noise "
-          f"(two seeds each): Cycles {ref_c.noise:.4f}, petzval {ref_p.noise:.4f}", file=sys.stderr)  # fmt: skip
-    rows, c_runs, p_runs = [], [], {name: [] for name in ladders}
-    for thr in (0.1, 0.05, 0.02, 0.01, 0.005):
-        img, t = cycles(workdir, camera, 4096, 1, thr)
-        e = ref_c.rel_rmse(img)
-        c_runs.append((t, e))
-        rows.append(("Cycles", f"adaptive, threshold {thr} (≤ 4096 spp)", t, e))
+    ref_p, ref_pd = Reference(p_a, p_b), Reference(display(p_a), display(p_b))
+    if not args.skip_cycles:
+        cycles(workdir, camera, 1, 0, None)  # warm-up (kernels, scene sync)
+        (c_a, t_rc), (c_b, _) = (cycles(workdir, camera, args.reference_spp, s, None) for s in (99, 98))
+        ref_c, ref_cd = Reference(c_a, c_b), Reference(display(c_a), display(c_b))
+        print(f"references: Cycles {args.reference_spp} spp {t_rc:.1f} s, petzval {t_rp:.1f} s; "
+              f"the two differ by rel. RMSE {rel_rmse(ref_c.image, ref_p.image):.4f}; their own noise "
+              f"(two seeds each): Cycles {ref_c.noise:.4f}, petzval {ref_p.noise:.4f}", file=sys.stderr)  # fmt: skip
+    # (renderer, run, seconds, linear error, display-referred error)
+    rows: list[tuple[str, str, float, float, float]] = []
+    c_runs, p_runs = [], {name: [] for name in ladders}
+    if not args.skip_cycles:
+        for thr in (0.1, 0.05, 0.02, 0.01, 0.005):
+            img, t = cycles(workdir, camera, 4096, 1, thr)
+            e, ed = ref_c.rel_rmse(img), ref_cd.rel_rmse(display(img))
+            c_runs.append((t, e, ed))
+            rows.append(("Cycles", f"adaptive, threshold {thr} (≤ 4096 spp)", t, e, ed))
     for k, (name, pargs) in enumerate(ladders.items()):
         for spp in (16, 32, 64, 128, 256, 512):
             img, t = petzval(binary, glb, workdir, f"ladder{k}", pargs, spp, 1)
-            e = ref_p.rel_rmse(img)
-            p_runs[name].append((t, e))
-            rows.append(("petzval", f"{spp} spp{name}", t, e))
+            e, ed = ref_p.rel_rmse(img), ref_pd.rel_rmse(display(img))
+            p_runs[name].append((t, e, ed))
+            rows.append(("petzval", f"{spp} spp{name}", t, e, ed))
     a_runs = []
-    for thr in (0.1, 0.05, 0.02, 0.01):
+    for thr in thresholds:
         img, t = petzval(binary, glb, workdir, "adaptive", ladders[""], 4096, 1, thr)
-        e = ref_p.rel_rmse(img)
-        a_runs.append((t, e))
-        rows.append(("petzval", f"adaptive, threshold {thr} (≤ 4096 spp)", t, e))
+        e, ed = ref_p.rel_rmse(img), ref_pd.rel_rmse(display(img))
+        a_runs.append((t, e, ed))
+        rows.append(("petzval", f"adaptive, threshold {thr} (≤ 4096 spp)", t, e, ed))
     print(f"{args.scene} scene, {camera} {w}x{h}, 2 threads each; references {args.reference_spp} spp "
           "(the mean of seeds 99 and 98, whose own noise is taken out of each run's error), runs seed 1; "
           "wall seconds of the render call (Cycles, in process) and of the "
           f"whole `petzval render` process ({' '.join(ladders[''])}).\n")  # fmt: skip
-    print("| renderer | run | seconds | rel. RMSE against its own reference (its noise taken out) |")
-    print("|---|---|---|---|")
+    print("| renderer | run | seconds | rel. RMSE against its own reference (its noise taken out) "
+          "| the same, display-referred |")  # fmt: skip
+    print("|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r[0]} | {r[1]} | {r[2]:.2f} | {r[3]:.4f} |")
-    tc, how_c = time_to(c_runs, args.target)
-    ta, how_a = time_to(a_runs, args.target)
+        print(f"| {r[0]} | {r[1]} | {r[2]:.2f} | {r[3]:.4f} | {r[4]:.4f} |")
+    print_times_to(1, args.target, "a relative RMSE", c_runs, p_runs, a_runs)
+    print_times_to(2, args.display_target, "a display-referred relative RMSE", c_runs, p_runs, a_runs)
+
+
+def print_times_to(col: int, target: float, label: str, c_runs: list, p_runs: dict, a_runs: list) -> None:
+    """Prints each ladder's time to `target` in error column `col` of its (seconds, linear error,
+    display-referred error) runs, and its ratio to Cycles' when Cycles ran."""
+
+    def runs_of(runs: list) -> list[tuple[float, float]]:
+        return [(r[0], r[col]) for r in runs]
+
+    tc, how_c = time_to(runs_of(c_runs), target) if c_runs else (math.nan, "not run")
+
+    def ratio(t: float) -> str:
+        return f", ratio {t / tc:.2f}" if c_runs else ""
+
+    ta, how_a = time_to(runs_of(a_runs), target)
     fixed = []
     for name, runs in p_runs.items():
-        tp, how_p = time_to(runs, args.target)
-        fixed.append(f"petzval fixed samples{name} {tp:.1f} s ({how_p}), ratio {tp / tc:.2f}")
-    print(f"\nTime to a relative RMSE of {args.target}: Cycles (adaptive) {tc:.1f} s ({how_c}); "
+        tp, how_p = time_to(runs_of(runs), target)
+        fixed.append(f"petzval fixed samples{name} {tp:.1f} s ({how_p}){ratio(tp)}")
+    print(f"\nTime to {label} of {target}: Cycles (adaptive) {tc:.1f} s ({how_c}); "
           + "; ".join(fixed)
-          + f"; petzval adaptive {ta:.1f} s ({how_a}), ratio {ta / tc:.2f}.")  # fmt: skip
+          + f"; petzval adaptive {ta:.1f} s ({how_a}){ratio(ta)}.")  # fmt: skip
 
 
 if __name__ == "__main__":
