@@ -28,7 +28,9 @@
 //! film point is traced at its own z. A cell without an outline (at the rim of the image
 //! circle, where a corner or a film point's centre is absorbed) gets the box of the rays that
 //! pass from its film points, grown by two grid cells; radii where nothing passes at any traced
-//! azimuth stay empty.
+//! azimuth stay empty. Past the last interval with passing rays, where the image circle ends,
+//! the regions can be smaller than the grid's cells (at the spectral range's ends above all),
+//! so those intervals are traced again on a grid four times finer until one has none.
 //!
 //! | name | type | unit | default |
 //! |---|---|---|---|
@@ -444,6 +446,40 @@ impl ExitPupilBounds {
                 (b, all_pts, if count > 0 { sum / count as f64 } else { DVec2::ZERO })
             })
             .collect();
+        let mut traced = traced;
+        // 1b. The rim. The image circle ends inside an interval, and at the spectral range's
+        //     ends it reaches a little further (lateral colour) in regions smaller than the
+        //     grid's cells (aspheric-fisheye-10mm at f/8: 0.8 × 1.7 mm against 1.6 mm cells at
+        //     380 nm). The intervals past the last one with passing rays are traced again on a
+        //     grid four times finer over the previous interval's box, until one has none.
+        let fine = cell / 4.0;
+        let mut k = traced.iter().rposition(|t| !t.0.is_empty()).map_or(traced.len(), |last| last + 1);
+        while k < traced.len() && k > 0 {
+            let prev = traced[k - 1].0;
+            let window = Box2 { min: prev.min - DVec2::splat(2.0 * cell), max: prev.max + DVec2::splat(2.0 * cell) };
+            let n = ((window.max - window.min).max_element() / fine).ceil().max(1.0) as usize;
+            let step = (window.max - window.min) / n as f64;
+            let found: Vec<Box2> = traced[k]
+                .1
+                .par_iter()
+                .map(|&fp| {
+                    let mut b = Box2::EMPTY;
+                    for &w in std::iter::once(&wl).chain(spectral_ends) {
+                        for_each_passing(lens, w, fp, [rear_z, window.min.x, window.min.y], step, n, |q| {
+                            b.grow(q - step);
+                            b.grow(q + step);
+                        });
+                    }
+                    b
+                })
+                .collect();
+            let b = found.into_iter().fold(Box2::EMPTY, |a, b| if b.is_empty() { a } else { Box2::union(a, b) });
+            if b.is_empty() {
+                break;
+            }
+            traced[k].0 = b;
+            k += 1;
+        }
         let boxes: Vec<Box2> = traced.iter().map(|t| t.0).collect();
         // 2. Enlarge by two cells (rays between grid points) and, for asymmetric systems, use
         //    the union for every interval.
