@@ -88,6 +88,11 @@ pub const OUTLINE_ANGLES: usize = 64;
 /// vertices, film points between the sampled ones, and the region's shift with wavelength).
 pub const OUTLINE_GROWTH: f64 = 0.03;
 
+/// [`OUTLINE_GROWTH`] for the outlines of film cells, whose corners between directions are
+/// raised first (the rest covers film points between the sampled ones and the interpolated
+/// centres' error).
+pub const CELL_OUTLINE_GROWTH: f64 = 0.025;
+
 /// The ends of the spectral renderer's wavelength range (nm): outlines of dispersive lenses
 /// hold the passing region at these as well as at the primary wavelength.
 pub const SPECTRAL_RANGE_NM: [f64; 2] = [380.0, 780.0];
@@ -578,13 +583,17 @@ impl ExitPupilBounds {
             outlines: vec![None; cells * cells],
             boxes: vec![Box2::EMPTY; cells * cells],
         };
-        // 2. Each cell's outline about its film points' own centres (corners and centre per film z).
+        // 2. Each cell's outline about its film points' own centres: a 3 × 3 grid of them (its
+        //    corners, edge midpoints and centre) per film z. A region bounded by several edges
+        //    (blades, element rims) reaches further between two film points than at either when
+        //    a different edge binds at each; corners and centre alone let a 5-blade stop on the
+        //    anamorphic lens at f/4 lose 1.4 % of one film point's passing rays.
         let outlines: Vec<(Option<Outline>, Box2)> = (0..cells * cells)
             .into_par_iter()
             .map(|k| {
                 let (i, j) = (k % cells, k / cells);
-                let mut pts = Vec::with_capacity(15);
-                for (a, b) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0), (0.5, 0.5)] {
+                let mut pts = Vec::with_capacity(27);
+                for (a, b) in (0..9).map(|m| ((m % 3) as f64 * 0.5, (m / 3) as f64 * 0.5)) {
                     let f = film_xy(i as f64 + a, j as f64 + b);
                     pts.extend(z_levels(f).into_iter().map(|z| DVec3::new(f.x, f.y, z)));
                 }
@@ -847,14 +856,66 @@ fn outline_radii(
         .collect();
     let radii: Vec<f64> =
         if mirror { (0..n).map(|k| half[if k <= n / 2 { k } else { n - k }]).collect() } else { half };
+    // Film cells (bladed and masked stops, lenses without symmetry): corners between two
+    // directions (a blade's, an element rim's crossing) are raised so that the chord between
+    // them holds the corner a convex region could have there. (The radial outlines of round
+    // stops on symmetric lenses, smooth regions, keep their radii: no brute-force run found a
+    // passing ray outside them.)
+    let (radii, growth) = if mirror { (radii, OUTLINE_GROWTH) } else { (with_corners(&radii), CELL_OUTLINE_GROWTH) };
     // Grown: each vertex takes its neighbours' radius too (a chord cannot cut the region), plus
     // a share of the largest radius.
     let largest = radii.iter().cloned().fold(0.0, f64::max);
-    Some(
-        (0..n)
-            .map(|k| radii[(k + n - 1) % n].max(radii[k]).max(radii[(k + 1) % n]) + OUTLINE_GROWTH * largest)
-            .collect(),
-    )
+    Some((0..n).map(|k| radii[(k + n - 1) % n].max(radii[k]).max(radii[(k + 1) % n]) + growth * largest).collect())
+}
+
+/// Outline radii (vertex k at angle 2πk/n) raised for the corners a convex region may have
+/// between two vertices: between directions k and k + 1 its boundary stays inside the lines
+/// through the boundary points k − 1, k and k + 2, k + 1, which meet at the farthest such corner.
+/// Where they meet inside the sector, no further than a quarter beyond the two radii, both
+/// vertices are scaled until their chord passes through that point (a bladed stop's corners
+/// reach up to 2 % past the chord of 64 directions; the growth alone did not always cover it).
+fn with_corners(radii: &[f64]) -> Vec<f64> {
+    let n = radii.len();
+    let dir = |k: usize| {
+        let phi = std::f64::consts::TAU * k as f64 / n as f64;
+        DVec2::new(phi.cos(), phi.sin())
+    };
+    let point = |k: usize| dir(k % n) * radii[k % n];
+    let cross = |a: DVec2, b: DVec2| a.x * b.y - a.y * b.x;
+    let mut out = radii.to_vec();
+    for k in 0..n {
+        let (a0, a1, b1, b0) = (point(k + n - 1), point(k), point(k + 1), point(k + 2));
+        // 1. The two lines' meeting point x = a1 + t (a1 − a0).
+        let (da, db) = (a1 - a0, b1 - b0);
+        let den = cross(da, db);
+        if den.abs() < 1e-12 {
+            continue;
+        }
+        let t = cross(b1 - a1, db) / den;
+        if !(t > 0.0) {
+            continue;
+        }
+        let x = a1 + da * t;
+        // 2. Inside the sector and not far out.
+        let (u0, u1) = (dir(k), dir((k + 1) % n));
+        if cross(u0, x) < 0.0 || cross(x, u1) < 0.0 || x.length() > 1.25 * radii[k].max(radii[(k + 1) % n]) {
+            continue;
+        }
+        // 3. The chord's distance along x's direction, and the scale that brings it out to x.
+        let (c0, c1) = (a1, b1);
+        let dx = x.normalize();
+        let den = cross(dx, c1 - c0);
+        if den.abs() < 1e-12 {
+            continue;
+        }
+        let along = cross(c0, c1 - c0) / den;
+        if along > 0.0 && x.length() > along {
+            let s = x.length() / along;
+            out[k] = out[k].max(radii[k] * s);
+            out[(k + 1) % n] = out[(k + 1) % n].max(radii[(k + 1) % n] * s);
+        }
+    }
+    out
 }
 
 /// The chief ray from film point `film` (lens frame, x, y, z): the ray through the centre of

@@ -339,7 +339,8 @@ fn exit_pupil_bounds_contain_every_passing_ray() {
         eprintln!("{name}: rejection inside bounds {:.1}%", 100.0 * rejection);
         // issue 14: at most 20 % of the rays sampled in the domain are absorbed; the bladed
         // stop at f/4 too, now outlined per film cell (29 % in its circumscribed circle before).
-        // Wide open, the 5-blade stop: 21.8–22.4 % (its circumscribed circle would let about a
+        // Wide open, the 5-blade stop: 22.9 % (21.8–22.4 % before its cells took 9 film points
+        // and raised their corners; its circumscribed circle would let about a
         // third be absorbed: the pentagon fills 76 % of it). The anamorphic lens, also per film
         // cell: at most 35 % (70 % with its former union box).
         let limit = if name.contains("anamorphic") {
@@ -416,6 +417,68 @@ fn exit_pupil_bounds_hold_for_every_library_lens() {
     }
 }
 
+/// A stress sweep of the film cells (not run by default: `cargo test --release -p
+/// petzval-optics --test optics exit_pupil_bounds_stress -- --ignored --nocapture`, with
+/// PETZVAL_STRESS_SEED to change the rays): every library lens with 5 blades at f/4 focused at
+/// 1 m, 7 blades wide open, a round stop on a sensor tilted 5°, and 6 blades at f/8 on a
+/// sensor tilted about both axes, 400 000 rays each. Known to fail: over seeds 4242, 77, 5 and
+/// 123, 2 of the 208 runs find one passing ray outside (docs/performance.md, session 20).
+#[test]
+#[ignore]
+fn exit_pupil_bounds_stress_bladed_and_tilted() {
+    let seed = std::env::var("PETZVAL_STRESS_SEED").ok().and_then(|s| s.parse().ok()).unwrap_or(4242u64);
+    let blades = |count: u32, rotation_rad: f64| petzval_optics::Aperture {
+        shape: petzval_optics::ApertureShape::Blades { count, curvature: 0.0 },
+        rotation_rad,
+        anamorphic_ratio: 1.0,
+    };
+    let mut failures = Vec::new();
+    for entry in petzval_optics::LIBRARY {
+        let lens = library_lens(entry.name).unwrap();
+        let stopped = |n: f64| lens.stopped_down(n).unwrap_or_else(|_| lens.clone());
+        let cases = [
+            ("5 blades f/4, 1 m", stopped(4.0).with_aperture(blades(5, 0.3)), Some(1000.0), DVec2::ZERO),
+            ("7 blades wide open", lens.with_aperture(blades(7, 0.1)), None, DVec2::ZERO),
+            ("round stop, tilted", lens.clone(), Some(2000.0), DVec2::new(5f64.to_radians().tan(), 0.0)),
+            ("6 blades f/8, tilted", stopped(8.0).with_aperture(blades(6, 0.0)), Some(1500.0), DVec2::new(0.03, -0.05)),
+        ];
+        for (case, l, focus_mm, slope) in cases {
+            let film_z = l.last_vertex_z_mm() + l.focus_image_distance_mm(focus_mm).unwrap();
+            let r_max = 21.7;
+            let spectral = l.has_dispersion();
+            let b = if slope == DVec2::ZERO {
+                ExitPupilBounds::compute_spectral(&l, film_z, 0.0, r_max)
+            } else {
+                ExitPupilBounds::compute_on_plane(&l, film_z, slope.length() * r_max, slope, r_max, spectral)
+            };
+            let rear = 1.5 * l.rear_semi_diameter_mm();
+            let mut state = seed;
+            let mut rnd = || {
+                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                (state >> 11) as f64 / (1u64 << 53) as f64
+            };
+            let (mut passed, mut outside) = (0, 0);
+            for i in 0..400_000 {
+                let r = r_max * rnd().sqrt();
+                let phi = std::f64::consts::TAU * rnd();
+                let f = DVec2::new(r * phi.cos(), r * phi.sin());
+                let film = DVec3::new(f.x, f.y, film_z + slope.dot(f));
+                let q = DVec3::new(rear * (2.0 * rnd() - 1.0), rear * (2.0 * rnd() - 1.0), l.last_vertex_z_mm());
+                let wl = if spectral { [WL, SPECTRAL_RANGE_NM[0], SPECTRAL_RANGE_NM[1]][i % 3] } else { WL };
+                if l.trace(&Ray::new(film, q - film), wl, TraceDirection::FilmToScene).is_some() {
+                    passed += 1;
+                    outside += !b.contains(f, DVec2::new(q.x, q.y)) as usize;
+                }
+            }
+            eprintln!("{} {case}: {outside} of {passed} passing rays outside", entry.name);
+            if outside > 0 {
+                failures.push(format!("{} {case}: {outside} of {passed}", entry.name));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "passing rays outside the bounds: {failures:?}");
+}
+
 /// On a tilted sensor (6° about y, 4° about x) the bounds still hold every passing ray: the radial
 /// outlines over the plane's z span, the film cells (anamorphic lens, bladed stop) at each film
 /// point's own z on the plane.
@@ -482,8 +545,10 @@ fn exit_pupil_bounds_hold_on_a_tilted_sensor() {
         eprintln!("{name}, tilted: {outside} of {passed} passing rays outside, rejection {:.1}%", 100.0 * rejection);
         assert!(passed > 1000, "{name}: too few passing rays ({passed})");
         assert_eq!(outside, 0, "{name}: {outside} of {passed} passing rays fall outside the bounds");
-        // measured 22.8 / 24.4 / 24.0 / 18.2 / 36.6 % (film cells over the z span instead of on
-        // the plane: 24.6 % for the 6-blade stop, 42.6 % anamorphic)
+        // measured 22.8 / 24.8 / 24.4 / 18.7 / 37.0 % (22.8 / 24.4 / 24.0 / 18.2 / 36.6 % before
+        // the film cells took 9 film points and raised their corners, which cut the passing rays
+        // found outside them in stress runs about tenfold; film cells over the z span instead of
+        // on the plane: 24.6 % for the 6-blade stop, 42.6 % anamorphic)
         let limit = if name.contains("anamorphic") { 0.40 } else { 0.25 };
         assert!(rejection <= limit, "{name}: {:.1}% of the sampled rays are absorbed", 100.0 * rejection);
     }
