@@ -309,6 +309,15 @@ proptest! {
     }
 }
 
+/// Uniform numbers in [0, 1) from a 64-bit LCG seeded with `seed` (the brute-force tests' rays).
+fn uniform(seed: u64) -> impl FnMut() -> f64 {
+    let mut state = seed;
+    move || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
 /// Exit-pupil bounds never cut off a ray that passes (brute force over the rear plane).
 #[test]
 fn exit_pupil_bounds_contain_every_passing_ray() {
@@ -365,11 +374,7 @@ fn brute_force_bounds(l: &Lens, film_z: f64, rays: usize, seed: u64) -> (usize, 
     let b = ExitPupilBounds::compute(l, film_z, 0.0, r_max);
     let spectral = ExitPupilBounds::compute_spectral(l, film_z, 0.0, r_max);
     let rear = 1.5 * l.rear_semi_diameter_mm();
-    let mut state = seed;
-    let mut rnd = || {
-        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rnd = uniform(seed);
     let (mut passed, mut outside, mut sampled_in_bounds, mut pass_in_bounds) = (0, 0, 0, 0);
     for i in 0..rays {
         let r = r_max * rnd().sqrt();
@@ -452,11 +457,7 @@ fn exit_pupil_bounds_stress_bladed_and_tilted() {
                 ExitPupilBounds::compute_on_plane(&l, film_z, slope.length() * r_max, slope, r_max, spectral)
             };
             let rear = 1.5 * l.rear_semi_diameter_mm();
-            let mut state = seed;
-            let mut rnd = || {
-                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-                (state >> 11) as f64 / (1u64 << 53) as f64
-            };
+            let mut rnd = uniform(seed);
             let (mut passed, mut outside) = (0, 0);
             for i in 0..400_000 {
                 let r = r_max * rnd().sqrt();
@@ -517,11 +518,7 @@ fn exit_pupil_bounds_hold_on_a_tilted_sensor() {
         let dz = slope.length() * r_max;
         let b = ExitPupilBounds::compute_on_plane(&l, film_z, dz, slope, r_max, false);
         let rear = 1.5 * l.rear_semi_diameter_mm();
-        let mut state = 777u64;
-        let mut rnd = || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = uniform(777u64);
         let (mut passed, mut outside, mut sampled, mut sampled_pass) = (0, 0, 0, 0);
         for _ in 0..200_000 {
             let r = r_max * rnd().sqrt();
@@ -661,11 +658,7 @@ fn reversed_lens_traces_rays_backwards() {
         let film_z = l + lens.focus_image_distance_mm(None).unwrap();
         let wl = lens.primary_wavelength_nm();
         let mut passed = 0;
-        let mut state = 99u64;
-        let mut rnd = || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = uniform(99u64);
         for _ in 0..4000 {
             let p = glam::DVec3::new(12.0 * (rnd() - 0.5), 12.0 * (rnd() - 0.5), film_z);
             let r = lens.rear_semi_diameter_mm() * rnd().sqrt();
