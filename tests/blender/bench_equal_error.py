@@ -129,16 +129,27 @@ def time_to(runs: list[tuple[float, float]], target: float) -> tuple[float, str]
     return t * (e / target) ** 2, "extrapolated"
 
 
+def thresholds_arg(text: str) -> list[float]:
+    """`--adaptive-thresholds`: comma-separated noise thresholds in (0, 1]."""
+    try:
+        values = [float(t) for t in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected comma-separated numbers, such as 0.1,0.05") from None
+    if not values or not all(0.0 < v <= 1.0 for v in values):
+        raise argparse.ArgumentTypeError(f"{text!r}: every threshold must be in (0, 1]")
+    return values
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--target", type=float, default=0.02)
     ap.add_argument("--reference-spp", type=int, default=2048)
     ap.add_argument("--scene", choices=("main", "street"), default="main")
     ap.add_argument("--display-target", type=float, default=0.05)
-    ap.add_argument("--adaptive-thresholds", default="0.1,0.05,0.02,0.01")
+    ap.add_argument("--adaptive-thresholds", type=thresholds_arg, default="0.1,0.05,0.02,0.01")
     ap.add_argument("--skip-cycles", action="store_true")
     args = ap.parse_args()
-    thresholds = [float(t) for t in args.adaptive_thresholds.split(",")]
+    thresholds = args.adaptive_thresholds
     workdir = REPO / "tests" / "out" / f"bench-equal-error-{args.scene}"
     workdir.mkdir(parents=True, exist_ok=True)
     if args.scene == "main":

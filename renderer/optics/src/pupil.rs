@@ -399,7 +399,7 @@ impl ExitPupilBounds {
             vec![film_z_mm]
         };
         // 1. For each radial interval, trace a grid from film points in it.
-        let traced: Vec<(Box2, Vec<DVec3>, DVec2)> = (0..intervals)
+        let mut traced: Vec<(Box2, Vec<DVec3>, DVec2)> = (0..intervals)
             .into_par_iter()
             .map(|k| {
                 let r0 = max_film_radius_mm * k as f64 / intervals as f64;
@@ -451,7 +451,6 @@ impl ExitPupilBounds {
                 (b, all_pts, if count > 0 { sum / count as f64 } else { DVec2::ZERO })
             })
             .collect();
-        let mut traced = traced;
         // 1b. The rim. The image circle ends inside an interval, and at the spectral range's
         //     ends it reaches a little further (lateral colour) in regions smaller than the
         //     grid's cells (aspheric-fisheye-10mm at f/8: 0.8 × 1.7 mm against 1.6 mm cells at
@@ -902,13 +901,12 @@ fn with_corners(radii: &[f64]) -> Vec<f64> {
             continue;
         }
         // 3. The chord's distance along x's direction, and the scale that brings it out to x.
-        let (c0, c1) = (a1, b1);
         let dx = x.normalize();
-        let den = cross(dx, c1 - c0);
+        let den = cross(dx, b1 - a1);
         if den.abs() < 1e-12 {
             continue;
         }
-        let along = cross(c0, c1 - c0) / den;
+        let along = cross(a1, b1 - a1) / den;
         if along > 0.0 && x.length() > along {
             let s = x.length() / along;
             out[k] = out[k].max(radii[k] * s);

@@ -318,6 +318,25 @@ fn uniform(seed: u64) -> impl FnMut() -> f64 {
     }
 }
 
+/// A brute-force ray: a film point uniform in the disc of radius `r_max` on the sensor plane
+/// `film_z + slope · (x, y)`, and a rear-plane point uniform in the square of half side `rear`
+/// (four draws of `rnd`). Returns (film point's x, y; film point; rear point).
+fn random_ray(
+    rnd: &mut impl FnMut() -> f64,
+    r_max: f64,
+    film_z: f64,
+    slope: DVec2,
+    rear: f64,
+    l: &Lens,
+) -> (DVec2, DVec3, DVec3) {
+    let r = r_max * rnd().sqrt();
+    let phi = std::f64::consts::TAU * rnd();
+    let f = DVec2::new(r * phi.cos(), r * phi.sin());
+    let film = DVec3::new(f.x, f.y, film_z + slope.dot(f));
+    let q = DVec3::new(rear * (2.0 * rnd() - 1.0), rear * (2.0 * rnd() - 1.0), l.last_vertex_z_mm());
+    (f, film, q)
+}
+
 /// Exit-pupil bounds never cut off a ray that passes (brute force over the rear plane).
 #[test]
 fn exit_pupil_bounds_contain_every_passing_ray() {
@@ -377,10 +396,7 @@ fn brute_force_bounds(l: &Lens, film_z: f64, rays: usize, seed: u64) -> (usize, 
     let mut rnd = uniform(seed);
     let (mut passed, mut outside, mut sampled_in_bounds, mut pass_in_bounds) = (0, 0, 0, 0);
     for i in 0..rays {
-        let r = r_max * rnd().sqrt();
-        let phi = std::f64::consts::TAU * rnd();
-        let film = DVec3::new(r * phi.cos(), r * phi.sin(), film_z);
-        let q = DVec3::new(rear * (2.0 * rnd() - 1.0), rear * (2.0 * rnd() - 1.0), l.last_vertex_z_mm());
+        let (_, film, q) = random_ray(&mut rnd, r_max, film_z, DVec2::ZERO, rear, l);
         let wl = [WL, SPECTRAL_RANGE_NM[0], SPECTRAL_RANGE_NM[1]][i % 3];
         let ok = l.trace(&Ray::new(film, q - film), wl, TraceDirection::FilmToScene).is_some();
         let bounds = if i % 3 == 0 { &b } else { &spectral };
@@ -460,11 +476,7 @@ fn exit_pupil_bounds_stress_bladed_and_tilted() {
             let mut rnd = uniform(seed);
             let (mut passed, mut outside) = (0, 0);
             for i in 0..400_000 {
-                let r = r_max * rnd().sqrt();
-                let phi = std::f64::consts::TAU * rnd();
-                let f = DVec2::new(r * phi.cos(), r * phi.sin());
-                let film = DVec3::new(f.x, f.y, film_z + slope.dot(f));
-                let q = DVec3::new(rear * (2.0 * rnd() - 1.0), rear * (2.0 * rnd() - 1.0), l.last_vertex_z_mm());
+                let (f, film, q) = random_ray(&mut rnd, r_max, film_z, slope, rear, &l);
                 let wl = if spectral { [WL, SPECTRAL_RANGE_NM[0], SPECTRAL_RANGE_NM[1]][i % 3] } else { WL };
                 if l.trace(&Ray::new(film, q - film), wl, TraceDirection::FilmToScene).is_some() {
                     passed += 1;
@@ -521,11 +533,7 @@ fn exit_pupil_bounds_hold_on_a_tilted_sensor() {
         let mut rnd = uniform(777u64);
         let (mut passed, mut outside, mut sampled, mut sampled_pass) = (0, 0, 0, 0);
         for _ in 0..200_000 {
-            let r = r_max * rnd().sqrt();
-            let phi = std::f64::consts::TAU * rnd();
-            let f = DVec2::new(r * phi.cos(), r * phi.sin());
-            let film = DVec3::new(f.x, f.y, film_z + slope.dot(f));
-            let q = DVec3::new(rear * (2.0 * rnd() - 1.0), rear * (2.0 * rnd() - 1.0), l.last_vertex_z_mm());
+            let (f, film, q) = random_ray(&mut rnd, r_max, film_z, slope, rear, &l);
             let ok = l.trace(&Ray::new(film, q - film), WL, TraceDirection::FilmToScene).is_some();
             if ok {
                 passed += 1;
