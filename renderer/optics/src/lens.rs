@@ -128,7 +128,7 @@ impl Placement {
 
     /// An aligned-element point in the lens frame.
     #[inline]
-    fn point_to_lens(&self, p: DVec3) -> DVec3 {
+    pub(crate) fn point_to_lens(&self, p: DVec3) -> DVec3 {
         self.rotation * (p - self.pivot) + self.pivot + self.offset
     }
 

@@ -1,7 +1,7 @@
 //! Optics: hard numerical cases, property tests and exit-pupil bounds against brute force.
 
 use glam::{DVec2, DVec3};
-use petzval_optics::pupil::{ExitPupilBounds, SPECTRAL_RANGE_NM};
+use petzval_optics::pupil::{ExitPupilBounds, DEFENSIVE_FRACTION, SPECTRAL_RANGE_NM};
 use petzval_optics::{library_lens, Absorbed, Lens, Ray, StopMode, TraceDirection};
 use proptest::prelude::*;
 
@@ -387,7 +387,8 @@ fn exit_pupil_bounds_contain_every_passing_ray() {
 /// semi-diameter), a third each at the primary wavelength (against the primary bounds) and at
 /// the spectral range's ends (against the spectral bounds, which spectral renders sample at
 /// every wavelength). Returns (passing rays, passing rays outside their bounds, primary rays
-/// sampled inside the bounds, and of those the passing ones).
+/// sampled inside the bounds, and of those the passing ones). Asserts that every passing ray has
+/// a positive sampling density (the defensive disc holds it, inside the bounds or not).
 fn brute_force_bounds(l: &Lens, film_z: f64, rays: usize, seed: u64) -> (usize, usize, usize, usize) {
     let r_max = 21.7;
     let b = ExitPupilBounds::compute(l, film_z, 0.0, r_max);
@@ -408,6 +409,8 @@ fn brute_force_bounds(l: &Lens, film_z: f64, rays: usize, seed: u64) -> (usize, 
         if ok {
             passed += 1;
             outside += !inside as usize;
+            let density = bounds.pdf_area(DVec2::new(film.x, film.y), DVec2::new(q.x, q.y));
+            assert!(density > 0.0, "{}: a passing ray at {wl} nm has no sampling density", l.name());
         }
     }
     (passed, outside, sampled_in_bounds, pass_in_bounds)
@@ -442,8 +445,10 @@ fn exit_pupil_bounds_hold_for_every_library_lens() {
 /// petzval-optics --test optics exit_pupil_bounds_stress -- --ignored --nocapture`, with
 /// PETZVAL_STRESS_SEED to change the rays): every library lens with 5 blades at f/4 focused at
 /// 1 m, 7 blades wide open, a round stop on a sensor tilted 5°, and 6 blades at f/8 on a
-/// sensor tilted about both axes, 400 000 rays each. Known to fail: over seeds 4242, 77, 5 and
-/// 123, 2 of the 208 runs find one passing ray outside (docs/performance.md, session 20).
+/// sensor tilted about both axes, 400 000 rays each. Every passing ray must have a positive
+/// sampling density. The traced bounds alone still miss a ray now and then (seeds 5 and 123: one
+/// passing ray outside in 2 of the 208 case-seed runs over seeds 4242, 77, 5 and 123;
+/// docs/performance.md, session 20); the defensive disc holds those, and the count is printed.
 #[test]
 #[ignore]
 fn exit_pupil_bounds_stress_bladed_and_tilted() {
@@ -453,7 +458,7 @@ fn exit_pupil_bounds_stress_bladed_and_tilted() {
         rotation_rad,
         anamorphic_ratio: 1.0,
     };
-    let mut failures = Vec::new();
+    let (mut failures, mut misses) = (Vec::new(), 0);
     for entry in petzval_optics::LIBRARY {
         let lens = library_lens(entry.name).unwrap();
         let stopped = |n: f64| lens.stopped_down(n).unwrap_or_else(|_| lens.clone());
@@ -474,22 +479,29 @@ fn exit_pupil_bounds_stress_bladed_and_tilted() {
             };
             let rear = 1.5 * l.rear_semi_diameter_mm();
             let mut rnd = uniform(seed);
-            let (mut passed, mut outside) = (0, 0);
+            let (mut passed, mut outside, mut no_density) = (0, 0, 0);
             for i in 0..400_000 {
                 let (f, film, q) = random_ray(&mut rnd, r_max, film_z, slope, rear, &l);
                 let wl = if spectral { [WL, SPECTRAL_RANGE_NM[0], SPECTRAL_RANGE_NM[1]][i % 3] } else { WL };
                 if l.trace(&Ray::new(film, q - film), wl, TraceDirection::FilmToScene).is_some() {
                     passed += 1;
                     outside += !b.contains(f, DVec2::new(q.x, q.y)) as usize;
+                    let density = b.pdf_area(f, DVec2::new(q.x, q.y));
+                    no_density += (density.is_nan() || density <= 0.0) as usize;
                 }
             }
-            eprintln!("{} {case}: {outside} of {passed} passing rays outside", entry.name);
-            if outside > 0 {
-                failures.push(format!("{} {case}: {outside} of {passed}", entry.name));
+            eprintln!(
+                "{} {case}: {outside} of {passed} passing rays outside the traced bounds, {no_density} without density",
+                entry.name
+            );
+            misses += outside;
+            if no_density > 0 {
+                failures.push(format!("{} {case}: {no_density} of {passed}", entry.name));
             }
         }
     }
-    assert!(failures.is_empty(), "passing rays outside the bounds: {failures:?}");
+    eprintln!("{misses} passing rays outside the traced bounds in all (the defensive disc holds them)");
+    assert!(failures.is_empty(), "passing rays without sampling density: {failures:?}");
 }
 
 /// On a tilted sensor (6° about y, 4° about x) the bounds still hold every passing ray: the radial
@@ -538,9 +550,11 @@ fn exit_pupil_bounds_hold_on_a_tilted_sensor() {
             if ok {
                 passed += 1;
                 outside += !b.contains(f, DVec2::new(q.x, q.y)) as usize;
+                assert!(b.pdf_area(f, DVec2::new(q.x, q.y)) > 0.0, "{name}: a passing ray has no sampling density");
             }
-            // the rejection of the domain's own samples
-            if let Some(s) = b.sample(f, DVec2::new(rnd(), rnd())) {
+            // the rejection of the traced domain's own samples (the defensive disc adds at most
+            // DEFENSIVE_FRACTION more, `pupil_samples_mix_in_the_defensive_disc`)
+            if let Some(s) = b.sample_bounds(f, DVec2::new(rnd(), rnd())) {
                 sampled += 1;
                 sampled_pass +=
                     l.trace(&Ray::new(film, s.point - film), WL, TraceDirection::FilmToScene).is_some() as usize;
@@ -559,7 +573,7 @@ fn exit_pupil_bounds_hold_on_a_tilted_sensor() {
     }
 }
 
-/// The sampling domain is sampled uniformly: every sample lies inside it, and its area (the
+/// The traced domain is sampled uniformly: every sample lies inside it, and its area (the
 /// inverse pdf) equals the share of a box's points that `contains` accepts.
 #[test]
 fn exit_pupil_domain_is_sampled_uniformly() {
@@ -588,7 +602,7 @@ fn exit_pupil_domain_is_sampled_uniformly() {
             for i in 0..n {
                 for j in 0..n {
                     let u = DVec2::new((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
-                    let s = b.sample(film, u).unwrap();
+                    let s = b.sample_bounds(film, u).unwrap();
                     assert!(b.contains(film, DVec2::new(s.point.x, s.point.y)), "{name} r={r}: a sample outside");
                     area = 1.0 / s.pdf_area;
                     // a point of the (unrotated, film on +x) box, rotated to the film's azimuth
@@ -605,6 +619,104 @@ fn exit_pupil_domain_is_sampled_uniformly() {
             }
         }
     }
+}
+
+/// The pupil samples mix the traced bounds with the defensive disc: each sample's density is
+/// the mixture's, as `pdf_area` gives it for the point, and the share of samples the traced
+/// bounds do not hold is at most the disc's share.
+#[test]
+fn pupil_samples_mix_in_the_defensive_disc() {
+    for name in ["double-gauss-50mm", "fisheye-10mm", "schneider-anamorphic-31mm"] {
+        let l = library_lens(name).unwrap();
+        let film_z = l.last_vertex_z_mm() + l.focus_image_distance_mm(None).unwrap();
+        let b = ExitPupilBounds::compute(&l, film_z, 0.0, 21.7);
+        let radius = b.defensive_radius_mm.expect("a defensive disc");
+        assert!(radius >= l.rear_semi_diameter_mm(), "{name}: disc {radius} mm inside the rear element");
+        for r in [0.0, 7.3, 15.1, 20.9] {
+            let film = DVec2::new(r * 0.6, r * 0.8);
+            let n = 256;
+            let (mut drawn, mut outside) = (0usize, 0usize);
+            for i in 0..n {
+                for j in 0..n {
+                    let u = DVec2::new((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
+                    let Some(s) = b.sample(film, u) else { continue };
+                    let p = DVec2::new(s.point.x, s.point.y);
+                    drawn += 1;
+                    outside += !b.contains(film, p) as usize;
+                    let pdf = b.pdf_area(film, p);
+                    assert!(
+                        (s.pdf_area / pdf - 1.0).abs() < 1e-12,
+                        "{name} r={r}: sample density {} against pdf_area {pdf}",
+                        s.pdf_area
+                    );
+                    assert!(p.length() <= radius * (1.0 + 1e-12) || b.contains(film, p));
+                }
+            }
+            let disc_share = DEFENSIVE_FRACTION * (n * n) as f64;
+            assert!(drawn as f64 >= disc_share, "{name} r={r}: {drawn} samples drawn");
+            assert!(outside as f64 <= disc_share + 1.0, "{name} r={r}: {outside} samples outside the bounds");
+        }
+    }
+}
+
+/// The defensive disc makes a bounds miss cost noise, not bias. double-gauss-50mm's outlines
+/// are shrunk to 70 % of their size about their centres (a grossly wrong trace), and the area
+/// of the rear-plane region whose rays pass from one film point is estimated three ways with
+/// 1 000 000 samples each: brute force in the disc (the reference), the shrunk bounds alone
+/// (biased low: they miss part of the region), and the mixture with the disc (unbiased: within
+/// 4.5 standard errors of the reference).
+#[test]
+fn defensive_disc_removes_the_bias_of_a_bounds_miss() {
+    let l = library_lens("double-gauss-50mm").unwrap();
+    let film_z = l.last_vertex_z_mm() + l.focus_image_distance_mm(None).unwrap();
+    let mut b = ExitPupilBounds::compute(&l, film_z, 0.0, 21.7);
+    for o in b.outlines.iter_mut().flatten() {
+        o.radii.iter_mut().for_each(|r| *r *= 0.7);
+        o.area *= 0.49; // every triangle scales alike, so the area cdf stays valid
+    }
+    let radius = b.defensive_radius_mm.unwrap();
+    let film = DVec2::new(11.0, 6.0);
+    let fp = DVec3::new(film.x, film.y, film_z);
+    let passes = |p: DVec3| l.trace(&Ray::new(fp, p - fp), WL, TraceDirection::FilmToScene).is_some();
+    // mean and standard error of pass(p)/pdf(p) over `n` samples drawn by `draw`
+    let estimate = |draw: &dyn Fn(DVec2) -> Option<(DVec3, f64)>, seed: u64| {
+        let mut rnd = uniform(seed);
+        let n = 1_000_000;
+        let (mut sum, mut sum2) = (0.0, 0.0);
+        for _ in 0..n {
+            let u = DVec2::new(rnd(), rnd());
+            if let Some((p, pdf)) = draw(u) {
+                if passes(p) {
+                    let x = 1.0 / pdf;
+                    (sum, sum2) = (sum + x, sum2 + x * x);
+                }
+            }
+        }
+        let mean = sum / n as f64;
+        (mean, ((sum2 / n as f64 - mean * mean) / n as f64).sqrt())
+    };
+    let rear_z = b.rear_z_mm;
+    let disc_area = std::f64::consts::PI * radius * radius;
+    let (reference, se_ref) = estimate(
+        &|u| {
+            let d = petzval_optics::aperture::concentric_disk(u) * radius;
+            Some((DVec3::new(d.x, d.y, rear_z), 1.0 / disc_area))
+        },
+        1,
+    );
+    let (bounds_only, se_b) = estimate(&|u| b.sample_bounds(film, u).map(|s| (s.point, s.pdf_area)), 2);
+    let (mixture, se_m) = estimate(&|u| b.sample(film, u).map(|s| (s.point, s.pdf_area)), 3);
+    eprintln!(
+        "passing area {reference:.3} ± {se_ref:.3} mm²; shrunk bounds alone {bounds_only:.3} ± {se_b:.3}; \
+         with the disc {mixture:.3} ± {se_m:.3}"
+    );
+    assert!(reference > 1.0, "too small a region ({reference} mm²)");
+    let se = (se_ref * se_ref + se_m * se_m).sqrt();
+    assert!((mixture - reference).abs() < 4.5 * se, "mixture {mixture} ± {se_m} against {reference} ± {se_ref}");
+    assert!(
+        bounds_only < reference - 10.0 * (se_ref * se_ref + se_b * se_b).sqrt(),
+        "the shrunk bounds are not biased"
+    );
 }
 
 #[test]

@@ -59,6 +59,12 @@ impl LrtfCamera {
         &self.exact
     }
 
+    /// This camera without the exact model's defensive pupil disc
+    /// ([`ExactCamera::without_defensive_disc`]).
+    pub fn without_defensive_disc(&self) -> LrtfCamera {
+        LrtfCamera { exact: self.exact.without_defensive_disc(), table: self.table.clone() }
+    }
+
     /// The table.
     pub fn table(&self) -> &Arc<LrtfTable> {
         &self.table

@@ -153,6 +153,17 @@ pub(crate) fn check_positive(field: &str, v: f64) -> Result<()> {
 pub const CAMERA_BATCH: usize = crate::optics::lrtf::LRTF_BATCH;
 
 impl Camera {
+    /// The camera for lens samples shared by every pixel (multi-view's views): real lenses draw
+    /// their pupil samples in the traced bounds only ([`ExactCamera::without_defensive_disc`]);
+    /// other models are unchanged.
+    pub fn for_shared_lens_samples(&self) -> Camera {
+        match self {
+            Camera::Exact(c) => Camera::Exact(c.without_defensive_disc()),
+            Camera::Lrtf(c) => Camera::Lrtf(c.without_defensive_disc()),
+            other => other.clone(),
+        }
+    }
+
     /// Generates a ray for image position `film` in [0,1]² (top left = (0,0)), lens sample
     /// `lens_u` in [0,1)² and wavelength. `None` when the sample is blocked.
     #[inline]

@@ -113,12 +113,14 @@ pub fn render_method(
         }
         Method::Multiview => multiview::render_multiview(scene, rig, settings, preview, progress, on_pass)?.0,
         Method::Spread => {
-            spread::check_camera(&rig.camera)?;
+            // The spread's tables integrate over fixed lens grids: the traced pupil bounds only.
+            let camera = rig.camera.for_shared_lens_samples();
+            spread::check_camera(&camera)?;
             let Some(layers) = make_layers(scene, rig, settings, preview, progress)? else {
                 return Ok(cancelled(settings, start));
             };
             let spread_settings = spread::SpreadSettings::default();
-            let r = spread::render_spread(&layers, Some(scene), &rig.camera, settings, &spread_settings, progress)?;
+            let r = spread::render_spread(&layers, Some(scene), &camera, settings, &spread_settings, progress)?;
             if r.complete {
                 on_pass(&r.image, r.spp_done);
             }
@@ -178,7 +180,14 @@ pub fn make_layers(
             ),
         ));
     }
-    Layers::trace(scene, rig.to_world, frame, &layer_settings, pupil_radius_m(&rig.camera), &|| progress(0.0))
+    Layers::trace(
+        scene,
+        rig.to_world,
+        frame,
+        &layer_settings,
+        pupil_radius_m(&rig.camera.for_shared_lens_samples()),
+        &|| progress(0.0),
+    )
 }
 
 /// The largest distance from the axis at which the camera's rays cross the pupil plane z = 0

@@ -142,7 +142,9 @@ pub fn render_multiview(
         seed: settings.seed,
         counts: Default::default(),
     };
-    let mut result = render_samples(rig, settings, progress, on_pass, &shader)?;
+    // The views share their lens samples: no view may fall in the pupil's defensive disc.
+    let rig = CameraRig { camera: rig.camera.for_shared_lens_samples(), to_world: rig.to_world };
+    let mut result = render_samples(&rig, settings, progress, on_pass, &shader)?;
     result.seconds = start.elapsed().as_secs_f64();
     let [layer_hits, fallbacks, misses] = shader.counts.each_ref().map(|c| c.load(Ordering::Relaxed));
     let stats = MultiviewStats { samples: layer_hits + fallbacks + misses, layer_hits, fallbacks, misses };
