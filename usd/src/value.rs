@@ -10,6 +10,7 @@
 //! | [`Reader::vec2s`] | `texCoord2f[]`, `float2[]`, their `d`/`h` forms |
 //! | [`Reader::ints`] | `int[]`, `uint[]`, `int64[]` |
 //! | [`Reader::quats`] | `quath[]`, `quatf[]`, `quatd[]` |
+//! | [`Reader::bool`] | `bool`, integers (time samples authored as `1: 1`) |
 //! | [`Reader::token`] | `token`, `string` |
 //! | [`Reader::asset`] | `asset` (resolved path when openusd resolved it) |
 
@@ -140,7 +141,11 @@ impl Reader<'_> {
         Ok(match self.raw(prim, name)? {
             None => None,
             Some(sdf::Value::Bool(b)) => Some(b),
+            // usda time samples keep the literal's type: Blender writes `1: 1` for a bool
             Some(sdf::Value::Int(i)) => Some(i != 0),
+            Some(sdf::Value::Int64(i)) => Some(i != 0),
+            Some(sdf::Value::Uint(i)) => Some(i != 0),
+            Some(sdf::Value::Uint64(i)) => Some(i != 0),
             Some(v) => return Err(attr_error(prim, name, format!("expected a bool, got {}", kind(&v)))),
         })
     }

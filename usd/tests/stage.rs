@@ -114,3 +114,27 @@ fn shapes_wind_outwards_with_outward_normals() {
         }
     }
 }
+
+/// A bool authored in time samples with integer literals (Blender's USD export of an animated
+/// light writes `bool inputs:normalize.timeSamples = { 1: 1 }`) reads as the bool, as pxr reads
+/// it: the light is normalised as with `bool inputs:normalize = true`.
+#[test]
+fn bool_time_samples_written_as_integers_read_as_bools() {
+    let stage = |name: &str, normalize: &str| {
+        write(
+            name,
+            &format!(
+                "#usda 1.0\n(\n metersPerUnit = 1\n startTimeCode = 1\n endTimeCode = 2\n)\ndef SphereLight \"Lamp\"\n{{\n float inputs:intensity = 100\n {normalize}\n}}\ndef Mesh \"M\"\n{{\n {TRI}\n}}\n"
+            ),
+        )
+    };
+    let intensity = |p: &PathBuf| match load(p, Some(1.0)).unwrap().scene.lights.as_slice() {
+        [petzval_renderer::scene::Light::Point { intensity, .. }] => *intensity,
+        other => panic!("expected one point light, got {other:?}"),
+    };
+    let sampled = intensity(&stage("bool_samples.usda", "bool inputs:normalize.timeSamples = {\n 1: 1,\n }"));
+    let on = intensity(&stage("bool_on.usda", "bool inputs:normalize = true"));
+    let off = intensity(&stage("bool_off.usda", "bool inputs:normalize = false"));
+    assert_eq!(sampled, on);
+    assert_ne!(on, off);
+}
