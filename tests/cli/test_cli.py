@@ -319,10 +319,10 @@ def read_exr_header(data: bytes) -> tuple[dict[str, tuple[str, bytes]], int]:
     attrs: dict[str, tuple[str, bytes]] = {}
     while data[pos] != 0:
         end = data.index(b"\0", pos)
-        name = data[pos:end].decode("latin-1")
+        name = data[pos:end].decode("utf-8")
         pos = end + 1
         end = data.index(b"\0", pos)
-        typ = data[pos:end].decode("latin-1")
+        typ = data[pos:end].decode("utf-8")
         pos = end + 1
         (size,) = struct.unpack_from("<i", data, pos)
         pos += 4
@@ -333,7 +333,8 @@ def read_exr_header(data: bytes) -> tuple[dict[str, tuple[str, bytes]], int]:
 
 
 def exr_text_attributes(attrs) -> dict[str, str]:
-    return {k: v.decode("latin-1") for k, (t, v) in attrs.items() if t == "string"}
+    """The string attributes, decoded as UTF-8 (what OpenEXR's libraries expect)."""
+    return {k: v.decode("utf-8") for k, (t, v) in attrs.items() if t == "string"}
 
 
 def parse_channels(raw: bytes) -> list[tuple[str, int]]:
@@ -540,6 +541,13 @@ def test_auto_lens_model_is_reported_in_stderr_and_metadata(petzval, tmp_path):
     meta, _ = read_exr(tmp_path / "p.exr")
     assert meta["petzval/lensModel"] == "pinhole", meta
     assert "circle of confusion" in meta["petzval/lensModelReason"], meta["petzval/lensModelReason"]
+    # text beyond ASCII survives as UTF-8 (it was Latin-1, with '?' for the rest)
+    assert " px ≤ 0.25 px" in meta["petzval/lensModelReason"], meta["petzval/lensModelReason"]
+    # and OpenEXR's own library reads the header (it raised UnicodeDecodeError on Latin-1 bytes)
+    import OpenEXR
+
+    with OpenEXR.File(str(tmp_path / "p.exr")) as f:
+        assert f.header()["petzval/lensModelReason"] == meta["petzval/lensModelReason"]
     assert float(meta["petzval/lensModelTolerancePx"]) == 0.25
     # The demo's wide-open double Gauss is not reduced to a thin lens, and every cheaper
     # candidate that failed is named with its measured error.

@@ -34,9 +34,11 @@ pub enum ToneMap {
     Filmic,
 }
 
+/// An EXR text attribute (or name) holding `s` as UTF-8, as OpenEXR's libraries read strings
+/// (NULs, which end a string in the header, become '?').
 fn text(s: &str) -> Text {
-    let ascii: String = s.chars().map(|c| if (c as u32) < 256 && c != '\0' { c } else { '?' }).collect();
-    Text::new_or_none(&ascii).unwrap_or_else(|| Text::from("?"))
+    let clean: String = s.chars().map(|c| if c == '\0' { '?' } else { c }).collect();
+    Text::from_slice_unchecked(clean.as_bytes())
 }
 
 /// Writes `image` as an EXR file.
