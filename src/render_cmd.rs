@@ -559,6 +559,11 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
         }
     };
     let mut flags_camera = flags_host_camera(&args, demo_shot.as_ref(), focus_m)?;
+    // A glTF camera clips at its znear and zfar, as Blender and Cycles clip at the camera's
+    // clip start and end (the USD camera brings its clippingRange).
+    if usd_cam.is_none() && args.scene.is_some() {
+        flags_camera.clip_m = (scene_cam.znear as f64, scene_cam.zfar.map_or(f64::INFINITY, |f| f as f64));
+    }
     if !matches!(flags_camera.lens.as_str(), "thin" | "pinhole") && args.focal_length.is_some() {
         eprintln!(
             "note: --focal-length is ignored for a real lens; '{}' brings its own focal length",

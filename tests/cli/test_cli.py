@@ -275,6 +275,26 @@ def test_sane_scene_values_render(petzval, tmp_path):
 
 
 @pytest.mark.parametrize(
+    "perspective,visible",
+    [
+        pytest.param('"znear":0.01', True, id="inside"),
+        pytest.param('"znear":4', False, id="before-znear"),
+        pytest.param('"znear":0.01,"zfar":2', False, id="past-zfar"),
+    ],
+)
+def test_gltf_camera_clips_at_znear_and_zfar(petzval, tmp_path, perspective, visible):
+    """A glTF camera clips at its znear and zfar, as Blender and Cycles clip at the camera's
+    clip start and end: the emissive triangle 3 m in front of the camera shows only between."""
+    text = ABSURD_GLTF.replace("STRENGTH", "10").replace("INTENSITY", "0").replace("BYTES", "36")
+    (tmp_path / "clip.gltf").write_text(text.replace('"znear":0.01', perspective))
+    r = run(petzval, ["render", "clip.gltf", "--resolution", "24x16", "--spp", "4", "-o", "x.exr"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    _, ch = read_exr(tmp_path / "x.exr")
+    assert (ch["A"].max() > 0.5) == visible, (perspective, ch["A"].max())
+    assert (ch["R"].max() > 1.0) == visible, (perspective, ch["R"].max())
+
+
+@pytest.mark.parametrize(
     "args,budget,words",
     [
         # the film's estimate (208 B per pixel) against a 100 MB budget: 1000x1000 needs ~200 MB
