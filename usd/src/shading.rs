@@ -191,12 +191,31 @@ impl Materials {
                 m.ior = ior as f32;
             }
         }
-        let opacity = reader.f64(&shader, "inputs:opacity")?.unwrap_or(1.0) as f32;
+        // Opacity: a value, or the alpha of the diffuse colour's texture (Blender's export of an
+        // image's alpha wired into the Principled BSDF's Alpha), which the renderer takes from
+        // the base colour texture as glTF does.
+        let diffuse_texture = source_prim(stage, &shader, "inputs:diffuseColor").map(|(p, _)| p.path().to_string());
+        let (opacity, textured) = match source_prim(stage, &shader, "inputs:opacity") {
+            Some((src, output)) => {
+                let same = diffuse_texture.as_deref() == Some(src.path().to_string().as_str());
+                if output == "outputs:a" && same && m.base_color_texture.is_some() {
+                    (1.0, true)
+                } else {
+                    warnings.push(format!(
+                        "{}: inputs:opacity from {}.{output} is not supported (only the alpha of the diffuseColor's texture); rendered opaque",
+                        shader.path(),
+                        src.path()
+                    ));
+                    (1.0, false)
+                }
+            }
+            None => (reader.f64(&shader, "inputs:opacity")?.unwrap_or(1.0) as f32, false),
+        };
         let threshold = reader.f64(&shader, "inputs:opacityThreshold")?.unwrap_or(0.0) as f32;
         m.base_color.w = opacity.clamp(0.0, 1.0);
-        m.alpha_mode = if threshold > 0.0 {
+        m.alpha_mode = if threshold > 0.0 && (textured || opacity < 1.0) {
             AlphaMode::Mask(threshold)
-        } else if opacity < 1.0 {
+        } else if textured || opacity < 1.0 {
             AlphaMode::Blend
         } else {
             AlphaMode::Opaque

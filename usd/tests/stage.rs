@@ -138,3 +138,40 @@ fn bool_time_samples_written_as_integers_read_as_bools() {
     assert_eq!(sampled, on);
     assert_ne!(on, off);
 }
+
+/// `inputs:opacity` connected to the alpha of the texture that gives the diffuse colour (Blender's
+/// USD export of an image's alpha wired into the Principled BSDF) cuts the surface out where the
+/// texture is transparent, as the GLB export's base colour alpha does; opacity from any other
+/// texture output is named in a warning (it was ignored in silence).
+#[test]
+fn opacity_from_the_diffuse_textures_alpha_cuts_out() {
+    let dir = write("alpha.png", "").parent().unwrap().to_path_buf();
+    let mut png = image::RgbaImage::new(4, 4);
+    for (x, _, p) in png.enumerate_pixels_mut() {
+        *p = image::Rgba([200, 100, 50, if x < 2 { 0 } else { 255 }]);
+    }
+    png.save(dir.join("alpha.png")).unwrap();
+    let stage = |name: &str, output: &str| {
+        write(
+            name,
+            &format!(
+                "#usda 1.0\n(\n metersPerUnit = 1\n)\ndef Mesh \"Card\"\n{{\n point3f[] points = [(-1,-1,0),(1,-1,0),(1,1,0),(-1,1,0)]\n int[] faceVertexCounts = [4]\n int[] faceVertexIndices = [0,1,2,3]\n texCoord2f[] primvars:st = [(0,0),(1,0),(1,1),(0,1)] (interpolation = \"vertex\")\n rel material:binding = </M>\n}}\ndef Material \"M\"\n{{\n token outputs:surface.connect = </M/S.outputs:surface>\n def Shader \"S\"\n {{\n  uniform token info:id = \"UsdPreviewSurface\"\n  color3f inputs:diffuseColor.connect = </M/T.outputs:rgb>\n  float inputs:opacity.connect = </M/T.{output}>\n  token outputs:surface\n }}\n def Shader \"T\"\n {{\n  uniform token info:id = \"UsdUVTexture\"\n  asset inputs:file = @./alpha.png@\n  float outputs:a\n  float outputs:r\n  float3 outputs:rgb\n }}\n}}\n"
+            ),
+        )
+    };
+    let shot = load(&stage("cutout.usda", "outputs:a"), None).unwrap();
+    let m = &shot.scene.materials[0];
+    assert!(m.base_color_texture.is_some());
+    assert_eq!(m.alpha_mode, petzval_renderer::scene::AlphaMode::Blend);
+    assert!(!shot.scene.warnings.iter().any(|w| w.contains("opacity")), "{:?}", shot.scene.warnings);
+    let shot = load(&stage("cutout_r.usda", "outputs:r"), None).unwrap();
+    assert_eq!(shot.scene.materials[0].alpha_mode, petzval_renderer::scene::AlphaMode::Opaque);
+    assert!(
+        shot.scene
+            .warnings
+            .iter()
+            .any(|w| w.contains("/M/S") && w.contains("inputs:opacity") && w.contains("outputs:r")),
+        "{:?}",
+        shot.scene.warnings
+    );
+}
