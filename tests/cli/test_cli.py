@@ -274,6 +274,15 @@ def test_sane_scene_values_render(petzval, tmp_path):
     assert (tmp_path / "x.exr").is_file()
 
 
+def test_empty_gltf_scene_is_named_as_such(petzval, tmp_path):
+    """Blender exports an empty scene with no `nodes` in its scene (valid glTF, which the gltf
+    crate rejects): the error says the scene is empty rather than that the file is invalid."""
+    text = '{"asset":{"version":"2.0","generator":"Khronos glTF Blender I/O"},"scene":0,"scenes":[{"name":"Scene"}]}'
+    (tmp_path / "empty.glb").write_text(text)  # glTF text under an INPUTS name (the loader sniffs)
+    r = run(petzval, ["render", "empty.glb", "--resolution", "24x16", "--spp", "1"], tmp_path)
+    assert_clean_failure(r, tmp_path, "empty.glb", "empty", "no camera")
+
+
 @pytest.mark.parametrize(
     "perspective,visible",
     [

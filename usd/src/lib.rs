@@ -174,9 +174,40 @@ pub fn load(path: &Path, time: Option<f64>) -> Result<UsdShot, Error> {
 }
 
 impl UsdShot {
-    /// The camera at prim `path`, or the first camera when `path` is None.
+    /// The camera at prim `path`, or the first camera when `path` is None. A `path` without a
+    /// '/' is a name: the camera whose prim, or whose parent prim, has it (Blender exports a
+    /// camera object `Camera` as `/root/Camera/Camera`), when exactly one does.
     pub fn camera(&self, path: Option<&str>) -> Result<&UsdCamera, Error> {
         let names = || self.cameras.iter().map(|c| c.path.as_str()).collect::<Vec<_>>().join(", ");
+        if let Some(name) = path.filter(|p| !p.contains('/')) {
+            let named = |c: &&UsdCamera| {
+                let mut parts = c.path.rsplit('/');
+                parts.next() == Some(name) || parts.next() == Some(name)
+            };
+            let found: Vec<&UsdCamera> = self.cameras.iter().filter(named).collect();
+            return match found.as_slice() {
+                [one] => Ok(one),
+                _ => Err(Error::Camera {
+                    file: self.file.clone(),
+                    camera: name.into(),
+                    message: if found.is_empty() {
+                        format!("no Camera prim, or parent of one, has this name (cameras: {})", {
+                            let n = names();
+                            if n.is_empty() {
+                                "none".to_string()
+                            } else {
+                                n
+                            }
+                        })
+                    } else {
+                        format!(
+                            "several cameras have this name: {}; give a prim path",
+                            found.iter().map(|c| c.path.as_str()).collect::<Vec<_>>().join(", ")
+                        )
+                    },
+                }),
+            };
+        }
         match path {
             Some(p) => self.cameras.iter().find(|c| c.path == p).ok_or_else(|| Error::Camera {
                 file: self.file.clone(),

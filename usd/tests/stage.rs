@@ -175,3 +175,22 @@ fn opacity_from_the_diffuse_textures_alpha_cuts_out() {
         shot.scene.warnings
     );
 }
+
+/// `--camera NAME` on a USD shot: a name (no '/') finds the camera whose prim or parent prim has
+/// it (Blender writes the camera object `Camera` as `/root/Camera/Camera`); several matches or
+/// none are errors that list the cameras.
+#[test]
+fn cameras_are_found_by_name() {
+    let p = write(
+        "names.usda",
+        "#usda 1.0\ndef Xform \"root\"\n{\n def Xform \"Camera\"\n {\n  def Camera \"Camera\"\n  {\n  }\n }\n def Xform \"Rig\"\n {\n  def Camera \"Tele\"\n  {\n  }\n }\n def Xform \"A\"\n {\n  def Camera \"Cam\"\n  {\n  }\n }\n def Xform \"B\"\n {\n  def Camera \"Cam\"\n  {\n  }\n }\n}\n",
+    );
+    let shot = load(&p, None).unwrap();
+    assert_eq!(shot.camera(Some("Camera")).unwrap().path, "/root/Camera/Camera");
+    assert_eq!(shot.camera(Some("Tele")).unwrap().path, "/root/Rig/Tele");
+    assert_eq!(shot.camera(Some("Rig")).unwrap().path, "/root/Rig/Tele");
+    let e = shot.camera(Some("Cam")).err().unwrap().to_string();
+    assert!(e.contains("several") && e.contains("/root/A/Cam") && e.contains("/root/B/Cam"), "{e}");
+    let e = shot.camera(Some("Nope")).err().unwrap().to_string();
+    assert!(e.contains("Nope") && e.contains("/root/Camera/Camera"), "{e}");
+}

@@ -175,8 +175,14 @@ impl<'a> Loader<'a> {
                 )));
             }
         }
-        let gltf::Gltf { document, blob } =
-            gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| err(format!("not a valid glTF file: {e}")))?;
+        let gltf::Gltf { document, blob } = gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| {
+            // Blender exports an empty scene without `nodes`, which the gltf crate requires.
+            if e.to_string().contains("missing field `nodes`") {
+                err("the scene is empty (the file has no nodes): no camera and nothing to render".into())
+            } else {
+                err(format!("not a valid glTF file: {e}"))
+            }
+        })?;
         // KHR_mesh_quantization only widens the accessor types allowed for attributes, which
         // the accessor reader below handles; the gltf crate does not know the name.
         let mut json = document.into_json();
