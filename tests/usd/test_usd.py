@@ -945,6 +945,41 @@ def test_intrinsic_shapes_fill_pxr_extents(petzval: Path, tmp_path: Path) -> Non
         assert m["triangles"] > 0
 
 
+def test_dome_map_inside_a_usdz_package(petzval: Path, tmp_path: Path) -> None:
+    """A DomeLight's EXR inside a usdz package (pxr's UsdUtils packs it; Blender's usdz export of a
+    world texture is this) is read from the archive as an environment map, as beside a usda; it
+    was listed as missing and the dome rendered magenta."""
+    import OpenEXR
+    from pxr import UsdUtils
+
+    (tmp_path / "env").mkdir()
+    rgb = np.full((8, 16, 3), 0.5, dtype=np.float32)
+    rgb[:4] = (1.0, 0.8, 0.6)  # a brighter upper half
+    with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION}, {"RGB": rgb}) as f:
+        f.write(str(tmp_path / "env" / "sky.exr"))
+    src = tmp_path / "dome.usda"
+    stage = Usd.Stage.CreateNew(str(src))
+    quad(stage, "/Q")
+    dome = UsdLux.DomeLight.Define(stage, "/Env")
+    dome.CreateTextureFileAttr("./env/sky.exr")
+    UsdGeom.Camera.Define(stage, "/Cam")
+    stage.GetRootLayer().Save()
+    usdz = tmp_path / "dome.usdz"
+    assert UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(str(src)), str(usdz))
+    for path in (src, usdz):
+        rep = info(petzval, path)
+        assert not rep["warnings"], (path, rep["warnings"])
+        assert rep["environment"] == "map", (path, rep["environment"])
+    # both render the same image
+    means = []
+    for path in (src, usdz):
+        out = tmp_path / f"{path.suffix[1:]}.exr"
+        run(petzval, "render", str(path), "-o", str(out), "--resolution", "24x16", "--spp", "4", "--no-png")
+        with OpenEXR.File(str(out)) as f:
+            means.append(float(np.mean(f.channels()["RGBA"].pixels[..., :3])))
+    assert means[0] == means[1] and means[0] > 0.1, means
+
+
 def test_textures_from_files_and_usdz_packages(petzval: Path, tmp_path: Path) -> None:
     import zlib
 

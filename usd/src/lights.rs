@@ -223,11 +223,20 @@ pub fn read_light(
                             "{path}: the dome is tilted off the up axis; only its turn about the up axis is applied"
                         ));
                     }
-                    match petzval_renderer::scene::environment::load_environment_exr(
-                        std::path::Path::new(&p),
-                        strength,
-                        yaw,
-                    ) {
+                    // A map inside a usdz package is read from the archive.
+                    let loaded = match openusd::ar::split_package_relative_path_outer(&p) {
+                        Some((package, inner)) => crate::shading::read_packaged(&package, &inner).and_then(|bytes| {
+                            petzval_renderer::scene::environment::load_environment_exr_bytes(&bytes, &p, strength, yaw)
+                                .map_err(|e| e.to_string())
+                        }),
+                        None => petzval_renderer::scene::environment::load_environment_exr(
+                            std::path::Path::new(&p),
+                            strength,
+                            yaw,
+                        )
+                        .map_err(|e| e.to_string()),
+                    };
+                    match loaded {
                         Ok(mut env) => {
                             if c != Vec3::ONE {
                                 w.warnings.push(format!("{path}: inputs:color on a textured dome is ignored"));

@@ -307,7 +307,7 @@ impl Materials {
 }
 
 /// The bytes of `inner` in the usdz package `package` (a zip archive).
-fn read_packaged(package: &str, inner: &str) -> Result<Vec<u8>, String> {
+pub(crate) fn read_packaged(package: &str, inner: &str) -> Result<Vec<u8>, String> {
     use std::io::Read;
     if openusd::ar::is_package_relative_path(inner) {
         return Err("nested packages are not read".into());

@@ -409,29 +409,56 @@ pub fn load_environment_exr(path: &Path, strength: f32, rotation_rad: f32) -> Re
     if !path.is_file() {
         return Err(Error::io(path, std::io::Error::new(std::io::ErrorKind::NotFound, "no such file")));
     }
+    let open = || std::fs::File::open(path).map(std::io::BufReader::new);
+    let source = open().map_err(|e| Error::io(path, e))?;
+    decode_environment_exr(source, &file, strength, rotation_rad)
+}
+
+/// [`load_environment_exr`] from the EXR file's bytes (a file inside a package, such as a USDZ
+/// archive); `name` names it in errors.
+pub fn load_environment_exr_bytes(bytes: &[u8], name: &str, strength: f32, rotation_rad: f32) -> Result<Environment> {
+    decode_environment_exr(std::io::Cursor::new(bytes), name, strength, rotation_rad)
+}
+
+/// Decodes the EXR from `source` (buffered) into an environment map.
+fn decode_environment_exr(
+    source: impl std::io::Read + std::io::Seek,
+    file: &str,
+    strength: f32,
+    rotation_rad: f32,
+) -> Result<Environment> {
+    use exr::prelude::traits::*;
     struct Pixels {
         width: usize,
         data: Vec<Vec3>,
     }
     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        exr::prelude::read_first_rgba_layer_from_file(
-            path,
-            |size, _| Pixels { width: size.width(), data: vec![Vec3::ZERO; size.width() * size.height()] },
-            |p: &mut Pixels, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-                if let Some(t) = p.data.get_mut(pos.y() * p.width + pos.x()) {
-                    *t = Vec3::new(r, g, b);
-                }
-            },
-        )
+        read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .rgba_channels(
+                |size: exr::math::Vec2<usize>, _: &exr::prelude::RgbaChannels| Pixels {
+                    width: size.width(),
+                    data: vec![Vec3::ZERO; size.width() * size.height()],
+                },
+                |p: &mut Pixels, pos: exr::math::Vec2<usize>, (r, g, b, _a): (f32, f32, f32, f32)| {
+                    if let Some(t) = p.data.get_mut(pos.y() * p.width + pos.x()) {
+                        *t = Vec3::new(r, g, b);
+                    }
+                },
+            )
+            .first_valid_layer()
+            .all_attributes()
+            .from_buffered(source)
     }));
     let image = match result {
         Ok(Ok(img)) => img,
-        Ok(Err(e)) => return Err(Error::scene(&file, "", format!("cannot read the EXR environment: {e}"))),
-        Err(_) => return Err(Error::scene(&file, "", "cannot read the EXR environment: malformed file")),
+        Ok(Err(e)) => return Err(Error::scene(file, "", format!("cannot read the EXR environment: {e}"))),
+        Err(_) => return Err(Error::scene(file, "", "cannot read the EXR environment: malformed file")),
     };
     let size = image.layer_data.size;
     let pixels = image.layer_data.channel_data.pixels;
-    let map = EnvironmentMap::new(&file, size.width(), size.height(), pixels.data, strength, rotation_rad)?;
+    let map = EnvironmentMap::new(file, size.width(), size.height(), pixels.data, strength, rotation_rad)?;
     Ok(Environment::Map(map))
 }
 
