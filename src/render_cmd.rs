@@ -537,7 +537,12 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
         None => DAffine3::from_cols_array(&scene_cam.to_world.to_cols_array().map(|v| v as f64)),
     };
     let t0 = std::time::Instant::now();
+    let warned = scene.warnings.len();
     let render_scene = RenderScene::new(scene)?;
+    // what building the render scene found (triangles skipped, ...)
+    for w in render_scene.scene().warnings.iter().skip(warned) {
+        eprintln!("warning: {w}");
+    }
     eprintln!("scene: {} triangles, BVH built in {:.2} s", render_scene.triangle_count(), t0.elapsed().as_secs_f64());
     // 2. The camera as the host conventions describe it (the sensor width spans the larger
     //    image dimension, Blender's automatic fit; shift in mm), focused as given, the demo's

@@ -274,6 +274,25 @@ def test_sane_scene_values_render(petzval, tmp_path):
     assert (tmp_path / "x.exr").is_file()
 
 
+@pytest.mark.parametrize(
+    "node,words",
+    [
+        pytest.param('"scale":[1e30,1e30,1e30]', ["1 instances", "transform", "skipped"], id="scale-overflows"),
+        pytest.param('"translation":[1e13,0,0]', ["1 triangles", "beyond", "skipped"], id="placed-too-far"),
+    ],
+)
+def test_geometry_placed_out_of_range_is_reported(petzval, tmp_path, node, words):
+    """docs/reliability.md: geometry beyond 10¹² scene units is skipped with a warning. The
+    warnings of the render scene's build were not printed, and a transform that placed a mesh
+    out of range was skipped in silence."""
+    text = ABSURD_GLTF.replace("STRENGTH", "10").replace("INTENSITY", "0").replace("BYTES", "36")
+    (tmp_path / "far.gltf").write_text(text.replace('{"mesh":0}', '{"mesh":0,' + node + "}"))
+    r = run(petzval, ["render", "far.gltf", "--resolution", "24x16", "--spp", "1", "-o", "x.exr"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    warning = [ln for ln in r.stderr.splitlines() if ln.startswith("warning:") and "skipped" in ln]
+    assert warning and all(w in warning[0] for w in words), r.stderr
+
+
 def test_empty_gltf_scene_is_named_as_such(petzval, tmp_path):
     """Blender exports an empty scene with no `nodes` in its scene (valid glTF, which the gltf
     crate rejects): the error says the scene is empty rather than that the file is invalid."""

@@ -757,6 +757,8 @@ impl RenderScene {
         let mut baked_offsets = vec![0u32];
         let mut baked_instances = Vec::new();
         let (mut bounds_min, mut bounds_max) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        // Triangles and instances that their transforms place beyond MAX_COORD (never hit).
+        let (mut placed_out, mut instances_out) = (0usize, 0usize);
         for (i, inst) in scene.instances.iter().enumerate() {
             if !usable[i] || uses[inst.mesh as usize] != 1 {
                 continue;
@@ -773,9 +775,13 @@ impl RenderScene {
                         xf.object_to_world.transform_point3(p)
                     }
                 });
+                if !v.iter().all(|p| in_range(*p)) {
+                    placed_out += 1;
+                    continue; // placed out of range by its transform: never hit
+                }
                 let area2 = (v[1] - v[0]).cross(v[2] - v[0]).length_squared();
-                if !(area2 > 0.0) || !area2.is_finite() || !v.iter().all(|p| in_range(*p)) {
-                    continue; // degenerate, or placed out of range by its transform: never hit
+                if !(area2 > 0.0) || !area2.is_finite() {
+                    continue; // degenerate: never hit
                 }
                 for p in v {
                     bounds_min = bounds_min.min(p);
@@ -850,6 +856,7 @@ impl RenderScene {
                 whi = whi.max(p);
             }
             if !(in_range(wlo) && in_range(whi)) {
+                instances_out += 1;
                 continue;
             }
             bounds_min = bounds_min.min(wlo);
@@ -866,6 +873,11 @@ impl RenderScene {
             tlas.primitive_indices = Vec::new();
             (tlas, ordered)
         };
+        if placed_out > 0 || instances_out > 0 {
+            scene.warnings.push(format!(
+                "{placed_out} triangles and {instances_out} instances that their transforms place beyond {MAX_COORD:e} scene units were skipped"
+            ));
+        }
         let build_time = start.elapsed();
         if world.tris.is_empty() && tlas_leaves.is_empty() {
             bounds_min = Vec3::ZERO;
