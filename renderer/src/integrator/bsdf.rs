@@ -261,6 +261,9 @@ pub struct Bsdf {
     fms_d: f32,
     /// ((1 − m)·F_ms,d + m·F_ms,m) / (π·(1 − Ē)): the lobe M's factor, or zero.
     ms_scale: Vec3,
+    /// The cosine lobes depend on the albedo tables (a specular layer, or M); false for a pure
+    /// Lambertian base, whose lookups are then skipped.
+    layered: bool,
 }
 
 impl Bsdf {
@@ -302,7 +305,8 @@ impl Bsdf {
         } else {
             Vec3::ZERO
         };
-        Bsdf { base, metallic, alpha, a2: alpha * alpha, f0_d, f90_d, row, diffuse_scale, fms_d, ms_scale }
+        let layered = f0_d != 0.0 || f90_d != 0.0 || ms_scale != Vec3::ZERO;
+        Bsdf { base, metallic, alpha, a2: alpha * alpha, f0_d, f90_d, row, diffuse_scale, fms_d, ms_scale, layered }
     }
 
     /// GGX alpha (roughness², clamped).
@@ -339,7 +343,9 @@ impl Bsdf {
     #[inline]
     fn spec_probability(&self, wo: Vec3) -> f32 {
         let ws = luminance(self.fresnel(wo.z));
-        let wd = if self.has_cosine_lobes() {
+        let wd = if !self.layered {
+            (1.0 - self.metallic) * luminance(self.base)
+        } else if self.has_cosine_lobes() {
             // the cosine lobes' albedo at μo: the base under the layer, and M's 1 − E(μo) share
             let e = self.row.e(wo.z);
             let diffuse = if self.diffuse_scale == Vec3::ZERO {
@@ -365,7 +371,9 @@ impl Bsdf {
             return Vec3::ZERO;
         }
         let mut f = Vec3::ZERO;
-        if self.has_cosine_lobes() {
+        if !self.layered {
+            f += self.diffuse_scale;
+        } else if self.has_cosine_lobes() {
             // the diffuse base under the layer, and the multiple-scattering lobe M
             let (eo, ei) = (self.row.e(wo.z), self.row.e(wi.z));
             if self.diffuse_scale != Vec3::ZERO {
