@@ -495,6 +495,23 @@ def petzval_cycles_args(spec: CameraSpec, **kw) -> list[str]:
     ]
 
 
+def pinhole_args(camera: CameraSpec, world_rgb, max_depth: int, resolution: tuple[int, int]) -> list[str]:
+    """`petzval render` options for a Blender camera without depth of field as a pinhole: the
+    focal length from the exported yfov and the sensor width, no natural vignetting (Cycles has
+    none), Cycles' pixel filter, the world colour and the bounce limit."""
+    bpy = _import_bpy()
+    return [
+        "--camera", camera.name,
+        "--lens", "pinhole",
+        "--sensor-width", _num(camera.sensor_mm),
+        "--natural-vignetting", "off",
+        "--filter-width", _num(bpy.context.scene.cycles.filter_width),
+        "--environment", ",".join(_num(c) for c in world_rgb),
+        "--max-depth", str(max_depth),
+        "--resolution", "x".join(map(str, resolution)),
+    ]  # fmt: skip
+
+
 def world_rgb_arg() -> str:
     """Blender's world colour x strength, as petzval's --environment R,G,B."""
     bpy = _import_bpy()

@@ -138,17 +138,7 @@ def render_cycles(samples: int, seed: int, out_exr: Path) -> float:
 def petzval_args() -> list[str]:
     """`petzval render` options for SpotCam: a pinhole with the focal length from the exported
     yfov and the sensor width, no natural vignetting (Cycles has none), Cycles' pixel filter."""
-    bpy = S._import_bpy()
-    return [
-        "--camera", CAMERA.name,
-        "--lens", "pinhole",
-        "--sensor-width", S._num(CAMERA.sensor_mm),
-        "--natural-vignetting", "off",
-        "--filter-width", S._num(bpy.context.scene.cycles.filter_width),
-        "--environment", ",".join(S._num(c) for c in WORLD_RGB),
-        "--max-depth", str(PETZVAL_MAX_DEPTH),
-        "--resolution", "x".join(map(str, RESOLUTION)),
-    ]  # fmt: skip
+    return S.pinhole_args(CAMERA, WORLD_RGB, PETZVAL_MAX_DEPTH, RESOLUTION)
 
 
 # ------------------------------------------------------------------------------------------

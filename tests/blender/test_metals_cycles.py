@@ -59,13 +59,8 @@ MEAN_TOL = 0.05
 
 
 def _metal(name, base, roughness):
-    mat = bpy.data.materials.new(name)
-    if mat.node_tree is None:
-        mat.use_nodes = True
-    p = mat.node_tree.nodes.get("Principled BSDF")
-    p.inputs["Base Color"].default_value = (*base, 1.0)
-    p.inputs["Metallic"].default_value = 1.0
-    p.inputs["Roughness"].default_value = roughness
+    mat = S._principled(bpy, name, base=base, roughness=roughness)
+    mat.node_tree.nodes.get("Principled BSDF").inputs["Metallic"].default_value = 1.0
     return mat
 
 
@@ -107,16 +102,7 @@ def sphere_windows() -> list[tuple[slice, slice]]:
 
 
 def petzval_args() -> list[str]:
-    return [
-        "--camera", CAMERA.name,
-        "--lens", "pinhole",
-        "--sensor-width", S._num(CAMERA.sensor_mm),
-        "--natural-vignetting", "off",
-        "--filter-width", S._num(bpy.context.scene.cycles.filter_width),
-        "--environment", ",".join(S._num(c) for c in WORLD_RGB),
-        "--max-depth", str(S.PETZVAL_MAX_DEPTH),
-        "--resolution", "x".join(map(str, RESOLUTION)),
-    ]  # fmt: skip
+    return S.pinhole_args(CAMERA, WORLD_RGB, S.PETZVAL_MAX_DEPTH, RESOLUTION)
 
 
 @pytest.fixture(scope="module")
