@@ -5,7 +5,7 @@ use glam::{DAffine3, DMat4, DVec4, Vec2, Vec3, Vec4};
 use numpy::{AllowTypeChange, PyArrayLike1, PyArrayLike2, PyArrayLike3};
 use petzval_renderer::scene::environment::EnvironmentMap;
 use petzval_renderer::scene::texture::Wrap;
-use petzval_renderer::scene::{AlphaMode, Environment, Light, Material, Mesh, Texture, TextureRef};
+use petzval_renderer::scene::{AlphaMode, Environment, Light, Material, Mesh, SpotFalloff, Texture, TextureRef};
 use pyo3::prelude::*;
 use std::sync::Arc;
 
@@ -418,8 +418,10 @@ impl PyScene {
         })
     }
 
-    /// A spot light.
-    #[pyo3(signature = (position, direction, intensity_w_sr, inner_cone_rad, outer_cone_rad, name = ""))]
+    /// A spot light; `falloff` "gltf" (a squared ramp in cos θ between the cones) or "blender"
+    /// (Cycles' smoothstep, with Spot Blend = 1 − inner/outer).
+    #[pyo3(signature = (position, direction, intensity_w_sr, inner_cone_rad, outer_cone_rad, name = "", falloff = "gltf"))]
+    #[allow(clippy::too_many_arguments)]
     fn add_spot_light(
         &mut self,
         position: Vec<f64>,
@@ -428,8 +430,16 @@ impl PyScene {
         inner_cone_rad: f64,
         outer_cone_rad: f64,
         name: &str,
+        falloff: &str,
     ) -> PyResult<()> {
         guard(|| {
+            let falloff = match falloff {
+                "gltf" => SpotFalloff::Gltf,
+                "blender" => SpotFalloff::Blender,
+                other => {
+                    return Err(scene_err(name, "falloff", format!("expected 'gltf' or 'blender', got '{other}'")))
+                }
+            };
             let d = vec3_arg(name, "direction", &direction)?.normalize_or_zero();
             if d == Vec3::ZERO {
                 return Err(scene_err(name, "direction", "must not be zero".into()));
@@ -452,6 +462,7 @@ impl PyScene {
                 inner_cone_rad: inner_cone_rad as f32,
                 outer_cone_rad: outer_cone_rad as f32,
                 range: None,
+                falloff,
             });
             Ok(())
         })

@@ -254,7 +254,7 @@ pub fn check_scene_values(scene: &Scene) -> std::result::Result<(), Bug> {
             Light::Point { position, intensity, range } => {
                 position.is_finite() && intensity.is_finite() && range.is_none_or(|r| !r.is_nan())
             }
-            Light::Spot { position, direction, intensity, inner_cone_rad, outer_cone_rad, range } => {
+            Light::Spot { position, direction, intensity, inner_cone_rad, outer_cone_rad, range, .. } => {
                 position.is_finite()
                     && direction.is_finite()
                     && intensity.is_finite()

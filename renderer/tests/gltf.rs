@@ -5,7 +5,7 @@
 use glam::{Vec2, Vec3, Vec4};
 use petzval_renderer::scene::gltf::{load_gltf, load_gltf_slice};
 use petzval_renderer::scene::texture::{srgb_to_linear, Wrap};
-use petzval_renderer::scene::{AlphaMode, Light, Material, Scene};
+use petzval_renderer::scene::{AlphaMode, Light, Material, Scene, SpotFalloff};
 use petzval_renderer::Error;
 use std::f32::consts::PI;
 use std::path::PathBuf;
@@ -189,7 +189,8 @@ fn gltf_lights_convert_to_blender_radiometric_units() {
         ref other => panic!("{other:?}"),
     }
     match s.lights[1] {
-        Light::Spot { position, direction, intensity, inner_cone_rad, outer_cone_rad, range } => {
+        Light::Spot { position, direction, intensity, inner_cone_rad, outer_cone_rad, range, falloff } => {
+            assert_eq!(falloff, SpotFalloff::Gltf);
             assert!(close(position, Vec3::new(1.0, 2.0, 3.0)));
             assert!(close(direction, Vec3::NEG_Y), "{direction}");
             assert!(rel_close(intensity * 4.0 * PI, Vec3::splat(500.0)), "{intensity}");

@@ -13,7 +13,7 @@ use petzval_renderer::integrator::{
 };
 use petzval_renderer::sampler::PixelSampler;
 use petzval_renderer::scene::texture::Wrap;
-use petzval_renderer::scene::{AlphaMode, Environment, Light, Material, Mesh, Scene, Texture, TextureRef};
+use petzval_renderer::scene::{AlphaMode, Environment, Light, Material, Mesh, Scene, SpotFalloff, Texture, TextureRef};
 
 // ------------------------------------------------------------------------------------------
 // Scene helpers.
@@ -342,7 +342,8 @@ fn bsdf_energy_at_most_one() {
 
 /// Multiple scattering: a white metal reflects all the light at every roughness and angle, as
 /// Blender's multiscatter GGX does (single-scatter GGX alone reflects 0.32 at roughness 1 head
-/// on), and a coloured one keeps less than white, but all of it where its F0 is 1.
+/// on), and a coloured one keeps less than white, but all of it where its F0 is 1; glossy
+/// metals sample the lobe M rarely (its albedo is small), so their weights stay low-noise.
 #[test]
 fn rough_white_metal_keeps_its_energy() {
     let mut rng = Rng(53);
@@ -356,6 +357,23 @@ fn rough_white_metal_keeps_its_energy() {
         }
         sum / n as f32
     };
+    // Glossy metals pick the multiple-scattering lobe by its albedo, F_ms·(1 − E(μo)), so
+    // nearly every sample goes to the GGX lobe: the one-sample weights of a white metal at
+    // roughness 0.15 stay close to 1 (variance 1.96 at 75° when M was weighted 1/(1 − Ē) ≈
+    // 170× too much; the mean was right, the noise was not).
+    let white = Bsdf::new(Vec3::ONE, 1.0, 0.15, 1.0, 1.5);
+    for theta in [0.0f32, 45.0, 75.0] {
+        let wo = wo_at(theta);
+        let n = 100_000;
+        let (mut sum, mut sum2) = (0.0f64, 0.0f64);
+        for _ in 0..n {
+            let w = white.sample(wo, rng.v2(), rng.next()).map_or(0.0, |s| s.weight.x as f64);
+            (sum, sum2) = (sum + w, sum2 + w * w);
+        }
+        let mean = sum / n as f64;
+        let var = sum2 / n as f64 - mean * mean;
+        assert!(var < 0.1, "white metal, roughness 0.15, θ={theta}: weight variance {var} (mean {mean})");
+    }
     for roughness in [0.3f32, 0.6, 1.0] {
         let white = Bsdf::new(Vec3::ONE, 1.0, roughness, 1.0, 1.5);
         let gold = Bsdf::new(Vec3::new(1.0, 0.78, 0.34), 1.0, roughness, 1.0, 1.5);
@@ -598,29 +616,40 @@ fn point_and_spot_lights_on_diffuse_plane() {
     assert!(rel(l.y, expected.y * win) < 0.01, "range: {l:?} vs {:?}", expected * win);
 
     // Spot pointing at p: inside the inner cone = point light; between the cones: glTF's
-    // squared linear ramp in cos; outside: dark.
+    // squared linear ramp in cos, or Blender's (Cycles') smoothstep in cos over
+    // (1 − cos outer)·blend with blend = 1 − inner/outer; outside: dark.
     let axis = -d.normalize();
-    for (inner, outer, tilt_deg) in [(0.3f32, 0.6f32, 0.0f32), (0.2, 0.6, 25.0), (0.1, 0.3, 30.0)] {
-        // Tilt the spot axis about z by `tilt_deg`.
-        let t = tilt_deg.to_radians();
-        let dir = glam::Quat::from_rotation_z(t) * axis;
-        let cd = dir.dot(-d.normalize());
-        let ramp = ((cd - outer.cos()) / (inner.cos() - outer.cos())).clamp(0.0, 1.0).powi(2);
-        let mut s = plane_scene(albedo);
-        s.lights.push(Light::Spot {
-            position: lp,
-            direction: dir,
-            intensity,
-            inner_cone_rad: inner,
-            outer_cone_rad: outer,
-            range: None,
-        });
-        let l = plane_radiance(s, p, 16);
-        let e = expected * ramp;
-        assert!(
-            (l.y - e.y).abs() <= 0.01 * expected.y * ramp.max(1e-6) + 1e-7,
-            "spot {inner}/{outer} tilt {tilt_deg}: {l:?} vs {e:?}"
-        );
+    for falloff in [SpotFalloff::Gltf, SpotFalloff::Blender] {
+        for (inner, outer, tilt_deg) in [(0.3f32, 0.6f32, 0.0f32), (0.2, 0.6, 25.0), (0.1, 0.3, 30.0), (0.3, 0.6, 30.0)]
+        {
+            // Tilt the spot axis about z by `tilt_deg`.
+            let t = tilt_deg.to_radians();
+            let dir = glam::Quat::from_rotation_z(t) * axis;
+            let cd = dir.dot(-d.normalize());
+            let ramp = match falloff {
+                SpotFalloff::Gltf => ((cd - outer.cos()) / (inner.cos() - outer.cos())).clamp(0.0, 1.0).powi(2),
+                SpotFalloff::Blender => {
+                    let x = ((cd - outer.cos()) / ((1.0 - outer.cos()) * (1.0 - inner / outer))).clamp(0.0, 1.0);
+                    x * x * (3.0 - 2.0 * x)
+                }
+            };
+            let mut s = plane_scene(albedo);
+            s.lights.push(Light::Spot {
+                position: lp,
+                direction: dir,
+                intensity,
+                inner_cone_rad: inner,
+                outer_cone_rad: outer,
+                range: None,
+                falloff,
+            });
+            let l = plane_radiance(s, p, 16);
+            let e = expected * ramp;
+            assert!(
+                (l.y - e.y).abs() <= 0.01 * expected.y * ramp.max(1e-6) + 1e-7,
+                "spot {falloff:?} {inner}/{outer} tilt {tilt_deg}: {l:?} vs {e:?}"
+            );
+        }
     }
 
     // Directional: E·cosθ·albedo/π.
@@ -1101,6 +1130,7 @@ fn light_tree_pmf_consistent() {
         inner_cone_rad: 0.3,
         outer_cone_rad: 0.5,
         range: None,
+        falloff: SpotFalloff::Gltf,
     });
     let mixed = {
         let mut s = scene.clone();
@@ -1283,6 +1313,7 @@ fn spot_cone_edges_unbiased_with_light_tree() {
             inner_cone_rad: inner,
             outer_cone_rad: outer,
             range: None,
+            falloff: SpotFalloff::Gltf,
         });
     }
     let point = (Vec3::new(0.0, 0.3, 2.0), 2.0f32);

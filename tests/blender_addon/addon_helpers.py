@@ -287,8 +287,9 @@ def _environment_image():
 
 def build_lights_scene(variant: str):
     """Diffuse ground and spheres lit by a rectangular and a disc area light (``variant``
-    "area", black world) or by an environment texture rotated by a Mapping node ("world", no
-    lights). The two are separate because the add-on's area lights are emissive geometry, which
+    "area", black world), by an environment texture rotated by a Mapping node ("world", no
+    lights), or by three spot lights of Spot Blend 0, 0.3 and 1 ("spots", black world). The
+    first two are separate because the add-on's area lights are emissive geometry, which
     shadows the sky (Cycles' lights do not); the lights are out of view (Cycles hides them from the
     camera)."""
     b = bpy()
@@ -329,6 +330,16 @@ def build_lights_scene(variant: str):
         obj = b.data.objects.new(name, data)
         scene.collection.objects.link(obj)
         obj.location = loc  # no rotation: emits down (-z)
+    spots = (("Spot0", -1.3, 0.0), ("Spot03", 0.0, 0.3), ("Spot1", 1.3, 1.0))
+    for name, x, blend in spots if variant == "spots" else ():
+        data = b.data.lights.new(name, "SPOT")
+        data.energy = 400.0
+        data.spot_size = math.radians(60.0)
+        data.spot_blend = blend
+        data.shadow_soft_size = 0.0  # a true point: the add-on's spots are punctual
+        obj = b.data.objects.new(name, data)
+        scene.collection.objects.link(obj)
+        obj.location = (x, 2.2, 2.2)  # no rotation: points down (-z)
     cam = add_camera("LightsCam", (0.0, -2.6, 0.9), (math.radians(80.0), 0.0, 0.0), lens_mm=28.0)
     cam.data.dof.use_dof = False
     scene.render.resolution_x, scene.render.resolution_y = LIGHTS_RESOLUTION

@@ -9,7 +9,7 @@
 //!
 //! | light | renderer | conversion | fallbacks |
 //! |---|---|---|---|
-//! | `SphereLight` | point light (spot with `shaping:cone:angle`) | radiant intensity = L · π r² (normalize: intensity/4 · 2^E · color) W/sr; cone: outer = angle, inner = angle · (1 − softness) | radius 0.5, normalize off |
+//! | `SphereLight` | point light (spot with `shaping:cone:angle`) | radiant intensity = L · π r² (normalize: intensity/4 · 2^E · color) W/sr; cone: outer = angle, fading as Blender's Spot Blend = softness ([`SpotFalloff::Blender`](petzval_renderer::scene::SpotFalloff)) | radius 0.5, normalize off |
 //! | `RectLight` | a one-sided emissive quad facing −z | radiance L | width 1, height 1 |
 //! | `DiskLight` | a one-sided emissive 32-gon facing −z | radiance L | radius 0.5 |
 //! | `DistantLight` | directional light along −z | irradiance = 4 · intensity · 2^E · color W/m² (Blender's factor) | — |
@@ -155,6 +155,8 @@ pub fn read_light(
                         inner_cone_rad: outer * (1.0 - soft as f32),
                         outer_cone_rad: outer,
                         range: None,
+                        // softness is Blender's Spot Blend (its USD exporter and importer)
+                        falloff: petzval_renderer::scene::SpotFalloff::Blender,
                     });
                     w.infos.push(info("spot (W/sr)", i));
                 }

@@ -62,7 +62,10 @@ def add_light(pz, obj, matrix_world, notes, materials) -> None:
             inner = outer * (1.0 - float(light.spot_blend))
             if light.use_square:
                 notes.warn(f"light '{name}': square spot (a round cone used)")
-            pz.add_spot_light(tuple(pos), tuple(direction), tuple(intensity), inner, outer, name=name)
+            # Spot Blend fades as in Cycles (a smoothstep in cos over (1 - cos outer)·blend)
+            pz.add_spot_light(
+                tuple(pos), tuple(direction), tuple(intensity), inner, outer, name=name, falloff="blender"
+            )
     elif light.type == "SUN":
         if light.angle > 0:
             notes.note("sun lights are rendered as parallel light (angle ignored)")

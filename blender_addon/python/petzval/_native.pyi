@@ -150,9 +150,11 @@ class Scene:
         inner_cone_rad: float,
         outer_cone_rad: float,
         name: str = "",
+        falloff: str = "gltf",
     ) -> None:
         """A spot light pointing along ``direction``; full intensity inside the inner cone
-        half-angle, zero outside the outer (smooth in between, as glTF)."""
+        half-angle, zero outside the outer. In between ``falloff`` "gltf" ramps as glTF does,
+        "blender" as Cycles' Spot Blend does (blend = 1 - inner/outer)."""
     def add_sun_light(self, direction: Sequence[float], irradiance_w_m2: Sequence[float], name: str = "") -> None:
         """A directional light travelling along ``direction``."""
     def set_environment_color(self, rgb: Sequence[float]) -> None:

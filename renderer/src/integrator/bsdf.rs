@@ -261,6 +261,8 @@ pub struct Bsdf {
     fms_d: f32,
     /// ((1 − m)·F_ms,d + m·F_ms,m) / (π·(1 − Ē)): the lobe M's factor, or zero.
     ms_scale: Vec3,
+    /// (1 − m)·F_ms,d + m·F_ms,m: M's albedo at μo is this × (1 − E(μo)), or zero.
+    ms_colour: Vec3,
     /// The cosine lobes depend on the albedo tables (a specular layer, or M); false for a pure
     /// Lambertian base, whose lookups are then skipped.
     layered: bool,
@@ -292,11 +294,8 @@ impl Bsdf {
         } else {
             Vec3::ZERO
         };
-        let ms_scale = if has_ms {
-            (Vec3::splat((1.0 - metallic) * fms_d) + fms_m * metallic) * (FRAC_1_PI / (1.0 - a1))
-        } else {
-            Vec3::ZERO
-        };
+        let ms_colour = if has_ms { Vec3::splat((1.0 - metallic) * fms_d) + fms_m * metallic } else { Vec3::ZERO };
+        let ms_scale = if has_ms { ms_colour * (FRAC_1_PI / (1.0 - a1)) } else { Vec3::ZERO };
         // 2. The dielectric layer's average albedo (M's average share is F_ms,d·(1 − Ē)), which
         //    normalises the base under it.
         let e_avg = (f0_d * a1 + (f90_d - f0_d) * a2 + fms_d * (1.0 - a1)).clamp(0.0, 1.0);
@@ -306,7 +305,20 @@ impl Bsdf {
             Vec3::ZERO
         };
         let layered = f0_d != 0.0 || f90_d != 0.0 || ms_scale != Vec3::ZERO;
-        Bsdf { base, metallic, alpha, a2: alpha * alpha, f0_d, f90_d, row, diffuse_scale, fms_d, ms_scale, layered }
+        Bsdf {
+            base,
+            metallic,
+            alpha,
+            a2: alpha * alpha,
+            f0_d,
+            f90_d,
+            row,
+            diffuse_scale,
+            fms_d,
+            ms_scale,
+            ms_colour,
+            layered,
+        }
     }
 
     /// GGX alpha (roughness², clamped).
@@ -353,7 +365,7 @@ impl Bsdf {
             } else {
                 (1.0 - self.metallic) * luminance(self.base) * (1.0 - self.e_d(e))
             };
-            diffuse + luminance(self.ms_scale) * std::f32::consts::PI * (1.0 - e.0).max(0.0)
+            diffuse + luminance(self.ms_colour) * (1.0 - e.0).max(0.0)
         } else {
             0.0
         };

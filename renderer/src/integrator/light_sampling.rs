@@ -6,7 +6,7 @@ use glam::{Vec2, Vec3};
 
 use super::lights::{env_pdf, env_sample, LightKind, LightSample, LightSelection};
 use crate::integrator::accel::{offset_ray_origin, AlphaTest, RenderScene, SurfaceHit};
-use crate::scene::Light;
+use crate::scene::{Light, SpotFalloff};
 
 /// glTF range window.
 #[inline]
@@ -31,8 +31,21 @@ fn range_window(d: f32, range: Option<f32>) -> f32 {
 /// that is a ramp 0.001 wide in `cd` inside the outer cone, i.e. 0.001/sin(outer) rad (2.4 mrad
 /// for a 25° cone, all of a cone narrower than 2.6°) dimmed where the light should be at full
 /// intensity up to the edge: the dark band of docs/cycles-comparison.md, disagreement 2.
+///
+/// With [`SpotFalloff::Blender`] the fade is Cycles' instead: smoothstep((cd − cos outer) /
+/// ((1 − cos outer)·blend)), blend = 1 − inner/outer, a step at the outer cone for blend 0.
 #[inline]
-pub fn spot_attenuation(cd: f32, inner: f32, outer: f32) -> f32 {
+pub fn spot_attenuation(cd: f32, inner: f32, outer: f32, falloff: SpotFalloff) -> f32 {
+    if falloff == SpotFalloff::Blender {
+        let cos_outer = outer.cos();
+        let blend = if outer > 0.0 { (1.0 - inner / outer).clamp(0.0, 1.0) } else { 0.0 };
+        let width = (1.0 - cos_outer) * blend;
+        if !(width > 0.0) {
+            return if cd > cos_outer { 1.0 } else { 0.0 };
+        }
+        let t = ((cd - cos_outer) / width).clamp(0.0, 1.0);
+        return t * t * (3.0 - 2.0 * t);
+    }
     let cos_outer = outer.cos();
     let width = inner.cos() - cos_outer;
     if !(width > 0.0) {
@@ -101,7 +114,7 @@ impl RenderScene {
                         }
                         (d / dist, intensity * (range_window(dist, range) / d2), Some(position))
                     }
-                    Light::Spot { position, direction, intensity, inner_cone_rad, outer_cone_rad, range } => {
+                    Light::Spot { position, direction, intensity, inner_cone_rad, outer_cone_rad, range, falloff } => {
                         let d = position - p;
                         let d2 = d.length_squared();
                         let dist = d2.sqrt();
@@ -110,7 +123,8 @@ impl RenderScene {
                         }
                         let wi = d / dist;
                         let cd = direction.normalize_or_zero().dot(-wi);
-                        let att = spot_attenuation(cd, inner_cone_rad, outer_cone_rad) * range_window(dist, range);
+                        let att =
+                            spot_attenuation(cd, inner_cone_rad, outer_cone_rad, falloff) * range_window(dist, range);
                         (wi, intensity * (att / d2), Some(position))
                     }
                     Light::Directional { direction, irradiance } => {

@@ -135,6 +135,19 @@ impl Material {
     }
 }
 
+/// How a spot light fades from its inner to its outer cone.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SpotFalloff {
+    /// KHR_lights_punctual's: a squared ramp in cos θ from 0 at the outer cone to 1 at the
+    /// inner one (glTF files).
+    #[default]
+    Gltf,
+    /// Blender's (Cycles' `spot_light_attenuation`): a smoothstep in cos θ from 0 at the outer
+    /// cone θo over (1 − cos θo)·blend, with blend = 1 − inner/outer (how the inner cone carries
+    /// Blender's Spot Blend: inner = outer·(1 − blend)). Live Blender scenes and USD.
+    Blender,
+}
+
 /// A punctual light (KHR_lights_punctual), in world space.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Light {
@@ -161,6 +174,8 @@ pub enum Light {
         outer_cone_rad: f32,
         /// Range.
         range: Option<f32>,
+        /// The fade between the cones.
+        falloff: SpotFalloff,
     },
     /// Directional (sun) light.
     Directional {

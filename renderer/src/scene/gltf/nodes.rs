@@ -3,7 +3,7 @@
 use super::accessors::read_accessor;
 use super::{named, Loader, WATTS_TO_LUMENS};
 use crate::limits::MAX_NODE_INSTANCES;
-use crate::scene::{Light, Mesh, SceneCamera};
+use crate::scene::{Light, Mesh, SceneCamera, SpotFalloff};
 use crate::Result;
 use glam::{Affine3A, Mat3, Mat4, Quat, Vec2, Vec3, Vec4};
 use gltf::accessor::{DataType, Dimensions};
@@ -184,6 +184,7 @@ impl Loader<'_> {
                     inner_cone_rad: inner,
                     outer_cone_rad: outer,
                     range,
+                    falloff: SpotFalloff::Gltf,
                 }
             }
         };
