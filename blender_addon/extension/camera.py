@@ -59,12 +59,18 @@ def frame_size(scene) -> tuple[int, int]:
 
 def border_window(scene, width: int, height: int):
     """Blender's render border as (x0, y0, x1, y1) pixels of the full frame, row 0 at the
-    BOTTOM (Blender's disprect: float * size truncated), or None without a border."""
+    BOTTOM (Blender's disprect: float * size truncated), or None without a border. The products
+    are taken in single precision as Blender takes them: 0.9 * 120 is 107.99999 in double, 108
+    in float32, and a double product would cut the last row."""
     r = scene.render
+
+    def edge(border: float, size: int) -> int:
+        return int(np.float32(border) * np.float32(size))
+
     if not r.use_border:
         return None
-    x0, x1 = int(r.border_min_x * width), int(r.border_max_x * width)
-    y0, y1 = int(r.border_min_y * height), int(r.border_max_y * height)
+    x0, x1 = edge(r.border_min_x, width), edge(r.border_max_x, width)
+    y0, y1 = edge(r.border_min_y, height), edge(r.border_max_y, height)
     if x1 - x0 < 1 or y1 - y0 < 1 or (x0, y0, x1, y1) == (0, 0, width, height):
         return None
     return x0, y0, x1, y1
