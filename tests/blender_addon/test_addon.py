@@ -223,10 +223,26 @@ def test_real_lens_round_trip_matches_gltf_path(main_scene, report):
             addon_imgs.append(B.read_rgb(main_scene / f"addon_dg_seed{seed}.exr"))
         assert entry["kwargs"]["lens"] == "double-gauss-50mm" and entry["lens_model"] == "exact"
         glb = S.export_glb(main_scene / "scene.glb")
-        args = ["--camera", "MainCam", "--lens", "double-gauss-50mm", "--lens-model", "exact",
-                "--fstop", S._num(cam.dof.aperture_fstop), "--focus", S._num(cam.dof.focus_distance),
-                "--aperture", f"blades:{cam.dof.aperture_blades}:{S._num(math.degrees(cam.dof.aperture_rotation))}",
-                "--sensor-width", S._num(cam.sensor_width), "--natural-vignetting", "off", "--filter-width", "1.5"]
+        args = [
+            "--camera",
+            "MainCam",
+            "--lens",
+            "double-gauss-50mm",
+            "--lens-model",
+            "exact",
+            "--fstop",
+            S._num(cam.dof.aperture_fstop),
+            "--focus",
+            S._num(cam.dof.focus_distance),
+            "--aperture",
+            f"blades:{cam.dof.aperture_blades}:{S._num(math.degrees(cam.dof.aperture_rotation))}",
+            "--sensor-width",
+            S._num(cam.sensor_width),
+            "--natural-vignetting",
+            "off",
+            "--filter-width",
+            "1.5",
+        ]
         t0 = time.perf_counter()
         cli_imgs = [
             B.read_rgb(
@@ -442,10 +458,11 @@ def test_tilt_shift_hinge_rule(addon, report):
         f"{thick['tilted'][ends].mean():.2f})"
     )
     assert abs(peak_row - pred_row) <= 0.05 * Hh, f"untilted sharpest row {peak_row}, predicted {pred_row}"
-    assert sharp["untilted"] < 0.6, f"untilted lens sharp on {sharp['untilted']*100:.0f} % of rows"
+    assert sharp["untilted"] < 0.6, f"untilted lens sharp on {sharp['untilted'] * 100:.0f} % of rows"
     assert np.median(thick["untilted"][rows][blurred]) < 0.8
-    assert sharp["tilted"] > 0.98 and thick["tilted"][rows].min() > 0.95, \
-        f"hinge-rule tilt: sharp on {sharp['tilted']*100:.0f} % of rows, min {thick['tilted'][rows].min():.2f}"
+    assert sharp["tilted"] > 0.98 and thick["tilted"][rows].min() > 0.95, (
+        f"hinge-rule tilt: sharp on {sharp['tilted'] * 100:.0f} % of rows, min {thick['tilted'][rows].min():.2f}"
+    )
     assert sharp["untilted"] < sharp["half"] < sharp["tilted"]
     assert sharp["reverse"] < sharp["untilted"]
     assert exact["tilted"][ends].mean() > exact["untilted"][ends].mean() + 0.08
@@ -497,8 +514,11 @@ def test_focus_animation_renders_each_frame(main_scene, report):
     imgs = [B.read_rgb(f) for f in files]
     assert imgs[0].shape == (64, 96, 3)
     diffs = [float(np.mean(np.abs(imgs[i] - imgs[j]))) / float(np.mean(imgs[0])) for i, j in ((0, 1), (1, 2), (0, 2))]
-    report.line(f"animation: 3 frames (focus 0.6, 1.5, 6 m) at 96x64 in {secs:.1f} s; mean |Δ| between frames "
-                + ", ".join(f"{d*100:.1f} %" for d in diffs) + " of the mean")
+    report.line(
+        f"animation: 3 frames (focus 0.6, 1.5, 6 m) at 96x64 in {secs:.1f} s; mean |Δ| between frames "
+        + ", ".join(f"{d * 100:.1f} %" for d in diffs)
+        + " of the mean"
+    )
     assert min(diffs) > 0.02, f"frames barely differ: {diffs}"
 
 
@@ -706,6 +726,58 @@ def test_unsupported_features_listed_once(addon, report):
     assert len(unsupported) == len(set(unsupported)) == 2, unsupported
     assert any("GlassMat" in u and "Glass" in u for u in unsupported)
     assert any("CoatMat" in u and "Coat" in u for u in unsupported)
+    assert entry.get("complete") is True
+
+
+def test_render_visibility_and_light_settings_are_listed(addon, report):
+    """What the add-on does not render as Blender would is listed, not ignored in silence: a
+    holdout object, a holdout and an indirect-only collection, a light with Cast Shadow off, a
+    point light with a radius and a sun wider than 1°. The render still completes."""
+    _depth_scene()
+    H.configure_petzval(2, seed=0, camera="DepthCam")
+    scene = bpy.context.scene
+    for name, x in (("HoldoutCube", -0.6), ("CollCube", 0.0), ("IndirectCube", 0.6)):
+        bpy.ops.mesh.primitive_cube_add(size=0.3, location=(x, 2.5, 0.0))
+        bpy.context.active_object.name = name
+    bpy.data.objects["HoldoutCube"].is_holdout = True
+    for coll_name, obj_name, flag in (
+        ("HoldoutColl", "CollCube", "holdout"),
+        ("IndirectColl", "IndirectCube", "indirect_only"),
+    ):
+        coll = bpy.data.collections.new(coll_name)
+        scene.collection.children.link(coll)
+        obj = bpy.data.objects[obj_name]
+        for c in obj.users_collection:
+            c.objects.unlink(obj)
+        coll.objects.link(obj)
+        setattr(bpy.context.view_layer.layer_collection.children[coll_name], flag, True)
+    for name, kind, radius in (("NoShadow", "POINT", 0.0), ("Soft", "POINT", 0.3), ("WideSun", "SUN", 0.0)):
+        data = bpy.data.lights.new(name, kind)
+        data.energy = 10.0 if kind == "POINT" else 1.0
+        data.shadow_soft_size = radius
+        if name == "NoShadow":
+            data.use_shadow = False
+        if kind == "SUN":
+            data.angle = math.radians(5.0)
+        obj = bpy.data.objects.new(name, data)
+        scene.collection.objects.link(obj)
+        obj.location = (0.0, 1.0, 2.0)
+    try:
+        _, entry = H.render_still(OUT / "visibility.exr")
+    finally:
+        for name in ("HoldoutColl", "IndirectColl"):
+            bpy.data.collections.remove(bpy.data.collections[name])
+    unsupported = entry["notes"]["unsupported"]
+    report.line(f"visibility and light settings listed: {unsupported}")
+    for words in (
+        ("HoldoutCube", "holdout"),
+        ("CollCube", "holdout"),
+        ("IndirectCube", "indirect only"),
+        ("NoShadow", "Cast Shadow"),
+        ("Soft", "radius"),
+        ("WideSun", "sun angle"),
+    ):
+        assert any(all(w in u for w in words) for u in unsupported), (words, unsupported)
     assert entry.get("complete") is True
 
 

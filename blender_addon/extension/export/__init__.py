@@ -27,6 +27,18 @@ UNSUPPORTED_TYPES = {"CURVES": "hair curves", "POINTCLOUD": "point clouds", "VOL
                      "GREASEPENCIL": "Grease Pencil", "GPENCIL": "Grease Pencil"}
 
 
+def _view_layer_flag(obj, method: str, depsgraph) -> bool:
+    """The object's holdout / indirect-only state from its collections in the depsgraph's view
+    layer (``Object.holdout_get``, ``Object.indirect_only_get``); False where Blender lacks it."""
+    get = getattr(getattr(obj, "original", obj), method, None)
+    if get is None:
+        return False
+    try:
+        return bool(get(view_layer=depsgraph.view_layer))
+    except (TypeError, RuntimeError, ReferenceError):
+        return False
+
+
 def build(petzval, depsgraph, notes, stop=None):
     """A ``petzval.Scene`` from the evaluated depsgraph. `stop()` (optional) is polled between
     objects; returns None when it asks to stop. Also returns counts for the status line."""
@@ -55,6 +67,9 @@ def build(petzval, depsgraph, notes, stop=None):
             continue
         if not getattr(obj, "visible_camera", True) or not getattr(obj, "visible_shadow", True):
             notes.warn(f"object '{obj.name}': ray visibility settings (rendered fully visible)")
+        for what, flag in (("holdout", "holdout_get"), ("indirect only", "indirect_only_get")):
+            if _view_layer_flag(obj, flag, depsgraph) or (what == "holdout" and getattr(obj, "is_holdout", False)):
+                notes.warn(f"object '{obj.name}': {what} (rendered as an ordinary object)")
         data = obj.data
         key = data.as_pointer() if data is not None else ("object", obj.name_full)
         md = meshes.get(key, False)

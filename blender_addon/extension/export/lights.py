@@ -51,10 +51,13 @@ def add_light(pz, obj, matrix_world, notes, materials) -> None:
     lnt = node_tree_of(light) if hasattr(light, "node_tree") else None
     if lnt is not None and _light_nodes_do_something(lnt):
         notes.warn(f"light '{name}': light nodes")
+    if not getattr(light, "use_shadow", True):
+        notes.warn(f"light '{name}': Cast Shadow off (its light is shadowed)")
     if light.type in ("POINT", "SPOT"):
         intensity = colour * float(light.energy) / (4.0 * math.pi)
         if light.shadow_soft_size > 0:
-            notes.note("point and spot lights are rendered as points (radius ignored)")
+            # soft shadows and broad highlights become hard ones: listed, not just noted
+            notes.warn(f"light '{name}': radius {light.shadow_soft_size:.3g} m (rendered as a point)")
         if light.type == "POINT":
             pz.add_point_light(tuple(pos), tuple(intensity), name=name)
         else:
@@ -67,7 +70,9 @@ def add_light(pz, obj, matrix_world, notes, materials) -> None:
                 tuple(pos), tuple(direction), tuple(intensity), inner, outer, name=name, falloff="blender"
             )
     elif light.type == "SUN":
-        if light.angle > 0:
+        if light.angle > math.radians(1.0):
+            notes.warn(f"light '{name}': sun angle {math.degrees(light.angle):.2g}° (rendered as parallel light)")
+        elif light.angle > 0:
             notes.note("sun lights are rendered as parallel light (angle ignored)")
         pz.add_sun_light(tuple(direction), tuple(colour * float(light.energy)), name=name)
     elif light.type == "AREA":
