@@ -196,8 +196,9 @@ impl SplitMix {
 }
 
 /// Up to `count` camera rays as the realistic camera draws them: (image position, film point,
-/// rear-plane point inside the exit-pupil bounds), drawn from `rng`; film points outside the
-/// image circle (empty bounds) are skipped.
+/// rear-plane point from the exit-pupil bounds mixed with their defensive disc, 1 sample in
+/// 128), drawn from `rng`; film points where nothing is drawn (outside the image circle, except
+/// for the disc's share) are skipped.
 pub(super) fn camera_ray_samples(
     sensor: &Sensor,
     bounds: &petzval_renderer::optics::pupil::ExitPupilBounds,

@@ -179,7 +179,7 @@ impl UsdShot {
     /// camera object `Camera` as `/root/Camera/Camera`), when exactly one does.
     pub fn camera(&self, path: Option<&str>) -> Result<&UsdCamera, Error> {
         let names = || self.cameras.iter().map(|c| c.path.as_str()).collect::<Vec<_>>().join(", ");
-        if let Some(name) = path.filter(|p| !p.contains('/')) {
+        if let Some(name) = path.filter(|p| !p.contains('/') && !p.is_empty()) {
             let named = |c: &&UsdCamera| {
                 let mut parts = c.path.rsplit('/');
                 parts.next() == Some(name) || parts.next() == Some(name)

@@ -153,8 +153,10 @@ pub fn make_layers(
     preview: &PreviewSettings,
     progress: Progress,
 ) -> Result<Option<Layers>> {
+    // The frame's chief rays take the lens sample (0.5, 0.5), the pupil's centre in the traced
+    // bounds (not in the defensive disc's mixture).
     let frame = LayerFrame::covering(
-        &rig.camera,
+        &rig.camera.for_shared_lens_samples(),
         settings.width,
         settings.height,
         preview.layers.margin,
