@@ -555,7 +555,15 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
             usd_cam.as_ref().and_then(|u| u.1.focus_distance_m)
         }
         (None, None) => {
-            let f = shot::autofocus_m(&render_scene, &to_world);
+            // what the camera sees: within a USD camera's clippingRange or a glTF one's znear/zfar
+            let clip = match &usd_cam {
+                Some((_, c, _)) => c.clipping_range_m,
+                None if args.scene.is_some() => {
+                    (scene_cam.znear as f64, scene_cam.zfar.map_or(f64::INFINITY, |f| f as f64))
+                }
+                None => (0.0, f64::INFINITY),
+            };
+            let f = shot::autofocus_clipped_m(&render_scene, &to_world, clip);
             match f {
                 Some(f) => eprintln!("autofocus: {f:.3} m (the surface at the image centre)"),
                 None => eprintln!("autofocus: nothing at the image centre, focusing at infinity"),

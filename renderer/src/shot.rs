@@ -53,9 +53,20 @@ pub fn scene_depth_range_m(
 /// Autofocus: the distance (m) to the surface the image centre sees (the camera's −z axis from
 /// its origin); `None` (infinity) when nothing is there.
 pub fn autofocus_m(scene: &RenderScene, to_world: &DAffine3) -> Option<f64> {
+    autofocus_clipped_m(scene, to_world, (0.0, f64::INFINITY))
+}
+
+/// [`autofocus_m`] seeing only what lies between the clipping planes `clip_m` (start, end,
+/// metres along the view axis), as the render does.
+pub fn autofocus_clipped_m(scene: &RenderScene, to_world: &DAffine3, clip_m: (f64, f64)) -> Option<f64> {
     let o = to_world.translation.as_vec3();
     let d = to_world.transform_vector3(DVec3::NEG_Z).normalize().as_vec3();
-    scene.intersect(o, d, f32::INFINITY).map(|h| h.t as f64)
+    let near = clip_m.0.max(0.0);
+    let t_max = if clip_m.1.is_finite() { (clip_m.1 - near).max(0.0) as f32 } else { f32::INFINITY };
+    if !(t_max > 0.0) {
+        return None;
+    }
+    scene.intersect(o + d * near as f32, d, t_max).map(|h| h.t as f64 + near)
 }
 
 /// Builds the camera of `spec` for a shot of `scene` seen from `to_world` at `width` ×

@@ -1463,3 +1463,22 @@ fn adaptive_settings_are_checked() {
     .to_string();
     assert!(e.contains("adaptive_threshold"), "{e}");
 }
+
+/// Autofocus sees what the render sees: with clipping planes it focuses past a surface nearer
+/// than the clip start and ignores one beyond the clip end.
+#[test]
+fn autofocus_honours_the_clipping_planes() {
+    // discs facing the camera at 1 m and 3 m down −z from the origin
+    let scene = scene_of(
+        &[disc(Vec3::new(0.0, 0.0, -1.0), 0.2, 0), disc(Vec3::new(0.0, 0.0, -3.0), 1.0, 0)],
+        vec![diffuse(Vec3::splat(0.5))],
+        Environment::Black,
+    );
+    let at = DAffine3::IDENTITY;
+    let f = |clip| petzval_renderer::shot::autofocus_clipped_m(&scene, &at, clip);
+    assert!((petzval_renderer::shot::autofocus_m(&scene, &at).unwrap() - 1.0).abs() < 1e-5);
+    assert!((f((0.0, f64::INFINITY)).unwrap() - 1.0).abs() < 1e-5);
+    assert!((f((1.5, 100.0)).unwrap() - 3.0).abs() < 1e-5, "{:?}", f((1.5, 100.0)));
+    assert_eq!(f((1.5, 2.5)), None);
+    assert_eq!(f((4.0, 100.0)), None);
+}
