@@ -49,12 +49,13 @@ pub struct RenderArgs {
     /// Focus distance in metres from the camera (default: autofocus on the image centre).
     #[arg(long)]
     pub focus: Option<f64>,
-    /// Sensor tilt about the horizontal axis (degrees).
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
-    pub tilt_x: f64,
-    /// Sensor tilt about the vertical axis (degrees).
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
-    pub tilt_y: f64,
+    /// Sensor tilt about the horizontal axis (degrees) [default: 0; the built-in demo's own
+    /// −6° without a scene file; a USD camera's own].
+    #[arg(long, allow_hyphen_values = true)]
+    pub tilt_x: Option<f64>,
+    /// Sensor tilt about the vertical axis (degrees) [default: 0, or a USD camera's own].
+    #[arg(long, allow_hyphen_values = true)]
+    pub tilt_y: Option<f64>,
     /// Sensor shift right (mm).
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pub shift_x: f64,
@@ -791,8 +792,8 @@ fn usd_host_camera(c: &petzval_usd::UsdCamera, args: &RenderArgs, focus_m: Optio
     if let Some(f) = args.focal_length {
         h.focal_length_mm = f;
     }
-    if args.tilt_x != 0.0 || args.tilt_y != 0.0 {
-        h.tilt_deg = DVec2::new(args.tilt_x, args.tilt_y);
+    if args.tilt_x.is_some() || args.tilt_y.is_some() {
+        h.tilt_deg = DVec2::new(args.tilt_x.unwrap_or(0.0), args.tilt_y.unwrap_or(0.0));
     }
     if args.shift_x != 0.0 || args.shift_y != 0.0 {
         h.film_back.shift = Shift::Mm(DVec2::new(args.shift_x, args.shift_y));
@@ -824,7 +825,8 @@ fn flags_host_camera(
     demo_shot: Option<&demo::DemoShot>,
     focus_m: Option<f64>,
 ) -> Result<HostCamera, Error> {
-    let tilt_x = if args.tilt_x == 0.0 { demo_shot.map(|d| d.tilt_x_deg).unwrap_or(0.0) } else { args.tilt_x };
+    // an explicit --tilt-x (0 too) wins over the demo's own tilt
+    let tilt_x = args.tilt_x.unwrap_or_else(|| demo_shot.map(|d| d.tilt_x_deg).unwrap_or(0.0));
     let film_back = FilmBack {
         width_mm: args.sensor_width,
         height_mm: args.sensor_width,
@@ -855,7 +857,7 @@ fn flags_host_camera(
         tolerance_px: args.tolerance,
         focal_length_mm: args.focal_length.unwrap_or(50.0),
         film_back,
-        tilt_deg: DVec2::new(tilt_x, args.tilt_y),
+        tilt_deg: DVec2::new(tilt_x, args.tilt_y.unwrap_or(0.0)),
         focus_distance_m: focus_m,
         aperture,
         clip_m: (0.0, f64::INFINITY),

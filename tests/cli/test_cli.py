@@ -467,6 +467,16 @@ METADATA_KEYS = {
 }
 
 
+def test_explicit_zero_tilt_untilts_the_demo(petzval, tmp_path):
+    """`--tilt-x 0` is a value, not "not given": it takes the demo's own −6° tilt away (it was
+    ignored, and a lens with a short back focus then failed on the tilt it was never asked for)."""
+    r = run(petzval, ["render", *FAST, "--tilt-x", "0", "-o", "t.exr", "--no-png"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "tilted focus plane" not in r.stderr, r.stderr
+    meta, _ = read_exr(tmp_path / "t.exr")
+    assert float(meta["petzval/tiltXDeg"]) == 0.0, meta["petzval/tiltXDeg"]
+
+
 def test_render_demo_without_arguments(petzval, tmp_path):
     r = run(petzval, ["render", *FAST, "--seed", "7"], tmp_path)
     assert r.returncode == 0, r.stderr

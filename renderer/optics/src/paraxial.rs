@@ -2,8 +2,11 @@
 //! cardinal points, pupils, f-numbers, Petzval sum, focusing and the thick-lens approximation.
 //!
 //! All z positions are in the lens frame: millimetres from the first surface's vertex, positive
-//! towards the film. Object and image space are air. The y–z meridian is used; for
-//! anamorphic lenses the x–z meridian is reported separately (`efl_x_mm`).
+//! towards the film. Object space is air; image space is the medium after the last surface
+//! (air, or a glass or liquid: an eye's vitreous), whose index n′ scales the image-side
+//! distances (back focal length n′/φ, rear focal length n′·EFL, exit pupil, image distances).
+//! The y–z meridian is used; for anamorphic lenses the x–z meridian is reported separately
+//! (`efl_x_mm`).
 
 use super::lens::Lens;
 use super::prescription::CylinderAxis;
@@ -134,10 +137,12 @@ pub fn analyse(lens: &Lens, wavelength_nm: f64) -> ParaxialData {
     let sys = matrix(lens, 0, n, wavelength_nm, Meridian::Y, false);
     let sys_x = matrix(lens, 0, n, wavelength_nm, Meridian::X, false);
     // 1. Cardinal points from the system matrix (infinite for an afocal system such as a plate).
+    // Image space index n′: reduced angles ω = n′u there, so image-side distances are n′·y/ω.
+    let n_img = lens.index_after(n - 1, wavelength_nm);
     let afocal = sys.c.abs() < 1e-15;
     let efl = if afocal { f64::INFINITY } else { -1.0 / sys.c };
     let efl_x = if sys_x.c.abs() < 1e-15 { f64::INFINITY } else { -1.0 / sys_x.c };
-    let bfl = if afocal { f64::INFINITY } else { -sys.a / sys.c };
+    let bfl = if afocal { f64::INFINITY } else { -n_img * sys.a / sys.c };
     let front_focal_z = if afocal { f64::NEG_INFINITY } else { sys.d / sys.c };
     let rear_focal_z = last_z + bfl;
     // 2. Pupils: images of the stop through the groups in front of and behind it.
@@ -149,7 +154,7 @@ pub fn analyse(lens: &Lens, wavelength_nm: f64) -> ParaxialData {
     let (xp_z, xp_d) = if back.d.abs() < 1e-15 {
         (f64::INFINITY, f64::INFINITY)
     } else {
-        (last_z - back.b / back.d, 2.0 * stop_r / back.d.abs())
+        (last_z - n_img * back.b / back.d, 2.0 * stop_r / back.d.abs())
     };
     // 3. Petzval sum.
     let mut petzval = 0.0;
@@ -166,9 +171,10 @@ pub fn analyse(lens: &Lens, wavelength_nm: f64) -> ParaxialData {
         ffl_mm: -front_focal_z,
         front_focal_z_mm: front_focal_z,
         rear_focal_z_mm: rear_focal_z,
+        // focal lengths f = EFL (object side, air) and f′ = n′·EFL; nodal points swap them
         front_principal_z_mm: front_focal_z + efl,
-        rear_principal_z_mm: rear_focal_z - efl,
-        front_nodal_z_mm: front_focal_z + efl,
+        rear_principal_z_mm: rear_focal_z - n_img * efl,
+        front_nodal_z_mm: front_focal_z + n_img * efl,
         rear_nodal_z_mm: rear_focal_z - efl,
         entrance_pupil_z_mm: ep_z,
         entrance_pupil_diameter_mm: ep_d,
@@ -205,7 +211,7 @@ pub fn image_distance_mm(lens: &Lens, object_z_mm: f64, wavelength_nm: f64) -> R
             -object_z_mm
         )));
     }
-    Ok(-y / w)
+    Ok(-lens.index_after(n - 1, wavelength_nm) * y / w)
 }
 
 /// Working f-number 1 / (2 n' sin u') for an axial object at `object_z_mm` (None = infinity),

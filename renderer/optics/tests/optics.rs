@@ -923,3 +923,42 @@ fn misalignment_errors_name_the_field() {
         assert!(err.contains(field), "{err} should name {field}");
     }
 }
+
+/// Image space in glass (an eye's vitreous, a lens cemented to its sensor): the image-side
+/// paraxial distances scale with its index n′. One surface of radius R into n′ = 1.5168: EFL =
+/// R/(n′ − 1), BFL = n′·R/(n′ − 1), the rear principal plane at the vertex, and a real ray near
+/// the axis crosses it at the rear focal point (the BFL was R/(n′ − 1) before, 20 mm short).
+#[test]
+fn image_space_in_glass_scales_the_image_side() {
+    let l = lens(
+        "[lens]\nname = \"image-in-glass\"\nsource = \"test\"\n\n[[surface]]\nthickness_mm = 2.0\nsemi_diameter_mm = 4.0\nstop = true\n\n[[surface]]\nradius_mm = 20.0\nthickness_mm = 60.0\nmaterial = { nd = 1.5168, vd = 0 }\nsemi_diameter_mm = 8.0\n",
+    );
+    let n = l.index_after(1, l.primary_wavelength_nm());
+    let p = l.paraxial();
+    let efl = 20.0 / (n - 1.0);
+    assert!((p.efl_mm - efl).abs() < 1e-9 * efl, "{p:?}");
+    assert!((p.bfl_mm - n * efl).abs() < 1e-9 * efl, "{p:?}");
+    assert!((p.rear_principal_z_mm - 2.0).abs() < 1e-9, "{p:?}");
+    let t = l
+        .trace(&Ray::new(DVec3::new(0.0, 1e-3, -5.0), DVec3::Z), l.primary_wavelength_nm(), TraceDirection::SceneToFilm)
+        .unwrap();
+    let z_cross = t.ray.origin.z - t.ray.origin.y * t.ray.direction.z / t.ray.direction.y;
+    assert!(
+        (z_cross - p.rear_focal_z_mm).abs() < 1e-4,
+        "real ray crosses at {z_cross}, paraxial {}",
+        p.rear_focal_z_mm
+    );
+    // focused at 1 m, the image distance is the real rays' too
+    let v = l.focus_image_distance_mm(Some(1000.0)).unwrap();
+    let object_z = p.entrance_pupil_z_mm - 1000.0;
+    let o = DVec3::new(0.0, 0.0, object_z);
+    let t = l
+        .trace(&Ray::new(o, DVec3::new(0.0, 1e-3, 2.0) - o), l.primary_wavelength_nm(), TraceDirection::SceneToFilm)
+        .unwrap();
+    let z_cross = t.ray.origin.z - t.ray.origin.y * t.ray.direction.z / t.ray.direction.y;
+    assert!(
+        (z_cross - (l.last_vertex_z_mm() + v)).abs() < 1e-3,
+        "real {z_cross}, paraxial {}",
+        l.last_vertex_z_mm() + v
+    );
+}
