@@ -334,6 +334,23 @@ fn zemax_diam_zero_takes_the_neighbours() {
     assert!(p.lens.notes.contains("DIAM 0"));
 }
 
+/// What a camera lens does not carry is named, not dropped in silence: a finite object distance
+/// (SURF 0's DISZ) and a curved image surface (the last SURF's CURV). The lens itself is the
+/// same.
+#[test]
+fn zemax_object_distance_and_curved_image_are_noted() {
+    let text = read("zmx/cooke_triplet.zmx");
+    let (plain, _) = import_zemax(text.as_bytes(), "c.zmx").unwrap();
+    assert!(!plain.lens.notes.contains("object distance") && !plain.lens.notes.contains("image surface"));
+    let t = text.replacen("DISZ INFINITY", "DISZ 500", 1);
+    let sevens = t.find("SURF 7").unwrap();
+    let t = format!("{}{}", &t[..sevens], t[sevens..].replacen("CURV 0.0000000000000000E+00", "CURV -0.01", 1));
+    let (p, _) = import_zemax(t.as_bytes(), "o.zmx").unwrap();
+    assert!(p.lens.notes.contains("object distance (SURF 0 DISZ 500 mm)"), "{}", p.lens.notes);
+    assert!(p.lens.notes.contains("image surface's curvature (SURF 7 CURV, radius -100"), "{}", p.lens.notes);
+    assert_eq!(p.surfaces.len(), plain.surfaces.len());
+}
+
 // ---------------------------------------------------------------------------------------------
 // lentil
 // ---------------------------------------------------------------------------------------------

@@ -260,6 +260,21 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
     }
     let lens_surfs = &surfs[1..surfs.len() - 1];
     let mut notes: Vec<String> = Vec::new();
+    // What a camera lens file does not carry, named rather than dropped in silence: the render
+    // focuses with --focus, and the sensor is flat.
+    if let Some(d) = surfs[0].disz.filter(|d| d.is_finite()) {
+        notes.push(format!(
+            "The file's object distance (SURF 0 DISZ {d} mm) is not kept: petzval focuses where the render asks (--focus)."
+        ));
+    }
+    let image = &surfs[surfs.len() - 1];
+    if image.curv.abs() > 1e-10 {
+        notes.push(format!(
+            "The image surface's curvature (SURF {} CURV, radius {:.4} mm) is not kept: the sensor is flat.",
+            image.number,
+            1.0 / image.curv
+        ));
+    }
 
     // Semi-diameters: CLAP max, else DIAM, else from the neighbours.
     let given: Vec<Option<f64>> = lens_surfs.iter().map(|s| s.clap.or(s.diam).filter(|&d| d > 0.0)).collect();
