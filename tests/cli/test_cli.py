@@ -477,6 +477,25 @@ def test_explicit_zero_tilt_untilts_the_demo(petzval, tmp_path):
     assert float(meta["petzval/tiltXDeg"]) == 0.0, meta["petzval/tiltXDeg"]
 
 
+@pytest.mark.parametrize(
+    "sensor,warned", [pytest.param("200", True, id="huge-sensor"), pytest.param("36", False, id="full-frame")]
+)
+def test_a_small_image_circle_is_warned(petzval, tmp_path, sensor, warned):
+    """A real lens whose image circle covers less than half of the sensor's half-diagonal gets a
+    warning naming the radius (fisheye-10mm's circle is 13 mm across a 200 mm sensor); on a full
+    frame sensor (its circle about 60 %) nothing is said."""
+    r = run(
+        petzval,
+        ["render", *FAST, "--lens", "fisheye-10mm", "--sensor-width", sensor, "-o", "c.exr", "--no-png"],
+        tmp_path,
+    )
+    assert r.returncode == 0, r.stderr
+    lines = [ln for ln in r.stderr.splitlines() if ln.startswith("warning:") and "covers a circle" in ln]
+    assert bool(lines) == warned, r.stderr
+    if warned:
+        assert "fisheye-10mm" in lines[0] and "13.1" in lines[0], lines[0]
+
+
 def test_render_demo_without_arguments(petzval, tmp_path):
     r = run(petzval, ["render", *FAST, "--seed", "7"], tmp_path)
     assert r.returncode == 0, r.stderr
@@ -515,8 +534,11 @@ def test_render_methods_record_themselves(petzval, tmp_path):
     images = {}
     for method in ("mc", "ibrt"):
         out = f"{method}.exr"
-        r = run(petzval, ["render", "--resolution", "96x64", "--spp", "32", "-o", out, "--no-png",
-                          "--method", method], tmp_path)
+        r = run(
+            petzval,
+            ["render", "--resolution", "96x64", "--spp", "32", "-o", out, "--no-png", "--method", method],
+            tmp_path,
+        )
         assert r.returncode == 0, r.stderr
         meta, ch = read_exr(tmp_path / out)
         assert meta["petzval/dofMethod"] == method, meta
