@@ -710,7 +710,12 @@ fn check_geometry(surfaces: &[LensSurface], map: &SourceMap) -> Result<()> {
             return Err(map.surface_error(
                 i,
                 "semi_diameter_mm",
-                format!("{} mm is larger than the surface's radius of curvature allows", s.semi_diameter_mm),
+                format!(
+                    "{} mm is larger than the surface allows (radius of curvature {:.6} mm, conic {})",
+                    s.semi_diameter_mm,
+                    1.0 / s.shape.paraxial_curvature_per_mm(),
+                    s.shape.conic
+                ),
             ));
         }
     }

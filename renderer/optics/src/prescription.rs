@@ -280,16 +280,41 @@ pub struct SourceMap {
     pub aperture_line: usize,
     /// Line of the `[lens]` table.
     pub lens_line: usize,
+    /// Per surface, the source's own line and keyword of a field (importers: Zemax's `DISZ`
+    /// for `thickness_mm`, ...); empty when the source has none.
+    pub field_keywords: Vec<Vec<(String, usize, String)>>,
 }
 
 impl SourceMap {
     /// A map for a prescription built in memory or by an importer: surface `i` is on `lines[i]`.
     pub fn new(file: impl Into<String>, surface_lines: Vec<usize>) -> Self {
-        SourceMap { file: file.into(), surface_lines, text: None, aperture_line: 0, lens_line: 0 }
+        SourceMap {
+            file: file.into(),
+            surface_lines,
+            text: None,
+            aperture_line: 0,
+            lens_line: 0,
+            field_keywords: Vec::new(),
+        }
+    }
+
+    /// This map with the source's own line and keyword for fields of each surface
+    /// (`keywords[i]`: (our field, line, keyword)), which errors then name.
+    pub fn with_field_keywords(mut self, keywords: Vec<Vec<(String, usize, String)>>) -> Self {
+        self.field_keywords = keywords;
+        self
+    }
+
+    /// The source's (line, keyword) of `field` of surface `index`, where the importer knows it.
+    fn keyword(&self, index: usize, field: &str) -> Option<(usize, &str)> {
+        self.field_keywords.get(index)?.iter().find(|(f, _, _)| f == field).map(|(_, l, k)| (*l, k.as_str()))
     }
 
     /// Line of `field` inside surface `index` (falls back to the table's line).
     pub fn surface_field_line(&self, index: usize, field: &str) -> usize {
+        if let Some((line, _)) = self.keyword(index, field) {
+            return line;
+        }
         let start = self.surface_lines.get(index).copied().unwrap_or(0);
         if let (Some(text), true) = (&self.text, start > 0) {
             for (i, line) in text.lines().enumerate().skip(start) {
@@ -307,12 +332,11 @@ impl SourceMap {
 
     /// An error about field `field` of surface `index`.
     pub fn surface_error(&self, index: usize, field: &str, message: impl Into<String>) -> Error {
-        Error::lens_file(
-            &self.file,
-            self.surface_field_line(index, field),
-            format!("surface[{}].{}", index + 1, field),
-            message,
-        )
+        let name = match self.keyword(index, field) {
+            Some((_, keyword)) => format!("surface[{}].{} ({keyword})", index + 1, field),
+            None => format!("surface[{}].{}", index + 1, field),
+        };
+        Error::lens_file(&self.file, self.surface_field_line(index, field), name, message)
     }
 }
 
@@ -339,7 +363,14 @@ pub fn parse_toml(text: &str, file: &str) -> Result<(Prescription, SourceMap)> {
             lens_line = i + 1;
         }
     }
-    let map = SourceMap { file: file.into(), surface_lines, text: Some(text.to_string()), aperture_line, lens_line };
+    let map = SourceMap {
+        file: file.into(),
+        surface_lines,
+        text: Some(text.to_string()),
+        aperture_line,
+        lens_line,
+        field_keywords: Vec::new(),
+    };
     Ok((p, map))
 }
 

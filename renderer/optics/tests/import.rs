@@ -317,12 +317,21 @@ fn zemax_bad_input_names_the_line() {
 }
 
 #[test]
-fn zemax_intersecting_elements_are_reported_at_the_surf_line() {
+fn zemax_intersecting_elements_are_reported_at_the_disz_line() {
+    // the error names the keyword's own line and the keyword (it named the SURF line before)
     let text = read("zmx/cooke_triplet.zmx");
     let t = text.replacen("DISZ 3.2589600000000001E+00", "DISZ 0.1", 1);
     let (line, field, msg) = lens_file_err(build(import_zemax(t.as_bytes(), "x.zmx")));
-    assert_eq!(line, line_containing(&t, "SURF 1"), "{msg}");
-    assert_eq!(field, "surface[1].thickness_mm");
+    assert_eq!(line, line_containing(&t, "DISZ 0.1"), "{msg}");
+    assert!(line > line_containing(&t, "SURF 1") && line < line_containing(&t, "SURF 2"), "{msg}");
+    assert_eq!(field, "surface[1].thickness_mm (DISZ)");
+    // a semi-diameter the surface cannot have: the DIAM line, and the radius in the message
+    let first = text.find("SURF 1").unwrap();
+    let t = format!("{}{}", &text[..first], text[first..].replacen("DIAM 9.1900830893933154E+00", "DIAM 40", 1));
+    let (line, field, msg) = lens_file_err(build(import_zemax(t.as_bytes(), "d.zmx")));
+    assert_eq!(line, line_containing(&t, "DIAM 40"), "{msg}");
+    assert_eq!(field, "surface[1].semi_diameter_mm (DIAM)");
+    assert!(msg.contains("radius of curvature"), "{msg}");
 }
 
 #[test]

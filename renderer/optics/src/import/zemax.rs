@@ -58,6 +58,8 @@ struct ZSurf {
     parms: Vec<(usize, usize, f64)>,
     stop: bool,
     comment: String,
+    /// The line of each geometry keyword read (CURV, DISZ, DIAM, CLAP, CONI), for errors.
+    key_lines: Vec<(&'static str, usize)>,
 }
 
 #[derive(Debug, Clone)]
@@ -174,6 +176,9 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
             }
             _ => {
                 let Some(s) = surfs.last_mut() else { continue };
+                if let Some(k) = ["CURV", "DISZ", "DIAM", "CLAP", "CONI"].into_iter().find(|k| *k == key) {
+                    s.key_lines.push((k, line));
+                }
                 match key {
                     "TYPE" => s.ty = Some((line, tokens.get(1).copied().unwrap_or("").to_string())),
                     "CURV" => s.curv = num(tokens.get(1), line, "CURV")? / unit_mm,
@@ -327,7 +332,24 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
     // Surfaces.
     let mut specs: Vec<SurfaceSpec> = Vec::with_capacity(lens_surfs.len() + 1);
     let mut lines: Vec<usize> = Vec::with_capacity(lens_surfs.len() + 1);
+    let mut keywords: Vec<Vec<(String, usize, String)>> = Vec::with_capacity(lens_surfs.len());
     for (k, s) in lens_surfs.iter().enumerate() {
+        // our fields' own lines: the keywords that set them
+        let key_line = |kw: &str| s.key_lines.iter().rev().find(|(k, _)| *k == kw).map(|(_, l)| *l);
+        let mut fields = Vec::new();
+        for (field, kw) in [("thickness_mm", "DISZ"), ("radius_mm", "CURV"), ("conic", "CONI")] {
+            if let Some(l) = key_line(kw) {
+                fields.push((field.to_string(), l, kw.to_string()));
+            }
+        }
+        let semi_kw = if s.clap.is_some() { "CLAP" } else { "DIAM" };
+        if let Some(l) = key_line(semi_kw) {
+            fields.push(("semi_diameter_mm".to_string(), l, semi_kw.to_string()));
+        }
+        if let Some((l, _)) = &s.glass {
+            fields.push(("material".to_string(), *l, "GLAS".to_string()));
+        }
+        keywords.push(fields);
         let thickness = match s.disz {
             Some(t) if t.is_finite() => t,
             Some(_) => return Err(Error::lens_file(file, s.line, "DISZ", "a lens surface cannot be INFINITY thick")),
@@ -473,5 +495,5 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
         aperture: Default::default(),
         surfaces: specs,
     };
-    Ok((p, SourceMap::new(file, lines)))
+    Ok((p, SourceMap::new(file, lines).with_field_keywords(keywords)))
 }
