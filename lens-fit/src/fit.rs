@@ -183,7 +183,11 @@ impl Problem {
     /// Loads every capture of a manifest and prepares the fit from its start lens.
     pub fn new(manifest: &Manifest, options: &FitOptions) -> Result<Problem> {
         let file = manifest.file.display().to_string();
-        let lens = petzval_optics::load_lens(&manifest.start_lens)?;
+        let lens = petzval_optics::load_lens(&manifest.start_lens).map_err(|e| match e {
+            // a lens that is not found is the manifest's field; a broken lens file names itself
+            petzval_optics::Error::UnknownLens(_) => Error::manifest(&file, "lens.start", e.to_string()),
+            other => other.into(),
+        })?;
         let mut start = Model::new(lens.prescription().clone());
         for (i, f) in manifest.free.iter().enumerate() {
             let field = format!("free[{}].param", i + 1);

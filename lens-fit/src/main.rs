@@ -10,7 +10,7 @@
 use clap::Parser;
 use petzval_fit::fit::{FitOptions, Problem};
 use petzval_fit::{report, solve, Error, Manifest};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 /// Fit a Petzval lens to photographs of point light sources.
@@ -134,15 +134,42 @@ fn run(args: &Args) -> petzval_fit::Result<()> {
         let text = std::fs::read_to_string(&path).map_err(|e| Error::Io { path: path.clone(), source: e })?;
         let v: serde_json::Value = serde_json::from_str(&text)
             .map_err(|e| Error::manifest(path.display().to_string(), "fit.json", e.to_string()))?;
-        for (i, f) in manifest.free.iter_mut().enumerate() {
-            let value = v["params"][&f.name]["value"].as_f64().ok_or_else(|| {
-                Error::manifest(
+        // Every parameter the earlier fit set must be listed here (its bounds say where it may
+        // lie), or evaluating would silently use the start lens's value for it.
+        if let Some(params) = v["params"].as_object() {
+            let missing: Vec<&String> =
+                params.keys().filter(|k| !manifest.free.iter().any(|f| &f.name == *k)).collect();
+            if !missing.is_empty() {
+                return Err(Error::manifest(
                     &file,
-                    format!("free[{}].param", i + 1),
-                    format!("'{}' is not in {}", f.name, path.display()),
-                )
+                    "free",
+                    format!(
+                        "{} fitted {} which this manifest's [[free]] tables do not list; list them (with their bounds) to evaluate through that fit",
+                        path.display(),
+                        missing.iter().map(|s| s.as_str()).collect::<Vec<_>>().join(", ")
+                    ),
+                ));
+            }
+        }
+        for (i, f) in manifest.free.iter_mut().enumerate() {
+            let field = format!("free[{}].param", i + 1);
+            let value = v["params"][&f.name]["value"].as_f64().ok_or_else(|| {
+                Error::manifest(&file, &field, format!("'{}' has no numeric value in {}", f.name, path.display()))
             })?;
-            f.start = Some(value.clamp(f.min, f.max));
+            if !(value >= f.min && value <= f.max) {
+                return Err(Error::manifest(
+                    &file,
+                    &field,
+                    format!(
+                        "{} = {value} in {} is outside this manifest's bounds [{}, {}]",
+                        f.name,
+                        path.display(),
+                        f.min,
+                        f.max
+                    ),
+                ));
+            }
+            f.start = Some(value);
         }
         options.global_share = 0.0;
     }
@@ -183,6 +210,19 @@ fn run(args: &Args) -> petzval_fit::Result<()> {
     };
     if !evaluate && args.output.is_none() {
         return Err(usage("-o FITTED.toml is required (the fitted lens)"));
+    }
+    // Where the results go is checked before the fit, not after it.
+    if report_dir.exists() && !report_dir.is_dir() {
+        return Err(usage(&format!("--report {}: exists and is not a folder", report_dir.display())));
+    }
+    for out in [args.output.as_ref(), args.lrtf.as_ref()].into_iter().flatten() {
+        let parent = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        if !parent.is_dir() {
+            return Err(usage(&format!("{}: the folder {} does not exist", out.display(), parent.display())));
+        }
+        if out.is_dir() {
+            return Err(usage(&format!("{}: is a folder", out.display())));
+        }
     }
     let fit_problem = if evaluate {
         let mut p = problem.clone();
@@ -225,6 +265,7 @@ fn run(args: &Args) -> petzval_fit::Result<()> {
     for p in &result.params {
         match p.sigma {
             Some(s) => println!("{:<28} {:>14.6} ± {:.2e}   (start {:.6})", p.name, p.value, s, p.start),
+            None if evaluate => println!("{:<28} {:>14.6}   (from the earlier fit)", p.name, p.value),
             None => {
                 println!("{:<28} {:>14.6}   not determined by these captures (start {:.6})", p.name, p.value, p.start)
             }

@@ -241,7 +241,8 @@ impl Manifest {
     pub fn parse(text: &str, path: &Path) -> Result<Manifest> {
         let file = path.display().to_string();
         let raw: RawManifest = toml::from_str(text.trim_start_matches('\u{feff}')).map_err(|e| {
-            let line = e.span().map(|s| text[..s.start].lines().count().max(1)).unwrap_or(0);
+            // 1 + the newlines before the span (`lines()` misses a span at a line's start)
+            let line = e.span().map(|s| text[..s.start].matches('\n').count() + 1).unwrap_or(0);
             Error::manifest(format!("{file}:{line}"), "manifest", e.message().to_string())
         })?;
         let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
@@ -355,10 +356,15 @@ impl Manifest {
                 saturation: c.saturation,
             });
         }
-        let start_lens = if Path::new(&raw.lens.start).is_relative() && dir.join(&raw.lens.start).exists() {
-            dir.join(&raw.lens.start).display().to_string()
+        // A library name as it is; a file relative to the manifest (never to the working
+        // directory, so the manifest means the same wherever it is run from).
+        let start = raw.lens.start.as_str();
+        let file_part = start.rsplit_once('#').map_or(start, |(f, _)| f);
+        let is_library = petzval_optics::LIBRARY.iter().any(|e| e.name == start);
+        let start_lens = if is_library || Path::new(file_part).is_absolute() {
+            start.to_string()
         } else {
-            raw.lens.start.clone()
+            dir.join(start).display().to_string()
         };
         let start_table = raw.lens.table.as_deref().map(resolve);
         Ok(Manifest { file: path.to_path_buf(), start_lens, start_table, sensor: s, free, captures })

@@ -48,6 +48,21 @@ f_number = "open"
 wavelength_nm = "rgb"
 "#;
 
+/// A manifest error at the start of a line names that line (it named the line before), and a
+/// start lens given as a relative file is the manifest's neighbour, wherever the fit runs.
+#[test]
+fn errors_name_the_line_and_start_lenses_are_relative_to_the_manifest() {
+    let bad = GOOD.replacen("exposure = 1.0\n", "exposure = 1.0\nfocal_length = 50\n", 1);
+    let line = bad.lines().position(|l| l.starts_with("focal_length")).unwrap() + 1;
+    let e = Manifest::parse(&bad, Path::new("/shots/m.toml")).unwrap_err().to_string();
+    assert!(e.contains(&format!("m.toml:{line}:")) && e.contains("focal_length"), "{e} (line {line})");
+    let rel = GOOD.replacen("start = \"double-gauss-50mm\"", "start = \"lenses/mine.zmx\"", 1);
+    let m = Manifest::parse(&rel, Path::new("/shots/m.toml")).unwrap();
+    assert_eq!(m.start_lens, "/shots/lenses/mine.zmx");
+    let m = Manifest::parse(GOOD, Path::new("/shots/m.toml")).unwrap();
+    assert_eq!(m.start_lens, "double-gauss-50mm", "a library name stays a name");
+}
+
 #[test]
 fn the_issue_example_parses() {
     let m = Manifest::parse(GOOD, Path::new("/shots/manifest.toml")).unwrap();

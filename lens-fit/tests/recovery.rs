@@ -213,5 +213,41 @@ fn the_command_line_fits_reports_and_evaluates() {
     let r = eval["captures"][0]["residual"].as_f64().unwrap();
     assert!(r < 0.05, "held-out capture residual {r}");
     println!("fit: offset {offset}; held-out residual {r}\n{stdout}");
+    // Evaluating through a fit whose parameters this manifest does not list is refused (it
+    // used the start lens's values for them in silence).
+    let bare_dir = dir.join("bare");
+    std::fs::create_dir_all(&bare_dir).unwrap();
+    let bare = write_captures(&bare_dir, &truth, &shots[..1], "", 40);
+    let out = std::process::Command::new(bin)
+        .args([
+            bare.to_str().unwrap(),
+            "--evaluate",
+            report.to_str().unwrap(),
+            "--report",
+            dir.join("r3").to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("free") && err.contains("sensor.offset_mm"), "{err}");
+    // Where the results go is checked before the fit: a report path that is a file, an output
+    // folder that does not exist; nothing is written.
+    let a_file = dir.join("a-file");
+    std::fs::write(&a_file, "x").unwrap();
+    let nowhere = dir.join("no-such-folder").join("f.toml");
+    for (out_lens, rep, words) in
+        [(lens_out.clone(), a_file.clone(), "not a folder"), (nowhere.clone(), dir.join("r4"), "does not exist")]
+    {
+        let t0 = std::time::Instant::now();
+        let out = std::process::Command::new(bin)
+            .args([manifest.to_str().unwrap(), "-o", out_lens.to_str().unwrap(), "--report", rep.to_str().unwrap()])
+            .args(["--time-limit", "600", "--max-evaluations", "100", "--rays", "8192"])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains(words), "{err}");
+        assert!(t0.elapsed().as_secs_f64() < 5.0, "checked only after fitting: {:?}", t0.elapsed());
+        assert!(!dir.join("r4").exists(), "a report was written by a failed run");
+    }
     std::fs::remove_dir_all(&dir).ok();
 }
