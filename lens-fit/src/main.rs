@@ -261,7 +261,10 @@ fn run(args: &Args) -> petzval_fit::Result<()> {
             })
             .collect();
     }
-    report::write_report(&report_dir, &fit_problem, &result, &model)?;
+    let written = report::write_report(&report_dir, &fit_problem, &result, &model)?;
+    for w in written["warnings"].as_array().into_iter().flatten().filter_map(|w| w.as_str()) {
+        eprintln!("warning: {w}");
+    }
     for p in &result.params {
         match p.sigma {
             Some(s) => println!("{:<28} {:>14.6} ± {:.2e}   (start {:.6})", p.name, p.value, s, p.start),

@@ -341,6 +341,14 @@ impl Manifest {
                     return Err(err(field("saturation"), format!("must be positive, got {v}")));
                 }
             }
+            // The same image at the same crop twice would count it twice (one photograph of
+            // several sources may be listed once per crop).
+            if let Some(j) = captures
+                .iter()
+                .position(|p: &Capture| p.image == resolve(&c.image) && p.crop_origin_px == c.crop_origin_px)
+            {
+                return Err(err(field("image"), format!("the same image and crop as capture[{}]", j + 1)));
+            }
             captures.push(Capture {
                 image: resolve(&c.image),
                 transfer: c.transfer,

@@ -3,7 +3,9 @@
 //!
 //! `fit.json` keys: `params` (name → `{value, sigma, start, determined}`; `sigma` is null for
 //! a parameter the captures cannot determine), `captures` (list of `{image, residual,
-//! shift_px, scale, background, clipped_pixels, hot_pixels}`), `seconds`, `iterations`
+//! shift_px, scale, background, clipped_pixels, hot_pixels}`), `warnings` (captures the
+//! fitted model does not explain: a non-positive intensity scale or a residual over 0.5, which
+//! the command also prints), `seconds`, `iterations`
 //! (objective evaluations per stage; a Jacobian counts one per parameter), `stage_seconds`
 //! (wall-clock per stage), `lm_stop` (`{reason, iterations, central_from_iteration}` of Levenberg–Marquardt: the last is the iteration from which its Jacobians were central differences, null for forward differences throughout), `correlations` (`{names, matrix}`), `history`
 //! (`[seconds, objective]` after each improvement), `camera` (the fitted camera parameters),
@@ -45,6 +47,9 @@ pub fn write_report(dir: &Path, problem: &Problem, result: &FitResult, model: &M
     }
     let landings = problem.landings(model);
     let mut captures = Vec::new();
+    // Captures the fitted model does not explain (a second source, a wrong source position or
+    // crop): a fit that "succeeds" on them is no fit.
+    let mut warnings: Vec<String> = Vec::new();
     for (c, prep) in problem.captures.iter().enumerate() {
         let fit = landings.as_ref().map(|l| problem.fit_capture(c, &l[c], result.shifts_px[c]));
         let image = prep.capture.image.display().to_string();
@@ -52,6 +57,14 @@ pub fn write_report(dir: &Path, problem: &Problem, result: &FitResult, model: &M
             prep.capture.image.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or(format!("capture{c}"));
         if let Some(f) = &fit {
             write_capture_png(&dir.join(format!("{:02}-{stem}.png", c + 1)), prep, &f.model)?;
+        }
+        let scale_sum: f64 = fit.as_ref().map_or(1.0, |f| f.scale.iter().sum());
+        if !(scale_sum > 0.0) || result.residuals[c] > 0.5 {
+            warnings.push(format!(
+                "capture {} ({image}): fitted intensity scale {scale_sum:.3e}, residual {:.3}: the model does not explain this capture (a second source, a wrong source position or crop?)",
+                c + 1,
+                result.residuals[c]
+            ));
         }
         captures.push(json!({
             "image": image,
@@ -77,6 +90,7 @@ pub fn write_report(dir: &Path, problem: &Problem, result: &FitResult, model: &M
         },
         "correlations": { "names": result.params.iter().map(|p| p.name.clone()).collect::<Vec<_>>(), "matrix": result.correlations },
         "captures": captures,
+        "warnings": warnings,
         "seconds": result.seconds,
         "iterations": iterations,
         "stage_seconds": stage_seconds,

@@ -61,6 +61,12 @@ fn errors_name_the_line_and_start_lenses_are_relative_to_the_manifest() {
     assert_eq!(m.start_lens, "/shots/lenses/mine.zmx");
     let m = Manifest::parse(GOOD, Path::new("/shots/m.toml")).unwrap();
     assert_eq!(m.start_lens, "double-gauss-50mm", "a library name stays a name");
+    // the same image at the same crop twice is refused; at another crop it is another source
+    let twice = GOOD.replacen("captures/c02.exr", "captures/c01.exr", 1).replacen("[0, 0]", "[2936, 1936]", 1);
+    let e = Manifest::parse(&twice, Path::new("/shots/m.toml")).unwrap_err().to_string();
+    assert!(e.contains("capture[2]") && e.contains("capture[1]"), "{e}");
+    let other_crop = GOOD.replacen("captures/c02.exr", "captures/c01.exr", 1);
+    assert!(Manifest::parse(&other_crop, Path::new("/shots/m.toml")).is_ok());
 }
 
 #[test]

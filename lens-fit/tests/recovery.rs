@@ -194,6 +194,8 @@ fn the_command_line_fits_reports_and_evaluates() {
     assert!(fit["params"]["sensor.offset_mm"]["sigma"].as_f64().is_some());
     assert_eq!(fit["captures"].as_array().unwrap().len(), 2);
     assert!(fit["captures"][0]["residual"].as_f64().unwrap() < 0.05);
+    // captures the model explains raise no warning (a second source in a capture does)
+    assert_eq!(fit["warnings"].as_array().map(Vec::len), Some(0), "{}", fit["warnings"]);
     assert!(fit["seconds"].as_f64().unwrap() > 0.0);
     assert!(report.join("01-c01.png").is_file() && report.join("convergence.svg").is_file());
     // the fitted lens is our format and loads
