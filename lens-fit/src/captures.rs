@@ -64,7 +64,16 @@ fn read_raw(path: &Path) -> Result<Raw> {
         let planes = match (find("R"), find("G"), find("B"), find("Y")) {
             (Some(r), Some(g), Some(b), _) => vec![r, g, b],
             (_, _, _, Some(y)) => vec![y],
-            _ => return Err(image_err(path, "has neither R, G, B nor Y channels")),
+            _ => {
+                let names: Vec<String> = layer.channel_data.list.iter().map(|c| c.name.to_string()).collect();
+                return Err(image_err(
+                    path,
+                    format!(
+                        "has neither R, G, B nor Y channels (its first layer has {}); write the capture's channels as R, G, B or Y",
+                        names.join(", ")
+                    ),
+                ));
+            }
         };
         return Ok(Raw { width, height, planes, max_value: None });
     }

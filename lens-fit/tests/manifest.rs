@@ -170,3 +170,21 @@ fn a_point_source_images_where_the_lens_says() {
     let (t4, ..) = stats(&image(&f4, [0.0, 0.0, 2.0], 2.0));
     assert!((t4 / t8 / 4.0 - 1.0).abs() < 0.03, "f/4 over f/8 light: {}", t4 / t8);
 }
+
+/// An EXR capture without R, G, B or Y channels (a render's layer-prefixed `diffuse.R`, ...) is
+/// refused naming the channels it has (the message named none).
+#[test]
+fn an_exr_without_rgb_or_y_names_its_channels() {
+    use exr::prelude::*;
+    let dir = std::env::temp_dir().join(format!("petzval-fit-exr-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let ch = |name: &str| AnyChannel::new(name, FlatSamples::F32(vec![0.5f32; 16]));
+    let channels = AnyChannels::sort(SmallVec::from_vec(vec![ch("diffuse.R"), ch("diffuse.G"), ch("diffuse.B")]));
+    let layer = Layer::new((4, 4), LayerAttributes::default(), Encoding::FAST_LOSSLESS, channels);
+    Image::from_layer(layer).write().to_file(dir.join("layered.exr")).unwrap();
+    let text = GOOD.replacen("captures/c01.exr", "layered.exr", 1);
+    let m = Manifest::parse(&text, &dir.join("m.toml")).unwrap();
+    let e = petzval_fit::captures::load(&m.captures[0]).err().expect("refused").to_string();
+    assert!(e.contains("layered.exr") && e.contains("diffuse.R") && e.contains("diffuse.B"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}
