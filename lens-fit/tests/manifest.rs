@@ -184,7 +184,7 @@ fn an_exr_without_rgb_or_y_names_its_channels() {
     Image::from_layer(layer).write().to_file(dir.join("layered.exr")).unwrap();
     let text = GOOD.replacen("captures/c01.exr", "layered.exr", 1);
     let m = Manifest::parse(&text, &dir.join("m.toml")).unwrap();
-    let e = petzval_fit::captures::load(&m.captures[0]).err().expect("refused").to_string();
+    let e = petzval_fit::captures::load(&m.captures[0]).expect_err("refused").to_string();
     assert!(e.contains("layered.exr") && e.contains("diffuse.R") && e.contains("diffuse.B"), "{e}");
     std::fs::remove_dir_all(&dir).ok();
 }
