@@ -17,6 +17,7 @@
 //! | `shift_steps` | Gauss–Newton steps on each capture's shift in every global/local evaluation (0: the centroid-matching shift) | — | 2 |
 //! | `max_evaluations` | objective evaluations of the whole fit (0: no bound, the time limit alone) | — | 0 |
 //! | `starts` | local (BOBYQA) starts from the global stage's best mutually distinct points | — | 3 |
+//! | `stop` | a flag that, once set (by the command's interrupt handler), ends the fit at its next evaluation with the best point so far: no further stage, no new Jacobian for the uncertainties | — | none |
 //! | `central_differences` | Levenberg–Marquardt's parameter Jacobian by central differences from the start (two evaluations per parameter: narrow valleys, e.g. several coupled radii, need them); false: forward differences until two poor steps, then central | bool | true |
 //!
 //! The whole fit keeps to `time_limit_s`: CRS2 35 %, BOBYQA 30 %, Levenberg–Marquardt computes
@@ -43,6 +44,7 @@ use petzval_optics::lrtf::{BakeOptions, LrtfTable};
 use petzval_optics::prescription::SourceMap;
 use petzval_optics::Lens;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 /// Fit settings (see the module's table).
@@ -76,6 +78,33 @@ pub struct FitOptions {
     /// Levenberg–Marquardt's parameter Jacobian by central differences from the start (twice
     /// the cost); false: forward differences until they prove poor, then central.
     pub central_differences: bool,
+    /// Set from outside (an interrupt) to end the fit early with the best point so far.
+    pub stop: StopFlag,
+}
+
+/// A flag that asks a running fit to stop at its next evaluation (see [`FitOptions::stop`]).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct StopFlag(Option<&'static AtomicBool>);
+
+impl StopFlag {
+    /// A stop flag watching `flag` (set it to request the stop).
+    pub fn new(flag: &'static AtomicBool) -> StopFlag {
+        StopFlag(Some(flag))
+    }
+
+    /// Whether the stop has been requested.
+    pub fn requested(&self) -> bool {
+        self.0.is_some_and(|f| f.load(Ordering::SeqCst))
+    }
+}
+
+impl PartialEq for StopFlag {
+    fn eq(&self, other: &StopFlag) -> bool {
+        match (self.0, other.0) {
+            (Some(a), Some(b)) => std::ptr::eq(a, b),
+            (a, b) => a.is_none() && b.is_none(),
+        }
+    }
 }
 
 impl FitOptions {
@@ -105,6 +134,7 @@ impl Default for FitOptions {
             max_evaluations: 0,
             starts: 3,
             central_differences: true,
+            stop: StopFlag::default(),
         }
     }
 }

@@ -6,12 +6,51 @@
 //! petzval-fit MANIFEST --evaluate DIR --report DIR2
 //! petzval-fit MANIFEST --check
 //! ```
+//!
+//! Interrupts (SIGINT, SIGTERM, SIGHUP):
+//!
+//! | phase | first signal | second signal |
+//! |---|---|---|
+//! | loading and checking | ends the program (exit 130), nothing written | — |
+//! | fitting | the fit stops at its next evaluation; its best point so far is written as usual, with `lm_stop.reason` = `interrupted` and a warning in `fit.json` (uncertainties only if its end point already had a Jacobian); exit 130 after the write | ends the program (exit 130); no output has been started |
+//! | writing (report, lens, LRTF) | the writes finish (each a temp file, then a rename), then exit 130 | the same |
 
 use clap::Parser;
 use petzval_fit::fit::{FitOptions, Problem};
 use petzval_fit::{report, solve, Error, Manifest};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU8, Ordering};
+
+/// Where the program is, for the interrupt handler (see the module's table): 0 loading,
+/// 1 fitting, 2 writing.
+static PHASE: AtomicU8 = AtomicU8::new(0);
+/// Signals received.
+static SIGNALS: AtomicU32 = AtomicU32::new(0);
+/// Set at the first signal while fitting: the fit's stop flag.
+static STOP_FIT: AtomicBool = AtomicBool::new(false);
+
+/// Installs the interrupt handler (SIGINT, SIGTERM and SIGHUP through ctrlc's `termination`).
+fn install_interrupts() {
+    let _ = ctrlc::set_handler(|| {
+        let n = SIGNALS.fetch_add(1, Ordering::SeqCst) + 1;
+        match PHASE.load(Ordering::SeqCst) {
+            0 => {
+                eprintln!("\ninterrupted before the fit started: nothing written");
+                std::process::exit(130);
+            }
+            1 if n == 1 => {
+                STOP_FIT.store(true, Ordering::SeqCst);
+                eprintln!("\ninterrupted: ending the fit and writing its best point so far (again to quit)");
+            }
+            1 => {
+                eprintln!("\ninterrupted again: quitting without writing");
+                std::process::exit(130);
+            }
+            _ => eprintln!("\ninterrupted: finishing the writes first"),
+        }
+    });
+}
 
 /// Fit a Petzval lens to photographs of point light sources.
 #[derive(Parser, Debug)]
@@ -69,7 +108,9 @@ struct Args {
 
 fn main() -> ExitCode {
     let args = Args::parse();
+    install_interrupts();
     match run(&args) {
+        Ok(()) if SIGNALS.load(Ordering::SeqCst) > 0 => ExitCode::from(130),
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e}");
@@ -125,6 +166,7 @@ fn run(args: &Args) -> petzval_fit::Result<()> {
         central_differences: args.central_differences || !args.forward_differences,
         max_evaluations: args.max_evaluations.unwrap_or(0),
         starts: args.starts,
+        stop: petzval_fit::fit::StopFlag::new(&STOP_FIT),
         ..Default::default()
     };
     let mut manifest = manifest;
@@ -243,7 +285,10 @@ fn run(args: &Args) -> petzval_fit::Result<()> {
         let best = if p.best.is_finite() { format!("{:.3e}", p.best) } else { "–".to_string() };
         bar.set_message(format!("{} best {best}", p.stage));
     };
+    PHASE.store(1, Ordering::SeqCst);
     let result = petzval_fit::staged::run_with_progress(&fit_problem, &options, &update);
+    // From here on a signal waits for the writes (each a temp file, then a rename).
+    PHASE.store(2, Ordering::SeqCst);
     bar.finish_and_clear();
     let values: Vec<f64> = result.params.iter().map(|p| p.value).collect();
     let model = fit_problem.model_at(&values).map_err(|m| usage(&m))?;
@@ -269,6 +314,9 @@ fn run(args: &Args) -> petzval_fit::Result<()> {
         match p.sigma {
             Some(s) => println!("{:<28} {:>14.6} ± {:.2e}   (start {:.6})", p.name, p.value, s, p.start),
             None if evaluate => println!("{:<28} {:>14.6}   (from the earlier fit)", p.name, p.value),
+            None if !result.uncertainties_computed => {
+                println!("{:<28} {:>14.6}   (interrupted: no uncertainty; start {:.6})", p.name, p.value, p.start)
+            }
             None => {
                 println!("{:<28} {:>14.6}   not determined by these captures (start {:.6})", p.name, p.value, p.start)
             }

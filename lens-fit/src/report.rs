@@ -2,10 +2,11 @@
 //! capture with measured | fitted | difference on one scale, `convergence.svg`).
 //!
 //! `fit.json` keys: `params` (name → `{value, sigma, start, determined}`; `sigma` is null for
-//! a parameter the captures cannot determine), `captures` (list of `{image, residual,
+//! a parameter the captures cannot determine, and for every parameter of a fit interrupted
+//! before its end point had a Jacobian, whose `determined` is then null: unknown), `captures` (list of `{image, residual,
 //! shift_px, scale, background, clipped_pixels, hot_pixels}`), `warnings` (captures the
-//! fitted model does not explain: a non-positive intensity scale or a residual over 0.5, which
-//! the command also prints), `seconds`, `iterations`
+//! fitted model does not explain: a non-positive intensity scale or a residual over 0.5, and an
+//! interrupted fit; the command also prints them), `seconds`, `iterations`
 //! (objective evaluations per stage; a Jacobian counts one per parameter), `stage_seconds`
 //! (wall-clock per stage), `lm_stop` (`{reason, iterations, central_from_iteration}` of Levenberg–Marquardt: the last is the iteration from which its Jacobians were central differences, null for forward differences throughout), `correlations` (`{names, matrix}`), `history`
 //! (`[seconds, objective]` after each improvement), `camera` (the fitted camera parameters),
@@ -38,11 +39,15 @@ pub fn write_lens(path: &Path, model: &Model, manifest_file: &str) -> Result<()>
 /// Writes `fit.json`, the capture PNGs and the convergence plot into `dir`.
 pub fn write_report(dir: &Path, problem: &Problem, result: &FitResult, model: &Model) -> Result<Value> {
     std::fs::create_dir_all(dir).map_err(|e| io_err(dir, e))?;
+    // An interrupted fit may have computed no uncertainties: whether a parameter is
+    // determined is then unknown.
+    let interrupted = result.lm_stop.0 == "interrupted";
     let mut params = Map::new();
     for p in &result.params {
+        let determined = if result.uncertainties_computed { json!(p.sigma.is_some()) } else { Value::Null };
         params.insert(
             p.name.clone(),
-            json!({ "value": p.value, "sigma": p.sigma, "start": p.start, "determined": p.sigma.is_some() }),
+            json!({ "value": p.value, "sigma": p.sigma, "start": p.start, "determined": determined }),
         );
     }
     let landings = problem.landings(model);
@@ -50,13 +55,23 @@ pub fn write_report(dir: &Path, problem: &Problem, result: &FitResult, model: &M
     // Captures the fitted model does not explain (a second source, a wrong source position or
     // crop): a fit that "succeeds" on them is no fit.
     let mut warnings: Vec<String> = Vec::new();
+    if interrupted {
+        warnings.push(format!(
+            "the fit was interrupted after {:.1} s: these values are its best point so far{}",
+            result.seconds,
+            if result.uncertainties_computed { "" } else { ", and their uncertainties were not computed" }
+        ));
+    }
+    let mut pngs: Vec<String> = Vec::new();
     for (c, prep) in problem.captures.iter().enumerate() {
         let fit = landings.as_ref().map(|l| problem.fit_capture(c, &l[c], result.shifts_px[c]));
         let image = prep.capture.image.display().to_string();
         let stem =
             prep.capture.image.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or(format!("capture{c}"));
         if let Some(f) = &fit {
-            write_capture_png(&dir.join(format!("{:02}-{stem}.png", c + 1)), prep, &f.model)?;
+            let name = format!("{:02}-{stem}.png", c + 1);
+            write_capture_png(&dir.join(&name), prep, &f.model)?;
+            pngs.push(name);
         }
         let scale_sum: f64 = fit.as_ref().map_or(1.0, |f| f.scale.iter().sum());
         if !(scale_sum > 0.0) || result.residuals[c] > 0.5 {
@@ -104,7 +119,24 @@ pub fn write_report(dir: &Path, problem: &Problem, result: &FitResult, model: &M
     let text = serde_json::to_string_pretty(&report).unwrap_or_default();
     petzval_optics::write_atomic(&dir.join("fit.json"), text.as_bytes())?;
     write_convergence_svg(&dir.join("convergence.svg"), &result.history)?;
+    remove_stale_capture_pngs(dir, &pngs);
     Ok(report)
+}
+
+/// Removes the capture PNGs (`NN-name.png`) an earlier fit left in a reused report folder that
+/// this fit did not write, so the folder shows this fit alone. Other files are left alone;
+/// a file that cannot be removed stays (it is not an error).
+fn remove_stale_capture_pngs(dir: &Path, written: &[String]) {
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().to_string();
+        let b = name.as_bytes();
+        let ours =
+            b.len() > 7 && b[0].is_ascii_digit() && b[1].is_ascii_digit() && b[2] == b'-' && name.ends_with(".png");
+        if ours && !written.contains(&name) && entry.path().is_file() {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
 }
 
 /// measured | fitted | difference (mean over channels), one scale for the three panels; the

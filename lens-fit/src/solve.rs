@@ -2,7 +2,7 @@
 //! uncertainties and correlations from the Jacobian, per-capture residuals, the convergence
 //! history.
 
-use crate::fit::{elapsed_s, unscale, FitOptions, Problem};
+use crate::fit::{elapsed_s, unscale, FitOptions, Problem, StopFlag};
 use crate::forward::Landing;
 use glam::DVec2;
 use nalgebra::{DMatrix, DVector};
@@ -46,11 +46,14 @@ pub struct FitResult {
     /// The scaled parameter vector at the end.
     pub scaled: Vec<f64>,
     /// Why Levenberg–Marquardt stopped (`ftol`, `xtol`, `gtol`, `patience`, `evaluation
-    /// budget`, `time limit`, `singular`) and its iterations (Jacobians).
+    /// budget`, `time limit`, `singular`, `interrupted`) and its iterations (Jacobians).
     pub lm_stop: (&'static str, usize),
     /// The Levenberg–Marquardt iteration from which its Jacobians were central differences
     /// (0: from the start, as asked; None: forward differences throughout).
     pub lm_central_from: Option<usize>,
+    /// Whether the uncertainties were computed (false only for an interrupted fit whose end
+    /// point had no Jacobian yet).
+    pub uncertainties_computed: bool,
 }
 
 /// What the progress callback sees after each evaluation.
@@ -189,10 +192,20 @@ struct Tracker<'a> {
     /// return +∞ without tracing.
     cap: usize,
     shift_steps: usize,
+    stop: StopFlag,
 }
+
+/// What [`Tracker::eval`] returns once a stop is requested: below NLopt's `stopval`
+/// ([`STOP_BELOW`]; objectives are sums of squares, never negative), so the optimiser ends at once.
+const STOPPED_VALUE: f64 = -1.0;
+/// NLopt's `stopval` for the global and local stages.
+const STOP_BELOW: f64 = -0.5;
 
 impl Tracker<'_> {
     fn eval(&mut self, x: &[f64]) -> f64 {
+        if self.stop.requested() {
+            return STOPPED_VALUE;
+        }
         if self.evaluations >= self.cap {
             return f64::INFINITY;
         }
@@ -286,6 +299,7 @@ fn nlopt_stages(
         progress,
         cap: usize::MAX,
         shift_steps: options.shift_steps,
+        stop: options.stop,
     };
     if n == 0 {
         *history = t.history;
@@ -315,6 +329,7 @@ fn nlopt_stages(
                 let _ = opt.set_maxeval((b - 1).min(u32::MAX as usize) as u32);
             }
             let _ = opt.set_xtol_rel(1e-7);
+            let _ = opt.set_stopval(STOP_BELOW);
             let _ = opt.set_population(10 * (n + 1));
             let mut x = x0.to_vec();
             let _ = opt.optimize(&mut x);
@@ -344,7 +359,7 @@ fn nlopt_stages(
             let starts_left = (k - i) as f64;
             let time_left = deadline.saturating_duration_since(Instant::now()).as_secs_f64();
             let evals_here = local_left.map(|b| (b as f64 / starts_left).floor() as usize);
-            if time_left <= 0.0 || evals_here == Some(0) {
+            if time_left <= 0.0 || evals_here == Some(0) || options.stop.requested() {
                 continue;
             }
             let used_before = t.evaluations;
@@ -360,6 +375,7 @@ fn nlopt_stages(
                     let _ = opt.set_maxeval(e.min(u32::MAX as usize) as u32);
                 }
                 let _ = opt.set_xtol_rel(1e-7);
+                let _ = opt.set_stopval(STOP_BELOW);
                 let _ = opt.set_initial_step1(0.05);
                 let mut x = c.clone();
                 let _ = opt.optimize(&mut x);
@@ -577,6 +593,7 @@ fn levenberg_marquardt(
     total_budget: Option<usize>,
     progress: ProgressFn,
     history: &mut Vec<(f64, f64)>,
+    stop_flag: StopFlag,
 ) -> LmOutcome {
     let n = lm.problem.free.len();
     let u = x0.len();
@@ -618,6 +635,9 @@ fn levenberg_marquardt(
     let trace = std::env::var_os("PETZVAL_FIT_TRACE").is_some_and(|v| v == "1");
     let affordable = |evaluations: usize, cost: usize| budget.is_none_or(|b| evaluations + cost <= b);
     let stop = 'outer: loop {
+        if stop_flag.requested() {
+            break 'outer "interrupted";
+        }
         if normal.is_none() {
             // a new Jacobian at x
             let central = central_from.is_some();
@@ -653,6 +673,9 @@ fn levenberg_marquardt(
         }
         // inner loop: damped steps until one is accepted
         loop {
+            if stop_flag.requested() {
+                break 'outer "interrupted";
+            }
             if !affordable(evaluations, 1) {
                 break 'outer "evaluation budget";
             }
@@ -782,7 +805,18 @@ pub fn run_with_progress(problem: &Problem, options: &FitOptions, progress: Prog
     let lm = LmProblem::new(problem, options.central_differences);
     let lm_budget = (options.max_evaluations > 0).then(|| stage_budgets(options)[2].unwrap_or(0));
     let total_budget = (options.max_evaluations > 0).then_some(options.max_evaluations);
-    let outcome = levenberg_marquardt(&lm, x, lm_budget, deadline, start, used, total_budget, progress, &mut history);
+    let outcome = levenberg_marquardt(
+        &lm,
+        x,
+        lm_budget,
+        deadline,
+        start,
+        used,
+        total_budget,
+        progress,
+        &mut history,
+        options.stop,
+    );
     evaluations.push(("Levenberg–Marquardt".to_string(), outcome.evaluations));
     stage_seconds.push(("Levenberg–Marquardt".to_string(), elapsed_s(lm_start)));
     let sigma_start = Instant::now();
@@ -791,8 +825,11 @@ pub fn run_with_progress(problem: &Problem, options: &FitOptions, progress: Prog
     history.push((elapsed_s(start), objective));
     // 4. Uncertainty: covariance s² (JᵀJ)⁻¹ of the scaled parameters, back to units (the last
     // Jacobian if it was taken at the end point, else a new one).
+    // An interrupted fit takes no new Jacobian: its uncertainties stay unknown.
+    let uncertainties_computed = outcome.normal.is_some() || outcome.stop != "interrupted";
     let (a, extra) = match outcome.normal {
         Some((a, _)) => (a, 0),
+        None if !uncertainties_computed => (DMatrix::zeros(outcome.x.len(), outcome.x.len()), 0),
         None => {
             let (_, landings) = lm.residuals(&outcome.x);
             let central = outcome.central_from.is_some();
@@ -836,6 +873,7 @@ pub fn run_with_progress(problem: &Problem, options: &FitOptions, progress: Prog
         scaled,
         lm_stop: (outcome.stop, outcome.iterations),
         lm_central_from: outcome.central_from,
+        uncertainties_computed,
     }
 }
 

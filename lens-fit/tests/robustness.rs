@@ -1,5 +1,5 @@
-//! Robustness: clipped highlights, hot pixels, a start 5 % off on several radii, and a
-//! parameter the captures cannot see (issue 10). Captures come from `petzval_fit::synth`.
+//! Robustness: clipped highlights, hot pixels, a start 5 % off on several radii, a
+//! parameter the captures cannot see (issue 10), and a fit stopped early (an interrupt). Captures come from `petzval_fit::synth`.
 
 use petzval_fit::fit::{FitOptions, Problem};
 use petzval_fit::synth::{write_captures, Shot, SynthOptions};
@@ -211,5 +211,77 @@ fn a_parameter_the_captures_cannot_see_is_not_determined() {
     assert!(o.sigma.is_some(), "the offset must stay determined");
     assert_eq!(json["params"]["sensor.offset_mm"]["determined"], serde_json::Value::Bool(true));
     assert!((o.value - 0.05).abs() < 0.004, "offset {}", o.value);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The fit's stop flag (what the command's interrupt handler sets).
+static STOP: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// (e) A stop requested during each stage ends the fit at once with its best point so far:
+/// no further evaluations than the one under way, `interrupted` as the reason, a warning, no
+/// new Jacobian for the uncertainties (`determined` null unless the end point had one), and a report folder reused from an earlier
+/// fit keeps none of that fit's capture images.
+#[test]
+fn a_stop_request_ends_each_stage_with_the_best_point_so_far() {
+    use std::sync::atomic::Ordering;
+    let dir = temp_dir("stop");
+    let mut truth = nominal();
+    truth.camera.sensor_offset_mm = 0.05;
+    let manifest =
+        write_captures(&dir, "double-gauss-50mm", &truth, &few_shots()[..2], OFFSET_FREE, 40, &SynthOptions::default())
+            .unwrap();
+    let report_dir = dir.join("report");
+    std::fs::create_dir_all(&report_dir).unwrap();
+    let options = FitOptions {
+        time_limit_s: 600.0,
+        rays: 4096,
+        max_evaluations: 400,
+        stop: petzval_fit::fit::StopFlag::new(&STOP),
+        ..Default::default()
+    };
+    let manifest = Manifest::load(&manifest).unwrap();
+    let problem = Problem::new(&manifest, &options).unwrap();
+    for (stage, after) in [("global (CRS2)", 5), ("local (BOBYQA)", 3), ("Levenberg–Marquardt", 1)] {
+        // an earlier fit's capture image, and a file of the user's
+        std::fs::write(report_dir.join("07-old-capture.png"), b"stale").unwrap();
+        std::fs::write(report_dir.join("notes.txt"), b"mine").unwrap();
+        STOP.store(false, Ordering::SeqCst);
+        let seen = std::sync::atomic::AtomicUsize::new(usize::MAX);
+        let progress = |p: &solve::Progress| {
+            if p.stage == stage {
+                let first = seen.fetch_min(p.evaluations, Ordering::SeqCst).min(p.evaluations);
+                if p.evaluations >= first + after {
+                    STOP.store(true, Ordering::SeqCst);
+                }
+            }
+        };
+        let result = solve::run_with_progress(&problem, &options, &progress);
+        assert!(STOP.load(Ordering::SeqCst), "{stage}: the stop was never requested");
+        let stopped_at = seen.load(Ordering::SeqCst) + after;
+        let total: usize = result.evaluations.iter().map(|e| e.1).sum();
+        println!("stop in {stage}: {total} evaluations, stop requested at {stopped_at}, {:?}", result.evaluations);
+        assert_eq!(result.lm_stop.0, "interrupted", "{stage}");
+        // one residual evaluation at the start of Levenberg–Marquardt, at most one Jacobian
+        // (one evaluation per parameter and side) under way when the stop came
+        assert!(total <= stopped_at + 3, "{stage}: {total} evaluations, stop requested at {stopped_at}");
+        // uncertainties only where the end point already had its Jacobian (in the last stage)
+        assert_eq!(result.uncertainties_computed, stage == "Levenberg–Marquardt", "{stage}");
+        assert_eq!(result.params.iter().all(|p| p.sigma.is_none()), !result.uncertainties_computed, "{stage}");
+        assert!(result.residuals.iter().all(|r| r.is_finite() && *r < 1.0), "{stage}: {:?}", result.residuals);
+        let values: Vec<f64> = result.params.iter().map(|p| p.value).collect();
+        let model = problem.model_at(&values).unwrap();
+        let json = report::write_report(&report_dir, &problem, &result, &model).unwrap();
+        let determined = &json["params"]["sensor.offset_mm"]["determined"];
+        assert_eq!(determined.is_null(), !result.uncertainties_computed, "{stage}: {determined}");
+        assert!(json["warnings"][0].as_str().unwrap().contains("interrupted"), "{stage}: {}", json["warnings"]);
+        assert!(!report_dir.join("07-old-capture.png").exists(), "{stage}: the stale capture image stays");
+        assert!(report_dir.join("notes.txt").exists(), "{stage}: a file of the user's was removed");
+        let names: Vec<String> = std::fs::read_dir(&report_dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+            .collect();
+        assert!(names.iter().any(|n| n.starts_with("01-") && n.ends_with(".png")), "{stage}: {names:?}");
+    }
+    STOP.store(false, Ordering::SeqCst);
     std::fs::remove_dir_all(&dir).ok();
 }
