@@ -7,8 +7,10 @@
 //!   light pdf in the weight of an emitter hit is evaluated for the vertex the ray left from.
 //! * `max_depth` counts scattering events (pbrt's convention): 0 = emission only, 1 = direct
 //!   lighting, ... Emitters reached by the last BSDF sample still count.
-//! * Russian roulette from `rr_start_depth` bounces on, survival probability = min(1, max
-//!   component of the throughput).
+//! * Russian roulette as Cycles does it: at every hit after `rr_start_depth` bounces (default 1:
+//!   from the second hit on), once its emission is counted, the rest of the path (next-event
+//!   estimation and further bounces) survives with probability min(1, √(max component of the
+//!   throughput)) and is divided by it.
 //! * Sample dimensions per bounce, always all consumed in this order so streams stay aligned:
 //!   light pick (1), light point (2), BSDF lobe (1), BSDF direction (2), roulette (1).
 //! * Nothing is clamped. A non-finite radiance is dropped (returned as zero) and flagged in
@@ -42,7 +44,8 @@ pub type DirectWeight<'a> = &'a dyn Fn(&SurfaceHit, Vec3) -> f32;
 pub struct PathTracer {
     /// Maximum number of scattering events (bounces).
     pub max_depth: u32,
-    /// Bounces before Russian roulette starts.
+    /// Bounces before Russian roulette starts (1: at the second hit, as Cycles with its
+    /// default Min Light Bounces of 0).
     pub rr_start_depth: u32,
     /// Estimators for area lights and the environment.
     pub strategy: LightStrategy,
@@ -50,7 +53,7 @@ pub struct PathTracer {
 
 impl Default for PathTracer {
     fn default() -> Self {
-        PathTracer { max_depth: 8, rr_start_depth: 3, strategy: LightStrategy::Mis }
+        PathTracer { max_depth: 8, rr_start_depth: 1, strategy: LightStrategy::Mis }
     }
 }
 
@@ -277,6 +280,16 @@ impl PathTracer {
             let u_bsdf = sampler.next_2d();
             let u_rr = sampler.next_1d();
 
+            // Russian roulette on the rest of the path (Cycles' rule): the emission found here
+            // already counts; what follows survives with probability √(max throughput).
+            if depth >= self.rr_start_depth {
+                let q = beta.max_element().sqrt().min(1.0);
+                if !(u_rr < q) {
+                    break;
+                }
+                beta /= q;
+            }
+
             let (bsdf, _) = material_bsdf(scene, &hit);
             let sb = SurfaceBsdf::new(bsdf, hit.geometric_normal, hit.shading_normal, wo);
 
@@ -321,14 +334,6 @@ impl PathTracer {
             d = bs.wi;
             t_max = f32::INFINITY;
             depth += 1;
-
-            if depth >= self.rr_start_depth {
-                let p = beta.max_element().min(1.0);
-                if !(u_rr < p) {
-                    break;
-                }
-                beta /= p;
-            }
         }
         if l.is_finite() {
             out.radiance = l;
