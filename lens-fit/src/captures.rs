@@ -5,7 +5,7 @@
 //! |---|---|
 //! | read | EXR (`R`,`G`,`B` or `Y` channels, first layer), 16-bit PNG or TIFF (values 0…65535), 8-bit PNG (0…255) |
 //! | clip | pixels at or above `saturation` in any channel are masked (default: the integer format's maximum; none for EXR) |
-//! | decode | `transfer = "srgb"`: the sRGB curve is undone on value / maximum |
+//! | decode | `transfer = "srgb"`: the sRGB curve is undone on value / maximum (an 8-bit file left at the default transfer is read as linear, with a warning: [`transfer_warning`]) |
 //! | dark | the dark frame (same size) is subtracted |
 //! | hot pixels | a pixel over 8 noise σ above the largest of its 8 neighbours, which are themselves near the background, is masked |
 //! | mask | the manifest's mask (same size): zero = masked |
@@ -30,6 +30,8 @@ pub struct CaptureImage {
     pub clipped: usize,
     /// Pixels masked as hot.
     pub hot: usize,
+    /// The file stores 8-bit integers (JPEG, 8-bit PNG or TIFF): almost always sRGB-encoded.
+    pub eight_bit: bool,
 }
 
 /// Raw planes of an image file with the format's clipping level.
@@ -38,6 +40,7 @@ struct Raw {
     height: usize,
     planes: Vec<Vec<f64>>,
     max_value: Option<f64>,
+    eight_bit: bool,
 }
 
 fn image_err(path: &Path, message: impl Into<String>) -> Error {
@@ -75,10 +78,14 @@ fn read_raw(path: &Path) -> Result<Raw> {
                 ));
             }
         };
-        return Ok(Raw { width, height, planes, max_value: None });
+        return Ok(Raw { width, height, planes, max_value: None, eight_bit: false });
     }
     let img = image::open(path).map_err(|e| image_err(path, e.to_string()))?;
     let (width, height) = (img.width() as usize, img.height() as usize);
+    let eight_bit = matches!(
+        img.color(),
+        image::ColorType::L8 | image::ColorType::La8 | image::ColorType::Rgb8 | image::ColorType::Rgba8
+    );
     let (planes, max_value) = match img {
         image::DynamicImage::ImageLuma8(b) => (vec![b.pixels().map(|p| p.0[0] as f64).collect()], 255.0),
         image::DynamicImage::ImageLuma16(b) => (vec![b.pixels().map(|p| p.0[0] as f64).collect()], 65535.0),
@@ -93,7 +100,19 @@ fn read_raw(path: &Path) -> Result<Raw> {
             ((0..3).map(|c| b.pixels().map(|p| p.0[c] as f64).collect()).collect(), 65535.0)
         }
     };
-    Ok(Raw { width, height, planes, max_value: Some(max_value) })
+    Ok(Raw { width, height, planes, max_value: Some(max_value), eight_bit })
+}
+
+/// A warning for an 8-bit capture read as linear only because the manifest left `transfer` at
+/// its default: such files (camera JPEGs, 8-bit PNG or TIFF) are almost always sRGB-encoded,
+/// and read as linear their spots' wings come out far too bright.
+pub fn transfer_warning(capture: &Capture, image: &CaptureImage) -> Option<String> {
+    (image.eight_bit && !capture.transfer_given).then(|| {
+        format!(
+            "{}: an 8-bit image read as linear (the default transfer); camera JPEGs and 8-bit PNGs are sRGB-encoded: set transfer = \"srgb\" if this one is, or transfer = \"linear\" to say it is linear",
+            capture.image.display()
+        )
+    })
 }
 
 fn srgb_to_linear(v: f64) -> f64 {
@@ -108,7 +127,7 @@ fn srgb_to_linear(v: f64) -> f64 {
 pub fn load(capture: &Capture) -> Result<CaptureImage> {
     let path = &capture.image;
     let raw = read_raw(path)?;
-    let (width, height) = (raw.width, raw.height);
+    let (width, height, eight_bit) = (raw.width, raw.height, raw.eight_bit);
     let n = width * height;
     if n == 0 {
         return Err(image_err(path, "is empty"));
@@ -185,7 +204,7 @@ pub fn load(capture: &Capture) -> Result<CaptureImage> {
     }
     // 6. Hot pixels.
     let hot = reject_hot_pixels(&channels, width, height, &mut mask);
-    Ok(CaptureImage { width, height, channels, mask, clipped, hot })
+    Ok(CaptureImage { width, height, channels, mask, clipped, hot, eight_bit })
 }
 
 /// Masks isolated hot pixels: far above all 8 neighbours while those are at the background,

@@ -224,6 +224,9 @@ fn run(args: &Args) -> petzval_fit::Result<()> {
         problem.source_label
     );
     for (c, p) in problem.captures.iter().enumerate() {
+        if let Some(w) = petzval_fit::captures::transfer_warning(&p.capture, &p.image) {
+            eprintln!("warning: capture {}: {w}", c + 1);
+        }
         if p.image.clipped + p.image.hot > 0 {
             println!(
                 "capture {} ({}): {} clipped and {} hot pixels masked",

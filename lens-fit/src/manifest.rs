@@ -146,6 +146,8 @@ pub struct Capture {
     pub image: PathBuf,
     /// Pixel encoding.
     pub transfer: Transfer,
+    /// Whether the manifest set `transfer` (else it is the default, linear).
+    pub transfer_given: bool,
     /// The image's top-left pixel on the full sensor.
     pub crop_origin_px: [i64; 2],
     /// The source (m), from [`Capture::distances_from`].
@@ -208,7 +210,7 @@ enum NumberOr {
 struct RawCapture {
     image: String,
     #[serde(default)]
-    transfer: Transfer,
+    transfer: Option<Transfer>,
     crop_origin_px: [i64; 2],
     source_m: [f64; 3],
     focus_m: f64,
@@ -351,7 +353,8 @@ impl Manifest {
             }
             captures.push(Capture {
                 image: resolve(&c.image),
-                transfer: c.transfer,
+                transfer: c.transfer.unwrap_or_default(),
+                transfer_given: c.transfer.is_some(),
                 crop_origin_px: c.crop_origin_px,
                 source_m: c.source_m,
                 focus_m: c.focus_m,

@@ -5,8 +5,8 @@
 //! a parameter the captures cannot determine, and for every parameter of a fit interrupted
 //! before its end point had a Jacobian, whose `determined` is then null: unknown), `captures` (list of `{image, residual,
 //! shift_px, scale, background, clipped_pixels, hot_pixels}`), `warnings` (captures the
-//! fitted model does not explain: a non-positive intensity scale or a residual over 0.5, and an
-//! interrupted fit; the command also prints them), `seconds`, `iterations`
+//! fitted model does not explain: a non-positive intensity scale or a residual over 0.5; an
+//! interrupted fit; an 8-bit capture read as linear by default; the command also prints them), `seconds`, `iterations`
 //! (objective evaluations per stage; a Jacobian counts one per parameter), `stage_seconds`
 //! (wall-clock per stage), `lm_stop` (`{reason, iterations, central_from_iteration}` of Levenberg–Marquardt: the last is the iteration from which its Jacobians were central differences, null for forward differences throughout), `correlations` (`{names, matrix}`), `history`
 //! (`[seconds, objective]` after each improvement), `camera` (the fitted camera parameters),
@@ -61,6 +61,11 @@ pub fn write_report(dir: &Path, problem: &Problem, result: &FitResult, model: &M
             result.seconds,
             if result.uncertainties_computed { "" } else { ", and their uncertainties were not computed" }
         ));
+    }
+    for (c, prep) in problem.captures.iter().enumerate() {
+        if let Some(w) = crate::captures::transfer_warning(&prep.capture, &prep.image) {
+            warnings.push(format!("capture {}: {w}", c + 1));
+        }
     }
     let mut pngs: Vec<String> = Vec::new();
     for (c, prep) in problem.captures.iter().enumerate() {

@@ -188,3 +188,34 @@ fn an_exr_without_rgb_or_y_names_its_channels() {
     assert!(e.contains("layered.exr") && e.contains("diffuse.R") && e.contains("diffuse.B"), "{e}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// An 8-bit capture left at the default transfer is read as linear with a warning (camera
+/// JPEGs and 8-bit PNGs are sRGB-encoded); none when the manifest says `transfer`, or for a
+/// 16-bit file.
+#[test]
+fn an_eight_bit_capture_read_as_linear_by_default_is_warned_about() {
+    let dir = std::env::temp_dir().join(format!("petzval-fit-8bit-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    image::GrayImage::from_fn(8, 8, |x, y| image::Luma([(x * 20 + y) as u8])).save(dir.join("c8.png")).unwrap();
+    image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(8, 8, |x, _| image::Luma([x as u16 * 4000]))
+        .save(dir.join("c16.png"))
+        .unwrap();
+    let case = |image: &str, transfer: Option<&str>| {
+        let mut text =
+            GOOD.replacen("captures/c01.exr", image, 1).replacen("dark_frame = \"captures/dark.exr\"\n", "", 1);
+        text = text.replacen("mask = \"captures/c01_mask.png\"\n", "", 1);
+        text = match transfer {
+            Some(t) => text.replacen("transfer = \"linear\"", &format!("transfer = \"{t}\""), 1),
+            None => text.replacen("transfer = \"linear\"\n", "", 1),
+        };
+        let m = Manifest::parse(&text, &dir.join("m.toml")).unwrap();
+        let img = petzval_fit::captures::load(&m.captures[0]).unwrap();
+        petzval_fit::captures::transfer_warning(&m.captures[0], &img)
+    };
+    let w = case("c8.png", None).expect("a warning for an 8-bit file read as linear by default");
+    assert!(w.contains("c8.png") && w.contains("srgb"), "{w}");
+    assert_eq!(case("c8.png", Some("linear")), None);
+    assert_eq!(case("c8.png", Some("srgb")), None);
+    assert_eq!(case("c16.png", None), None);
+    std::fs::remove_dir_all(&dir).ok();
+}
