@@ -3,7 +3,7 @@
 //!
 //! | step | what |
 //! |---|---|
-//! | read | EXR (`R`,`G`,`B` or `Y` channels, first layer), 16-bit PNG or TIFF (values 0…65535), 8-bit PNG (0…255) |
+//! | read | EXR (`R`,`G`,`B` or `Y` channels, first layer) or floating-point TIFF (grey or RGB; linear values, no clipping level), 16-bit PNG or TIFF (values 0…65535), 8-bit PNG, TIFF or JPEG (0…255) |
 //! | clip | pixels at or above `saturation` in any channel are masked (default: the integer format's maximum; none for EXR) |
 //! | decode | `transfer = "srgb"`: the sRGB curve is undone on value / maximum (an 8-bit file left at the default transfer is read as linear, with a warning: [`transfer_warning`]) |
 //! | dark | the dark frame (same size) is subtracted |
@@ -80,6 +80,11 @@ fn read_raw(path: &Path) -> Result<Raw> {
         };
         return Ok(Raw { width, height, planes, max_value: None, eight_bit: false });
     }
+    if ext == "tif" || ext == "tiff" {
+        if let Some(raw) = read_float_tiff(path)? {
+            return Ok(raw);
+        }
+    }
     let img = image::open(path).map_err(|e| image_err(path, e.to_string()))?;
     let (width, height) = (img.width() as usize, img.height() as usize);
     let eight_bit = matches!(
@@ -113,6 +118,38 @@ pub fn transfer_warning(capture: &Capture, image: &CaptureImage) -> Option<Strin
             capture.image.display()
         )
     })
+}
+
+/// A floating-point TIFF (16-, 32- or 64-bit samples; grey, grey + alpha, RGB or RGBA, alpha
+/// dropped), read as linear values with no clipping level, as an EXR is; None for an integer
+/// TIFF, which the `image` crate reads.
+fn read_float_tiff(path: &Path) -> Result<Option<Raw>> {
+    use tiff::decoder::{Decoder, DecodingResult};
+    use tiff::ColorType;
+    let file = std::fs::File::open(path).map_err(|e| image_err(path, e.to_string()))?;
+    let tiff_err = |e: tiff::TiffError| image_err(path, format!("TIFF: {e}"));
+    let mut decoder = Decoder::new(std::io::BufReader::new(file)).map_err(tiff_err)?;
+    let (samples, keep) = match decoder.colortype().map_err(tiff_err)? {
+        ColorType::Gray(_) => (1, 1),
+        ColorType::GrayA(_) => (2, 1),
+        ColorType::RGB(_) => (3, 3),
+        ColorType::RGBA(_) => (4, 3),
+        // other layouts: left to the image crate (which refuses what it cannot read)
+        _ => return Ok(None),
+    };
+    let (w, h) = decoder.dimensions().map_err(tiff_err)?;
+    let values: Vec<f64> = match decoder.read_image().map_err(tiff_err)? {
+        DecodingResult::F32(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::F64(v) => v,
+        DecodingResult::F16(v) => v.into_iter().map(|x| x.to_f64()).collect(),
+        _ => return Ok(None),
+    };
+    let (width, height) = (w as usize, h as usize);
+    if values.len() < width * height * samples {
+        return Err(image_err(path, format!("TIFF: {} samples for {width}×{height}×{samples}", values.len())));
+    }
+    let planes = (0..keep).map(|c| (0..width * height).map(|k| values[k * samples + c]).collect()).collect();
+    Ok(Some(Raw { width, height, planes, max_value: None, eight_bit: false }))
 }
 
 fn srgb_to_linear(v: f64) -> f64 {

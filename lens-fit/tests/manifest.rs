@@ -219,3 +219,43 @@ fn an_eight_bit_capture_read_as_linear_by_default_is_warned_about() {
     assert_eq!(case("c16.png", None), None);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A floating-point TIFF (grey or RGB, as raw converters write them) is read as linear values
+/// with no clipping level, as an EXR is: the values come back exactly, and none is masked.
+#[test]
+fn a_float_tiff_capture_is_read_as_linear_values() {
+    use tiff::encoder::{colortype, TiffEncoder};
+    let dir = std::env::temp_dir().join(format!("petzval-fit-ftiff-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let grey: Vec<f32> = (0..48).map(|k| k as f32 * 1.5e4 + 0.25).collect(); // up to 7e5: past 16-bit
+    let rgb: Vec<f32> = (0..48 * 3).map(|k| (k % 7) as f32 * 0.125 + (k / 3) as f32).collect();
+    let write = |name: &str, rgb_file: bool| {
+        let f = std::fs::File::create(dir.join(name)).unwrap();
+        let mut enc = TiffEncoder::new(f).unwrap();
+        if rgb_file {
+            enc.write_image::<colortype::RGB32Float>(8, 6, &rgb).unwrap();
+        } else {
+            enc.write_image::<colortype::Gray32Float>(8, 6, &grey).unwrap();
+        }
+    };
+    write("grey.tif", false);
+    write("rgb.tif", true);
+    let load = |image: &str, wavelength: &str| {
+        let text = GOOD
+            .replacen("captures/c01.exr", image, 1)
+            .replacen("dark_frame = \"captures/dark.exr\"\n", "", 1)
+            .replacen("mask = \"captures/c01_mask.png\"\n", "", 1)
+            .replacen("wavelength_nm = 550", &format!("wavelength_nm = {wavelength}"), 1);
+        let m = Manifest::parse(&text, &dir.join("m.toml")).unwrap();
+        petzval_fit::captures::load(&m.captures[0]).unwrap()
+    };
+    let g = load("grey.tif", "550");
+    assert_eq!((g.width, g.height, g.channels.len(), g.clipped), (8, 6, 1, 0));
+    assert!(g.channels[0].iter().zip(&grey).all(|(a, b)| *a == *b as f64));
+    let c = load("rgb.tif", "\"rgb\"");
+    assert_eq!((c.width, c.height, c.channels.len(), c.clipped), (8, 6, 3, 0));
+    for ch in 0..3 {
+        assert!(c.channels[ch].iter().enumerate().all(|(k, v)| *v == rgb[k * 3 + ch] as f64), "channel {ch}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
