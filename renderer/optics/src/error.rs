@@ -7,7 +7,7 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     /// A lens file (our TOML, pbrt `.dat`, Zemax `.zmx`, lentil JSON) is malformed or invalid.
-    #[error("{file}:{line}: {field}: {message}")]
+    #[error("{file}{}: {field}: {message}", line_suffix(*line))]
     LensFile {
         /// File name (or `library:NAME` for embedded lenses).
         file: String,
@@ -67,5 +67,14 @@ impl Error {
     /// Builds an [`Error::Io`].
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io { path: path.into(), source }
+    }
+}
+
+/// `:N` for a 1-based line number, nothing for 0 (a problem of the whole file).
+fn line_suffix(line: usize) -> String {
+    if line == 0 {
+        String::new()
+    } else {
+        format!(":{line}")
     }
 }

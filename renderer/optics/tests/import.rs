@@ -723,6 +723,12 @@ fn toml_bad_input_names_file_line_and_field() {
             }
             other => panic!("expected a LensFile error, got {other}"),
         }
+        // a problem of the whole file names the file alone, not a line 0
+        assert!(!msg.starts_with("bad.toml:0"), "{msg}");
+        assert!(
+            msg.starts_with(&if line == 0 { "bad.toml: ".to_string() } else { format!("bad.toml:{line}: ") }),
+            "{msg}"
+        );
     }
 }
 
