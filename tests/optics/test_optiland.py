@@ -417,11 +417,13 @@ def sag(s: dict, r: float) -> float:
     rad = 1.0 - (1.0 + k) * c * c * r2
     if rad < 0:
         return math.nan
-    z = c * r2 / (1.0 + math.sqrt(rad))
+    z = c * r2 / (1.0 + math.sqrt(rad)) + float(s.get("aspheric_r2") or 0.0) * r2
     p = r2
     for a in s.get("aspheric") or []:
         p *= r2
         z += a * p
+    for j, b in enumerate(s.get("aspheric_odd") or []):
+        z += b * abs(r) ** (2 * j + 1)
     return z
 
 
@@ -918,6 +920,51 @@ def _aspheric_singlet_a4_stop_on_glass():
     return optic
 
 
+def _cylinder_singlet():
+    """A plano-cylindrical singlet behind a plane stop: optiland's toroidal surface with an
+    infinite radius of rotation (curved along y only), which save_zemax_file writes as TYPE
+    TOROIDAL."""
+    optic = Optic(name="CylinderSinglet")
+    optic.surfaces.add(index=0, radius=be.inf, thickness=be.inf)
+    optic.surfaces.add(index=1, radius=be.inf, thickness=2.0, is_stop=True)
+    optic.surfaces.add(
+        index=2, surface_type="toroidal", radius_x=be.inf, radius_y=40.0, conic=0.0, thickness=5.0, material="N-BK7"
+    )
+    optic.surfaces.add(index=3, radius=be.inf, thickness=75.0)
+    optic.surfaces.add(index=4)
+    optic.set_aperture("EPD", 10.0)
+    optic.fields.set_type("angle")
+    optic.fields.add(y=0)
+    optic.fields.add(y=5)
+    optic.wavelengths.add(value=0.5876, is_primary=True)
+    return optic
+
+
+def _odd_asphere_singlet():
+    """A singlet whose front surface is optiland's odd asphere (r^1, r^3, r^4, r^5 terms and a
+    conic; no r^2 term, which optiland's paraxial trace leaves out), written as TYPE ODDASPHE."""
+    optic = Optic(name="OddAsphereSinglet")
+    optic.surfaces.add(index=0, radius=be.inf, thickness=be.inf)
+    optic.surfaces.add(index=1, radius=be.inf, thickness=3.0, is_stop=True)
+    optic.surfaces.add(
+        index=2,
+        radius=30.0,
+        thickness=5.0,
+        material="N-BK7",
+        surface_type="odd_asphere",
+        conic=-0.3,
+        coefficients=[3e-4, 0.0, 2e-6, 1e-7, 1e-9],
+    )
+    optic.surfaces.add(index=3, radius=-200.0, thickness=50.0)
+    optic.surfaces.add(index=4)
+    optic.set_aperture("EPD", 10.0)
+    optic.fields.set_type("angle")
+    optic.fields.add(y=0)
+    optic.fields.add(y=8)
+    optic.wavelengths.add(value=0.5876, is_primary=True)
+    return optic
+
+
 def _samples():
     from optiland.samples import objectives, simple
 
@@ -930,6 +977,8 @@ def _samples():
         "aspheric-singlet": simple.AsphericSinglet,
         "aspheric-singlet-a4": _aspheric_singlet_a4,
         "aspheric-singlet-a4-stop-on-glass": _aspheric_singlet_a4_stop_on_glass,
+        "cylinder-singlet": _cylinder_singlet,
+        "odd-asphere-singlet": _odd_asphere_singlet,
     }
 
 
@@ -942,6 +991,8 @@ SAMPLE_NAMES = [
     "aspheric-singlet",
     "aspheric-singlet-a4",
     "aspheric-singlet-a4-stop-on-glass",
+    "cylinder-singlet",
+    "odd-asphere-singlet",
 ]
 
 

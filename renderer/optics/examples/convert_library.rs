@@ -200,7 +200,8 @@ fn push_note(p: &mut Prescription, note: &str) {
     p.lens.notes.push_str(note);
 }
 
-/// Scales every length by `s` (aspheric A_{2k} by s^(1-2k)), rounding lengths to 1 nm.
+/// Scales every length by `s` (aspheric A_{2k} by s^(1-2k), odd B_i by s^(1-i)), rounding
+/// lengths to 1 nm.
 fn scale(p: &mut Prescription, s: f64) {
     let r = |x: f64| (x * s * 1e6).round() / 1e6;
     for surf in &mut p.surfaces {
@@ -210,9 +211,14 @@ fn scale(p: &mut Prescription, s: f64) {
         if let Some(h) = surf.housing_semi_diameter_mm.as_mut() {
             *h = r(*h);
         }
+        surf.aspheric_r2 /= s;
         for (j, a) in surf.aspheric.iter_mut().enumerate() {
             let order = 2 * (j as i32 + 2);
             *a *= s.powi(1 - order);
+        }
+        for (j, b) in surf.aspheric_odd.iter_mut().enumerate() {
+            let order = 2 * j as i32 + 1;
+            *b *= s.powi(1 - order);
         }
     }
     if let Some(open) = p.lens.stop_semi_diameter_mm.as_mut() {

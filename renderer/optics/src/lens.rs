@@ -181,6 +181,7 @@ impl Lens {
                 conic: s.conic,
                 a2: s.aspheric_r2,
                 aspheric: s.aspheric.clone(),
+                aspheric_odd: s.aspheric_odd.clone(),
                 cylinder: s.cylinder,
             };
             surfaces.push(LensSurface {
@@ -304,6 +305,7 @@ impl Lens {
                 s.radius_mm = -old.radius_mm;
                 s.aspheric_r2 = -old.aspheric_r2;
                 s.aspheric = old.aspheric.iter().map(|a| -a).collect();
+                s.aspheric_odd = old.aspheric_odd.iter().map(|b| -b).collect();
                 s.material = if i + 1 < n { p.surfaces[n - 2 - i].material.clone() } else { air.clone() };
                 s.thickness_mm = if i + 1 < n { p.surfaces[n - 2 - i].thickness_mm } else { 0.0 };
                 // placements are mirrored onto the built surfaces below

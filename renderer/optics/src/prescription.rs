@@ -26,6 +26,7 @@
 //! | `conic` | f64, conic constant k | — | 0 |
 //! | `aspheric_r2` | f64, coefficient A2 of r² (adds 2·A2 to the paraxial curvature) | 1/mm | 0 |
 //! | `aspheric` | list of f64: A4, A6, A8, ... (coefficients of r⁴, r⁶, ...) | mm^(1-2i) | `[]` |
+//! | `aspheric_odd` | list of f64: B1, B3, B5, ... (coefficients of r¹, r³, r⁵, ...: Zemax ODDASPHE; not in the paraxial curvature, and B1 makes a cone point at the vertex) | mm^(1-i) | `[]` |
 //! | `cylinder` | `"x"` or `"y"`: the surface is curved only along this axis (anamorphic) | — | none |
 //! | `stop` | bool: this surface is the aperture stop (usually a plane in air; a curved or glass surface may be the stop, as in Zemax) | — | false |
 //! | `housing_semi_diameter_mm` | f64: mechanical radius around the stop opening | mm | stop `semi_diameter_mm` |
@@ -122,6 +123,9 @@ pub struct SurfaceSpec {
     /// Even aspheric coefficients A4, A6, ...
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub aspheric: Vec<f64>,
+    /// Odd aspheric coefficients B1, B3, ... of r¹, r³, ...
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub aspheric_odd: Vec<f64>,
     /// Cylindrical surface: curved only along this axis.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cylinder: Option<CylinderAxis>,
@@ -528,6 +532,9 @@ pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedS
         finite("aspheric_r2", s.aspheric_r2)?;
         for a in &s.aspheric {
             finite("aspheric", *a)?;
+        }
+        for b in &s.aspheric_odd {
+            finite("aspheric_odd", *b)?;
         }
         if s.thickness_mm < 0.0 {
             return Err(map.surface_error(i, "thickness_mm", format!("negative thickness {}", s.thickness_mm)));

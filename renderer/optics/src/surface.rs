@@ -1,5 +1,5 @@
 //! Surface geometry: sag, normal and numerically stable ray intersection for plane, spherical,
-//! conic / even-aspheric and cylindrical surfaces, in the surface's local frame (vertex at the
+//! conic / even- and odd-aspheric and cylindrical surfaces, in the surface's local frame (vertex at the
 //! origin, +z towards the film).
 
 use super::prescription::CylinderAxis;
@@ -21,6 +21,9 @@ pub struct Shape {
     pub a2: f64,
     /// Aspheric coefficients A4, A6, ... of r⁴, r⁶, ...
     pub aspheric: Vec<f64>,
+    /// Odd aspheric coefficients B1, B3, B5, ... of r¹, r³, r⁵, ... (Zemax ODDASPHE); they do
+    /// not enter the paraxial curvature.
+    pub aspheric_odd: Vec<f64>,
     /// Cylindrical: curved only along this axis.
     pub cylinder: Option<CylinderAxis>,
 }
@@ -28,7 +31,14 @@ pub struct Shape {
 impl Shape {
     /// A plane.
     pub fn plane() -> Self {
-        Shape { curvature_per_mm: 0.0, conic: 0.0, a2: 0.0, aspheric: Vec::new(), cylinder: None }
+        Shape {
+            curvature_per_mm: 0.0,
+            conic: 0.0,
+            a2: 0.0,
+            aspheric: Vec::new(),
+            aspheric_odd: Vec::new(),
+            cylinder: None,
+        }
     }
 
     /// Whether the shape is a plane.
@@ -36,10 +46,10 @@ impl Shape {
         self.curvature_per_mm == 0.0 && !self.has_polynomial()
     }
 
-    /// Whether polynomial (A2, A4, ...) terms are present.
+    /// Whether polynomial (A2, A4, ..., or odd B1, B3, ...) terms are present.
     #[inline]
     pub fn has_polynomial(&self) -> bool {
-        self.a2 != 0.0 || self.aspheric.iter().any(|a| *a != 0.0)
+        self.a2 != 0.0 || self.aspheric.iter().any(|a| *a != 0.0) || self.aspheric_odd.iter().any(|b| *b != 0.0)
     }
 
     /// Paraxial curvature c + 2·A2.
@@ -82,6 +92,20 @@ impl Shape {
             slope += a * order * power; // d/d(r²) of (r²)^(j+2) = (j+2) (r²)^(j+1)
             power *= r2;
             sag += a * power;
+        }
+        if !self.aspheric_odd.is_empty() {
+            // term B_i r^i (i = 1, 3, 5, ...): d/d(r²) = (i/2) r^(i−2). On the axis itself the
+            // r¹ term (a cone point) has no slope; it is taken as 0 there.
+            let r = r2.sqrt();
+            let mut power = r; // r^i
+            for (j, b) in self.aspheric_odd.iter().enumerate() {
+                let i = (2 * j + 1) as f64;
+                sag += b * power;
+                if r2 > 0.0 {
+                    slope += b * 0.5 * i * power / r2;
+                }
+                power *= r2;
+            }
         }
         Some((sag, slope))
     }
@@ -236,7 +260,7 @@ mod tests {
     use super::*;
 
     fn sphere(r: f64) -> Shape {
-        Shape { curvature_per_mm: 1.0 / r, conic: 0.0, a2: 0.0, aspheric: vec![], cylinder: None }
+        Shape { curvature_per_mm: 1.0 / r, conic: 0.0, a2: 0.0, aspheric: vec![], aspheric_odd: vec![], cylinder: None }
     }
 
     #[test]
@@ -296,6 +320,7 @@ mod tests {
             conic: 0.0,
             a2: 0.0,
             aspheric: vec![-1.5313e-05, 9.4893e-08, -1.8128e-09, 8.7528e-12],
+            aspheric_odd: vec![],
             cylinder: None,
         };
         let o = DVec3::new(2.0, -3.0, -5.0);
@@ -303,6 +328,42 @@ mod tests {
         let t = s.intersect(o, d).unwrap();
         let p = o + t * d;
         assert!((p.z - s.sag(p.x, p.y).unwrap()).abs() < 1e-12);
+    }
+
+    /// Odd terms (r¹, r³, r⁵): the sag is the sum written out, the hit lies on it, and the
+    /// normal is the sag's numerical gradient, for the round surface and a cylinder.
+    #[test]
+    fn odd_asphere_sag_normal_and_intersection_agree() {
+        for cylinder in [None, Some(CylinderAxis::Y)] {
+            let s = Shape {
+                curvature_per_mm: 1.0 / 30.0,
+                conic: -0.5,
+                a2: 0.0,
+                aspheric: vec![2e-6],
+                aspheric_odd: vec![1e-3, 1e-5, -2e-8],
+                cylinder,
+            };
+            let (x, y) = (1.2, -2.5);
+            let r2: f64 = if cylinder.is_none() { x * x + y * y } else { y * y };
+            let r: f64 = r2.sqrt();
+            let c = 1.0 / 30.0;
+            let conic = c * r2 / (1.0 + (1.0 - 0.5 * c * c * r2).sqrt());
+            let expected = conic + 2e-6 * r2 * r2 + 1e-3 * r + 1e-5 * r * r2 - 2e-8 * r * r2 * r2;
+            assert!((s.sag(x, y).unwrap() - expected).abs() < 1e-15, "{cylinder:?}");
+            let h = 1e-6;
+            let gx = (s.sag(x + h, y).unwrap() - s.sag(x - h, y).unwrap()) / (2.0 * h);
+            let gy = (s.sag(x, y + h).unwrap() - s.sag(x, y - h).unwrap()) / (2.0 * h);
+            let n = s.normal(DVec3::new(x, y, expected)).unwrap();
+            let g = DVec3::new(-gx, -gy, 1.0).normalize();
+            assert!((n - g).length() < 1e-8, "{cylinder:?}: {n} vs {g}");
+            let o = DVec3::new(2.0, -3.0, -5.0);
+            let d = DVec3::new(0.05, 0.02, 1.0).normalize();
+            let p = o + s.intersect(o, d).unwrap() * d;
+            assert!((p.z - s.sag(p.x, p.y).unwrap()).abs() < 1e-12, "{cylinder:?}");
+            // on the axis the cone point has a finite sag and the axial normal
+            assert_eq!(s.sag(0.0, 0.0), Some(0.0));
+            assert_eq!(s.normal(DVec3::ZERO), Some(DVec3::Z));
+        }
     }
 
     #[test]

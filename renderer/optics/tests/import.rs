@@ -233,6 +233,69 @@ fn zemax_even_asphere_coefficients_are_a4_onwards() {
     assert!((c - (0.05 - 2.0 * 2.248851e-4)).abs() < 1e-15);
 }
 
+/// A Zemax file with one surface of the given TYPE and PARM lines (inch units), a plane stop
+/// in front and a plane back.
+fn one_surface_zmx(ty: &str, curv: f64, conic: f64, parms: &[(usize, f64)]) -> String {
+    let parm: String = parms.iter().map(|(k, v)| format!("  PARM {k} {v:e}\n")).collect();
+    format!(
+        "VERS 1\nMODE SEQ\nUNIT IN X W X CM MR CPMM\nSURF 0\n  TYPE STANDARD\n  CURV 0\n  DISZ INFINITY\n\
+         SURF 1\n  TYPE STANDARD\n  STOP\n  CURV 0\n  DISZ 0.1\n  DIAM 0.2\n\
+         SURF 2\n  TYPE {ty}\n  CURV {curv:e}\n  CONI {conic}\n  DISZ 0.2\n  GLAS N-BK7 0 0 1.5168 64.17\n  DIAM 0.2\n{parm}\
+         SURF 3\n  TYPE STANDARD\n  CURV 0\n  DISZ 3\n  DIAM 0.2\nSURF 4\n  TYPE STANDARD\n  CURV 0\n  DISZ 0\n"
+    )
+}
+
+/// ODDASPHE: PARM k is the coefficient of r^k (k = 1..8), odd k → `aspheric_odd`, k = 2 →
+/// `aspheric_r2`, even k ≥ 4 → `aspheric`; each converted from the file's unit (inches here)
+/// as β·u^(1−k). TOROIDAL: read as a cylinder (PARM 1 = 0: the YZ profile extruded along x;
+/// a flat profile with PARM 1 = R: radius R along x); a toroid curved both ways is refused at
+/// its PARM 1 line.
+#[test]
+fn zemax_odd_aspheres_and_cylindrical_toroids_import() {
+    let u: f64 = 25.4;
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs();
+    let text =
+        one_surface_zmx("ODDASPHE", 0.5, -0.3, &[(1, 1e-3), (2, 2e-3), (3, 3e-4), (4, 4e-5), (5, 5e-6), (8, 8e-7)]);
+    let (p, _) = import_zemax(text.as_bytes(), "odd.zmx").unwrap();
+    let s = &p.surfaces[1];
+    assert!(close(s.radius_mm, 2.0 * u) && s.conic == -0.3 && s.cylinder.is_none());
+    assert_eq!(s.aspheric_odd.len(), 3);
+    for (got, (k, v)) in s.aspheric_odd.iter().zip([(1, 1e-3), (3, 3e-4), (5, 5e-6)]) {
+        assert!(close(*got, v * u.powi(1 - k)), "B{k}: {got}");
+    }
+    assert!(close(s.aspheric_r2, 2e-3 / u));
+    assert_eq!(s.aspheric.len(), 3); // A4, A6 (0), A8
+    assert!(close(s.aspheric[0], 4e-5 * u.powi(-3)) && s.aspheric[1] == 0.0 && close(s.aspheric[2], 8e-7 * u.powi(-7)));
+    // the lens builds and its sag is the sum of the terms
+    let (p2, map) = import_zemax(text.as_bytes(), "odd.zmx").unwrap();
+    let lens = Lens::new(p2, &map, None).unwrap();
+    let r: f64 = 3.0;
+    let shape = &lens.surfaces()[1].shape;
+    let c = 1.0 / (2.0 * u);
+    let mut z = c * r * r / (1.0 + (1.0 - 0.7 * c * c * r * r).sqrt());
+    for (k, v) in [(1, 1e-3), (2, 2e-3), (3, 3e-4), (4, 4e-5), (5, 5e-6), (8, 8e-7)] {
+        z += v * u.powi(1 - k) * r.powi(k);
+    }
+    assert!((shape.sag(r, 0.0).unwrap() - z).abs() < 1e-12, "{:?} vs {z}", shape.sag(r, 0.0));
+
+    // TOROIDAL with an infinite radius of rotation: curved along y, its y² and y⁴ terms kept
+    let text = one_surface_zmx("TOROIDAL", 0.5, 0.0, &[(1, 0.0), (2, 2e-3), (3, 3e-4)]);
+    let (p, _) = import_zemax(text.as_bytes(), "cyl.zmx").unwrap();
+    let s = &p.surfaces[1];
+    assert_eq!(s.cylinder, Some(petzval_optics::prescription::CylinderAxis::Y));
+    assert!(close(s.radius_mm, 2.0 * u) && close(s.aspheric_r2, 2e-3 / u) && close(s.aspheric[0], 3e-4 * u.powi(-3)));
+    // a flat profile rotated about an axis R away: a cylinder of radius R along x
+    let text = one_surface_zmx("TOROIDAL", 0.0, 0.0, &[(1, 2.0)]);
+    let (p, _) = import_zemax(text.as_bytes(), "cylx.zmx").unwrap();
+    assert_eq!(p.surfaces[1].cylinder, Some(petzval_optics::prescription::CylinderAxis::X));
+    assert!(close(p.surfaces[1].radius_mm, 2.0 * u));
+    // a true toroid is refused, naming PARM 1's line
+    let text = one_surface_zmx("TOROIDAL", 0.5, 0.0, &[(1, 2.0)]);
+    let e = import_zemax(text.as_bytes(), "toroid.zmx").unwrap_err().to_string();
+    let line = text.lines().position(|l| l.trim_start().starts_with("PARM 1")).unwrap() + 1;
+    assert!(e.starts_with(&format!("toroid.zmx:{line}: PARM 1: a toroid")), "{e}");
+}
+
 #[test]
 fn zemax_utf16_in_every_byte_order_reads_like_ascii() {
     let ascii = import_zemax(&bytes("zmx/cooke_triplet.zmx"), "c.zmx").unwrap().0;
@@ -308,8 +371,8 @@ fn zemax_bad_input_names_the_line() {
     let (line, field, _) = lens_file_err(import_zemax(t.as_bytes(), "t.zmx"));
     assert_eq!((line, field.as_str()), (t.lines().count(), "DISZ"));
     // Unsupported surface type, non-sequential mode, two stops.
-    let t = text.replacen("  TYPE STANDARD\n  CURV -2.29", "  TYPE TOROIDAL\n  CURV -2.29", 1);
-    assert_eq!(lens_file_err(import_zemax(t.as_bytes(), "t.zmx")).0, line_containing(&t, "TOROIDAL"));
+    let t = text.replacen("  TYPE STANDARD\n  CURV -2.29", "  TYPE SZERNSAG\n  CURV -2.29", 1);
+    assert_eq!(lens_file_err(import_zemax(t.as_bytes(), "t.zmx")).0, line_containing(&t, "SZERNSAG"));
     let t = text.replace("MODE SEQ", "MODE NSC");
     assert_eq!(lens_file_err(import_zemax(t.as_bytes(), "t.zmx")).0, 2);
     let t = text.replacen("SURF 2\n  TYPE STANDARD\n", "SURF 2\n  TYPE STANDARD\n  STOP\n", 1);

@@ -355,6 +355,7 @@ pub(super) fn shape_of(s: &SurfaceSpec) -> Shape {
         conic: s.conic,
         a2: s.aspheric_r2,
         aspheric: s.aspheric.clone(),
+        aspheric_odd: s.aspheric_odd.clone(),
         cylinder: s.cylinder,
     }
 }
@@ -394,7 +395,7 @@ pub(crate) fn fit_semi_diameters(p: &mut Prescription) -> Vec<String> {
     let valid = |v: f64| v.is_finite() && v > 0.0;
     if p.surfaces.iter().any(|s| {
         !(valid(s.semi_diameter_mm) && s.thickness_mm.is_finite() && s.radius_mm.is_finite() && s.conic.is_finite())
-            || s.aspheric.iter().any(|a| !a.is_finite())
+            || s.aspheric.iter().chain(&s.aspheric_odd).any(|a| !a.is_finite())
     }) {
         return notes;
     }

@@ -14,7 +14,7 @@
 //! | `FNUM f` | image-space f-number | `lens.f_number` |
 //! | `WAVM i λ`, `PWAV i` | wavelengths (µm) and the primary one | `lens.wavelengths_nm`, `primary_wavelength_nm` |
 //! | `SURF n` | starts surface n; 0 = object, the last = image | one `[[surface]]` per lens surface |
-//! | `TYPE STANDARD\|EVENASPH` | surface type (others are refused) | — |
+//! | `TYPE STANDARD\|EVENASPH\|ODDASPHE\|TOROIDAL` | surface type (others are refused; a TOROIDAL surface only as a cylinder, below) | — |
 //! | `CURV c` | curvature 1/length (0 = plane) | `radius_mm = 1/c` |
 //! | `DISZ t` | thickness to the next surface (`INFINITY` on the object) | `thickness_mm` |
 //! | `GLAS name ...` | medium after the surface: a catalogue name, or `MODEL`/`___BLANK` with nd and vd in fields 4 and 5 | `material` |
@@ -22,11 +22,19 @@
 //! | `CLAP rmin rmax` | circular aperture: rmax is the clear semi-diameter when given | `semi_diameter_mm` |
 //! | `CONI k` | conic constant | `conic` |
 //! | `PARM k v` (EVENASPH) | coefficient of r^(2k): PARM 2 = A4, PARM 3 = A6, ... | `aspheric` |
+//! | `PARM k v` (ODDASPHE) | coefficient of r^k, k = 1..8: odd k → B_k, PARM 2 → r², even k ≥ 4 → A_k | `aspheric_odd`, `aspheric_r2`, `aspheric` |
+//! | `PARM 1 R` (TOROIDAL) | radius of rotation (0 = infinite) | `cylinder` |
+//! | `PARM k v` (TOROIDAL, k ≥ 2) | coefficient of y^(2(k−1)) on the YZ profile: PARM 2 = y², PARM 3 = y⁴, ... | `aspheric_r2`, `aspheric` |
 //! | `STOP` | this surface is the stop (default: surface 1, as in Zemax) | `stop` |
 //!
 //! Conversions and choices:
 //! - The last lens surface's `DISZ` is its distance to the image surface.
 //! - `PARM 1` of an EVENASPH surface (the r² term) becomes `aspheric_r2`.
+//! - A TOROIDAL surface is read as a cylinder: with `PARM 1` = 0 (an infinite radius of
+//!   rotation) its YZ profile (CURV, CONI, PARM 2...) is extruded along x (`cylinder = "y"`,
+//!   curved along y); with a flat profile (CURV 0, no conic or PARM terms) and `PARM 1` = R it is
+//!   a cylinder of radius R curved along x (`cylinder = "x"`). A toroid curved both ways is
+//!   refused.
 //! - A glass name not in our catalogue falls back to the file's own nd/vd (fields 4 and 5 of
 //!   the `GLAS` line) as a model glass, with a note; without usable nd it is an error.
 //! - A surface with `DIAM 0` (or none) takes the larger semi-diameter of its nearest
@@ -39,7 +47,12 @@
 use super::pbrt::{join_sentences, short, MAX_LENGTH_MM};
 use crate::error::{Error, Result};
 use crate::glass::Material;
-use crate::prescription::{LensMeta, MaterialSpec, ModelGlass, Prescription, SourceMap, SurfaceSpec};
+use crate::prescription::{CylinderAxis, LensMeta, MaterialSpec, ModelGlass, Prescription, SourceMap, SurfaceSpec};
+
+/// Whether a surface has aspheric terms (r², even or odd).
+fn spec_has_polynomial(s: &SurfaceSpec) -> bool {
+    s.aspheric_r2 != 0.0 || s.aspheric.iter().chain(&s.aspheric_odd).any(|a| *a != 0.0)
+}
 
 /// One SURF block as read.
 #[derive(Debug, Default, Clone)]
@@ -391,12 +404,86 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
                 }
                 spec.aspheric = coeffs;
             }
+            "ODDASPHE" => {
+                let (mut even, mut odd): (Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new());
+                for &(_, pk, v) in &s.parms {
+                    if !(1..=8).contains(&pk) {
+                        continue; // ODDASPHE has 8 terms, β1 r … β8 r⁸
+                    }
+                    // β r^k in file units → mm: β · u^(1 − k).
+                    let b = v * unit_mm.powi(1 - pk as i32);
+                    let (list, idx) = match pk {
+                        2 => {
+                            spec.aspheric_r2 = b;
+                            continue;
+                        }
+                        k if k % 2 == 1 => (&mut odd, (k - 1) / 2),
+                        k => (&mut even, (k - 4) / 2),
+                    };
+                    if list.len() <= idx {
+                        list.resize(idx + 1, 0.0);
+                    }
+                    list[idx] = b;
+                }
+                for list in [&mut even, &mut odd] {
+                    while list.last() == Some(&0.0) {
+                        list.pop();
+                    }
+                }
+                spec.aspheric = even;
+                spec.aspheric_odd = odd;
+            }
+            "TOROIDAL" => {
+                let mut rotation_mm = 0.0;
+                let mut coeffs: Vec<f64> = Vec::new();
+                for &(_, pk, v) in &s.parms {
+                    match pk {
+                        1 => rotation_mm = v * unit_mm,
+                        // α y^(2(k−1)) in file units → mm: α · u^(3 − 2k)
+                        2 => spec.aspheric_r2 = v / unit_mm,
+                        3..=9 => {
+                            let idx = pk - 3;
+                            if coeffs.len() <= idx {
+                                coeffs.resize(idx + 1, 0.0);
+                            }
+                            coeffs[idx] = v * unit_mm.powi(3 - 2 * pk as i32);
+                        }
+                        _ => {}
+                    }
+                }
+                while coeffs.last() == Some(&0.0) {
+                    coeffs.pop();
+                }
+                spec.aspheric = coeffs;
+                let flat_profile = spec.radius_mm == 0.0 && spec.conic == 0.0 && !spec_has_polynomial(&spec);
+                if rotation_mm == 0.0 || !rotation_mm.is_finite() || rotation_mm.abs() > MAX_LENGTH_MM * 1e3 {
+                    // infinite radius of rotation: the YZ profile extruded along x
+                    spec.cylinder = Some(CylinderAxis::Y);
+                } else if flat_profile {
+                    // a straight profile rotated about an axis R away: a cylinder curved along x
+                    spec.radius_mm = rotation_mm;
+                    spec.cylinder = Some(CylinderAxis::X);
+                } else {
+                    let line = s.parms.iter().find(|p| p.1 == 1).map_or(ty.0, |p| p.0);
+                    return Err(Error::lens_file(
+                        file,
+                        line,
+                        "PARM 1",
+                        format!(
+                            "a toroid (radius of rotation {rotation_mm} mm with a curved YZ profile) is not supported; cylinders are (PARM 1 = 0, or a flat profile with PARM 1 = R)"
+                        ),
+                    ));
+                }
+            }
             other => {
                 return Err(Error::lens_file(
                     file,
                     ty.0,
                     "TYPE",
-                    format!("surface type {} is not supported (STANDARD and EVENASPH are)", short(other)),
+                    format!(
+                        "surface type {} is not supported (STANDARD, EVENASPH, ODDASPHE and cylindrical TOROIDAL are)",
+                        short(other)
+                    ),
                 ))
             }
         }
@@ -437,7 +524,7 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
         if k == stop_k {
             // The stop is this surface itself, curved or not, with whatever media around it
             // (as in Zemax): the tracer clips by the opening where the ray meets it, then refracts.
-            if spec.radius_mm == 0.0 && spec.aspheric.is_empty() {
+            if spec.radius_mm == 0.0 && !spec_has_polynomial(&spec) {
                 spec.conic = 0.0; // a conic constant means nothing on a plane
             }
             spec.stop = true;
