@@ -211,6 +211,8 @@ impl PathTracer {
         let (mut prev_p, mut prev_n) = (Vec3::ZERO, Vec3::ZERO);
         let mut depth = 0u32;
         let nee = self.strategy != LightStrategy::BsdfOnly;
+        // The first hit's BSDF, built once for its base colour (the albedo output) and its shading.
+        let mut first_bsdf: Option<Bsdf> = None;
         loop {
             let found = match first_hit.take() {
                 Some(given) => given,
@@ -244,7 +246,9 @@ impl PathTracer {
             if depth == 0 {
                 out.alpha = 1.0;
                 out.depth_m = hit.t + t_near;
-                out.albedo = base_color(scene, &hit);
+                let (bsdf, base) = material_bsdf(scene, &hit);
+                out.albedo = base;
+                first_bsdf = Some(bsdf);
                 let n = hit.shading_normal;
                 out.normal = if n.dot(wo) >= 0.0 { n } else { -n };
             }
@@ -290,7 +294,10 @@ impl PathTracer {
                 beta /= q;
             }
 
-            let (bsdf, _) = material_bsdf(scene, &hit);
+            let bsdf = match first_bsdf.take() {
+                Some(b) => b,
+                None => material_bsdf(scene, &hit).0,
+            };
             let sb = SurfaceBsdf::new(bsdf, hit.geometric_normal, hit.shading_normal, wo);
 
             // Next-event estimation.
