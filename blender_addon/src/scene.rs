@@ -404,14 +404,22 @@ impl PyScene {
         self.scene.instances.len()
     }
 
-    /// A point light (W/sr per channel).
-    #[pyo3(signature = (position, intensity_w_sr, name = ""))]
-    fn add_point_light(&mut self, position: Vec<f64>, intensity_w_sr: Vec<f64>, name: &str) -> PyResult<()> {
+    /// A point light (W/sr per channel) of radius `radius_m` (Blender's Radius: soft shadows,
+    /// as Cycles' Soft Falloff; 0 = a point).
+    #[pyo3(signature = (position, intensity_w_sr, name = "", radius_m = 0.0))]
+    fn add_point_light(
+        &mut self,
+        position: Vec<f64>,
+        intensity_w_sr: Vec<f64>,
+        name: &str,
+        radius_m: f64,
+    ) -> PyResult<()> {
         guard(|| {
             let light = Light::Point {
                 position: vec3_arg(name, "position", &position)?,
                 intensity: non_negative_rgb(name, "intensity_w_sr", &intensity_w_sr)?,
                 range: None,
+                radius_m: light_radius(name, radius_m)?,
             };
             self.scene.lights.push(light);
             Ok(())
@@ -419,8 +427,8 @@ impl PyScene {
     }
 
     /// A spot light; `falloff` "gltf" (a squared ramp in cos θ between the cones) or "blender"
-    /// (Cycles' smoothstep, with Spot Blend = 1 − inner/outer).
-    #[pyo3(signature = (position, direction, intensity_w_sr, inner_cone_rad, outer_cone_rad, name = "", falloff = "gltf"))]
+    /// (Cycles' smoothstep, with Spot Blend = 1 − inner/outer); `radius_m` as the point light's.
+    #[pyo3(signature = (position, direction, intensity_w_sr, inner_cone_rad, outer_cone_rad, name = "", falloff = "gltf", radius_m = 0.0))]
     #[allow(clippy::too_many_arguments)]
     fn add_spot_light(
         &mut self,
@@ -431,6 +439,7 @@ impl PyScene {
         outer_cone_rad: f64,
         name: &str,
         falloff: &str,
+        radius_m: f64,
     ) -> PyResult<()> {
         guard(|| {
             let falloff = match falloff {
@@ -463,14 +472,22 @@ impl PyScene {
                 outer_cone_rad: outer_cone_rad as f32,
                 range: None,
                 falloff,
+                radius_m: light_radius(name, radius_m)?,
             });
             Ok(())
         })
     }
 
-    /// A directional light.
-    #[pyo3(signature = (direction, irradiance_w_m2, name = ""))]
-    fn add_sun_light(&mut self, direction: Vec<f64>, irradiance_w_m2: Vec<f64>, name: &str) -> PyResult<()> {
+    /// A directional light whose disc spans `angle_rad` (Blender's Angle, the angular diameter;
+    /// 0 = parallel light).
+    #[pyo3(signature = (direction, irradiance_w_m2, name = "", angle_rad = 0.0))]
+    fn add_sun_light(
+        &mut self,
+        direction: Vec<f64>,
+        irradiance_w_m2: Vec<f64>,
+        name: &str,
+        angle_rad: f64,
+    ) -> PyResult<()> {
         guard(|| {
             let d = vec3_arg(name, "direction", &direction)?.normalize_or_zero();
             if d == Vec3::ZERO {
@@ -479,6 +496,11 @@ impl PyScene {
             self.scene.lights.push(Light::Directional {
                 direction: d,
                 irradiance: non_negative_rgb(name, "irradiance_w_m2", &irradiance_w_m2)?,
+                angle_rad: if angle_rad.is_finite() && (0.0..std::f64::consts::PI).contains(&angle_rad) {
+                    angle_rad as f32
+                } else {
+                    return Err(scene_err(name, "angle_rad", format!("must be in [0, π), got {angle_rad}")));
+                },
             });
             Ok(())
         })
@@ -545,5 +567,15 @@ pub(crate) fn face_normals(positions: &[Vec3], indices: &[[u32; 3]]) -> Vec<Vec3
     n.into_iter().map(|v| v.try_normalize().unwrap_or(Vec3::Z)).collect()
 }
 
+/// A light's radius in metres: finite and ≥ 0.
+fn light_radius(name: &str, radius_m: f64) -> PyResult<f32> {
+    if (0.0..=1e6).contains(&radius_m) {
+        Ok(radius_m as f32)
+    } else {
+        Err(scene_err(name, "radius_m", format!("must be in [0, 1e6] m, got {radius_m}")))
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
+
 // Rendering

@@ -251,18 +251,21 @@ pub fn check_scene_values(scene: &Scene) -> std::result::Result<(), Bug> {
     }
     for l in &scene.lights {
         let ok = match *l {
-            Light::Point { position, intensity, range } => {
-                position.is_finite() && intensity.is_finite() && range.is_none_or(|r| !r.is_nan())
+            Light::Point { position, intensity, range, radius_m } => {
+                position.is_finite() && intensity.is_finite() && range.is_none_or(|r| !r.is_nan()) && radius_m >= 0.0
             }
-            Light::Spot { position, direction, intensity, inner_cone_rad, outer_cone_rad, range, .. } => {
+            Light::Spot { position, direction, intensity, inner_cone_rad, outer_cone_rad, range, radius_m, .. } => {
                 position.is_finite()
                     && direction.is_finite()
                     && intensity.is_finite()
                     && inner_cone_rad.is_finite()
                     && outer_cone_rad.is_finite()
                     && range.is_none_or(|r| !r.is_nan())
+                    && radius_m >= 0.0
             }
-            Light::Directional { direction, irradiance } => direction.is_finite() && irradiance.is_finite(),
+            Light::Directional { direction, irradiance, angle_rad } => {
+                direction.is_finite() && irradiance.is_finite() && (0.0..std::f32::consts::PI).contains(&angle_rad)
+            }
         };
         bug_if(!ok, || format!("light with non-finite values: {l:?}"))?;
     }

@@ -297,9 +297,11 @@ fn ground_scene_with(extra: &[(Vec3, f32, u32)]) -> RenderScene {
     ];
     let mut scene =
         Scene { materials, environment: Environment::Constant(Vec3::new(0.3, 0.4, 0.6)), ..Scene::world(mesh) };
-    scene
-        .lights
-        .push(Light::Directional { direction: Vec3::new(0.4, -1.0, -0.3).normalize(), irradiance: Vec3::splat(1.5) });
+    scene.lights.push(Light::Directional {
+        direction: Vec3::new(0.4, -1.0, -0.3).normalize(),
+        irradiance: Vec3::splat(1.5),
+        angle_rad: 0.0,
+    });
     RenderScene::new(scene).unwrap()
 }
 

@@ -181,7 +181,7 @@ fn gltf_lights_convert_to_blender_radiometric_units() {
     assert_eq!(s.lights.len(), 3);
     // A Blender light of P watts was exported as P/(4π)·683 cd; here it is P/(4π) W/sr.
     match s.lights[0] {
-        Light::Point { position, intensity, range } => {
+        Light::Point { position, intensity, range, .. } => {
             assert!(close(position, Vec3::new(0.0, 3.0, 0.0)));
             assert!(rel_close(intensity * 4.0 * PI, Vec3::new(1000.0, 500.0, 250.0)), "{intensity}");
             assert_eq!(range, Some(20.0));
@@ -189,7 +189,7 @@ fn gltf_lights_convert_to_blender_radiometric_units() {
         ref other => panic!("{other:?}"),
     }
     match s.lights[1] {
-        Light::Spot { position, direction, intensity, inner_cone_rad, outer_cone_rad, range, falloff } => {
+        Light::Spot { position, direction, intensity, inner_cone_rad, outer_cone_rad, range, falloff, .. } => {
             assert_eq!(falloff, SpotFalloff::Gltf);
             assert!(close(position, Vec3::new(1.0, 2.0, 3.0)));
             assert!(close(direction, Vec3::NEG_Y), "{direction}");
@@ -200,7 +200,7 @@ fn gltf_lights_convert_to_blender_radiometric_units() {
         ref other => panic!("{other:?}"),
     }
     match s.lights[2] {
-        Light::Directional { direction, irradiance } => {
+        Light::Directional { direction, irradiance, .. } => {
             let h = std::f32::consts::FRAC_1_SQRT_2;
             assert!(close(direction, Vec3::new(0.0, -h, -h)), "{direction}");
             assert!(rel_close(irradiance, Vec3::new(3.0, 3.0, 1.5)), "{irradiance}");

@@ -600,7 +600,7 @@ fn point_and_spot_lights_on_diffuse_plane() {
     let expected = intensity * (albedo / PI * cos / r2);
 
     let mut s = plane_scene(albedo);
-    s.lights.push(Light::Point { position: lp, intensity, range: None });
+    s.lights.push(Light::Point { position: lp, intensity, range: None, radius_m: 0.0 });
     let l = plane_radiance(s, p, 16);
     for k in 0..3 {
         assert!(rel(l[k], expected[k]) < 0.01, "point: {l:?} vs {expected:?}");
@@ -611,7 +611,7 @@ fn point_and_spot_lights_on_diffuse_plane() {
     let x = r2.sqrt() / range;
     let win = (1.0 - x.powi(4)).clamp(0.0, 1.0).powi(2);
     let mut s = plane_scene(albedo);
-    s.lights.push(Light::Point { position: lp, intensity, range: Some(range) });
+    s.lights.push(Light::Point { position: lp, intensity, range: Some(range), radius_m: 0.0 });
     let l = plane_radiance(s, p, 16);
     assert!(rel(l.y, expected.y * win) < 0.01, "range: {l:?} vs {:?}", expected * win);
 
@@ -642,6 +642,7 @@ fn point_and_spot_lights_on_diffuse_plane() {
                 outer_cone_rad: outer,
                 range: None,
                 falloff,
+                radius_m: 0.0,
             });
             let l = plane_radiance(s, p, 16);
             let e = expected * ramp;
@@ -655,10 +656,45 @@ fn point_and_spot_lights_on_diffuse_plane() {
     // Directional: E·cosθ·albedo/π.
     let mut s = plane_scene(albedo);
     let dir = Vec3::new(0.3, -1.0, 0.2).normalize();
-    s.lights.push(Light::Directional { direction: dir, irradiance: Vec3::splat(3.0) });
+    s.lights.push(Light::Directional { direction: dir, irradiance: Vec3::splat(3.0), angle_rad: 0.0 });
     let l = plane_radiance(s, p, 16);
     let e = 3.0 * (-dir.y) * albedo / PI;
     assert!(rel(l.x, e) < 0.01, "directional: {l:?} vs {e}");
+}
+
+/// Lights with a size (Blender's Radius and sun Angle, as Cycles renders them): a point light
+/// of radius r is a disc facing the shading point, so straight above a plane at height h its
+/// irradiance is I/(h² + r²) (I/h² for a point); a sun of angular diameter 2θ spreads its
+/// directions uniformly over the cone and keeps the irradiance E·cos α of the parallel sun on
+/// a plane it lights wholly (the cone's mean cosine cos α·(1 + cos θ)/2 times Cycles'
+/// normalisation 2/(1 + cos θ)).
+#[test]
+fn lights_with_a_radius_or_an_angle_give_their_analytic_irradiance() {
+    let albedo = 0.5;
+    let p = Vec3::new(0.1, 0.0, 0.2);
+    let (h, i) = (1.5f32, 10.0f32);
+    for radius in [0.0f32, 0.3, 1.2] {
+        let mut s = plane_scene(albedo);
+        s.lights.push(Light::Point {
+            position: p + Vec3::Y * h,
+            intensity: Vec3::splat(i),
+            range: None,
+            radius_m: radius,
+        });
+        let l = plane_radiance(s, p, 4096);
+        let expected = i / (h * h + radius * radius) * albedo / PI;
+        assert!(rel(l.y, expected) < 0.01, "point of radius {radius}: {} vs {expected}", l.y);
+    }
+    let e = 3.0f32;
+    for (angle_deg, tilt_deg) in [(0.0f32, 0.0f32), (20.0, 0.0), (20.0, 40.0), (60.0, 25.0)] {
+        let tilt = tilt_deg.to_radians();
+        let direction = Vec3::new(tilt.sin(), -tilt.cos(), 0.0);
+        let mut s = plane_scene(albedo);
+        s.lights.push(Light::Directional { direction, irradiance: Vec3::splat(e), angle_rad: angle_deg.to_radians() });
+        let l = plane_radiance(s, p, 4096);
+        let expected = e * tilt.cos() * albedo / PI;
+        assert!(rel(l.y, expected) < 0.01, "sun {angle_deg}° tilted {tilt_deg}°: {} vs {expected}", l.y);
+    }
 }
 
 #[test]
@@ -670,7 +706,7 @@ fn shadows_block_lights() {
     let blocker = quad(mid + Vec3::new(-0.2, 0.0, 0.2), Vec3::new(0.4, 0.0, 0.0), Vec3::new(0.0, 0.0, -0.4), 0);
     let ground = quad(Vec3::new(-10.0, 0.0, 10.0), Vec3::new(20.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -20.0), 0);
     let mut s = scene_of(&[ground, blocker], vec![diffuse(Vec3::splat(0.5))]);
-    s.lights.push(Light::Point { position: lp, intensity: Vec3::splat(10.0), range: None });
+    s.lights.push(Light::Point { position: lp, intensity: Vec3::splat(10.0), range: None, radius_m: 0.0 });
     let rs = RenderScene::new(s).unwrap();
     let eye = Vec3::new(2.0, 1.0, 2.0);
     // max_depth 1: direct light only (the blocker's top would otherwise bounce light down).
@@ -776,7 +812,12 @@ fn deterministic_and_finite() {
             emitter(Vec3::splat(10.0), false),
         ],
     );
-    scene.lights.push(Light::Point { position: Vec3::new(2.0, 3.0, 1.0), intensity: Vec3::splat(5.0), range: None });
+    scene.lights.push(Light::Point {
+        position: Vec3::new(2.0, 3.0, 1.0),
+        intensity: Vec3::splat(5.0),
+        range: None,
+        radius_m: 0.0,
+    });
     scene.environment = Environment::Constant(Vec3::splat(0.1));
     let rs = RenderScene::new(scene).unwrap();
     let tracer = PathTracer { max_depth: 32, ..PathTracer::default() };
@@ -1122,7 +1163,12 @@ fn light_tree_pmf_consistent() {
     // The grid plus a point light and a spot; then also lights at infinity (directional,
     // environment) and a double-sided emitter facing sideways.
     let (mut scene, _) = light_grid(0.5);
-    scene.lights.push(Light::Point { position: Vec3::new(0.7, 0.8, 0.2), intensity: Vec3::splat(3.0), range: None });
+    scene.lights.push(Light::Point {
+        position: Vec3::new(0.7, 0.8, 0.2),
+        intensity: Vec3::splat(3.0),
+        range: None,
+        radius_m: 0.0,
+    });
     scene.lights.push(Light::Spot {
         position: Vec3::new(-0.6, 1.0, -0.3),
         direction: Vec3::new(0.2, -1.0, 0.1),
@@ -1131,10 +1177,15 @@ fn light_tree_pmf_consistent() {
         outer_cone_rad: 0.5,
         range: None,
         falloff: SpotFalloff::Gltf,
+        radius_m: 0.0,
     });
     let mixed = {
         let mut s = scene.clone();
-        s.lights.push(Light::Directional { direction: Vec3::new(0.3, -1.0, -0.2), irradiance: Vec3::splat(0.5) });
+        s.lights.push(Light::Directional {
+            direction: Vec3::new(0.3, -1.0, -0.2),
+            irradiance: Vec3::splat(0.5),
+            angle_rad: 0.0,
+        });
         s.environment = Environment::Constant(Vec3::splat(0.05));
         let n = s.materials.len() as u32;
         s.materials.push(emitter(Vec3::splat(3.0), true));
@@ -1228,7 +1279,7 @@ fn emitted_values_beyond_the_limit_are_refused_by_name() {
         let e = build(vec![lamp(le)], vec![], Environment::Black).unwrap_err();
         assert!(e.contains("lamps.gltf") && e.contains("material 0 'Lamp'") && e.contains("emission"), "{e}");
     }
-    let sun = Light::Directional { direction: -Vec3::Y, irradiance: Vec3::new(1.0, f32::NAN, 1.0) };
+    let sun = Light::Directional { direction: -Vec3::Y, irradiance: Vec3::new(1.0, f32::NAN, 1.0), angle_rad: 0.0 };
     let e = build(vec![diffuse(Vec3::ONE)], vec![sun], Environment::Black).unwrap_err();
     assert!(e.contains("light 0 (directional)") && e.contains("irradiance"), "{e}");
     let e = build(vec![diffuse(Vec3::ONE)], vec![], Environment::Constant(Vec3::splat(1e20))).unwrap_err();
@@ -1314,10 +1365,11 @@ fn spot_cone_edges_unbiased_with_light_tree() {
             outer_cone_rad: outer,
             range: None,
             falloff: SpotFalloff::Gltf,
+            radius_m: 0.0,
         });
     }
     let point = (Vec3::new(0.0, 0.3, 2.0), 2.0f32);
-    scene.lights.push(Light::Point { position: point.0, intensity: Vec3::splat(point.1), range: None });
+    scene.lights.push(Light::Point { position: point.0, intensity: Vec3::splat(point.1), range: None, radius_m: 0.0 });
     let lights = scene.lights.clone();
     let mut rs = RenderScene::new(scene).unwrap();
     assert_eq!(rs.light_selection(), LightSelection::Tree, "the tree is the default, with spots too");

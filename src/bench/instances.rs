@@ -73,8 +73,11 @@ fn scatter_scene(mesh: Mesh, n: usize) -> (Scene, f32) {
         environment: Environment::Constant(Vec3::new(0.3, 0.35, 0.45)),
         ..Scene::default()
     };
-    s.lights
-        .push(Light::Directional { direction: Vec3::new(-0.4, -1.0, -0.3).normalize(), irradiance: Vec3::splat(2.0) });
+    s.lights.push(Light::Directional {
+        direction: Vec3::new(-0.4, -1.0, -0.3).normalize(),
+        irradiance: Vec3::splat(2.0),
+        angle_rad: 0.0,
+    });
     let side = (n as f64).sqrt().ceil() as usize;
     let half = side as f32 * 0.5;
     let id = s.add_mesh(mesh);

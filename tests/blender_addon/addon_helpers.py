@@ -289,6 +289,8 @@ def build_lights_scene(variant: str):
     """Diffuse ground and spheres lit by a rectangular and a disc area light (``variant``
     "area", black world), by an environment texture rotated by a Mapping node ("world", no
     lights), or by three spot lights of Spot Blend 0, 0.3 and 1 ("spots", black world). The
+    "soft" has a point light of radius 0.4 m (Soft Falloff, Blender's default) and a sun 12° wide,
+    whose soft shadows the add-on renders as Cycles does (black world). The
     first two are separate because the add-on's area lights are emissive geometry, which
     shadows the sky (Cycles' lights do not); the lights are out of view (Cycles hides them from the
     camera)."""
@@ -340,6 +342,21 @@ def build_lights_scene(variant: str):
         obj = b.data.objects.new(name, data)
         scene.collection.objects.link(obj)
         obj.location = (x, 2.2, 2.2)  # no rotation: points down (-z)
+    if variant in ("soft", "soft_point"):
+        data = b.data.lights.new("SoftPoint", "POINT")
+        data.energy = 250.0
+        data.shadow_soft_size = 0.4
+        obj = b.data.objects.new("SoftPoint", data)
+        scene.collection.objects.link(obj)
+        obj.location = (-0.9, 1.3, 1.5)
+    if variant in ("soft", "soft_sun"):
+        data = b.data.lights.new("WideSun", "SUN")
+        data.energy = 1.5
+        data.angle = math.radians(12.0)
+        data.color = (0.8, 0.9, 1.0)
+        obj = b.data.objects.new("WideSun", data)
+        scene.collection.objects.link(obj)
+        obj.rotation_euler = (math.radians(40.0), 0.0, math.radians(-35.0))
     cam = add_camera("LightsCam", (0.0, -2.6, 0.9), (math.radians(80.0), 0.0, 0.0), lens_mm=28.0)
     cam.data.dof.use_dof = False
     scene.render.resolution_x, scene.render.resolution_y = LIGHTS_RESOLUTION

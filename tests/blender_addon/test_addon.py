@@ -285,14 +285,15 @@ def test_real_lens_round_trip_matches_gltf_path(main_scene, report):
 SPP_LIGHTS = 128
 
 
-@pytest.mark.parametrize("variant", ["area", "world", "spots"])
+@pytest.mark.parametrize("variant", ["area", "world", "spots", "soft"])
 def test_area_lights_and_environment_match_cycles(addon, report, variant):
     """What tests/blender's glTF scene cannot carry, against Cycles (8x8 block z-test and image
     means, both sides two seeds): "area": a rectangle and a disc area light (one-sided emitters of
     radiance power / (area pi)); "world": an environment texture turned 40° by a Mapping node,
     whose bright patch, seen directly, must land on the same pixels; "spots": spot lights with
     Spot Blend 0, 0.3 and 1, which fade as Cycles' smoothstep (glTF's ramp, used before, left the
-    blended ones 22–37 % dark)."""
+    blended ones 22–37 % dark); "soft": a point light of radius 0.4 m and a sun 12° wide, whose
+    soft shadows are rendered as Cycles renders them (they were hard before)."""
     H.build_lights_scene(variant)
     cyc = [B.read_rgb(H.lights_cycles_reference(variant, seed, SPP_LIGHTS)) for seed in SEEDS]
     pz = []
@@ -308,6 +309,7 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
         "area": "area lights (rectangle, disc)",
         "world": f"environment texture turned {H.LIGHTS_ENV_ROTATION_DEG:g}° by a Mapping node",
         "spots": "spot lights of Spot Blend 0, 0.3 and 1",
+        "soft": "a point light of radius 0.4 m and a sun 12° wide",
     }[variant]
     report.line(f"{what} vs Cycles, {w}x{h} {SPP_LIGHTS} spp x seeds {SEEDS} ({secs:.1f} s per F12)")
     report.line(f"  blocks: {_fmt(v)}; image mean add-on/Cycles R,G,B {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f}")
@@ -731,8 +733,10 @@ def test_unsupported_features_listed_once(addon, report):
 
 def test_render_visibility_and_light_settings_are_listed(addon, report):
     """What the add-on does not render as Blender would is listed, not ignored in silence: a
-    holdout object, a holdout and an indirect-only collection, a light with Cast Shadow off, a
-    point light with a radius and a sun wider than 1°. The render still completes."""
+    holdout object, a holdout and an indirect-only collection, a light with Cast Shadow off, and a
+    point light with a radius and Soft Falloff off (Cycles' sphere light). A point light with a
+    radius and Soft Falloff on (Blender's default) and a sun 5° wide are rendered (soft shadows;
+    see test_soft_lights_match_cycles) and not listed. The render still completes."""
     _depth_scene()
     H.configure_petzval(2, seed=0, camera="DepthCam")
     scene = bpy.context.scene
@@ -751,12 +755,15 @@ def test_render_visibility_and_light_settings_are_listed(addon, report):
             c.objects.unlink(obj)
         coll.objects.link(obj)
         setattr(bpy.context.view_layer.layer_collection.children[coll_name], flag, True)
-    for name, kind, radius in (("NoShadow", "POINT", 0.0), ("Soft", "POINT", 0.3), ("WideSun", "SUN", 0.0)):
+    lights = (("NoShadow", "POINT", 0.0), ("Soft", "POINT", 0.3), ("Sphere", "POINT", 0.3), ("WideSun", "SUN", 0.0))
+    for name, kind, radius in lights:
         data = bpy.data.lights.new(name, kind)
         data.energy = 10.0 if kind == "POINT" else 1.0
         data.shadow_soft_size = radius
         if name == "NoShadow":
             data.use_shadow = False
+        if name == "Sphere":
+            data.use_soft_falloff = False
         if kind == "SUN":
             data.angle = math.radians(5.0)
         obj = bpy.data.objects.new(name, data)
@@ -774,10 +781,11 @@ def test_render_visibility_and_light_settings_are_listed(addon, report):
         ("CollCube", "holdout"),
         ("IndirectCube", "indirect only"),
         ("NoShadow", "Cast Shadow"),
-        ("Soft", "radius"),
-        ("WideSun", "sun angle"),
+        ("Sphere", "Soft Falloff off"),
     ):
         assert any(all(w in u for w in words) for u in unsupported), (words, unsupported)
+    for rendered in ("'Soft'", "WideSun"):
+        assert not any(rendered in u for u in unsupported), (rendered, unsupported)
     assert entry.get("complete") is True
 
 

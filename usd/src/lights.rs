@@ -9,10 +9,10 @@
 //!
 //! | light | renderer | conversion | fallbacks |
 //! |---|---|---|---|
-//! | `SphereLight` | point light (spot with `shaping:cone:angle`) | radiant intensity = L · π r² (normalize: intensity/4 · 2^E · color) W/sr; cone: outer = angle, fading as Blender's Spot Blend = softness ([`SpotFalloff::Blender`](petzval_renderer::scene::SpotFalloff)) | radius 0.5, normalize off |
+//! | `SphereLight` | point light (spot with `shaping:cone:angle`) of radius r (soft shadows, as Cycles' Soft Falloff; 0 with `treatAsPoint`) | radiant intensity = L · π r² (normalize: intensity/4 · 2^E · color) W/sr; cone: outer = angle, fading as Blender's Spot Blend = softness ([`SpotFalloff::Blender`](petzval_renderer::scene::SpotFalloff)) | radius 0.5, normalize off |
 //! | `RectLight` | a one-sided emissive quad facing −z | radiance L | width 1, height 1 |
 //! | `DiskLight` | a one-sided emissive 32-gon facing −z | radiance L | radius 0.5 |
-//! | `DistantLight` | directional light along −z | irradiance = 4 · intensity · 2^E · color W/m² (Blender's factor) | — |
+//! | `DistantLight` | directional light along −z, directions spread over its `angle` (angular diameter, degrees) | irradiance = 4 · intensity · 2^E · color W/m² (Blender's factor) | angle 0.53 |
 //! | `DomeLight` | environment: `texture:file` (EXR, latlong) × intensity · 2^E · color, or the constant colour; turned about +y by the light's yaw | — | — |
 //! | `CylinderLight` | the side of a one-sided emissive cylinder along x (48 sides), radiance L | radius 0.5, length 1 |
 //!
@@ -143,6 +143,11 @@ pub fn read_light(
             } else {
                 base * (std::f64::consts::PI * radius * radius) as f32
             };
+            // the emitter's size (soft shadows), unless the light says it is a point
+            if !(radius.is_finite() && radius >= 0.0) {
+                return Err(crate::value::attr_error(prim, "inputs:radius", format!("must be ≥ 0, got {radius}")));
+            }
+            let radius_m = if r.bool(prim, "treatAsPoint")?.unwrap_or(false) { 0.0 } else { radius as f32 };
             let cone = r.f64(prim, "inputs:shaping:cone:angle")?;
             match cone {
                 Some(a) if a < 180.0 => {
@@ -157,18 +162,32 @@ pub fn read_light(
                         range: None,
                         // softness is Blender's Spot Blend (its USD exporter and importer)
                         falloff: petzval_renderer::scene::SpotFalloff::Blender,
+                        radius_m,
                     });
                     w.infos.push(info("spot (W/sr)", i));
                 }
                 _ => {
-                    w.scene.lights.push(Light::Point { position: pos, intensity: i, range: None });
+                    w.scene.lights.push(Light::Point { position: pos, intensity: i, range: None, radius_m });
                     w.infos.push(info("point (W/sr)", i));
                 }
             }
         }
         "DistantLight" => {
             let e = base * 4.0;
-            w.scene.lights.push(Light::Directional { direction: dir, irradiance: e });
+            // angular diameter in degrees (UsdLux's fallback 0.53, the Sun's)
+            let angle = r.f64_or(prim, "inputs:angle", 0.53)?;
+            if !(angle.is_finite() && (0.0..180.0).contains(&angle)) {
+                return Err(crate::value::attr_error(
+                    prim,
+                    "inputs:angle",
+                    format!("must be in [0, 180) degrees, got {angle}"),
+                ));
+            }
+            w.scene.lights.push(Light::Directional {
+                direction: dir,
+                irradiance: e,
+                angle_rad: (angle as f32).to_radians(),
+            });
             w.infos.push(info("directional (W/m²)", e));
         }
         "RectLight" | "DiskLight" | "CylinderLight" => {

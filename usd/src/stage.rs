@@ -167,7 +167,7 @@ impl<'a> Walker<'a> {
                         && inner_cone_rad.is_finite()
                         && outer_cone_rad.is_finite()
                 }
-                Light::Directional { direction, irradiance } => direction.is_finite() && irradiance.is_finite(),
+                Light::Directional { direction, irradiance, .. } => direction.is_finite() && irradiance.is_finite(),
             };
             if !finite {
                 let prim = self.info.lights.get(k).map(|i| i.prim.clone()).unwrap_or_else(|| format!("light {k}"));

@@ -139,6 +139,51 @@ fn bool_time_samples_written_as_integers_read_as_bools() {
     assert_ne!(on, off);
 }
 
+/// A sphere light's radius and a distant light's angle are read (soft shadows, as Cycles renders
+/// Blender's exports): `inputs:radius` in stage units (metersPerUnit applied), 0 with
+/// `treatAsPoint`; `inputs:angle` in degrees, 0.53 (UsdLux's fallback) when not authored; a
+/// negative radius is an error naming the prim and the attribute.
+#[test]
+fn sphere_light_radius_and_distant_light_angle_are_read() {
+    use petzval_renderer::scene::Light;
+    let stage = |name: &str, lights: &str| {
+        write(name, &format!("#usda 1.0\n(\n metersPerUnit = 0.01\n)\n{lights}\ndef Mesh \"M\"\n{{\n {TRI}\n}}\n"))
+    };
+    let p = stage(
+        "soft_lights.usda",
+        "def SphereLight \"Soft\"\n{\n float inputs:radius = 25\n}\n\
+         def SphereLight \"Hard\"\n{\n float inputs:radius = 25\n bool treatAsPoint = true\n}\n\
+         def DistantLight \"Sun\"\n{\n float inputs:angle = 12\n}\n\
+         def DistantLight \"Default\"\n{\n}\n",
+    );
+    let shot = load(&p, None).unwrap();
+    let radii: Vec<f32> = shot
+        .scene
+        .lights
+        .iter()
+        .filter_map(|l| match l {
+            Light::Point { radius_m, .. } => Some(*radius_m),
+            _ => None,
+        })
+        .collect();
+    let angles: Vec<f32> = shot
+        .scene
+        .lights
+        .iter()
+        .filter_map(|l| match l {
+            Light::Directional { angle_rad, .. } => Some(angle_rad.to_degrees()),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(radii.len(), 2);
+    assert!((radii[0] - 0.25).abs() < 1e-6 && radii[1] == 0.0, "{radii:?}");
+    assert!((angles[0] - 12.0).abs() < 1e-4 && (angles[1] - 0.53).abs() < 1e-4, "{angles:?}");
+    let bad = stage("bad_radius.usda", "def SphereLight \"Neg\"\n{\n float inputs:radius = -1\n}\n");
+    let Err(e) = load(&bad, None) else { panic!("a negative radius was accepted") };
+    let e = e.to_string();
+    assert!(e.contains("/Neg") && e.contains("inputs:radius"), "{e}");
+}
+
 /// `inputs:opacity` connected to the alpha of the texture that gives the diffuse colour (Blender's
 /// USD export of an image's alpha wired into the Principled BSDF) cuts the surface out where the
 /// texture is transparent, as the GLB export's base colour alpha does; opacity from any other

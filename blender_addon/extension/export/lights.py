@@ -55,11 +55,12 @@ def add_light(pz, obj, matrix_world, notes, materials) -> None:
         notes.warn(f"light '{name}': Cast Shadow off (its light is shadowed)")
     if light.type in ("POINT", "SPOT"):
         intensity = colour * float(light.energy) / (4.0 * math.pi)
-        if light.shadow_soft_size > 0:
-            # soft shadows and broad highlights become hard ones: listed, not just noted
-            notes.warn(f"light '{name}': radius {light.shadow_soft_size:.3g} m (rendered as a point)")
+        radius = max(float(light.shadow_soft_size), 0.0)
+        if radius > 0 and not getattr(light, "use_soft_falloff", True):
+            # Cycles then emits from a sphere (brighter close to it); ours stays the Soft Falloff disc
+            notes.warn(f"light '{name}': Soft Falloff off (rendered with it: a disc facing each point)")
         if light.type == "POINT":
-            pz.add_point_light(tuple(pos), tuple(intensity), name=name)
+            pz.add_point_light(tuple(pos), tuple(intensity), name=name, radius_m=radius)
         else:
             outer = float(light.spot_size) / 2.0
             inner = outer * (1.0 - float(light.spot_blend))
@@ -67,14 +68,18 @@ def add_light(pz, obj, matrix_world, notes, materials) -> None:
                 notes.warn(f"light '{name}': square spot (a round cone used)")
             # Spot Blend fades as in Cycles (a smoothstep in cos over (1 - cos outer)·blend)
             pz.add_spot_light(
-                tuple(pos), tuple(direction), tuple(intensity), inner, outer, name=name, falloff="blender"
+                tuple(pos),
+                tuple(direction),
+                tuple(intensity),
+                inner,
+                outer,
+                name=name,
+                falloff="blender",
+                radius_m=radius,
             )
     elif light.type == "SUN":
-        if light.angle > math.radians(1.0):
-            notes.warn(f"light '{name}': sun angle {math.degrees(light.angle):.2g}° (rendered as parallel light)")
-        elif light.angle > 0:
-            notes.note("sun lights are rendered as parallel light (angle ignored)")
-        pz.add_sun_light(tuple(direction), tuple(colour * float(light.energy)), name=name)
+        angle = min(max(float(light.angle), 0.0), math.radians(179.0))
+        pz.add_sun_light(tuple(direction), tuple(colour * float(light.energy)), name=name, angle_rad=angle)
     elif light.type == "AREA":
         add_area_light(pz, obj, m, colour, notes, materials)
     else:

@@ -140,8 +140,12 @@ class Scene:
     @property
     def instance_count(self) -> int:
         """Placements of meshes (``add_mesh`` counts one)."""
-    def add_point_light(self, position: Sequence[float], intensity_w_sr: Sequence[float], name: str = "") -> None:
-        """A point light: radiant intensity per RGB channel in W/sr."""
+    def add_point_light(
+        self, position: Sequence[float], intensity_w_sr: Sequence[float], name: str = "", radius_m: float = 0.0
+    ) -> None:
+        """A point light: radiant intensity per RGB channel in W/sr; ``radius_m`` > 0 (Blender's
+        Radius) emits from a disc of that radius facing each shading point, as Cycles' Soft
+        Falloff does (soft shadows)."""
     def add_spot_light(
         self,
         position: Sequence[float],
@@ -151,12 +155,18 @@ class Scene:
         outer_cone_rad: float,
         name: str = "",
         falloff: str = "gltf",
+        radius_m: float = 0.0,
     ) -> None:
         """A spot light pointing along ``direction``; full intensity inside the inner cone
         half-angle, zero outside the outer. In between ``falloff`` "gltf" ramps as glTF does,
-        "blender" as Cycles' Spot Blend does (blend = 1 - inner/outer)."""
-    def add_sun_light(self, direction: Sequence[float], irradiance_w_m2: Sequence[float], name: str = "") -> None:
-        """A directional light travelling along ``direction``."""
+        "blender" as Cycles' Spot Blend does (blend = 1 - inner/outer). ``radius_m`` as the
+        point light's."""
+    def add_sun_light(
+        self, direction: Sequence[float], irradiance_w_m2: Sequence[float], name: str = "", angle_rad: float = 0.0
+    ) -> None:
+        """A directional light travelling along ``direction``; ``angle_rad`` > 0 (Blender's
+        Angle, the disc's angular diameter) spreads its directions over that cone (soft shadows)
+        with the same irradiance."""
     def set_environment_color(self, rgb: Sequence[float]) -> None:
         """A uniform environment radiance."""
     def set_environment_map(

@@ -55,6 +55,46 @@ pub fn spot_attenuation(cd: f32, inner: f32, outer: f32, falloff: SpotFalloff) -
     a * a
 }
 
+/// A point of the disc of radius `r` about `centre` that faces `p` (Cycles' point and spot
+/// lights with a radius and Soft Falloff), uniform in area (concentric map of `u`).
+#[inline]
+fn disc_point_facing(centre: Vec3, r: f32, p: Vec3, u: Vec2) -> Vec3 {
+    let n = (p - centre).normalize_or_zero();
+    if n == Vec3::ZERO || !(r > 0.0) {
+        return centre;
+    }
+    let (t, b) = n.any_orthonormal_pair();
+    let d = concentric_disc(u);
+    centre + (t * d.x + b * d.y) * r
+}
+
+/// Shirley–Chiu concentric map of the unit square onto the unit disc.
+#[inline]
+fn concentric_disc(u: Vec2) -> Vec2 {
+    let o = 2.0 * u - Vec2::ONE;
+    if o.x == 0.0 && o.y == 0.0 {
+        return Vec2::ZERO;
+    }
+    let (r, theta) = if o.x.abs() > o.y.abs() {
+        (o.x, std::f32::consts::FRAC_PI_4 * (o.y / o.x))
+    } else {
+        (o.y, std::f32::consts::FRAC_PI_2 - std::f32::consts::FRAC_PI_4 * (o.x / o.y))
+    };
+    Vec2::new(theta.cos(), theta.sin()) * r
+}
+
+/// A direction uniform in the cone of half-angle `half_angle` about unit `axis` (Cycles'
+/// sun with an angle).
+#[inline]
+fn cone_direction(axis: Vec3, half_angle: f32, u: Vec2) -> Vec3 {
+    let cos_max = half_angle.cos();
+    let cos_t = 1.0 - u.x * (1.0 - cos_max);
+    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+    let phi = 2.0 * std::f32::consts::PI * u.y;
+    let (t, b) = axis.any_orthonormal_pair();
+    (t * (sin_t * phi.cos()) + b * (sin_t * phi.sin()) + axis * cos_t).normalize()
+}
+
 impl RenderScene {
     /// How next-event estimation chooses lights ([`LightSelection::Tree`] unless changed).
     pub fn light_selection(&self) -> LightSelection {
@@ -105,34 +145,63 @@ impl RenderScene {
             LightKind::Punctual(li) => {
                 let light = self.scene().lights[li as usize];
                 let (wi, radiance, target) = match light {
-                    Light::Point { position, intensity, range } => {
-                        let d = position - p;
-                        let d2 = d.length_squared();
-                        let dist = d2.sqrt();
-                        if !(dist > 0.0) {
-                            return None;
-                        }
-                        (d / dist, intensity * (range_window(dist, range) / d2), Some(position))
-                    }
-                    Light::Spot { position, direction, intensity, inner_cone_rad, outer_cone_rad, range, falloff } => {
-                        let d = position - p;
+                    Light::Point { position, intensity, range, radius_m } => {
+                        // 1. The emitting point: the centre, or a point of the disc facing p.
+                        let range_w = range_window((position - p).length(), range);
+                        let q = disc_point_facing(position, radius_m, p, u);
+                        let d = q - p;
                         let d2 = d.length_squared();
                         let dist = d2.sqrt();
                         if !(dist > 0.0) {
                             return None;
                         }
                         let wi = d / dist;
-                        let cd = direction.normalize_or_zero().dot(-wi);
-                        let att =
-                            spot_attenuation(cd, inner_cone_rad, outer_cone_rad, falloff) * range_window(dist, range);
-                        (wi, intensity * (att / d2), Some(position))
+                        // 2. A disc point's light leaves it at an angle: its cosine (1 at the centre).
+                        let cos_l =
+                            if q == position { 1.0 } else { (p - position).normalize_or_zero().dot(-wi).max(0.0) };
+                        (wi, intensity * (range_w * cos_l / d2), Some(q))
                     }
-                    Light::Directional { direction, irradiance } => {
-                        let wi = -direction.normalize_or_zero();
-                        if wi == Vec3::ZERO {
+                    Light::Spot {
+                        position,
+                        direction,
+                        intensity,
+                        inner_cone_rad,
+                        outer_cone_rad,
+                        range,
+                        falloff,
+                        radius_m,
+                    } => {
+                        let range_w = range_window((position - p).length(), range);
+                        let q = disc_point_facing(position, radius_m, p, u);
+                        let d = q - p;
+                        let d2 = d.length_squared();
+                        let dist = d2.sqrt();
+                        if !(dist > 0.0) {
                             return None;
                         }
-                        (wi, irradiance, None)
+                        let wi = d / dist;
+                        let cos_l =
+                            if q == position { 1.0 } else { (p - position).normalize_or_zero().dot(-wi).max(0.0) };
+                        // the cone is seen along the direction the light leaves the disc point
+                        let cd = direction.normalize_or_zero().dot(-wi);
+                        let att = spot_attenuation(cd, inner_cone_rad, outer_cone_rad, falloff) * range_w;
+                        (wi, intensity * (att * cos_l / d2), Some(q))
+                    }
+                    Light::Directional { direction, irradiance, angle_rad } => {
+                        let axis = -direction.normalize_or_zero();
+                        if axis == Vec3::ZERO {
+                            return None;
+                        }
+                        if !(angle_rad > 0.0) {
+                            (axis, irradiance, None)
+                        } else {
+                            // A sun with an angle (as Cycles): a direction uniform in its cone of
+                            // half-angle θ, radiance E / (π sin²θ) so that a surface facing it
+                            // receives E; per sample E·2/(1 + cos θ) over the cone's pdf.
+                            let half = 0.5 * angle_rad;
+                            let wi = cone_direction(axis, half, u);
+                            (wi, irradiance * (2.0 / (1.0 + half.cos())), None)
+                        }
                     }
                 };
                 if radiance == Vec3::ZERO || !radiance.is_finite() {

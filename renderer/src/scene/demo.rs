@@ -264,6 +264,7 @@ pub fn demo_scene() -> (Scene, DemoShot) {
     scene.lights.push(Light::Directional {
         direction: Vec3::new(0.3, -1.0, -0.4).normalize(),
         irradiance: Vec3::new(0.25, 0.27, 0.35),
+        angle_rad: 0.0,
     });
     // 6. The camera: low over the table, looking down the street.
     let eye = Vec3::new(0.0, 0.09, 0.55);

@@ -159,6 +159,9 @@ pub enum Light {
         intensity: Vec3,
         /// Range (glTF `range`; None = infinite).
         range: Option<f32>,
+        /// Radius of the emitter (Blender's Radius, USD `inputs:radius`); 0 = a point. Rendered
+        /// as Cycles does with Soft Falloff: a disc of this radius facing the shading point.
+        radius_m: f32,
     },
     /// Spot light.
     Spot {
@@ -176,6 +179,8 @@ pub enum Light {
         range: Option<f32>,
         /// The fade between the cones.
         falloff: SpotFalloff,
+        /// Radius of the emitter, as the point light's.
+        radius_m: f32,
     },
     /// Directional (sun) light.
     Directional {
@@ -183,6 +188,10 @@ pub enum Light {
         direction: Vec3,
         /// Irradiance on a surface facing the light (W/m²).
         irradiance: Vec3,
+        /// Angular diameter of the light's disc (Blender's Angle, USD `inputs:angle`); 0 = one
+        /// direction. Directions are drawn uniformly in the cone of half this angle, and the
+        /// irradiance on a surface facing the light stays `irradiance` (Cycles' normalisation).
+        angle_rad: f32,
     },
 }
 

@@ -72,9 +72,10 @@ impl LightSet {
             let li = kinds.len() as u32;
             kinds.push(LightKind::Punctual(i as u32));
             power.push(p as f64);
-            let point = |position: Vec3, intensity: Vec3, w: Vec3, cos_o: f32, cos_e: f32| LightBounds {
-                bmin: position,
-                bmax: position,
+            // a light with a radius emits from anywhere within it
+            let point = |position: Vec3, radius_m: f32, intensity: Vec3, w: Vec3, cos_o: f32, cos_e: f32| LightBounds {
+                bmin: position - Vec3::splat(radius_m.max(0.0)),
+                bmax: position + Vec3::splat(radius_m.max(0.0)),
                 phi: 4.0 * PI * luminance(intensity),
                 w,
                 cos_o,
@@ -82,13 +83,13 @@ impl LightSet {
                 two_sided: false,
             };
             let b = match *l {
-                Light::Point { position, intensity, .. } => {
-                    Some(point(position, intensity, Vec3::Z, -1.0, cos_half_pi))
+                Light::Point { position, intensity, radius_m, .. } => {
+                    Some(point(position, radius_m, intensity, Vec3::Z, -1.0, cos_half_pi))
                 }
-                Light::Spot { position, direction, intensity, inner_cone_rad, outer_cone_rad, .. } => {
+                Light::Spot { position, direction, intensity, inner_cone_rad, outer_cone_rad, radius_m, .. } => {
                     let w = direction.normalize_or_zero();
                     if w == Vec3::ZERO {
-                        Some(point(position, intensity, Vec3::Z, -1.0, cos_half_pi))
+                        Some(point(position, radius_m, intensity, Vec3::Z, -1.0, cos_half_pi))
                     } else {
                         // Zero beyond the outer cone whatever the inner one (see
                         // spot_attenuation, a step at the outer cone when inner = outer); the
@@ -96,7 +97,9 @@ impl LightSet {
                         let outer = outer_cone_rad.clamp(0.0, PI);
                         let theta_o = inner_cone_rad.clamp(0.0, outer);
                         let theta_e = (outer - theta_o).max(1e-3);
-                        Some(point(position, intensity, w, theta_o.cos(), theta_e.cos()))
+                        // a disc point's cone is the centre's turned by up to the disc's angle
+                        // from the shading point: the tree's box bound covers that spread
+                        Some(point(position, radius_m, intensity, w, theta_o.cos(), theta_e.cos()))
                     }
                 }
                 Light::Directional { .. } => None,

@@ -157,8 +157,12 @@ impl Loader<'_> {
         }
         let direction = dir.normalize_or_zero();
         let l = match light.kind() {
-            gltf::khr_lights_punctual::Kind::Point => Light::Point { position, intensity: radiometric, range },
-            gltf::khr_lights_punctual::Kind::Directional => Light::Directional { direction, irradiance: radiometric },
+            gltf::khr_lights_punctual::Kind::Point => {
+                Light::Point { position, intensity: radiometric, range, radius_m: 0.0 }
+            }
+            gltf::khr_lights_punctual::Kind::Directional => {
+                Light::Directional { direction, irradiance: radiometric, angle_rad: 0.0 }
+            }
             gltf::khr_lights_punctual::Kind::Spot { inner_cone_angle, outer_cone_angle } => {
                 let mut outer = outer_cone_angle;
                 let mut inner = inner_cone_angle;
@@ -185,6 +189,7 @@ impl Loader<'_> {
                     outer_cone_rad: outer,
                     range,
                     falloff: SpotFalloff::Gltf,
+                    radius_m: 0.0,
                 }
             }
         };
