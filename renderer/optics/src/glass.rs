@@ -143,15 +143,20 @@ impl Material {
                 dispersion: g.dispersion.clone(),
             });
         }
-        let close: Vec<&str> = cat
+        // Suggestions: names one or two edits away (a quarter of the name's length), or that
+        // contain the name or are contained in it with most of its letters; nearest first.
+        let mut close: Vec<(usize, &str)> = cat
             .iter()
-            .filter(|g| {
+            .filter_map(|g| {
                 let n = normalize(&g.name);
-                n.contains(&key) || key.contains(&n)
+                let d = edit_distance(&n, &key);
+                let (short, long) = if n.len() < key.len() { (n.len(), key.len()) } else { (key.len(), n.len()) };
+                let contained = (n.contains(&key) || key.contains(&n)) && 5 * short >= 3 * long;
+                (d <= (key.len() / 4).max(1) || contained).then_some((d, g.name.as_str()))
             })
-            .map(|g| g.name.as_str())
-            .take(5)
             .collect();
+        close.sort_by_key(|c| c.0);
+        let close: Vec<&str> = close.into_iter().map(|c| c.1).take(5).collect();
         let suggestion = if close.is_empty() { String::new() } else { format!(", did you mean {}?", close.join(", ")) };
         Err(Error::UnknownGlass { name: name.to_string(), suggestion })
     }
@@ -166,6 +171,22 @@ pub struct CatalogGlass {
     pub catalogue: String,
     /// Dispersion formula.
     pub dispersion: Dispersion,
+}
+
+/// Levenshtein distance between two names (characters).
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut diagonal = row[0];
+        row[0] = i + 1;
+        for (j, cb) in b.iter().enumerate() {
+            let above = row[j + 1];
+            row[j + 1] = (diagonal + usize::from(ca != *cb)).min(above + 1).min(row[j] + 1);
+            diagonal = above;
+        }
+    }
+    row[b.len()]
 }
 
 fn normalize(name: &str) -> String {

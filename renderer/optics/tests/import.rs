@@ -289,6 +289,10 @@ fn zemax_odd_aspheres_and_cylindrical_toroids_import() {
     let (p, _) = import_zemax(text.as_bytes(), "cylx.zmx").unwrap();
     assert_eq!(p.surfaces[1].cylinder, Some(petzval_optics::prescription::CylinderAxis::X));
     assert!(close(p.surfaces[1].radius_mm, 2.0 * u));
+    // EVENASPH has eight terms (PARM 1–8, r² … r¹⁶): a PARM 9 is not a coefficient
+    let text = one_surface_zmx("EVENASPH", 0.5, 0.0, &[(2, 1e-4), (9, 1e-3)]);
+    let (p, _) = import_zemax(text.as_bytes(), "even9.zmx").unwrap();
+    assert_eq!(p.surfaces[1].aspheric.len(), 1, "{:?}", p.surfaces[1].aspheric);
     // a true toroid is refused, naming PARM 1's line
     let text = one_surface_zmx("TOROIDAL", 0.5, 0.0, &[(1, 2.0)]);
     let e = import_zemax(text.as_bytes(), "toroid.zmx").unwrap_err().to_string();
@@ -793,6 +797,17 @@ fn toml_bad_input_names_file_line_and_field() {
             "{msg}"
         );
     }
+}
+
+/// An unknown glass name gets suggestions that are near it (an edit or two, or most of its
+/// letters), not any catalogue name that happens to be a substring of it.
+#[test]
+fn unknown_glasses_get_near_suggestions_only() {
+    let msg = |name: &str| petzval_optics::glass::Material::from_catalog(name).unwrap_err().to_string();
+    assert!(msg("N-BK8").ends_with("did you mean N-BK7?"), "{}", msg("N-BK8"));
+    assert!(msg("LAK9X").contains("LAK9"), "{}", msg("LAK9X"));
+    // J-LLF2 (a Hikari glass) contains "F2" but is not F2
+    assert!(!msg("J-LLF2").contains("did you mean"), "{}", msg("J-LLF2"));
 }
 
 /// Issue 12: every text format reads UTF-8 with a BOM and UTF-16 (as Windows tools write them),

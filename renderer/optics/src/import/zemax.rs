@@ -389,8 +389,8 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
                         spec.aspheric_r2 = v / unit_mm;
                         continue;
                     }
-                    if pk > 9 {
-                        continue; // EVENASPH has 8 terms; PARM 9+ are not coefficients
+                    if pk > 8 {
+                        continue; // EVENASPH has 8 terms (r² … r¹⁶); PARM 9+ are not coefficients
                     }
                     let idx = pk - 2;
                     if coeffs.len() <= idx {
@@ -496,7 +496,9 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
                             file,
                             *gl,
                             "GLAS",
-                            format!("model glass nd = {nd}, vd = {vd} out of range"),
+                            format!(
+                                "model glass nd = {nd}, vd = {vd} is outside nd in [1, 3], vd ≥ 0 (infrared materials such as germanium are not supported)"
+                            ),
                         ));
                     }
                     MaterialSpec::Model(ModelGlass { nd: *nd, vd: *vd })
