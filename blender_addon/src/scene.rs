@@ -404,15 +404,17 @@ impl PyScene {
         self.scene.instances.len()
     }
 
-    /// A point light (W/sr per channel) of radius `radius_m` (Blender's Radius: soft shadows,
-    /// as Cycles' Soft Falloff; 0 = a point).
-    #[pyo3(signature = (position, intensity_w_sr, name = "", radius_m = 0.0))]
+    /// A point light (W/sr per channel) of radius `radius_m` (Blender's Radius: soft shadows;
+    /// 0 = a point): a disc facing each shading point as Cycles' Soft Falloff, or a sphere
+    /// (`sphere`, Soft Falloff off).
+    #[pyo3(signature = (position, intensity_w_sr, name = "", radius_m = 0.0, sphere = false))]
     fn add_point_light(
         &mut self,
         position: Vec<f64>,
         intensity_w_sr: Vec<f64>,
         name: &str,
         radius_m: f64,
+        sphere: bool,
     ) -> PyResult<()> {
         guard(|| {
             let light = Light::Point {
@@ -420,6 +422,7 @@ impl PyScene {
                 intensity: non_negative_rgb(name, "intensity_w_sr", &intensity_w_sr)?,
                 range: None,
                 radius_m: light_radius(name, radius_m)?,
+                sphere,
             };
             self.scene.lights.push(light);
             Ok(())
@@ -427,8 +430,9 @@ impl PyScene {
     }
 
     /// A spot light; `falloff` "gltf" (a squared ramp in cos θ between the cones) or "blender"
-    /// (Cycles' smoothstep, with Spot Blend = 1 − inner/outer); `radius_m` as the point light's.
-    #[pyo3(signature = (position, direction, intensity_w_sr, inner_cone_rad, outer_cone_rad, name = "", falloff = "gltf", radius_m = 0.0))]
+    /// (Cycles' smoothstep, with Spot Blend = 1 − inner/outer); `radius_m` and `sphere` as the
+    /// point light's.
+    #[pyo3(signature = (position, direction, intensity_w_sr, inner_cone_rad, outer_cone_rad, name = "", falloff = "gltf", radius_m = 0.0, sphere = false))]
     #[allow(clippy::too_many_arguments)]
     fn add_spot_light(
         &mut self,
@@ -440,6 +444,7 @@ impl PyScene {
         name: &str,
         falloff: &str,
         radius_m: f64,
+        sphere: bool,
     ) -> PyResult<()> {
         guard(|| {
             let falloff = match falloff {
@@ -473,6 +478,7 @@ impl PyScene {
                 range: None,
                 falloff,
                 radius_m: light_radius(name, radius_m)?,
+                sphere,
             });
             Ok(())
         })

@@ -251,7 +251,7 @@ pub fn check_scene_values(scene: &Scene) -> std::result::Result<(), Bug> {
     }
     for l in &scene.lights {
         let ok = match *l {
-            Light::Point { position, intensity, range, radius_m } => {
+            Light::Point { position, intensity, range, radius_m, .. } => {
                 position.is_finite() && intensity.is_finite() && range.is_none_or(|r| !r.is_nan()) && radius_m >= 0.0
             }
             Light::Spot { position, direction, intensity, inner_cone_rad, outer_cone_rad, range, radius_m, .. } => {

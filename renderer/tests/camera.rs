@@ -226,5 +226,13 @@ mod host_conventions {
         let f = host::focal_length_from_yfov_mm(2.0 * (12.0f64 / 50.0).atan(), 300, 200, &s).unwrap();
         assert!((f - 50.0).abs() < 1e-12, "{f}");
         assert!(host::focal_length_from_yfov_mm(f64::NAN, 300, 200, &s).is_err());
+        // non-square pixels (2:1): the sensor's height is half the square-pixel one, and the
+        // same vertical field of view needs half the focal length (it was taken from the
+        // width in pixels, a 2× zoom)
+        let fb = FilmBack { pixel_aspect: 2.0, ..FilmBack::default() };
+        let s2 = fb.sensor(300, 200, DVec2::ZERO).unwrap();
+        let f2 = host::focal_length_from_yfov_mm(2.0 * (12.0f64 / 50.0).atan(), 300, 200, &s2).unwrap();
+        assert!((f2 - 50.0 * s2.height_mm / s.height_mm).abs() < 1e-12, "{f2}, sensor {s2:?}");
+        assert!((s2.height_mm - 0.5 * s.height_mm).abs() < 1e-12, "{s2:?} vs {s:?}");
     }
 }

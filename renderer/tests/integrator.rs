@@ -600,7 +600,7 @@ fn point_and_spot_lights_on_diffuse_plane() {
     let expected = intensity * (albedo / PI * cos / r2);
 
     let mut s = plane_scene(albedo);
-    s.lights.push(Light::Point { position: lp, intensity, range: None, radius_m: 0.0 });
+    s.lights.push(Light::Point { position: lp, intensity, range: None, radius_m: 0.0, sphere: false });
     let l = plane_radiance(s, p, 16);
     for k in 0..3 {
         assert!(rel(l[k], expected[k]) < 0.01, "point: {l:?} vs {expected:?}");
@@ -611,7 +611,7 @@ fn point_and_spot_lights_on_diffuse_plane() {
     let x = r2.sqrt() / range;
     let win = (1.0 - x.powi(4)).clamp(0.0, 1.0).powi(2);
     let mut s = plane_scene(albedo);
-    s.lights.push(Light::Point { position: lp, intensity, range: Some(range), radius_m: 0.0 });
+    s.lights.push(Light::Point { position: lp, intensity, range: Some(range), radius_m: 0.0, sphere: false });
     let l = plane_radiance(s, p, 16);
     assert!(rel(l.y, expected.y * win) < 0.01, "range: {l:?} vs {:?}", expected * win);
 
@@ -643,6 +643,7 @@ fn point_and_spot_lights_on_diffuse_plane() {
                 range: None,
                 falloff,
                 radius_m: 0.0,
+                sphere: false,
             });
             let l = plane_radiance(s, p, 16);
             let e = expected * ramp;
@@ -664,7 +665,7 @@ fn point_and_spot_lights_on_diffuse_plane() {
 
 /// Lights with a size (Blender's Radius and sun Angle, as Cycles renders them): a point light
 /// of radius r is a disc facing the shading point, so straight above a plane at height h its
-/// irradiance is I/(h² + r²) (I/h² for a point); a sun of angular diameter 2θ spreads its
+/// irradiance is I/(h² + r²) (I/h² for a point), or a sphere (I/h²; inside it, I/r²); a sun of angular diameter 2θ spreads its
 /// directions uniformly over the cone and keeps the irradiance E·cos α of the parallel sun on
 /// a plane it lights wholly (the cone's mean cosine cos α·(1 + cos θ)/2 times Cycles'
 /// normalisation 2/(1 + cos θ)).
@@ -673,18 +674,35 @@ fn lights_with_a_radius_or_an_angle_give_their_analytic_irradiance() {
     let albedo = 0.5;
     let p = Vec3::new(0.1, 0.0, 0.2);
     let (h, i) = (1.5f32, 10.0f32);
-    for radius in [0.0f32, 0.3, 1.2] {
-        let mut s = plane_scene(albedo);
-        s.lights.push(Light::Point {
-            position: p + Vec3::Y * h,
-            intensity: Vec3::splat(i),
-            range: None,
-            radius_m: radius,
-        });
-        let l = plane_radiance(s, p, 4096);
-        let expected = i / (h * h + radius * radius) * albedo / PI;
-        assert!(rel(l.y, expected) < 0.01, "point of radius {radius}: {} vs {expected}", l.y);
+    for sphere in [false, true] {
+        for radius in [0.0f32, 0.3, 1.2] {
+            let mut s = plane_scene(albedo);
+            s.lights.push(Light::Point {
+                position: p + Vec3::Y * h,
+                intensity: Vec3::splat(i),
+                range: None,
+                radius_m: radius,
+                sphere,
+            });
+            let l = plane_radiance(s, p, 4096);
+            // a sphere's irradiance is its centre's as a point (a Lambertian sphere wholly above)
+            let expected = if sphere { i / (h * h) } else { i / (h * h + radius * radius) } * albedo / PI;
+            assert!(rel(l.y, expected) < 0.01, "point of radius {radius} (sphere {sphere}): {} vs {expected}", l.y);
+        }
     }
+    // inside a sphere light of radius r, a uniform direction: I/(πr²)·π = I/r² on the plane
+    let mut s = plane_scene(albedo);
+    s.lights.push(Light::Point {
+        position: p + Vec3::Y * 0.2,
+        intensity: Vec3::splat(i),
+        range: None,
+        radius_m: 0.5,
+        sphere: true,
+    });
+    let l = plane_radiance(s, p, 8192);
+    // (the sphere's lower cap is below the plane: only its radiance above counts, L·π·1)
+    let expected = i / (PI * 0.25) * PI * albedo / PI;
+    assert!(rel(l.y, expected) < 0.02, "inside a sphere: {} vs {expected}", l.y);
     let e = 3.0f32;
     for (angle_deg, tilt_deg) in [(0.0f32, 0.0f32), (20.0, 0.0), (20.0, 40.0), (60.0, 25.0)] {
         let tilt = tilt_deg.to_radians();
@@ -706,7 +724,13 @@ fn shadows_block_lights() {
     let blocker = quad(mid + Vec3::new(-0.2, 0.0, 0.2), Vec3::new(0.4, 0.0, 0.0), Vec3::new(0.0, 0.0, -0.4), 0);
     let ground = quad(Vec3::new(-10.0, 0.0, 10.0), Vec3::new(20.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -20.0), 0);
     let mut s = scene_of(&[ground, blocker], vec![diffuse(Vec3::splat(0.5))]);
-    s.lights.push(Light::Point { position: lp, intensity: Vec3::splat(10.0), range: None, radius_m: 0.0 });
+    s.lights.push(Light::Point {
+        position: lp,
+        intensity: Vec3::splat(10.0),
+        range: None,
+        radius_m: 0.0,
+        sphere: false,
+    });
     let rs = RenderScene::new(s).unwrap();
     let eye = Vec3::new(2.0, 1.0, 2.0);
     // max_depth 1: direct light only (the blocker's top would otherwise bounce light down).
@@ -817,6 +841,7 @@ fn deterministic_and_finite() {
         intensity: Vec3::splat(5.0),
         range: None,
         radius_m: 0.0,
+        sphere: false,
     });
     scene.environment = Environment::Constant(Vec3::splat(0.1));
     let rs = RenderScene::new(scene).unwrap();
@@ -1168,6 +1193,7 @@ fn light_tree_pmf_consistent() {
         intensity: Vec3::splat(3.0),
         range: None,
         radius_m: 0.0,
+        sphere: false,
     });
     scene.lights.push(Light::Spot {
         position: Vec3::new(-0.6, 1.0, -0.3),
@@ -1178,6 +1204,7 @@ fn light_tree_pmf_consistent() {
         range: None,
         falloff: SpotFalloff::Gltf,
         radius_m: 0.0,
+        sphere: false,
     });
     let mixed = {
         let mut s = scene.clone();
@@ -1366,10 +1393,17 @@ fn spot_cone_edges_unbiased_with_light_tree() {
             range: None,
             falloff: SpotFalloff::Gltf,
             radius_m: 0.0,
+            sphere: false,
         });
     }
     let point = (Vec3::new(0.0, 0.3, 2.0), 2.0f32);
-    scene.lights.push(Light::Point { position: point.0, intensity: Vec3::splat(point.1), range: None, radius_m: 0.0 });
+    scene.lights.push(Light::Point {
+        position: point.0,
+        intensity: Vec3::splat(point.1),
+        range: None,
+        radius_m: 0.0,
+        sphere: false,
+    });
     let lights = scene.lights.clone();
     let mut rs = RenderScene::new(scene).unwrap();
     assert_eq!(rs.light_selection(), LightSelection::Tree, "the tree is the default, with spots too");

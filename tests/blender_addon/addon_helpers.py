@@ -289,7 +289,8 @@ def build_lights_scene(variant: str):
     """Diffuse ground and spheres lit by a rectangular and a disc area light (``variant``
     "area", black world), by an environment texture rotated by a Mapping node ("world", no
     lights), or by three spot lights of Spot Blend 0, 0.3 and 1 ("spots", black world). The
-    "soft" has a point light of radius 0.4 m (Soft Falloff, Blender's default) and a sun 12° wide,
+    "soft" has a point light of radius 0.4 m (Soft Falloff, Blender's default), a spot light of
+    radius 0.3 m with Soft Falloff off (a sphere) and a sun 12° wide,
     whose soft shadows the add-on renders as Cycles does (black world). The
     first two are separate because the add-on's area lights are emissive geometry, which
     shadows the sky (Cycles' lights do not); the lights are out of view (Cycles hides them from the
@@ -349,6 +350,16 @@ def build_lights_scene(variant: str):
         obj = b.data.objects.new("SoftPoint", data)
         scene.collection.objects.link(obj)
         obj.location = (-0.9, 1.3, 1.5)
+        # and a spot light emitting from a sphere (Soft Falloff off), close to the ground
+        data = b.data.lights.new("SphereSpot", "SPOT")
+        data.energy = 120.0
+        data.spot_size = math.radians(70.0)
+        data.spot_blend = 0.2
+        data.shadow_soft_size = 0.3
+        data.use_soft_falloff = False
+        obj = b.data.objects.new("SphereSpot", data)
+        scene.collection.objects.link(obj)
+        obj.location = (1.0, 1.6, 0.9)
     if variant in ("soft", "soft_sun"):
         data = b.data.lights.new("WideSun", "SUN")
         data.energy = 1.5

@@ -292,8 +292,9 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
     radiance power / (area pi)); "world": an environment texture turned 40° by a Mapping node,
     whose bright patch, seen directly, must land on the same pixels; "spots": spot lights with
     Spot Blend 0, 0.3 and 1, which fade as Cycles' smoothstep (glTF's ramp, used before, left the
-    blended ones 22–37 % dark); "soft": a point light of radius 0.4 m and a sun 12° wide, whose
-    soft shadows are rendered as Cycles renders them (they were hard before)."""
+    blended ones 22–37 % dark); "soft": a point light of radius 0.4 m (Soft Falloff: a disc), a
+    spot light of radius 0.3 m with Soft Falloff off (a sphere) and a sun 12° wide, whose soft
+    shadows are rendered as Cycles renders them (they were hard before)."""
     H.build_lights_scene(variant)
     cyc = [B.read_rgb(H.lights_cycles_reference(variant, seed, SPP_LIGHTS)) for seed in SEEDS]
     pz = []
@@ -309,7 +310,7 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
         "area": "area lights (rectangle, disc)",
         "world": f"environment texture turned {H.LIGHTS_ENV_ROTATION_DEG:g}° by a Mapping node",
         "spots": "spot lights of Spot Blend 0, 0.3 and 1",
-        "soft": "a point light of radius 0.4 m and a sun 12° wide",
+        "soft": "a point light of radius 0.4 m, a spherical spot light of radius 0.3 m and a sun 12° wide",
     }[variant]
     report.line(f"{what} vs Cycles, {w}x{h} {SPP_LIGHTS} spp x seeds {SEEDS} ({secs:.1f} s per F12)")
     report.line(f"  blocks: {_fmt(v)}; image mean add-on/Cycles R,G,B {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f}")
@@ -733,10 +734,10 @@ def test_unsupported_features_listed_once(addon, report):
 
 def test_render_visibility_and_light_settings_are_listed(addon, report):
     """What the add-on does not render as Blender would is listed, not ignored in silence: a
-    holdout object, a holdout and an indirect-only collection, a light with Cast Shadow off, and a
-    point light with a radius and Soft Falloff off (Cycles' sphere light). A point light with a
-    radius and Soft Falloff on (Blender's default) and a sun 5° wide are rendered (soft shadows;
-    see test_soft_lights_match_cycles) and not listed. The render still completes."""
+    holdout object, a holdout and an indirect-only collection and a light with Cast Shadow off.
+    Point lights with a radius (Soft Falloff on or off) and a sun 5° wide are rendered (soft
+    shadows; see the "soft" variant of test_area_lights_and_environment_match_cycles) and not
+    listed. The render still completes."""
     _depth_scene()
     H.configure_petzval(2, seed=0, camera="DepthCam")
     scene = bpy.context.scene
@@ -781,10 +782,9 @@ def test_render_visibility_and_light_settings_are_listed(addon, report):
         ("CollCube", "holdout"),
         ("IndirectCube", "indirect only"),
         ("NoShadow", "Cast Shadow"),
-        ("Sphere", "Soft Falloff off"),
     ):
         assert any(all(w in u for w in words) for u in unsupported), (words, unsupported)
-    for rendered in ("'Soft'", "WideSun"):
+    for rendered in ("'Soft'", "'Sphere'", "WideSun"):
         assert not any(rendered in u for u in unsupported), (rendered, unsupported)
     assert entry.get("complete") is True
 

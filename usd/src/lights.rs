@@ -9,10 +9,10 @@
 //!
 //! | light | renderer | conversion | fallbacks |
 //! |---|---|---|---|
-//! | `SphereLight` | point light (spot with `shaping:cone:angle`) of radius r (soft shadows, as Cycles' Soft Falloff; 0 with `treatAsPoint`) | radiant intensity = L · π r² (normalize: intensity/4 · 2^E · color) W/sr; cone: outer = angle, fading as Blender's Spot Blend = softness ([`SpotFalloff::Blender`](petzval_renderer::scene::SpotFalloff)) | radius 0.5, normalize off |
+//! | `SphereLight` | point light (spot with `shaping:cone:angle`) of radius r: a sphere (0 with `treatAsPoint`; in stages Blender wrote, Blender's default Soft Falloff, a disc facing each point, since its USD does not record the setting) | radiant intensity = L · π r² (normalize: intensity/4 · 2^E · color) W/sr; cone: outer = angle, fading as Blender's Spot Blend = softness ([`SpotFalloff::Blender`](petzval_renderer::scene::SpotFalloff)) | radius 0.5, normalize off |
 //! | `RectLight` | a one-sided emissive quad facing −z | radiance L | width 1, height 1 |
 //! | `DiskLight` | a one-sided emissive 32-gon facing −z | radiance L | radius 0.5 |
-//! | `DistantLight` | directional light along −z, directions spread over its `angle` (angular diameter, degrees) | irradiance = 4 · intensity · 2^E · color W/m² (Blender's factor) | angle 0.53 |
+//! | `DistantLight` | directional light along −z, directions spread over its `angle` (angular diameter, degrees; twice the value in stages Blender wrote, whose exporter writes half the diameter) | irradiance = 4 · intensity · 2^E · color W/m² (Blender's factor) | angle 0.53 |
 //! | `DomeLight` | environment: `texture:file` (EXR, latlong) × intensity · 2^E · color, or the constant colour; turned about +y by the light's yaw | — | — |
 //! | `CylinderLight` | the side of a one-sided emissive cylinder along x (48 sides), radiance L | radius 0.5, length 1 |
 //!
@@ -148,6 +148,10 @@ pub fn read_light(
                 return Err(crate::value::attr_error(prim, "inputs:radius", format!("must be ≥ 0, got {radius}")));
             }
             let radius_m = if r.bool(prim, "treatAsPoint")?.unwrap_or(false) { 0.0 } else { radius as f32 };
+            // UsdLux's sphere emits from its surface; Blender writes its point lights as spheres
+            // but renders them by default with Soft Falloff (a disc facing each point), which
+            // its USD does not record: stages Blender wrote get the default.
+            let sphere = !units.blender_authored;
             let cone = r.f64(prim, "inputs:shaping:cone:angle")?;
             match cone {
                 Some(a) if a < 180.0 => {
@@ -163,11 +167,12 @@ pub fn read_light(
                         // softness is Blender's Spot Blend (its USD exporter and importer)
                         falloff: petzval_renderer::scene::SpotFalloff::Blender,
                         radius_m,
+                        sphere,
                     });
                     w.infos.push(info("spot (W/sr)", i));
                 }
                 _ => {
-                    w.scene.lights.push(Light::Point { position: pos, intensity: i, range: None, radius_m });
+                    w.scene.lights.push(Light::Point { position: pos, intensity: i, range: None, radius_m, sphere });
                     w.infos.push(info("point (W/sr)", i));
                 }
             }
@@ -183,10 +188,12 @@ pub fn read_light(
                     format!("must be in [0, 180) degrees, got {angle}"),
                 ));
             }
+            // Blender writes half its sun's angular diameter (and reads it back doubled)
+            let diameter = if units.blender_authored { 2.0 * angle } else { angle };
             w.scene.lights.push(Light::Directional {
                 direction: dir,
                 irradiance: e,
-                angle_rad: (angle as f32).to_radians(),
+                angle_rad: (diameter.min(179.0) as f32).to_radians(),
             });
             w.infos.push(info("directional (W/m²)", e));
         }

@@ -138,6 +138,9 @@ pub struct StageUnits {
     pub up_axis_z: bool,
     /// Metres per scene unit.
     pub meters_per_unit: f64,
+    /// The root layer's `doc` says Blender wrote it ("Blender v5.0.1"): some of Blender's
+    /// conventions differ from UsdLux's (see `lights.rs`).
+    pub blender_authored: bool,
 }
 
 impl StageUnits {
@@ -168,7 +171,11 @@ impl StageUnits {
         if !(meters_per_unit > 0.0 && meters_per_unit.is_finite()) {
             return Err(bad("metersPerUnit", format!("must be positive, got {meters_per_unit}")));
         }
-        Ok(StageUnits { up_axis_z, meters_per_unit })
+        let blender_authored = match stage.stage_metadata(sdf::FieldKey::Documentation.as_str()) {
+            Ok(Some(sdf::Value::String(d))) => d.trim_start().starts_with("Blender"),
+            _ => false,
+        };
+        Ok(StageUnits { up_axis_z, meters_per_unit, blender_authored })
     }
 
     /// Stage world → renderer world (metres, +y up): a rotation of −90° about x for Z-up

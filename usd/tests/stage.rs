@@ -141,8 +141,9 @@ fn bool_time_samples_written_as_integers_read_as_bools() {
 
 /// A sphere light's radius and a distant light's angle are read (soft shadows, as Cycles renders
 /// Blender's exports): `inputs:radius` in stage units (metersPerUnit applied), 0 with
-/// `treatAsPoint`; `inputs:angle` in degrees, 0.53 (UsdLux's fallback) when not authored; a
-/// negative radius is an error naming the prim and the attribute.
+/// `treatAsPoint`; `inputs:angle` in degrees, 0.53 (UsdLux's fallback) when not authored; in a
+/// stage Blender wrote (`doc = "Blender v…"`) the angle is doubled and the sphere is Blender's
+/// default Soft Falloff disc; a negative radius is an error naming the prim and the attribute.
 #[test]
 fn sphere_light_radius_and_distant_light_angle_are_read() {
     use petzval_renderer::scene::Light;
@@ -178,6 +179,26 @@ fn sphere_light_radius_and_distant_light_angle_are_read() {
     assert_eq!(radii.len(), 2);
     assert!((radii[0] - 0.25).abs() < 1e-6 && radii[1] == 0.0, "{radii:?}");
     assert!((angles[0] - 12.0).abs() < 1e-4 && (angles[1] - 0.53).abs() < 1e-4, "{angles:?}");
+    // UsdLux's sphere light is a sphere; Blender writes its point lights as spheres but renders
+    // them with Soft Falloff by default (a disc), and writes half its sun's angle
+    assert!(shot.scene.lights.iter().all(|l| !matches!(l, Light::Point { sphere: false, .. })));
+    let blender = write(
+        "soft_lights_blender.usda",
+        &format!(
+            "#usda 1.0\n(\n doc = \"Blender v5.0.1\"\n metersPerUnit = 1\n)\n\
+             def SphereLight \"Soft\"\n{{\n float inputs:radius = 0.1\n}}\n\
+             def DistantLight \"Sun\"\n{{\n float inputs:angle = 5\n}}\n\
+             def Mesh \"M\"\n{{\n {TRI}\n}}\n"
+        ),
+    );
+    let shot = load(&blender, None).unwrap();
+    for l in &shot.scene.lights {
+        match *l {
+            Light::Point { radius_m, sphere, .. } => assert!((radius_m - 0.1).abs() < 1e-6 && !sphere, "{l:?}"),
+            Light::Directional { angle_rad, .. } => assert!((angle_rad.to_degrees() - 10.0).abs() < 1e-4, "{l:?}"),
+            _ => panic!("{l:?}"),
+        }
+    }
     let bad = stage("bad_radius.usda", "def SphereLight \"Neg\"\n{\n float inputs:radius = -1\n}\n");
     let Err(e) = load(&bad, None) else { panic!("a negative radius was accepted") };
     let e = e.to_string();

@@ -56,11 +56,10 @@ def add_light(pz, obj, matrix_world, notes, materials) -> None:
     if light.type in ("POINT", "SPOT"):
         intensity = colour * float(light.energy) / (4.0 * math.pi)
         radius = max(float(light.shadow_soft_size), 0.0)
-        if radius > 0 and not getattr(light, "use_soft_falloff", True):
-            # Cycles then emits from a sphere (brighter close to it); ours stays the Soft Falloff disc
-            notes.warn(f"light '{name}': Soft Falloff off (rendered with it: a disc facing each point)")
+        # Soft Falloff (the default): a disc facing each point; off: a sphere, as in Cycles
+        sphere = not getattr(light, "use_soft_falloff", True)
         if light.type == "POINT":
-            pz.add_point_light(tuple(pos), tuple(intensity), name=name, radius_m=radius)
+            pz.add_point_light(tuple(pos), tuple(intensity), name=name, radius_m=radius, sphere=sphere)
         else:
             outer = float(light.spot_size) / 2.0
             inner = outer * (1.0 - float(light.spot_blend))
@@ -76,6 +75,7 @@ def add_light(pz, obj, matrix_world, notes, materials) -> None:
                 name=name,
                 falloff="blender",
                 radius_m=radius,
+                sphere=sphere,
             )
     elif light.type == "SUN":
         angle = min(max(float(light.angle), 0.0), math.radians(179.0))

@@ -141,11 +141,16 @@ class Scene:
     def instance_count(self) -> int:
         """Placements of meshes (``add_mesh`` counts one)."""
     def add_point_light(
-        self, position: Sequence[float], intensity_w_sr: Sequence[float], name: str = "", radius_m: float = 0.0
+        self,
+        position: Sequence[float],
+        intensity_w_sr: Sequence[float],
+        name: str = "",
+        radius_m: float = 0.0,
+        sphere: bool = False,
     ) -> None:
         """A point light: radiant intensity per RGB channel in W/sr; ``radius_m`` > 0 (Blender's
         Radius) emits from a disc of that radius facing each shading point, as Cycles' Soft
-        Falloff does (soft shadows)."""
+        Falloff does (soft shadows), or from a sphere with ``sphere`` (Soft Falloff off)."""
     def add_spot_light(
         self,
         position: Sequence[float],
@@ -156,11 +161,12 @@ class Scene:
         name: str = "",
         falloff: str = "gltf",
         radius_m: float = 0.0,
+        sphere: bool = False,
     ) -> None:
         """A spot light pointing along ``direction``; full intensity inside the inner cone
         half-angle, zero outside the outer. In between ``falloff`` "gltf" ramps as glTF does,
-        "blender" as Cycles' Spot Blend does (blend = 1 - inner/outer). ``radius_m`` as the
-        point light's."""
+        "blender" as Cycles' Spot Blend does (blend = 1 - inner/outer). ``radius_m`` and
+        ``sphere`` as the point light's."""
     def add_sun_light(
         self, direction: Sequence[float], irradiance_w_m2: Sequence[float], name: str = "", angle_rad: float = 0.0
     ) -> None:

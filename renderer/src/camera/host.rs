@@ -142,19 +142,17 @@ impl FilmBack {
 }
 
 /// glTF's (and Blender's exported) vertical field of view → the focal length (mm) that frames
-/// it on `sensor` for a `width` × `height` frame fitted as the CLI fits it (the sensor width
-/// spans the larger side).
+/// it on `sensor`, the film of the `width` × `height` frame as the CLI fits it: the vertical
+/// field spans the sensor's height, whatever the pixels' aspect (with non-square pixels the
+/// height is not the width × height / width in pixels).
 pub fn focal_length_from_yfov_mm(yfov_rad: f64, width: u32, height: u32, sensor: &Sensor) -> Result<f64> {
     if !(yfov_rad > 0.0 && yfov_rad < std::f64::consts::PI) {
         return Err(Error::camera("yfov", format!("the camera's field of view must be in (0, π) rad, got {yfov_rad}")));
     }
-    let tan_half_y = (yfov_rad * 0.5).tan();
-    let aspect = width as f64 / height as f64;
-    Ok(if width >= height {
-        0.5 * sensor.width_mm / (tan_half_y * aspect)
-    } else {
-        0.5 * sensor.height_mm / tan_half_y
-    })
+    if width == 0 || height == 0 {
+        return Err(Error::camera("resolution", format!("{width}×{height} has no pixels")));
+    }
+    Ok(0.5 * sensor.height_mm / (yfov_rad * 0.5).tan())
 }
 
 /// The aperture from its text form: `circle`, `blades:N[:ROTATION_DEG]` (N ≥ 3) or

@@ -68,6 +68,50 @@ fn disc_point_facing(centre: Vec3, r: f32, p: Vec3, u: Vec2) -> Vec3 {
     centre + (t * d.x + b * d.y) * r
 }
 
+/// The emitting point of a point or spot light of radius `r` about `centre` seen from `p`, and
+/// its weight w: the light's value at `p` is I·w/|q − p|². A disc facing `p` (Soft Falloff):
+/// a point uniform in its area, w = cos at the disc (its radiance I/(π r²) over the area pdf).
+/// A sphere: a direction uniform in the cone it subtends, radiance I/(π r²) over the solid-angle
+/// pdf 1/(2π(1 − cos θmax)), so w = 2(1 − cos θmax)·t²/r² with t the distance to the hit;
+/// inside the sphere a uniform direction, w = 4t²/r². None when `p` is at the centre.
+#[inline]
+fn emitter_point(centre: Vec3, r: f32, sphere: bool, p: Vec3, u: Vec2) -> Option<(Vec3, f32)> {
+    let to_p = p - centre;
+    let d2 = to_p.length_squared();
+    if !(d2 > 0.0) {
+        return None;
+    }
+    if !(r > 0.0) {
+        return Some((centre, 1.0));
+    }
+    if !sphere {
+        let q = disc_point_facing(centre, r, p, u);
+        let wi = (q - p).normalize_or_zero();
+        let cos_l = (to_p / d2.sqrt()).dot(-wi).max(0.0);
+        return Some((q, cos_l));
+    }
+    let d = d2.sqrt();
+    let axis = -to_p / d; // p → centre
+    let (wi, t, weight_per_t2) = if d > r {
+        let cos_max = (1.0 - (r * r / d2).min(1.0)).max(0.0).sqrt();
+        let wi = cone_direction(axis, cos_max.acos(), u);
+        // nearest intersection with the sphere along wi
+        let dc = d * wi.dot(axis);
+        let t = dc - (r * r - (d2 - dc * dc)).max(0.0).sqrt();
+        (wi, t, 2.0 * (1.0 - cos_max) / (r * r))
+    } else {
+        let z = 1.0 - 2.0 * u.x;
+        let s = (1.0 - z * z).max(0.0).sqrt();
+        let phi = 2.0 * std::f32::consts::PI * u.y;
+        let wi = Vec3::new(s * phi.cos(), s * phi.sin(), z);
+        let dc = wi.dot(-to_p);
+        let t = dc + (r * r - (d2 - dc * dc)).max(0.0).sqrt();
+        (wi, t, 4.0 / (r * r))
+    };
+    let t = t.max(1e-6);
+    Some((p + wi * t, weight_per_t2 * t * t))
+}
+
 /// Shirley–Chiu concentric map of the unit square onto the unit disc.
 #[inline]
 fn concentric_disc(u: Vec2) -> Vec2 {
@@ -145,21 +189,18 @@ impl RenderScene {
             LightKind::Punctual(li) => {
                 let light = self.scene().lights[li as usize];
                 let (wi, radiance, target) = match light {
-                    Light::Point { position, intensity, range, radius_m } => {
-                        // 1. The emitting point: the centre, or a point of the disc facing p.
+                    Light::Point { position, intensity, range, radius_m, sphere } => {
+                        // 1. The emitting point (the centre, a point of the disc facing p, or of
+                        //    the sphere) and its weight; 2. its light at p.
                         let range_w = range_window((position - p).length(), range);
-                        let q = disc_point_facing(position, radius_m, p, u);
+                        let (q, weight) = emitter_point(position, radius_m, sphere, p, u)?;
                         let d = q - p;
                         let d2 = d.length_squared();
                         let dist = d2.sqrt();
                         if !(dist > 0.0) {
                             return None;
                         }
-                        let wi = d / dist;
-                        // 2. A disc point's light leaves it at an angle: its cosine (1 at the centre).
-                        let cos_l =
-                            if q == position { 1.0 } else { (p - position).normalize_or_zero().dot(-wi).max(0.0) };
-                        (wi, intensity * (range_w * cos_l / d2), Some(q))
+                        (d / dist, intensity * (range_w * weight / d2), Some(q))
                     }
                     Light::Spot {
                         position,
@@ -170,9 +211,10 @@ impl RenderScene {
                         range,
                         falloff,
                         radius_m,
+                        sphere,
                     } => {
                         let range_w = range_window((position - p).length(), range);
-                        let q = disc_point_facing(position, radius_m, p, u);
+                        let (q, weight) = emitter_point(position, radius_m, sphere, p, u)?;
                         let d = q - p;
                         let d2 = d.length_squared();
                         let dist = d2.sqrt();
@@ -180,12 +222,10 @@ impl RenderScene {
                             return None;
                         }
                         let wi = d / dist;
-                        let cos_l =
-                            if q == position { 1.0 } else { (p - position).normalize_or_zero().dot(-wi).max(0.0) };
-                        // the cone is seen along the direction the light leaves the disc point
+                        // the cone is seen along the direction the light leaves its emitting point
                         let cd = direction.normalize_or_zero().dot(-wi);
                         let att = spot_attenuation(cd, inner_cone_rad, outer_cone_rad, falloff) * range_w;
-                        (wi, intensity * (att * cos_l / d2), Some(q))
+                        (wi, intensity * (att * weight / d2), Some(q))
                     }
                     Light::Directional { direction, irradiance, angle_rad } => {
                         let axis = -direction.normalize_or_zero();

@@ -162,6 +162,9 @@ pub enum Light {
         /// Radius of the emitter (Blender's Radius, USD `inputs:radius`); 0 = a point. Rendered
         /// as Cycles does with Soft Falloff: a disc of this radius facing the shading point.
         radius_m: f32,
+        /// Emit from a sphere of `radius_m` instead (UsdLux's SphereLight; Cycles with Soft
+        /// Falloff off): the same intensity far away, I/d² on a surface facing it at any d > r.
+        sphere: bool,
     },
     /// Spot light.
     Spot {
@@ -181,6 +184,8 @@ pub enum Light {
         falloff: SpotFalloff,
         /// Radius of the emitter, as the point light's.
         radius_m: f32,
+        /// A sphere rather than a disc, as the point light's.
+        sphere: bool,
     },
     /// Directional (sun) light.
     Directional {

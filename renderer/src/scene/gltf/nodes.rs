@@ -158,7 +158,7 @@ impl Loader<'_> {
         let direction = dir.normalize_or_zero();
         let l = match light.kind() {
             gltf::khr_lights_punctual::Kind::Point => {
-                Light::Point { position, intensity: radiometric, range, radius_m: 0.0 }
+                Light::Point { position, intensity: radiometric, range, radius_m: 0.0, sphere: false }
             }
             gltf::khr_lights_punctual::Kind::Directional => {
                 Light::Directional { direction, irradiance: radiometric, angle_rad: 0.0 }
@@ -190,6 +190,7 @@ impl Loader<'_> {
                     range,
                     falloff: SpotFalloff::Gltf,
                     radius_m: 0.0,
+                    sphere: false,
                 }
             }
         };
