@@ -330,6 +330,18 @@ impl<'a> Walker<'a> {
             let faces = m.indices.len();
             (m, crate::mesh::MeshReport { faces, ..Default::default() })
         };
+        // A subdivision surface (Blender writes its Subdivision modifier's cage with the scheme
+        // when exporting "Best Match"): rendered as its cage, which Cycles would smooth. Only an
+        // authored scheme counts (every Blender mesh authors "none"; USD's fallback is
+        // catmullClark, which most files leave unauthored for plain polygon meshes).
+        if ty == "Mesh" {
+            if let Some(scheme) = self.reader.token(prim, "subdivisionScheme")?.filter(|s| s != "none") {
+                self.warnings.push(format!(
+                    "{}: {path}: subdivisionScheme = {scheme}: rendered as its control cage, not subdivided (export it tessellated: Blender's USD export, Subdivision = Tessellate)",
+                    layer_of_prim(prim)
+                ));
+            }
+        }
         if report.degenerate_faces > 0 {
             self.warnings.push(format!(
                 "{}: {path}: {} of {} faces have fewer than 3 vertices and were skipped",
