@@ -167,11 +167,19 @@ fn gltf_textured_quad_material_and_texel_lookup() {
     assert!(s.meshes[0].uv1.iter().all(|u| *u == Vec2::splat(0.5)));
     assert!(s.meshes[0].normals.iter().all(|n| *n == Vec3::Z));
 
-    assert!(
-        s.warnings.iter().any(|w| w.contains("KHR_texture_transform") && w.contains("emissiveTexture")),
-        "{:?}",
-        s.warnings
-    );
+    // KHR_texture_transform on the emissive texture: uv' = T·R·S·uv with offset (0.5, 0.25),
+    // rotation π/2, scale (2, 3), and its texCoord (1) over the texture info's
+    let t = em.transform.expect("the emissive texture's KHR_texture_transform");
+    assert_eq!(em.uv_set, 1);
+    for (uv, expected) in [
+        (Vec2::ZERO, Vec2::new(0.5, 0.25)),
+        (Vec2::new(1.0, 0.0), Vec2::new(0.5, 0.25 - 2.0)), // S: (2, 0); R: (cos·2, −sin·2) = (0, −2)
+        (Vec2::new(0.0, 1.0), Vec2::new(0.5 + 3.0, 0.25)), // S: (0, 3); R: (sin·3, cos·3) = (3, 0)
+    ] {
+        assert!((t.apply(uv) - expected).length() < 1e-6, "{uv} → {} (expected {expected})", t.apply(uv));
+    }
+    assert!(bc.transform.is_none());
+    assert!(!s.warnings.iter().any(|w| w.contains("KHR_texture_transform")), "{:?}", s.warnings);
     assert!(s.warnings.iter().any(|w| w.contains("KHR_materials_clearcoat")), "{:?}", s.warnings);
 }
 

@@ -174,7 +174,17 @@ def textured_quad():
             },
             "normalTexture": {"index": 1, "scale": 0.5},
             "emissiveFactor": [1, 0.5, 0.25],
-            "emissiveTexture": {"index": 0, "extensions": {"KHR_texture_transform": {"scale": [2, 2]}}},
+            "emissiveTexture": {
+                "index": 0,
+                "extensions": {
+                    "KHR_texture_transform": {
+                        "offset": [0.5, 0.25],
+                        "rotation": 1.5707963267948966,
+                        "scale": [2, 3],
+                        "texCoord": 1,
+                    }
+                },
+            },
             "alphaMode": "MASK",
             "alphaCutoff": 0.3,
             "doubleSided": True,

@@ -2,8 +2,8 @@
 
 use super::{named, Loader, TexKind};
 use crate::scene::texture::{srgb_to_linear, Wrap};
-use crate::scene::{AlphaMode, Material, Texture, TextureRef};
-use glam::{Vec3, Vec4};
+use crate::scene::{AlphaMode, Material, Texture, TextureRef, UvTransform};
+use glam::{Vec2, Vec3, Vec4};
 use std::sync::Arc;
 
 impl Loader<'_> {
@@ -107,10 +107,25 @@ impl Loader<'_> {
         used_by: &str,
     ) -> Option<TextureRef> {
         let info = info?;
-        if info.texture_transform().is_some() {
-            self.warn(used_by, "KHR_texture_transform is not supported and is ignored");
-        }
-        Some(self.texture_ref(&info.texture(), info.tex_coord(), kind, used_by))
+        // KHR_texture_transform: uv' = T·R·S·uv (glTF's UVs already have the renderer's
+        // top-left origin), and its texCoord overrides the texture info's.
+        let (transform, tex_coord) = match info.texture_transform() {
+            Some(t) => {
+                let ([tx, ty], r, [sx, sy]) = (t.offset(), t.rotation(), t.scale());
+                if ![tx, ty, r, sx, sy].iter().all(|v| v.is_finite()) {
+                    self.warn(used_by, "KHR_texture_transform has non-finite values; ignored");
+                    (None, info.tex_coord())
+                } else {
+                    let (sin, cos) = r.sin_cos();
+                    let m = glam::Mat2::from_cols(Vec2::new(cos * sx, -sin * sx), Vec2::new(sin * sy, cos * sy));
+                    (Some(UvTransform { m, offset: Vec2::new(tx, ty) }), t.tex_coord().unwrap_or(info.tex_coord()))
+                }
+            }
+            None => (None, info.tex_coord()),
+        };
+        let mut r = self.texture_ref(&info.texture(), tex_coord, kind, used_by);
+        r.transform = transform;
+        Some(r)
     }
 
     // ---------------------------------------------------------------- materials

@@ -21,7 +21,7 @@
 //! | `KHR_materials_emissive_strength` | × `Material::emissive` | |
 //! | `KHR_materials_specular` `specularFactor` | `Material::specular` | specular colour and textures ignored (warning) |
 //! | `KHR_materials_ior` | `Material::ior` | |
-//! | `KHR_texture_transform` | ignored, with a warning | |
+//! | `KHR_texture_transform` | offset, rotation, scale and texCoord on base colour, metallic-roughness and emissive textures (a normal map's tangent frame is not rotated) | |
 //! | no material | [`Material::default`] (white, metallic 1, roughness 1) | |
 //! | image (PNG, JPEG; file, data URI or bufferView) | [`Texture`], sampler wrap modes, `magFilter` nearest → nearest | missing or undecodable: warning and a 1×1 fallback: magenta for base colour, flat for normal maps, white for metallic-roughness, black for emission |
 //! | `KHR_lights_punctual` point, spot | [`Light::Point`], [`Light::Spot`]: `color × intensity / 683` W/sr | see below |
