@@ -108,14 +108,16 @@ impl PyScene {
         PyScene { scene: petzval_renderer::scene::Scene::default(), all_tangents: true }
     }
 
-    /// Adds a texture from (H, W, 4|3) linear values, row 0 at the top.
-    #[pyo3(signature = (pixels, name = "", interpolation = "linear", extension = "repeat"))]
+    /// Adds a texture from (H, W, 4|3) linear values, row 0 at the top; with `srgb_encoded` the
+    /// RGB values are sRGB-encoded (an 8-bit sRGB image), decoded after filtering as Cycles does.
+    #[pyo3(signature = (pixels, name = "", interpolation = "linear", extension = "repeat", srgb_encoded = false))]
     fn add_texture(
         &mut self,
         pixels: PyArrayLike3<'_, f32, AllowTypeChange>,
         name: &str,
         interpolation: &str,
         extension: &str,
+        srgb_encoded: bool,
     ) -> PyResult<usize> {
         guard(|| {
             let a = pixels.as_array();
@@ -164,6 +166,7 @@ impl PyScene {
                 wrap_s: wrap,
                 wrap_t: wrap,
                 bilinear,
+                srgb_encoded,
             }));
             Ok(self.scene.textures.len() - 1)
         })

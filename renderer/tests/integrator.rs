@@ -221,6 +221,7 @@ fn alpha_quads(mode: AlphaMode, factor: f32, texture: bool) -> RenderScene {
         wrap_s: Wrap::ClampToEdge,
         wrap_t: Wrap::ClampToEdge,
         bilinear: false,
+        srgb_encoded: false,
     }));
     RenderScene::new(scene).unwrap()
 }

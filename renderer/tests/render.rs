@@ -809,6 +809,7 @@ fn striped_ground(h: f64, cam_to_world: &DAffine3, stripes_per_radian: f64) -> R
         wrap_s: Wrap::Repeat,
         wrap_t: Wrap::Repeat,
         bilinear: false,
+        srgb_encoded: false,
     };
     let to_cam = cam_to_world.inverse();
     let mut mesh = Mesh::default();

@@ -23,10 +23,17 @@ def srgb_to_linear(c: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.04045, c / 12.92, ((np.maximum(c, 0.04045) + 0.055) / 1.055) ** 2.4).astype(np.float32)
 
 
-def image_pixels(img, notes, what: str):
+def srgb_byte_image(img) -> bool:
+    """A byte image whose colours are sRGB-encoded (tagged sRGB, or a space we decode as sRGB)."""
+    return not img.is_float and img.colorspace_settings.name not in LINEAR_SPACES
+
+
+def image_pixels(img, notes, what: str, keep_srgb: bool = False):
     """(H, W, 4) float32 linear pixels of a Blender image, row 0 at the top; None if it has no
     pixels (missing file). Byte images tagged sRGB are decoded here (``Image.pixels`` gives the
-    stored byte values / 255); float images are already scene linear in Blender's memory."""
+    stored byte values / 255), unless ``keep_srgb`` (then they stay encoded, for a texture that
+    petzval filters and then decodes as Cycles does); float images are already scene linear in
+    Blender's memory."""
     try:
         w, h = img.size
     except Exception:
@@ -50,9 +57,8 @@ def image_pixels(img, notes, what: str):
             out[..., 3] = px[..., 1]
     if not img.is_float:
         cs = img.colorspace_settings.name
-        if cs == "sRGB":
-            out[..., :3] = srgb_to_linear(out[..., :3])
-        elif cs not in LINEAR_SPACES:
+        if cs not in LINEAR_SPACES and cs != "sRGB":
             notes.warn(f"image '{img.name}': colour space '{cs}' decoded as sRGB")
+        if cs not in LINEAR_SPACES and not keep_srgb:
             out[..., :3] = srgb_to_linear(out[..., :3])
     return np.ascontiguousarray(out)

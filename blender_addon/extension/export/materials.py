@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .images import MISSING_TEXTURE, image_pixels
+from .images import MISSING_TEXTURE, image_pixels, srgb_byte_image
 from .nodes import node_tree_of, source, surface_shader, value
 
 DEFAULT_COLOUR = (0.8, 0.8, 0.8, 1.0)
@@ -52,15 +52,22 @@ class Materials:
             )
         key = (img.name_full, tex_node.interpolation, tex_node.extension, keep_alpha)
         if key not in self.textures:
-            px = image_pixels(img, self.notes, what)
+            interpolation = INTERPOLATION.get(tex_node.interpolation, "linear")
+            # an 8-bit sRGB image filtered linearly stays encoded: filtered, then decoded (Cycles)
+            encoded = interpolation == "linear" and srgb_byte_image(img)
+            px = image_pixels(img, self.notes, what, keep_srgb=encoded)
             if px is None:
                 self.textures[key] = None
             else:
                 if not keep_alpha:
                     px[..., 3] = 1.0
                 self.textures[key] = self.scene.add_texture(
-                    px, name=img.name, interpolation=INTERPOLATION.get(tex_node.interpolation, "linear"),
-                    extension=EXTENSION.get(tex_node.extension, "repeat"))
+                    px,
+                    name=img.name,
+                    interpolation=interpolation,
+                    extension=EXTENSION.get(tex_node.extension, "repeat"),
+                    srgb_encoded=encoded,
+                )
         return self.textures[key]
 
     def _data_texture(self, key, make):

@@ -75,11 +75,18 @@ class Scene:
 
     def __init__(self) -> None: ...
     def add_texture(
-        self, pixels: NDArray[np.float32], name: str = "", interpolation: str = "linear", extension: str = "repeat"
+        self,
+        pixels: NDArray[np.float32],
+        name: str = "",
+        interpolation: str = "linear",
+        extension: str = "repeat",
+        srgb_encoded: bool = False,
     ) -> int:
         """Adds a texture from ``(H, W, 4)`` (or ``(H, W, 3)``) LINEAR values, row 0 at the
         top. ``interpolation``: ``"linear"`` or ``"closest"``; ``extension``: ``"repeat"``,
-        ``"clip"`` (clamp to edge) or ``"mirror"``. Returns its index."""
+        ``"clip"`` (clamp to edge) or ``"mirror"``. With ``srgb_encoded`` the RGB values are
+        sRGB-encoded (an 8-bit sRGB image), filtered and then decoded, as Cycles does with byte
+        images. Returns its index."""
     def add_material(
         self,
         name: str,

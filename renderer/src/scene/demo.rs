@@ -139,6 +139,7 @@ pub fn demo_scene() -> (Scene, DemoShot) {
             wrap_s: Wrap::Repeat,
             wrap_t: Wrap::Repeat,
             bilinear: true,
+            srgb_encoded: false,
         }
     };
     scene.textures.push(Arc::new(checker));

@@ -60,7 +60,9 @@ impl Loader<'_> {
         let texture = match self.decode_image(tex.source().index()) {
             Ok(img) => {
                 let (w, h) = (img.width(), img.height());
-                let texels = image_texels(&img, kind.srgb());
+                // an 8-bit sRGB image filtered bilinearly keeps its encoded values (see Texture)
+                let srgb_encoded = kind.srgb() && bilinear && is_eight_bit(&img);
+                let texels = image_texels(&img, kind.srgb() && !srgb_encoded);
                 Texture {
                     name: name.clone(),
                     width: w,
@@ -69,6 +71,7 @@ impl Loader<'_> {
                     wrap_s: wrap(sampler.wrap_s()),
                     wrap_t: wrap(sampler.wrap_t()),
                     bilinear,
+                    srgb_encoded,
                 }
             }
             Err(reason) => {
@@ -248,17 +251,21 @@ impl Loader<'_> {
     }
 }
 
-/// Linear RGBA texels of a decoded image, row 0 at the top; RGB sRGB-decoded if `srgb`
-/// (alpha is always linear).
-fn image_texels(img: &image::DynamicImage, srgb: bool) -> Vec<Vec4> {
-    let eight_bit = matches!(
+/// Whether an image stores 8 bits per channel.
+fn is_eight_bit(img: &image::DynamicImage) -> bool {
+    matches!(
         img,
         image::DynamicImage::ImageLuma8(_)
             | image::DynamicImage::ImageLumaA8(_)
             | image::DynamicImage::ImageRgb8(_)
             | image::DynamicImage::ImageRgba8(_)
-    );
-    if eight_bit {
+    )
+}
+
+/// Linear RGBA texels of a decoded image, row 0 at the top; RGB sRGB-decoded if `srgb`
+/// (alpha is always linear).
+fn image_texels(img: &image::DynamicImage, srgb: bool) -> Vec<Vec4> {
+    if is_eight_bit(img) {
         let lut: Vec<f32> = (0..256)
             .map(|i| {
                 let c = i as f32 / 255.0;
