@@ -251,6 +251,27 @@ def _principled_lambert(name, base):
     return mat
 
 
+def _checker_image():
+    """An 8-bit sRGB 8 x 8 checker of dark red and light grey, saved as PNG and packed: a byte
+    image, which Cycles filters in its encoded values and decodes afterwards."""
+    import numpy as np
+
+    b = bpy()
+    n = 8
+    img = b.data.images.new("Checker8", n, n, alpha=False, float_buffer=False)
+    img.colorspace_settings.name = "sRGB"
+    i, j = np.meshgrid(np.arange(n), np.arange(n))
+    dark = ((i + j) % 2 == 0)[..., None]
+    px = np.where(dark, np.array([0.35, 0.05, 0.05, 1.0]), np.array([0.9, 0.9, 0.85, 1.0])).astype(np.float32)
+    img.pixels.foreach_set(px.ravel())
+    OUT.mkdir(parents=True, exist_ok=True)
+    img.filepath_raw = str(OUT / "checker8.png")
+    img.file_format = "PNG"
+    img.save()
+    img.pack()
+    return img
+
+
 def _environment_image():
     """A float equirectangular sky: a blue-to-white gradient with a small bright warm patch, saved
     and packed. With the Mapping node's 40° Z rotation the patch is seen 15° right of the view
@@ -289,7 +310,8 @@ def build_lights_scene(variant: str):
     """Diffuse ground and spheres lit by a rectangular and a disc area light (``variant``
     "area", black world), by an environment texture rotated by a Mapping node ("world", no
     lights), or by three spot lights of Spot Blend 0, 0.3 and 1 ("spots", black world). The
-    "soft" has a point light of radius 0.4 m (Soft Falloff, Blender's default), a spot light of
+    "texture" lights the ground, coloured by a coarse 8-bit checker with Linear interpolation, by
+    a sun. "soft" has a point light of radius 0.4 m (Soft Falloff, Blender's default), a spot light of
     radius 0.3 m with Soft Falloff off (a sphere) and a sun 12° wide,
     whose soft shadows the add-on renders as Cycles does (black world). The
     first two are separate because the add-on's area lights are emissive geometry, which
@@ -315,7 +337,20 @@ def build_lights_scene(variant: str):
     scene.world = world
 
     b.ops.mesh.primitive_plane_add(size=8.0, location=(0.0, 2.0, 0.0))
-    b.context.active_object.data.materials.append(_principled_lambert("Ground", (0.5, 0.5, 0.5)))
+    ground = _principled_lambert("Ground", (0.5, 0.5, 0.5))
+    if variant == "texture":
+        # the ground's colour from a coarse 8-bit checker with Linear interpolation
+        tex = ground.node_tree.nodes.new("ShaderNodeTexImage")
+        tex.image = _checker_image()
+        tex.interpolation = "Linear"
+        bsdf = ground.node_tree.nodes.get("Principled BSDF")
+        ground.node_tree.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+        sun = b.data.lights.new("TexSun", "SUN")
+        sun.energy = 2.0
+        sun_obj = b.data.objects.new("TexSun", sun)
+        scene.collection.objects.link(sun_obj)
+        sun_obj.rotation_euler = (math.radians(20.0), 0.0, math.radians(10.0))
+    b.context.active_object.data.materials.append(ground)
     for loc, r, col in (((-0.5, 1.5, 0.35), 0.35, (0.7, 0.2, 0.15)), ((0.6, 2.2, 0.5), 0.5, (0.2, 0.6, 0.3))):
         b.ops.mesh.primitive_uv_sphere_add(segments=32, ring_count=16, radius=r, location=loc)
         b.ops.object.shade_smooth()

@@ -285,7 +285,7 @@ def test_real_lens_round_trip_matches_gltf_path(main_scene, report):
 SPP_LIGHTS = 128
 
 
-@pytest.mark.parametrize("variant", ["area", "world", "spots", "soft"])
+@pytest.mark.parametrize("variant", ["area", "world", "spots", "soft", "texture"])
 def test_area_lights_and_environment_match_cycles(addon, report, variant):
     """What tests/blender's glTF scene cannot carry, against Cycles (8x8 block z-test and image
     means, both sides two seeds): "area": a rectangle and a disc area light (one-sided emitters of
@@ -294,7 +294,9 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
     Spot Blend 0, 0.3 and 1, which fade as Cycles' smoothstep (glTF's ramp, used before, left the
     blended ones 22–37 % dark); "soft": a point light of radius 0.4 m (Soft Falloff: a disc), a
     spot light of radius 0.3 m with Soft Falloff off (a sphere) and a sun 12° wide, whose soft
-    shadows are rendered as Cycles renders them (they were hard before)."""
+    shadows are rendered as Cycles renders them (they were hard before); "texture": an 8-bit sRGB
+    checker filtered linearly, which Cycles filters in its encoded values (decoding first left
+    the texel edges darker)."""
     H.build_lights_scene(variant)
     cyc = [B.read_rgb(H.lights_cycles_reference(variant, seed, SPP_LIGHTS)) for seed in SEEDS]
     pz = []
@@ -311,6 +313,7 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
         "world": f"environment texture turned {H.LIGHTS_ENV_ROTATION_DEG:g}° by a Mapping node",
         "spots": "spot lights of Spot Blend 0, 0.3 and 1",
         "soft": "a point light of radius 0.4 m, a spherical spot light of radius 0.3 m and a sun 12° wide",
+        "texture": "a coarse 8-bit checker with Linear interpolation",
     }[variant]
     report.line(f"{what} vs Cycles, {w}x{h} {SPP_LIGHTS} spp x seeds {SEEDS} ({secs:.1f} s per F12)")
     report.line(f"  blocks: {_fmt(v)}; image mean add-on/Cycles R,G,B {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f}")

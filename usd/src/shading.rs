@@ -285,7 +285,7 @@ impl Materials {
             return Ok(Some(TextureRef { index: i, uv_set: 0, transform }));
         }
         let t = match load_image(&path.1, srgb) {
-            Ok((w, h, texels, srgb_encoded)) => Texture {
+            Ok((w, h, texels)) => Texture {
                 name: path.0.clone(),
                 width: w,
                 height: h,
@@ -293,7 +293,7 @@ impl Materials {
                 wrap_s: ws,
                 wrap_t: wt,
                 bilinear: true,
-                srgb_encoded,
+                srgb_encoded: false,
             },
             Err(e) => {
                 if !path.1.is_empty() {
@@ -327,9 +327,10 @@ pub(crate) fn read_packaged(package: &str, inner: &str) -> Result<Vec<u8>, Strin
     Ok(bytes)
 }
 
-/// (width, height, texels, whether they are sRGB-encoded): an 8-bit sRGB image keeps its
-/// encoded values, decoded after filtering as Cycles does (see `Texture`).
-fn load_image(path: &str, srgb: bool) -> Result<(u32, u32, Vec<Vec4>, bool), String> {
+/// (width, height, linear texels): decoded before filtering, as USD's renderers (Storm's sRGB
+/// textures, Karma, RenderMan) do; only Cycles filters byte images encoded (see `Texture`; the
+/// add-on does that for Blender's own images).
+fn load_image(path: &str, srgb: bool) -> Result<(u32, u32, Vec<Vec4>), String> {
     let img = match openusd::ar::split_package_relative_path_outer(path) {
         Some((package, inner)) => {
             let bytes = read_packaged(&package, &inner)?;
@@ -342,18 +343,10 @@ fn load_image(path: &str, srgb: bool) -> Result<(u32, u32, Vec<Vec4>, bool), Str
             .decode()
             .map_err(|e| e.to_string())?,
     };
-    let encoded = srgb
-        && matches!(
-            img,
-            image::DynamicImage::ImageLuma8(_)
-                | image::DynamicImage::ImageLumaA8(_)
-                | image::DynamicImage::ImageRgb8(_)
-                | image::DynamicImage::ImageRgba8(_)
-        );
     let rgba = img.to_rgba32f();
-    let decode = |c: f32| if srgb && !encoded { petzval_renderer::scene::texture::srgb_to_linear(c) } else { c };
+    let decode = |c: f32| if srgb { petzval_renderer::scene::texture::srgb_to_linear(c) } else { c };
     let texels = rgba.pixels().map(|p| Vec4::new(decode(p[0]), decode(p[1]), decode(p[2]), p[3])).collect();
-    Ok((img.width(), img.height(), texels, encoded))
+    Ok((img.width(), img.height(), texels))
 }
 
 fn display_color(reader: &Reader, prim: &usd::Prim) -> Result<Vec3, Error> {

@@ -1,7 +1,8 @@
 //! Textures: RGBA f32 texels with glTF wrap modes and bilinear filtering. Texels are linear,
-//! except in 8-bit sRGB images filtered bilinearly, which keep their sRGB-encoded values and are
-//! decoded after filtering (`srgb_encoded`), as Cycles does with byte images: filtering the
-//! encoded values gives a texel edge its brighter sRGB-space blend (up to ~5 % on a checker).
+//! except where `srgb_encoded` keeps an 8-bit sRGB image's encoded values, decoded after
+//! filtering, as Cycles does with byte images (filtering the encoded values brightens a texel
+//! edge's blend, up to ~5 % on a checker). The add-on does that for Blender's images; glTF and
+//! USD images are decoded before filtering, as the glTF spec asks and USD's other renderers do.
 
 use glam::{Vec2, Vec4};
 

@@ -60,9 +60,10 @@ impl Loader<'_> {
         let texture = match self.decode_image(tex.source().index()) {
             Ok(img) => {
                 let (w, h) = (img.width(), img.height());
-                // an 8-bit sRGB image filtered bilinearly keeps its encoded values (see Texture)
-                let srgb_encoded = kind.srgb() && bilinear && is_eight_bit(&img);
-                let texels = image_texels(&img, kind.srgb() && !srgb_encoded);
+                // decoded before filtering, as the glTF spec asks ("to achieve correct
+                // filtering, the transfer function should be decoded before performing linear
+                // interpolation"); Cycles filters byte images encoded (see Texture)
+                let texels = image_texels(&img, kind.srgb());
                 Texture {
                     name: name.clone(),
                     width: w,
@@ -71,7 +72,7 @@ impl Loader<'_> {
                     wrap_s: wrap(sampler.wrap_s()),
                     wrap_t: wrap(sampler.wrap_t()),
                     bilinear,
-                    srgb_encoded,
+                    srgb_encoded: false,
                 }
             }
             Err(reason) => {
