@@ -173,7 +173,7 @@ impl PyScene {
     }
 
     /// Adds a glTF metallic-roughness material; returns its index.
-    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true))]
+    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true, light_emitter = false))]
     #[allow(clippy::too_many_arguments)]
     fn add_material(
         &mut self,
@@ -192,6 +192,7 @@ impl PyScene {
         normal_scale: f64,
         emission_texture: Option<usize>,
         double_sided: bool,
+        light_emitter: bool,
     ) -> PyResult<usize> {
         guard(|| {
             let bc = match base_color.as_slice() {
@@ -238,6 +239,7 @@ impl PyScene {
                 alpha_mode: parse_alpha_mode(alpha_mode, alpha_cutoff)
                     .map_err(|e| scene_err(name, "", e.to_string()))?,
                 double_sided,
+                light_emitter,
             };
             self.scene.materials.push(m);
             Ok(self.scene.materials.len() - 1)

@@ -716,6 +716,54 @@ fn lights_with_a_radius_or_an_angle_give_their_analytic_irradiance() {
     }
 }
 
+/// A light's emitting surface (`Material::light_emitter`: an area light from USD or the
+/// add-on) is not geometry, as in Cycles: a sun shining through it still lights the ground
+/// below (an ordinary emissive quad shadows it), a camera ray reaching its back passes through
+/// to the ground, and from the front it is seen with its emission.
+#[test]
+fn light_emitters_cast_no_shadow_and_are_seen_from_the_front_only() {
+    let albedo = 0.5;
+    let ground = quad(Vec3::new(-10.0, 0.0, 10.0), Vec3::new(20.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -20.0), 0);
+    // a 1 m panel 1 m up, facing down (its front toward the ground)
+    let panel = quad(Vec3::new(-0.5, 1.0, -0.5), Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 0.0, 1.0), 1);
+    assert!(panel.normals[0].y < 0.0, "the panel faces down");
+    let emitter = |light_emitter: bool| Material {
+        name: "panel".into(),
+        base_color: glam::Vec4::new(0.0, 0.0, 0.0, 1.0),
+        metallic: 0.0,
+        specular: 0.0,
+        emissive: Vec3::splat(2.0),
+        light_emitter,
+        ..Material::default()
+    };
+    let scene = |light_emitter: bool| {
+        let mut s =
+            scene_of(&[ground.clone(), panel.clone()], vec![diffuse(Vec3::splat(albedo)), emitter(light_emitter)]);
+        s.lights.push(Light::Directional { direction: -Vec3::Y, irradiance: Vec3::splat(3.0), angle_rad: 0.0 });
+        RenderScene::new(s).unwrap()
+    };
+    let tracer = PathTracer { max_depth: 1, ..PathTracer::default() };
+    let (light, solid) = (scene(true), scene(false));
+    // 1. the ground under the panel, seen from the side: the sun (3 W/m², albedo 0.5) plus the
+    //    panel's light; an ordinary emitter shadows the sun
+    let eye = Vec3::new(3.0, 0.5, 0.0);
+    let below = Vec3::new(0.0, 0.0, 0.0) - eye;
+    let (l_light, _) = mean_radiance(&tracer, &light, eye, below, 1, 1024);
+    let (l_solid, _) = mean_radiance(&tracer, &solid, eye, below, 1, 1024);
+    let sun = 3.0 * albedo / PI;
+    assert!(l_light.y > sun && l_light.y - l_solid.y > 0.9 * sun, "light {l_light}, solid {l_solid}");
+    assert!(rel(l_light.y - l_solid.y, sun) < 0.02, "the sun's share {} vs {sun}", l_light.y - l_solid.y);
+    // 2. from above, through the panel's back: the same (Lambertian) ground point, not the back
+    let top = Vec3::new(0.0, 3.0, 0.0);
+    let (through, first) = mean_radiance(&tracer, &light, top, -Vec3::Y, 2, 1024);
+    assert!(first.depth_m > 2.5 && rel(through.y, l_light.y) < 0.02, "seen through: {through} at {}", first.depth_m);
+    let (back, first) = mean_radiance(&tracer, &solid, top, -Vec3::Y, 2, 256);
+    assert!(first.depth_m < 2.5 && back.y < 1e-6, "an ordinary emitter's back: {back} at {}", first.depth_m);
+    // 3. from below, its front: its emission
+    let (front, _) = mean_radiance(&tracer, &light, Vec3::new(0.0, 0.2, 0.0), Vec3::Y, 3, 16);
+    assert!(rel(front.y, 2.0) < 1e-4, "its front: {front}");
+}
+
 #[test]
 fn shadows_block_lights() {
     let p = Vec3::new(0.1, 0.0, 0.2);

@@ -10,7 +10,7 @@
 //! | light | renderer | conversion | fallbacks |
 //! |---|---|---|---|
 //! | `SphereLight` | point light (spot with `shaping:cone:angle`) of radius r: a sphere (0 with `treatAsPoint`; in stages Blender wrote, Blender's default Soft Falloff, a disc facing each point, since its USD does not record the setting) | radiant intensity = L · π r² (normalize: intensity/4 · 2^E · color) W/sr; cone: outer = angle, fading as Blender's Spot Blend = softness ([`SpotFalloff::Blender`](petzval_renderer::scene::SpotFalloff)) | radius 0.5, normalize off |
-//! | `RectLight` | a one-sided emissive quad facing −z | radiance L | width 1, height 1 |
+//! | `RectLight` | a one-sided emissive quad facing −z, a light's emitter (no shadow, not there from behind: `Material::light_emitter`) | radiance L | width 1, height 1 |
 //! | `DiskLight` | a one-sided emissive 32-gon facing −z | radiance L | radius 0.5 |
 //! | `DistantLight` | directional light along −z, directions spread over its `angle` (angular diameter, degrees; twice the value in stages Blender wrote, whose exporter writes half the diameter) | irradiance = 4 · intensity · 2^E · color W/m² (Blender's factor) | angle 0.53 |
 //! | `DomeLight` | environment: `texture:file` (EXR, latlong) × intensity · 2^E · color, or the constant colour; turned about +y by the light's yaw | — | — |
@@ -215,11 +215,15 @@ pub fn read_light(
             }
             let area_m2 = area_units * mpu * mpu;
             let l = if normalize && area_m2 > 0.0 { base / area_m2 as f32 } else { base };
+            // a light's emitter, not geometry, as in Cycles: no shadow, not there from behind
+            // (and no reflection off the panel: no specular layer)
             let mut m = Material {
                 name: path.clone(),
                 base_color: glam::Vec4::new(0.0, 0.0, 0.0, 1.0),
                 metallic: 0.0,
+                specular: 0.0,
                 emissive: l,
+                light_emitter: true,
                 ..Material::default()
             };
             m.double_sided = false;

@@ -123,15 +123,11 @@ def add_area_light(pz, obj, m, colour, notes, materials) -> None:
     # in Cycles 5.0: a 1 m^2 light of 100 W seen head-on reads 31.83 = 100 / pi)
     power = float(light.energy)
     radiance = colour * power / ((area if light.normalize else 1.0) * math.pi)
+    # a light's emitter, not geometry (as in Cycles): it casts no shadow, and from behind it is not there
     mat = pz.add_material(f"{obj.name} (area light)", base_color=(0.0, 0.0, 0.0, 1.0), specular=0.0, roughness=1.0,
-                          emission=tuple(radiance), double_sided=False)
+                          emission=tuple(radiance), double_sided=False, light_emitter=True)
     normals = np.tile(np.array([[0.0, 0.0, -1.0]], dtype=np.float32), (len(v), 1))
     pz.add_mesh(v.astype(np.float32), t, material_ids=np.full(len(t), mat, dtype=np.uint32), normals=normals,
                 transform=m, name=obj.name)
     if not getattr(obj, "visible_camera", True):
-        notes.note(
-            "area lights are emissive surfaces here: seen by the camera (Cycles hides lights from camera rays by "
-            "default) and casting shadows (Cycles' lights do not)"
-        )
-    else:
-        notes.note("area lights are emissive surfaces here: they cast shadows (Cycles' lights do not)")
+        notes.note("area lights are seen by the camera from their front here (this one is hidden from camera rays)")

@@ -104,6 +104,7 @@ class Scene:
         normal_scale: float = 1.0,
         emission_texture: int | None = None,
         double_sided: bool = True,
+        light_emitter: bool = False,
     ) -> int:
         """Adds a glTF metallic-roughness material and returns its index.
 
@@ -112,7 +113,9 @@ class Scene:
         colour x strength). ``alpha_mode``: ``"opaque"``, ``"blend"`` (stochastic) or
         ``"mask"`` (cut at ``alpha_cutoff``); alpha is ``base_color[3]`` x texture alpha.
         ``metallic_roughness_texture`` reads roughness from G and metallic from B (glTF).
-        Texture indices come from :meth:`add_texture`."""
+        ``light_emitter`` marks a light's emitting surface (an area light, as Cycles' lights):
+        it casts no shadow and is seen only from its front. Texture indices come from
+        :meth:`add_texture`."""
     def add_mesh(
         self,
         positions: NDArray[np.float32],

@@ -142,9 +142,15 @@ pub(crate) enum AlphaTest {
     Mask(f32),
     /// Opaque with probability alpha.
     Stochastic,
+    /// A light's emitting surface (an area light, as Cycles' lights): no shadow, and seen only
+    /// from its front.
+    LightEmitter,
 }
 
 fn alpha_test_of(m: &Material) -> AlphaTest {
+    if m.light_emitter {
+        return AlphaTest::LightEmitter;
+    }
     let factor = m.base_color.w;
     let textured = m.base_color_texture.is_some();
     match m.alpha_mode {
@@ -1068,7 +1074,10 @@ impl RenderScene {
     /// Whether the surface is there (not cut out) at a candidate hit; `key` identifies the
     /// triangle for the stochastic decision.
     #[inline(never)]
-    fn alpha_passes(&self, c: Candidate, b1: f32, b2: f32, ray_hash: u32) -> bool {
+    /// Whether the surface is there for this ray at (b1, b2) of candidate `c`: its alpha test,
+    /// and for a light's emitter (an area light) whether the ray sees it at all: never a shadow
+    /// ray (`dir` None), only from the front a ray searching the closest hit along `dir`.
+    fn alpha_passes(&self, c: Candidate, b1: f32, b2: f32, ray_hash: u32, dir: Option<Vec3>) -> bool {
         let (inst, tri, key) = match c {
             Candidate::Baked(k) => {
                 let (i, t) = self.resolve_baked(k);
@@ -1078,6 +1087,10 @@ impl RenderScene {
         };
         match self.alpha_tests[self.material_of(inst, tri) as usize] {
             AlphaTest::None => true,
+            AlphaTest::LightEmitter => dir.is_some_and(|d| {
+                let [p0, p1, p2] = self.world_triangle(inst, tri);
+                (p1 - p0).cross(p2 - p0).dot(d) * self.instance_sign(inst) < 0.0
+            }),
             AlphaTest::Mask(cutoff) => self.alpha_at(inst, tri, b1, b2) >= cutoff,
             AlphaTest::Stochastic => {
                 let u = (hash_u32(ray_hash ^ hash_u32(key)) >> 8) as f32 * (1.0 / (1u32 << 24) as f32);
@@ -1101,7 +1114,7 @@ impl RenderScene {
                 let tri = &tris[id];
                 if let Some((t, b1, b2)) = wray.intersect(&tri.v, r.tmax) {
                     let c = Candidate::Baked(tri.prim & !ALPHA_BIT);
-                    if tri.prim & ALPHA_BIT != 0 && !self.alpha_passes(c, b1, b2, ray_hash) {
+                    if tri.prim & ALPHA_BIT != 0 && !self.alpha_passes(c, b1, b2, ray_hash, Some(dir)) {
                         return f32::INFINITY;
                     }
                     best = Some((c, b1, b2));
@@ -1153,7 +1166,7 @@ impl RenderScene {
                 let c = Candidate::Baked(tri.prim & !ALPHA_BIT);
                 // A hit of lane i: kept unless the alpha test lets the ray through.
                 let mut take = |i: usize, b1: f32, b2: f32| {
-                    if tri.prim & ALPHA_BIT != 0 && !self.alpha_passes(c, b1, b2, hashes[i]) {
+                    if tri.prim & ALPHA_BIT != 0 && !self.alpha_passes(c, b1, b2, hashes[i], Some(lane(i).1)) {
                         return false;
                     }
                     best[i] = Some((c, b1, b2));
@@ -1247,7 +1260,7 @@ impl RenderScene {
                     let tri = &blas.tris[id2];
                     if let Some((t, b1, b2)) = wray.intersect(&tri.v, r2.tmax) {
                         let c = Candidate::Instanced(leaf.instance, tri.prim & !ALPHA_BIT);
-                        if tri.prim & ALPHA_BIT != 0 && !self.alpha_passes(c, b1, b2, ray_hash) {
+                        if tri.prim & ALPHA_BIT != 0 && !self.alpha_passes(c, b1, b2, ray_hash, Some(dir)) {
                             return f32::INFINITY;
                         }
                         found = Some((c, b1, b2));
@@ -1303,7 +1316,7 @@ impl RenderScene {
                 let tri = &tris[id];
                 if let Some((t, b1, b2)) = wray.intersect(&tri.v, r.tmax) {
                     let c = Candidate::Baked(tri.prim & !ALPHA_BIT);
-                    if tri.prim & ALPHA_BIT != 0 && !self.alpha_passes(c, b1, b2, ray_hash) {
+                    if tri.prim & ALPHA_BIT != 0 && !self.alpha_passes(c, b1, b2, ray_hash, None) {
                         return f32::INFINITY;
                     }
                     return t;
@@ -1329,7 +1342,7 @@ impl RenderScene {
                 let tri = &blas.tris[id2];
                 if let Some((t, b1, b2)) = wray.intersect(&tri.v, r2.tmax) {
                     let c = Candidate::Instanced(leaf.instance, tri.prim & !ALPHA_BIT);
-                    if tri.prim & ALPHA_BIT != 0 && !self.alpha_passes(c, b1, b2, ray_hash) {
+                    if tri.prim & ALPHA_BIT != 0 && !self.alpha_passes(c, b1, b2, ray_hash, None) {
                         return f32::INFINITY;
                     }
                     t_hit = t;

@@ -286,7 +286,7 @@ impl RenderScene {
                 // Cut-outs of the emitter itself: Mask removes, Blend emits with weight alpha
                 // (the expected value of stochastic opacity).
                 match self.alpha_tests[material_id as usize] {
-                    AlphaTest::None => {}
+                    AlphaTest::None | AlphaTest::LightEmitter => {}
                     AlphaTest::Mask(cutoff) => {
                         if self.alpha_at(instance, tri, w1, w2) < cutoff {
                             return None;

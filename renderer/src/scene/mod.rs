@@ -105,6 +105,10 @@ pub struct Material {
     pub alpha_mode: AlphaMode,
     /// Double sided.
     pub double_sided: bool,
+    /// The emitting surface of a light (an area light from USD or the add-on), which Cycles does
+    /// not treat as geometry: it casts no shadow and is seen only from its front (from behind,
+    /// rays pass through it).
+    pub light_emitter: bool,
 }
 
 impl Default for Material {
@@ -124,6 +128,7 @@ impl Default for Material {
             ior: 1.5,
             alpha_mode: AlphaMode::Opaque,
             double_sided: false,
+            light_emitter: false,
         }
     }
 }

@@ -225,6 +225,7 @@ impl Loader<'_> {
                 ior,
                 alpha_mode,
                 double_sided: m.double_sided(),
+                light_emitter: false,
             });
         }
     }
