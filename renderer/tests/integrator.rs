@@ -691,6 +691,19 @@ fn lights_with_a_radius_or_an_angle_give_their_analytic_irradiance() {
             assert!(rel(l.y, expected) < 0.01, "point of radius {radius} (sphere {sphere}): {} vs {expected}", l.y);
         }
     }
+    // a small sphere far away (sin²θmax = 1e-8: cos θmax rounds to 1 in f32) keeps its light
+    let mut s = plane_scene(albedo);
+    let far = 50.0f32;
+    s.lights.push(Light::Point {
+        position: p + Vec3::Y * far,
+        intensity: Vec3::splat(i),
+        range: None,
+        radius_m: 0.005,
+        sphere: true,
+    });
+    let l = plane_radiance(s, p, 256);
+    let expected = i / (far * far) * albedo / PI;
+    assert!(rel(l.y, expected) < 0.01, "a far small sphere: {} vs {expected}", l.y);
     // inside a sphere light of radius r, a uniform direction: I/(πr²)·π = I/r² on the plane
     let mut s = plane_scene(albedo);
     s.lights.push(Light::Point {

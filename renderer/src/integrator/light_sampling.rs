@@ -93,12 +93,15 @@ fn emitter_point(centre: Vec3, r: f32, sphere: bool, p: Vec3, u: Vec2) -> Option
     let d = d2.sqrt();
     let axis = -to_p / d; // p → centre
     let (wi, t, weight_per_t2) = if d > r {
-        let cos_max = (1.0 - (r * r / d2).min(1.0)).max(0.0).sqrt();
-        let wi = cone_direction(axis, cos_max.acos(), u);
+        // 1 − cos θmax from sin²θmax = r²/d² without cancellation (a small sphere far away
+        // would round cos θmax to 1 and lose its light)
+        let sin2 = (r * r / d2).min(1.0);
+        let one_minus_cos = sin2 / (1.0 + (1.0 - sin2).sqrt());
+        let wi = cone_direction(axis, one_minus_cos, u);
         // nearest intersection with the sphere along wi
         let dc = d * wi.dot(axis);
         let t = dc - (r * r - (d2 - dc * dc)).max(0.0).sqrt();
-        (wi, t, 2.0 * (1.0 - cos_max) / (r * r))
+        (wi, t, 2.0 * one_minus_cos / (r * r))
     } else {
         let z = 1.0 - 2.0 * u.x;
         let s = (1.0 - z * z).max(0.0).sqrt();
@@ -127,13 +130,13 @@ fn concentric_disc(u: Vec2) -> Vec2 {
     Vec2::new(theta.cos(), theta.sin()) * r
 }
 
-/// A direction uniform in the cone of half-angle `half_angle` about unit `axis` (Cycles'
-/// sun with an angle).
+/// A direction uniform in the cone about unit `axis` whose half-angle θ has 1 − cos θ =
+/// `one_minus_cos` (given as that, which stays exact for narrow cones where cos θ rounds to 1).
 #[inline]
-fn cone_direction(axis: Vec3, half_angle: f32, u: Vec2) -> Vec3 {
-    let cos_max = half_angle.cos();
-    let cos_t = 1.0 - u.x * (1.0 - cos_max);
-    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+fn cone_direction(axis: Vec3, one_minus_cos: f32, u: Vec2) -> Vec3 {
+    let x = u.x * one_minus_cos; // 1 − cos of the sampled angle
+    let cos_t = 1.0 - x;
+    let sin_t = (x * (2.0 - x)).max(0.0).sqrt();
     let phi = 2.0 * std::f32::consts::PI * u.y;
     let (t, b) = axis.any_orthonormal_pair();
     (t * (sin_t * phi.cos()) + b * (sin_t * phi.sin()) + axis * cos_t).normalize()
@@ -239,7 +242,8 @@ impl RenderScene {
                             // half-angle θ, radiance E / (π sin²θ) so that a surface facing it
                             // receives E; per sample E·2/(1 + cos θ) over the cone's pdf.
                             let half = 0.5 * angle_rad;
-                            let wi = cone_direction(axis, half, u);
+                            let s = (0.5 * half).sin();
+                            let wi = cone_direction(axis, 2.0 * s * s, u); // 1 − cos θ = 2 sin²(θ/2)
                             (wi, irradiance * (2.0 / (1.0 + half.cos())), None)
                         }
                     }
