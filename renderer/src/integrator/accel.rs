@@ -1071,12 +1071,11 @@ impl RenderScene {
         mat.base_color.w * tex
     }
 
-    /// Whether the surface is there (not cut out) at a candidate hit; `key` identifies the
-    /// triangle for the stochastic decision.
+    /// Whether the surface is there for this ray at (b1, b2) of candidate `c`: not cut out by
+    /// its alpha test (`ray_hash` and the triangle key the stochastic decision), and for a
+    /// light's emitter (an area light) seen at all: never by a shadow ray (`dir` None), only
+    /// from its front by a ray searching the closest hit along `dir`.
     #[inline(never)]
-    /// Whether the surface is there for this ray at (b1, b2) of candidate `c`: its alpha test,
-    /// and for a light's emitter (an area light) whether the ray sees it at all: never a shadow
-    /// ray (`dir` None), only from the front a ray searching the closest hit along `dir`.
     fn alpha_passes(&self, c: Candidate, b1: f32, b2: f32, ray_hash: u32, dir: Option<Vec3>) -> bool {
         let (inst, tri, key) = match c {
             Candidate::Baked(k) => {
