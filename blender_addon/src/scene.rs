@@ -173,7 +173,7 @@ impl PyScene {
     }
 
     /// Adds a glTF metallic-roughness material; returns its index.
-    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true, light_emitter = false))]
+    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true, light_emitter = false, visible_to_camera = true))]
     #[allow(clippy::too_many_arguments)]
     fn add_material(
         &mut self,
@@ -193,6 +193,7 @@ impl PyScene {
         emission_texture: Option<usize>,
         double_sided: bool,
         light_emitter: bool,
+        visible_to_camera: bool,
     ) -> PyResult<usize> {
         guard(|| {
             let bc = match base_color.as_slice() {
@@ -240,8 +241,30 @@ impl PyScene {
                     .map_err(|e| scene_err(name, "", e.to_string()))?,
                 double_sided,
                 light_emitter,
+                visible_to_camera,
             };
             self.scene.materials.push(m);
+            Ok(self.scene.materials.len() - 1)
+        })
+    }
+
+    /// Adds a copy of material `material` that camera rays do not see; returns its index (see
+    /// the stub).
+    fn hide_from_camera(&mut self, material: usize) -> PyResult<usize> {
+        guard(|| {
+            let Some(m) = self.scene.materials.get(material) else {
+                return Err(scene_err(
+                    "",
+                    "material",
+                    format!("index {material} is out of range ({} materials)", self.scene.materials.len()),
+                ));
+            };
+            let hidden = Material {
+                name: format!("{} (hidden from the camera)", m.name),
+                visible_to_camera: false,
+                ..m.clone()
+            };
+            self.scene.materials.push(hidden);
             Ok(self.scene.materials.len() - 1)
         })
     }

@@ -35,7 +35,7 @@ pub fn scene_depth_range_m(
             };
             let o = to_world.transform_point3(ray.origin).as_vec3();
             let d = to_world.transform_vector3(ray.direction).normalize().as_vec3();
-            match scene.intersect(o, d, f32::INFINITY) {
+            match scene.intersect_seen(o, d, f32::INFINITY) {
                 Some(hit) => {
                     // distance along the view axis (the depth a lens focuses by)
                     let z = hit.t as f64 * (-ray.direction.z);
@@ -66,7 +66,7 @@ pub fn autofocus_clipped_m(scene: &RenderScene, to_world: &DAffine3, clip_m: (f6
     if !(t_max > 0.0) {
         return None;
     }
-    scene.intersect(o + d * near as f32, d, t_max).map(|h| h.t as f64 + near)
+    scene.intersect_seen(o + d * near as f32, d, t_max).map(|h| h.t as f64 + near)
 }
 
 /// Builds the camera of `spec` for a shot of `scene` seen from `to_world` at `width` ×

@@ -777,6 +777,71 @@ fn light_emitters_cast_no_shadow_and_are_seen_from_the_front_only() {
     assert!(rel(front.y, 2.0) < 1e-4, "its front: {front}");
 }
 
+/// A surface hidden from the camera (`Material::visible_to_camera` false: Blender's Ray
+/// Visibility > Camera, off for lights in Blender 5) is not seen by camera rays, which go on
+/// to what lies behind it (depth and alpha included), yet it lights the scene as before and is
+/// seen in a mirror. Autofocus looks through it too.
+#[test]
+fn surfaces_hidden_from_the_camera_are_seen_only_by_other_rays() {
+    let ground = quad(Vec3::new(-10.0, 0.0, 10.0), Vec3::new(20.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -20.0), 0);
+    // a 1 m light panel 1 m up, facing down, and a mirror on the ground beside it
+    let panel = quad(Vec3::new(-0.5, 1.0, -0.5), Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 0.0, 1.0), 1);
+    let mirror = quad(Vec3::new(1.5, 0.01, 0.5), Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -1.0), 2);
+    let chrome = Material {
+        name: "mirror".into(),
+        base_color: glam::Vec4::ONE,
+        metallic: 1.0,
+        roughness: 0.0,
+        ..Material::default()
+    };
+    let scene = |visible: bool| {
+        let panel_mat = Material {
+            name: "panel".into(),
+            base_color: glam::Vec4::new(0.0, 0.0, 0.0, 1.0),
+            metallic: 0.0,
+            specular: 0.0,
+            emissive: Vec3::splat(2.0),
+            light_emitter: true,
+            visible_to_camera: visible,
+            ..Material::default()
+        };
+        let mut s = scene_of(
+            &[ground.clone(), panel.clone(), mirror.clone()],
+            vec![diffuse(Vec3::splat(0.5)), panel_mat, chrome.clone()],
+        );
+        s.environment = Environment::Constant(Vec3::splat(0.25));
+        RenderScene::new(s).unwrap()
+    };
+    let (seen, hidden) = (scene(true), scene(false));
+    let tracer = PathTracer { max_depth: 2, ..PathTracer::default() };
+    // 1. Looking up at the panel's front from 0.2 m: its emission, or through it the sky.
+    let below = Vec3::new(0.0, 0.2, 0.0);
+    let (front, first) = mean_radiance(&tracer, &seen, below, Vec3::Y, 3, 16);
+    assert!(rel(front.y, 2.0) < 1e-4 && first.alpha == 1.0, "seen: {front}");
+    let (sky, first) = mean_radiance(&tracer, &hidden, below, Vec3::Y, 3, 16);
+    assert!(rel(sky.y, 0.25) < 1e-6, "hidden: the sky behind it, {sky}");
+    assert!(first.alpha == 0.0 && first.depth_m.is_infinite(), "hidden: a miss ({} at {})", first.alpha, first.depth_m);
+    // 2. The ground it lights, seen from the side: the same light, path for path.
+    let eye = Vec3::new(3.0, 0.5, 2.0);
+    let to_ground = Vec3::new(0.0, 0.0, 0.0) - eye;
+    let (lit_seen, _) = mean_radiance(&tracer, &seen, eye, to_ground, 1, 512);
+    let (lit_hidden, _) = mean_radiance(&tracer, &hidden, eye, to_ground, 1, 512);
+    assert!(lit_seen.y > 0.25 * 0.5 * 1.05, "the panel lights the ground: {lit_seen}");
+    assert_eq!(lit_seen, lit_hidden, "the panel's light on the ground");
+    // 3. In the mirror (x 1.5…2.5 on the ground): the camera ray toward the panel's mirror
+    //    image (0, −0.98, 0) meets the mirror 1.12 m away and goes on up to the panel's front.
+    let eye = Vec3::new(3.0, 0.5, -0.5);
+    let toward_image = Vec3::new(0.0, -0.98, 0.0) - eye;
+    let (m_seen, first) = mean_radiance(&tracer, &seen, eye, toward_image, 5, 16);
+    let (m_hidden, _) = mean_radiance(&tracer, &hidden, eye, toward_image, 5, 16);
+    assert!((first.depth_m - 1.12).abs() < 0.01, "the camera ray hits the mirror first ({} m)", first.depth_m);
+    assert!(m_seen.y > 1.5 && m_seen == m_hidden, "the panel in the mirror: seen {m_seen}, hidden {m_hidden}");
+    // 4. Autofocus from below the panel looks through it (to nothing: infinity).
+    let look_up = glam::DAffine3::from_cols(glam::DVec3::X, glam::DVec3::Z, glam::DVec3::NEG_Y, below.as_dvec3());
+    assert!((petzval_renderer::shot::autofocus_m(&seen, &look_up).unwrap() - 0.8).abs() < 1e-3);
+    assert_eq!(petzval_renderer::shot::autofocus_m(&hidden, &look_up), None);
+}
+
 #[test]
 fn shadows_block_lights() {
     let p = Vec3::new(0.1, 0.0, 0.2);

@@ -313,10 +313,9 @@ def build_lights_scene(variant: str):
     "texture" lights the ground, coloured by a coarse 8-bit checker with Linear interpolation, by
     a sun. "soft" has a point light of radius 0.4 m (Soft Falloff, Blender's default), a spot light of
     radius 0.3 m with Soft Falloff off (a sphere) and a sun 12° wide,
-    whose soft shadows the add-on renders as Cycles does (black world). The
-    first two are separate because the add-on's area lights are emissive geometry, which
-    shadows the sky (Cycles' lights do not); the lights are out of view (Cycles hides them from the
-    camera)."""
+    whose soft shadows the add-on renders as Cycles does (black world). "hidden" has an area light
+    in view facing the camera (Blender 5 hides lights from camera rays) and a cube whose Camera ray
+    visibility is off, both lighting or shadowing the scene, lit also by a sun (black world)."""
     b = bpy()
     reset_blender()
     scene = b.context.scene
@@ -403,6 +402,26 @@ def build_lights_scene(variant: str):
         obj = b.data.objects.new("WideSun", data)
         scene.collection.objects.link(obj)
         obj.rotation_euler = (math.radians(40.0), 0.0, math.radians(-35.0))
+    if variant == "hidden":
+        data = b.data.lights.new("FacingRect", "AREA")
+        data.shape = "RECTANGLE"
+        data.size = 1.2
+        data.size_y = 0.6
+        data.energy = 200.0
+        obj = b.data.objects.new("FacingRect", data)
+        scene.collection.objects.link(obj)
+        obj.location = (0.3, 3.6, 1.1)
+        obj.rotation_euler = (math.radians(-90.0), 0.0, 0.0)  # emits toward -y: at the camera
+        assert not obj.visible_camera, "Blender 5 hides new lights from camera rays"
+        data = b.data.lights.new("HiddenSun", "SUN")
+        data.energy = 1.5
+        obj = b.data.objects.new("HiddenSun", data)
+        scene.collection.objects.link(obj)
+        obj.rotation_euler = (math.radians(40.0), 0.0, math.radians(30.0))
+        b.ops.mesh.primitive_cube_add(size=0.5, location=(-0.2, 0.9, 0.25))
+        card = b.context.active_object
+        card.data.materials.append(_principled_lambert("Card", (0.8, 0.8, 0.8)))
+        card.visible_camera = False
     cam = add_camera("LightsCam", (0.0, -2.6, 0.9), (math.radians(80.0), 0.0, 0.0), lens_mm=28.0)
     cam.data.dof.use_dof = False
     scene.render.resolution_x, scene.render.resolution_y = LIGHTS_RESOLUTION

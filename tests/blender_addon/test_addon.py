@@ -285,7 +285,7 @@ def test_real_lens_round_trip_matches_gltf_path(main_scene, report):
 SPP_LIGHTS = 128
 
 
-@pytest.mark.parametrize("variant", ["area", "world", "spots", "soft", "texture"])
+@pytest.mark.parametrize("variant", ["area", "world", "spots", "soft", "texture", "hidden"])
 def test_area_lights_and_environment_match_cycles(addon, report, variant):
     """What tests/blender's glTF scene cannot carry, against Cycles (8x8 block z-test and image
     means, both sides two seeds): "area": a rectangle and a disc area light (one-sided emitters of
@@ -296,7 +296,9 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
     spot light of radius 0.3 m with Soft Falloff off (a sphere) and a sun 12° wide, whose soft
     shadows are rendered as Cycles renders them (they were hard before); "texture": an 8-bit sRGB
     checker filtered linearly, which Cycles filters in its encoded values (decoding first left
-    the texel edges darker)."""
+    the texel edges darker); "hidden": an area light facing the camera in view and a cube whose
+    Camera ray visibility is off, which light and shadow the scene but are not seen (the light
+    was seen before)."""
     H.build_lights_scene(variant)
     cyc = [B.read_rgb(H.lights_cycles_reference(variant, seed, SPP_LIGHTS)) for seed in SEEDS]
     pz = []
@@ -314,6 +316,7 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
         "spots": "spot lights of Spot Blend 0, 0.3 and 1",
         "soft": "a point light of radius 0.4 m, a spherical spot light of radius 0.3 m and a sun 12° wide",
         "texture": "a coarse 8-bit checker with Linear interpolation",
+        "hidden": "an area light in view and a cube hidden from camera rays",
     }[variant]
     report.line(f"{what} vs Cycles, {w}x{h} {SPP_LIGHTS} spp x seeds {SEEDS} ({secs:.1f} s per F12)")
     report.line(f"  blocks: {_fmt(v)}; image mean add-on/Cycles R,G,B {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f}")

@@ -216,7 +216,9 @@ pub fn read_light(
             let area_m2 = area_units * mpu * mpu;
             let l = if normalize && area_m2 > 0.0 { base / area_m2 as f32 } else { base };
             // a light's emitter, not geometry, as in Cycles: no shadow, not there from behind
-            // (and no reflection off the panel: no specular layer)
+            // (and no reflection off the panel: no specular layer). Camera rays see it, except
+            // on a stage Blender wrote: Blender 5 hides lights from the camera by default and its
+            // exporter does not record the setting.
             let mut m = Material {
                 name: path.clone(),
                 base_color: glam::Vec4::new(0.0, 0.0, 0.0, 1.0),
@@ -224,6 +226,7 @@ pub fn read_light(
                 specular: 0.0,
                 emissive: l,
                 light_emitter: true,
+                visible_to_camera: !units.blender_authored,
                 ..Material::default()
             };
             m.double_sided = false;

@@ -205,6 +205,29 @@ fn sphere_light_radius_and_distant_light_angle_are_read() {
     assert!(e.contains("/Neg") && e.contains("inputs:radius"), "{e}");
 }
 
+/// A rect light's emitter is seen by camera rays on a UsdLux stage, and hidden from them on a
+/// stage Blender wrote (Blender 5 hides lights from the camera; its exporter does not record
+/// the setting); either way it is a light's emitter (no shadow).
+#[test]
+fn rect_lights_are_hidden_from_the_camera_on_blender_stages() {
+    let stage = |name: &str, doc: &str| {
+        write(
+            name,
+            &format!(
+                "#usda 1.0\n(\n{doc} metersPerUnit = 1\n)\n\
+                 def RectLight \"Panel\"\n{{\n float inputs:width = 2\n}}\n\
+                 def Mesh \"M\"\n{{\n {TRI}\n}}\n"
+            ),
+        )
+    };
+    for (doc, seen) in [("", true), (" doc = \"Blender v5.0.1\"\n", false)] {
+        let shot = load(&stage(if seen { "rect_usdlux.usda" } else { "rect_blender.usda" }, doc), None).unwrap();
+        let panel: Vec<_> = shot.scene.materials.iter().filter(|m| m.name == "/Panel").collect();
+        assert_eq!(panel.len(), 1, "{:?}", shot.scene.materials.iter().map(|m| &m.name).collect::<Vec<_>>());
+        assert!(panel[0].light_emitter && panel[0].visible_to_camera == seen, "doc {doc:?}: {:?}", panel[0]);
+    }
+}
+
 /// A mesh that says it is a subdivision surface (Blender's "Best Match" export of a Subdivision
 /// modifier) is rendered as its cage with a warning naming the prim; "none" (what Blender writes
 /// for every other mesh) and an unauthored scheme say nothing.

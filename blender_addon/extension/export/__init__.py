@@ -65,8 +65,12 @@ def build(petzval, depsgraph, notes, stop=None):
             continue
         if t not in GEOMETRY_TYPES or not inst.show_self:
             continue
-        if not getattr(obj, "visible_camera", True) or not getattr(obj, "visible_shadow", True):
-            notes.warn(f"object '{obj.name}': ray visibility settings (rendered fully visible)")
+        # Camera ray visibility off: the object's materials hidden from camera rays (reflections,
+        # bounces and shadows still see it); the other ray types are not separated
+        hidden_from_camera = not getattr(obj, "visible_camera", True)
+        if not all(getattr(obj, f"visible_{ray}", True) for ray in ("shadow", "diffuse", "glossy", "transmission")):
+            notes.warn(f"object '{obj.name}': shadow, diffuse, glossy or transmission ray visibility off "
+                       "(seen by those rays)")
         for what, flag in (("holdout", "holdout_get"), ("indirect only", "indirect_only_get")):
             if _view_layer_flag(obj, flag, depsgraph) or (what == "holdout" and getattr(obj, "is_holdout", False)):
                 notes.warn(f"object '{obj.name}': {what} (rendered as an ordinary object)")
@@ -93,6 +97,8 @@ def build(petzval, depsgraph, notes, stop=None):
             table = np.array([materials.default()], dtype=np.uint32)
         else:
             table = np.array([materials.index(s.material) for s in slots], dtype=np.uint32)
+        if hidden_from_camera:
+            table = np.array([materials.hidden(int(k)) for k in table], dtype=np.uint32)
         xf = to_gltf(inst.matrix_world)
         id_key = (key, tuple(table.tolist()))
         mesh_id = mesh_ids.get(id_key)

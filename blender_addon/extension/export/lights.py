@@ -1,9 +1,11 @@
 """Blender lights as petzval lights.
 
 Lights: point and spot as punctual lights (intensity = power / 4 pi, as Blender's glTF exporter),
-sun as a directional light, area lights as one-sided emissive quads/discs with Cycles' radiance
-power / (area * pi) (being geometry, they also block light behind them, which Cycles' lights do
-not). Positions and directions in glTF axes (Blender (x, y, z) -> (x, z, -y)).
+or discs/spheres with a radius; sun as a directional light with its angle; area lights as
+one-sided emitting quads/discs with Cycles' radiance power / (area * pi), which as Cycles' lights
+cast no shadow, are not there from behind and are hidden from camera rays unless the light's
+Ray Visibility > Camera is on (off by default in Blender 5). Positions and directions in glTF axes
+(Blender (x, y, z) -> (x, z, -y)).
 """
 
 from __future__ import annotations
@@ -124,10 +126,10 @@ def add_area_light(pz, obj, m, colour, notes, materials) -> None:
     power = float(light.energy)
     radiance = colour * power / ((area if light.normalize else 1.0) * math.pi)
     # a light's emitter, not geometry (as in Cycles): it casts no shadow, and from behind it is not there
+    # Blender 5 hides lights from camera rays unless Ray Visibility > Camera is on
     mat = pz.add_material(f"{obj.name} (area light)", base_color=(0.0, 0.0, 0.0, 1.0), specular=0.0, roughness=1.0,
-                          emission=tuple(radiance), double_sided=False, light_emitter=True)
+                          emission=tuple(radiance), double_sided=False, light_emitter=True,
+                          visible_to_camera=bool(getattr(obj, "visible_camera", False)))
     normals = np.tile(np.array([[0.0, 0.0, -1.0]], dtype=np.float32), (len(v), 1))
     pz.add_mesh(v.astype(np.float32), t, material_ids=np.full(len(t), mat, dtype=np.uint32), normals=normals,
                 transform=m, name=obj.name)
-    if not getattr(obj, "visible_camera", True):
-        notes.note("area lights are seen by the camera from their front here (this one is hidden from camera rays)")

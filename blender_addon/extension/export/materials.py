@@ -28,6 +28,7 @@ class Materials:
         self.index_of: dict = {}
         self.textures: dict = {}
         self._default = None
+        self._hidden: dict = {}
 
     # -- textures
 
@@ -90,6 +91,13 @@ class Materials:
         if key not in self.index_of:
             self.index_of[key] = self._convert(mat)
         return self.index_of[key]
+
+    def hidden(self, index: int) -> int:
+        """The copy of material ``index`` that camera rays do not see (for objects whose Camera
+        ray visibility is off), made once."""
+        if index not in self._hidden:
+            self._hidden[index] = self.scene.hide_from_camera(index)
+        return self._hidden[index]
 
     def _fallback(self, mat, why: str) -> int:
         self.notes.warn(f"material '{mat.name}': {why}, rendered with its viewport display colour")

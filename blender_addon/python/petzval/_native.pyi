@@ -105,6 +105,7 @@ class Scene:
         emission_texture: int | None = None,
         double_sided: bool = True,
         light_emitter: bool = False,
+        visible_to_camera: bool = True,
     ) -> int:
         """Adds a glTF metallic-roughness material and returns its index.
 
@@ -114,8 +115,14 @@ class Scene:
         ``"mask"`` (cut at ``alpha_cutoff``); alpha is ``base_color[3]`` x texture alpha.
         ``metallic_roughness_texture`` reads roughness from G and metallic from B (glTF).
         ``light_emitter`` marks a light's emitting surface (an area light, as Cycles' lights):
-        it casts no shadow and is seen only from its front. Texture indices come from
-        :meth:`add_texture`."""
+        it casts no shadow and is seen only from its front. ``visible_to_camera`` False hides
+        the surface from camera rays (Blender's Ray Visibility > Camera, off for lights in
+        Blender 5): they go on through it, while reflections, bounces and shadows still see it.
+        Texture indices come from :meth:`add_texture`."""
+    def hide_from_camera(self, material: int) -> int:
+        """Adds a copy of material ``material`` that camera rays do not see (as
+        ``visible_to_camera=False``), for an object whose Camera ray visibility is off;
+        returns its index. An index out of range raises InvalidSceneError."""
     def add_mesh(
         self,
         positions: NDArray[np.float32],

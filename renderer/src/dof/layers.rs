@@ -456,7 +456,7 @@ fn peel(scene: &RenderScene, origin: Vec3, dir: Vec3, k: usize, clip: (f32, f32)
     while out.len() < k && guard < 64 && t0 < clip.1 {
         guard += 1;
         let o = origin + dir * t0;
-        let Some(hit) = scene.intersect(o, dir, clip.1 - t0) else { break };
+        let Some(hit) = scene.intersect_seen(o, dir, clip.1 - t0) else { break };
         let t = t0 + hit.t;
         let double_sided = scene.scene().materials[hit.material_id as usize].double_sided;
         if out.is_empty() || hit.front_face || double_sided {

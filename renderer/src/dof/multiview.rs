@@ -239,7 +239,7 @@ impl SampleShader for MultiviewShader<'_> {
         let (t_near, t_far) = (clip.0.max(0.0), clip.1);
         let start = origin + d * t_near;
         let found =
-            if t_far > t_near && d != Vec3::ZERO { self.scene.intersect(start, d, t_far - t_near) } else { None };
+            if t_far > t_near && d != Vec3::ZERO { self.scene.intersect_seen(start, d, t_far - t_near) } else { None };
         let Some(hit) = found else {
             self.counts[2].fetch_add(1, Ordering::Relaxed);
             return PathSample::miss(crate::integrator::lights::env_radiance(&self.scene.scene().environment, d));

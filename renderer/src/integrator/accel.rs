@@ -229,6 +229,10 @@ impl SurfaceHit {
     }
 }
 
+/// How many surfaces hidden from the camera ([`crate::scene::Material::visible_to_camera`]) one
+/// camera ray goes on through before it stops (and sees the environment).
+pub const MAX_HIDDEN_LAYERS: u32 = 64;
+
 /// Wächter & Binder's offset: moves `p` off a surface with unit normal `n` (pointing to the side
 /// the new ray leaves toward) by a few ULPs of `p` (an absolute 1/65536·n near the origin).
 #[inline]
@@ -574,6 +578,8 @@ pub struct RenderScene {
     mesh_info: Vec<MeshInfo>,
     pub(crate) alpha_tests: Vec<AlphaTest>,
     any_stochastic: bool,
+    /// Some material is hidden from camera rays.
+    any_hidden_from_camera: bool,
     pub(crate) lights: LightSet,
     bounds_min: Vec3,
     bounds_max: Vec3,
@@ -687,6 +693,7 @@ impl RenderScene {
 
         let alpha_tests: Vec<AlphaTest> = scene.materials.iter().map(alpha_test_of).collect();
         let any_stochastic = alpha_tests.contains(&AlphaTest::Stochastic);
+        let any_hidden_from_camera = scene.materials.iter().any(|m| !m.visible_to_camera);
         let alpha_flag = |mesh: &Mesh, t: u32| {
             if alpha_tests[mesh.material_ids[t as usize] as usize] != AlphaTest::None {
                 ALPHA_BIT
@@ -928,6 +935,7 @@ impl RenderScene {
             mesh_info,
             alpha_tests,
             any_stochastic,
+            any_hidden_from_camera,
             lights,
             bounds_min,
             bounds_max,
@@ -1431,6 +1439,42 @@ impl RenderScene {
             material_id,
             front_face: dir.dot(ng) < 0.0,
         }
+    }
+
+    /// Whether camera rays see the hit's surface ([`crate::scene::Material::visible_to_camera`]).
+    #[inline]
+    pub fn visible_to_camera(&self, hit: &SurfaceHit) -> bool {
+        !self.any_hidden_from_camera || self.scene.materials[hit.material_id as usize].visible_to_camera
+    }
+
+    /// [`RenderScene::intersect`] as camera rays see the scene: surfaces hidden from the camera
+    /// are passed through.
+    pub fn intersect_seen(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<SurfaceHit> {
+        let hit = self.intersect(origin, dir, t_max)?;
+        if self.visible_to_camera(&hit) {
+            Some(hit)
+        } else {
+            self.seen_beyond(&hit, origin, dir, t_max)
+        }
+    }
+
+    /// The first surface a camera ray from `origin` along unit `dir` sees beyond `hidden`, a
+    /// hit of that ray on a surface hidden from the camera, with `t` counted from `origin`
+    /// (None past `t_max`, or after [`MAX_HIDDEN_LAYERS`] hidden surfaces).
+    pub fn seen_beyond(&self, hidden: &SurfaceHit, origin: Vec3, dir: Vec3, t_max: f32) -> Option<SurfaceHit> {
+        let mut next = hidden.spawn_origin(dir);
+        for _ in 0..MAX_HIDDEN_LAYERS {
+            // 1. Go on from just past the hidden surface, counting the distance from `origin`.
+            let t0 = (next - origin).dot(dir).max(0.0);
+            let mut hit = self.intersect(next, dir, t_max - t0)?;
+            hit.t += t0;
+            // 2. Seen, or hidden again.
+            if self.visible_to_camera(&hit) {
+                return Some(hit);
+            }
+            next = hit.spawn_origin(dir);
+        }
+        None
     }
 
     /// Emitted radiance of the hit's material toward the side the ray came from: front side

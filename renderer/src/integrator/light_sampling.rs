@@ -355,13 +355,18 @@ impl RenderScene {
         self.lights.kinds.iter().any(|k| matches!(k, LightKind::Triangle { .. }))
     }
 
-    /// Every emissive triangle: (light index, world-space vertices, power: emission factor's
-    /// luminance × area, textures not counted).
+    /// Every emissive triangle the camera can see (light paths through the lens stand for the
+    /// camera seeing it; one hidden from the camera has none): (light index, world-space
+    /// vertices, power: emission factor's luminance × area, textures not counted).
     pub(crate) fn emissive_triangles(&self) -> impl Iterator<Item = (usize, [Vec3; 3], f32)> + '_ {
         self.lights.kinds.iter().enumerate().filter_map(|(i, k)| match *k {
             LightKind::Triangle { instance, tri } => {
+                let mat = &self.scene().materials[self.material_of(instance, tri) as usize];
+                if !mat.visible_to_camera {
+                    return None;
+                }
                 let v = self.world_triangle(instance, tri);
-                let e = self.scene().materials[self.material_of(instance, tri) as usize].emissive;
+                let e = mat.emissive;
                 let area = 0.5 * (v[1] - v[0]).cross(v[2] - v[0]).length();
                 Some((i, v, (0.2126 * e.x + 0.7152 * e.y + 0.0722 * e.z) * area))
             }

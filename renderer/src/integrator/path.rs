@@ -13,6 +13,8 @@
 //!   throughput)) and is divided by it.
 //! * Sample dimensions per bounce, always all consumed in this order so streams stay aligned:
 //!   light pick (1), light point (2), BSDF lobe (1), BSDF direction (2), roulette (1).
+//! * Camera rays go on through surfaces hidden from the camera
+//!   ([`crate::scene::Material::visible_to_camera`]); every later ray sees them.
 //! * Nothing is clamped. A non-finite radiance is dropped (returned as zero) and flagged in
 //!   [`PathSample::dropped`].
 
@@ -214,11 +216,17 @@ impl PathTracer {
         // The first hit's BSDF, built once for its base colour (the albedo output) and its shading.
         let mut first_bsdf: Option<Bsdf> = None;
         loop {
-            let found = match first_hit.take() {
+            let mut found = match first_hit.take() {
                 Some(given) => given,
                 None if t_max > 0.0 => scene.intersect(o, d, t_max),
                 None => None,
             };
+            // A surface hidden from camera rays: the camera ray goes on through it.
+            if depth == 0 {
+                if let Some(hidden) = found.as_ref().filter(|h| !scene.visible_to_camera(h)) {
+                    found = scene.seen_beyond(hidden, o, d, t_max);
+                }
+            }
             let Some(hit) = found else {
                 let le = env_radiance(env, d);
                 if le != Vec3::ZERO {

@@ -109,6 +109,10 @@ pub struct Material {
     /// not treat as geometry: it casts no shadow and is seen only from its front (from behind,
     /// rays pass through it).
     pub light_emitter: bool,
+    /// Whether camera rays see the surface (Blender's Ray Visibility > Camera, which Blender 5
+    /// turns off for lights). When false, a camera ray goes on through it; every other ray
+    /// (reflections, bounces, shadow rays) treats it as before.
+    pub visible_to_camera: bool,
 }
 
 impl Default for Material {
@@ -129,6 +133,7 @@ impl Default for Material {
             alpha_mode: AlphaMode::Opaque,
             double_sided: false,
             light_emitter: false,
+            visible_to_camera: true,
         }
     }
 }

@@ -226,6 +226,7 @@ impl Loader<'_> {
                 alpha_mode,
                 double_sided: m.double_sided(),
                 light_emitter: false,
+                visible_to_camera: true,
             });
         }
     }
