@@ -242,15 +242,22 @@ impl PyScene {
                 double_sided,
                 light_emitter,
                 visible_to_camera,
+                terminator_offset: petzval_renderer::scene::TERMINATOR_OFFSET,
             };
             self.scene.materials.push(m);
             Ok(self.scene.materials.len() - 1)
         })
     }
 
-    /// Adds a copy of material `material` that camera rays do not see; returns its index (see
-    /// the stub).
-    fn hide_from_camera(&mut self, material: usize) -> PyResult<usize> {
+    /// Adds a copy of material `material` with an object's ray visibility and shadow-terminator
+    /// settings; returns its index (see the stub).
+    #[pyo3(signature = (material, visible_to_camera = true, terminator_offset = 0.1))]
+    fn material_variant(
+        &mut self,
+        material: usize,
+        visible_to_camera: bool,
+        terminator_offset: f64,
+    ) -> PyResult<usize> {
         guard(|| {
             let Some(m) = self.scene.materials.get(material) else {
                 return Err(scene_err(
@@ -259,12 +266,16 @@ impl PyScene {
                     format!("index {material} is out of range ({} materials)", self.scene.materials.len()),
                 ));
             };
-            let hidden = Material {
-                name: format!("{} (hidden from the camera)", m.name),
-                visible_to_camera: false,
+            if !(terminator_offset.is_finite() && (0.0..=1.0).contains(&terminator_offset)) {
+                return Err(scene_err(&m.name, "terminator_offset", format!("{terminator_offset} is outside [0, 1]")));
+            }
+            let variant = Material {
+                name: format!("{} (object settings)", m.name),
+                visible_to_camera,
+                terminator_offset: terminator_offset as f32,
                 ..m.clone()
             };
-            self.scene.materials.push(hidden);
+            self.scene.materials.push(variant);
             Ok(self.scene.materials.len() - 1)
         })
     }

@@ -842,6 +842,37 @@ fn surfaces_hidden_from_the_camera_are_seen_only_by_other_rays() {
     assert_eq!(petzval_renderer::shot::autofocus_m(&hidden, &look_up), None);
 }
 
+/// Blender's Shadow Terminator > Geometry Offset (0.1 by default): a smooth-shaded low-poly
+/// sphere is lit up to its terminator like the smooth sphere its normals describe, as Cycles
+/// renders it. Without the offset (shadow rays from the flat facets, light below a facet's
+/// plane dropped) the band next to the terminator of an 80-face icosphere came out 29 % darker
+/// than that of a 20 480-face one (now 4 % brighter).
+#[test]
+fn smooth_low_poly_meshes_are_lit_to_the_terminator() {
+    let band = |level: u32| {
+        let mut s = scene_of(&[icosphere(Vec3::ZERO, 1.0, level, 0)], vec![diffuse(Vec3::splat(0.8))]);
+        s.lights.push(Light::Directional { direction: -Vec3::X, irradiance: Vec3::ONE, angle_rad: 0.0 });
+        let rs = RenderScene::new(s).unwrap();
+        let tracer = PathTracer { max_depth: 1, ..PathTracer::default() };
+        // camera rays from +z onto the lit side next to the terminator (0 < x < 0.15)
+        let (mut sum, mut n) = (0.0f64, 0u32);
+        for i in 0..24 {
+            for j in 0..48 {
+                let (x, y) = (0.15 * (i as f32 + 0.5) / 24.0, -0.9 + 1.8 * (j as f32 + 0.5) / 48.0);
+                let (l, first) = mean_radiance(&tracer, &rs, Vec3::new(x, y, 5.0), -Vec3::Z, i * 48 + j, 4);
+                if first.alpha == 1.0 {
+                    sum += l.y as f64;
+                    n += 1;
+                }
+            }
+        }
+        sum / n as f64
+    };
+    let (low, smooth) = (band(1), band(5));
+    assert!(smooth > 0.01, "the smooth sphere's band is lit: {smooth}");
+    assert!((low / smooth - 1.0).abs() < 0.08, "80 faces {low} against 20 480 faces {smooth}: {}", low / smooth);
+}
+
 #[test]
 fn shadows_block_lights() {
     let p = Vec3::new(0.1, 0.0, 0.2);

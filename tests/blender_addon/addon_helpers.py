@@ -315,7 +315,9 @@ def build_lights_scene(variant: str):
     radius 0.3 m with Soft Falloff off (a sphere) and a sun 12° wide,
     whose soft shadows the add-on renders as Cycles does (black world). "hidden" has an area light
     in view facing the camera (Blender 5 hides lights from camera rays) and a cube whose Camera ray
-    visibility is off, both lighting or shadowing the scene, lit also by a sun (black world)."""
+    visibility is off, both lighting or shadowing the scene, lit also by a sun (black world).
+    "terminator" has smooth-shaded low-poly meshes lit from the side by a sun: Suzanne with
+    Blender's default Shadow Terminator Geometry Offset (0.1) and a 12 x 6 UV sphere with 0."""
     b = bpy()
     reset_blender()
     scene = b.context.scene
@@ -422,6 +424,22 @@ def build_lights_scene(variant: str):
         card = b.context.active_object
         card.data.materials.append(_principled_lambert("Card", (0.8, 0.8, 0.8)))
         card.visible_camera = False
+    if variant == "terminator":
+        data = b.data.lights.new("SideSun", "SUN")
+        data.energy = 3.0
+        obj = b.data.objects.new("SideSun", data)
+        scene.collection.objects.link(obj)
+        obj.rotation_euler = (math.radians(80.0), 0.0, math.radians(70.0))  # low, from the side
+        b.ops.mesh.primitive_monkey_add(size=0.8, location=(-0.6, 0.6, 0.45))
+        monkey = b.context.active_object
+        b.ops.object.shade_smooth()
+        monkey.data.materials.append(_principled_lambert("Monkey", (0.7, 0.7, 0.7)))
+        assert abs(monkey.shadow_terminator_geometry_offset - 0.1) < 1e-6, "Blender's default offset"
+        b.ops.mesh.primitive_uv_sphere_add(segments=12, ring_count=6, radius=0.4, location=(0.7, 0.8, 0.4))
+        ball = b.context.active_object
+        b.ops.object.shade_smooth()
+        ball.data.materials.append(_principled_lambert("Ball", (0.6, 0.65, 0.7)))
+        ball.shadow_terminator_geometry_offset = 0.0
     cam = add_camera("LightsCam", (0.0, -2.6, 0.9), (math.radians(80.0), 0.0, 0.0), lens_mm=28.0)
     cam.data.dof.use_dof = False
     scene.render.resolution_x, scene.render.resolution_y = LIGHTS_RESOLUTION

@@ -285,7 +285,7 @@ def test_real_lens_round_trip_matches_gltf_path(main_scene, report):
 SPP_LIGHTS = 128
 
 
-@pytest.mark.parametrize("variant", ["area", "world", "spots", "soft", "texture", "hidden"])
+@pytest.mark.parametrize("variant", ["area", "world", "spots", "soft", "texture", "hidden", "terminator"])
 def test_area_lights_and_environment_match_cycles(addon, report, variant):
     """What tests/blender's glTF scene cannot carry, against Cycles (8x8 block z-test and image
     means, both sides two seeds): "area": a rectangle and a disc area light (one-sided emitters of
@@ -298,7 +298,9 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
     checker filtered linearly, which Cycles filters in its encoded values (decoding first left
     the texel edges darker); "hidden": an area light facing the camera in view and a cube whose
     Camera ray visibility is off, which light and shadow the scene but are not seen (the light
-    was seen before)."""
+    was seen before); "terminator": smooth-shaded low-poly meshes lit from the side, Suzanne with
+    Blender's default Shadow Terminator Geometry Offset and a coarse sphere with 0 (their
+    terminators were darker than Cycles')."""
     H.build_lights_scene(variant)
     cyc = [B.read_rgb(H.lights_cycles_reference(variant, seed, SPP_LIGHTS)) for seed in SEEDS]
     pz = []
@@ -317,6 +319,7 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
         "soft": "a point light of radius 0.4 m, a spherical spot light of radius 0.3 m and a sun 12° wide",
         "texture": "a coarse 8-bit checker with Linear interpolation",
         "hidden": "an area light in view and a cube hidden from camera rays",
+        "terminator": "smooth low-poly meshes lit from the side (geometry offsets 0.1 and 0)",
     }[variant]
     report.line(f"{what} vs Cycles, {w}x{h} {SPP_LIGHTS} spp x seeds {SEEDS} ({secs:.1f} s per F12)")
     report.line(f"  blocks: {_fmt(v)}; image mean add-on/Cycles R,G,B {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f}")

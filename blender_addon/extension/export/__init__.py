@@ -66,8 +66,10 @@ def build(petzval, depsgraph, notes, stop=None):
         if t not in GEOMETRY_TYPES or not inst.show_self:
             continue
         # Camera ray visibility off: the object's materials hidden from camera rays (reflections,
-        # bounces and shadows still see it); the other ray types are not separated
-        hidden_from_camera = not getattr(obj, "visible_camera", True)
+        # bounces and shadows still see it); the other ray types are not separated. The
+        # shadow-terminator geometry offset is the object's too.
+        visible_to_camera = bool(getattr(obj, "visible_camera", True))
+        offset = min(max(float(getattr(obj, "shadow_terminator_geometry_offset", 0.1)), 0.0), 1.0)
         if not all(getattr(obj, f"visible_{ray}", True) for ray in ("shadow", "diffuse", "glossy", "transmission")):
             notes.warn(f"object '{obj.name}': shadow, diffuse, glossy or transmission ray visibility off "
                        "(seen by those rays)")
@@ -97,8 +99,7 @@ def build(petzval, depsgraph, notes, stop=None):
             table = np.array([materials.default()], dtype=np.uint32)
         else:
             table = np.array([materials.index(s.material) for s in slots], dtype=np.uint32)
-        if hidden_from_camera:
-            table = np.array([materials.hidden(int(k)) for k in table], dtype=np.uint32)
+        table = np.array([materials.for_object(int(k), visible_to_camera, offset) for k in table], dtype=np.uint32)
         xf = to_gltf(inst.matrix_world)
         id_key = (key, tuple(table.tolist()))
         mesh_id = mesh_ids.get(id_key)

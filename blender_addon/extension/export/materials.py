@@ -28,7 +28,7 @@ class Materials:
         self.index_of: dict = {}
         self.textures: dict = {}
         self._default = None
-        self._hidden: dict = {}
+        self._variants: dict = {}
 
     # -- textures
 
@@ -92,12 +92,17 @@ class Materials:
             self.index_of[key] = self._convert(mat)
         return self.index_of[key]
 
-    def hidden(self, index: int) -> int:
-        """The copy of material ``index`` that camera rays do not see (for objects whose Camera
-        ray visibility is off), made once."""
-        if index not in self._hidden:
-            self._hidden[index] = self.scene.hide_from_camera(index)
-        return self._hidden[index]
+    def for_object(self, index: int, visible_to_camera: bool, terminator_offset: float) -> int:
+        """Material ``index`` with an object's Ray Visibility > Camera and Shadow Terminator >
+        Geometry Offset: itself for Blender's defaults (visible, 0.1), else a copy made once."""
+        if visible_to_camera and abs(terminator_offset - 0.1) < 1e-6:
+            return index
+        key = (index, visible_to_camera, round(terminator_offset, 6))
+        if key not in self._variants:
+            self._variants[key] = self.scene.material_variant(
+                index, visible_to_camera=visible_to_camera, terminator_offset=terminator_offset
+            )
+        return self._variants[key]
 
     def _fallback(self, mat, why: str) -> int:
         self.notes.warn(f"material '{mat.name}': {why}, rendered with its viewport display colour")

@@ -119,10 +119,13 @@ class Scene:
         the surface from camera rays (Blender's Ray Visibility > Camera, off for lights in
         Blender 5): they go on through it, while reflections, bounces and shadows still see it.
         Texture indices come from :meth:`add_texture`."""
-    def hide_from_camera(self, material: int) -> int:
-        """Adds a copy of material ``material`` that camera rays do not see (as
-        ``visible_to_camera=False``), for an object whose Camera ray visibility is off;
-        returns its index. An index out of range raises InvalidSceneError."""
+    def material_variant(self, material: int, visible_to_camera: bool = True, terminator_offset: float = 0.1) -> int:
+        """Adds a copy of material ``material`` with an object's settings and returns its index:
+        ``visible_to_camera`` (its Ray Visibility > Camera) and ``terminator_offset`` (its
+        Shadow Terminator > Geometry Offset, Blender's default 0.1: near the terminator of a
+        smooth-shaded mesh, shadow rays leave from the smooth surface its normals describe; 0
+        leaves them on the flat triangles). An index out of range or an offset outside [0, 1]
+        raises InvalidSceneError."""
     def add_mesh(
         self,
         positions: NDArray[np.float32],

@@ -1447,6 +1447,72 @@ impl RenderScene {
         !self.any_hidden_from_camera || self.scene.materials[hit.material_id as usize].visible_to_camera
     }
 
+    /// Where a shadow ray from `hit` toward unit `wi` starts: Cycles' shadow-terminator geometry
+    /// offset (Hanika, "Hacking the Shadow Terminator", 2021) with the material's cutoff
+    /// ([`crate::scene::Material::terminator_offset`], Blender's default 0.1). Near the terminator of a smooth-shaded mesh (the light grazing the
+    /// shading normal `n`, or below the flat triangle, `ng`; both on the viewer's side) the origin
+    /// is lifted toward the smooth surface the vertex normals describe, so that low-poly meshes
+    /// are not shadowed by their own facets; elsewhere it is the usual offset origin. A ray
+    /// toward a light below the triangle's plane may still hit the triangle (then it is shadowed).
+    pub fn shadow_origin(&self, hit: &SurfaceHit, n: Vec3, ng: Vec3, wi: Vec3) -> Vec3 {
+        // 1. How far into the terminator region: by the shading and the geometric cosines.
+        let mut nl = n.dot(wi);
+        let ng = if nl < 0.0 { -ng } else { ng };
+        nl = nl.abs();
+        let ngl = ng.dot(wi);
+        let c = self.scene.materials[hit.material_id as usize].terminator_offset;
+        if !(c > 0.0) {
+            return hit.spawn_origin(wi);
+        }
+        let amount = if nl < c { (2.0 - (ngl + nl) / c).clamp(0.0, 1.0) } else { (1.0 - ngl / c).clamp(0.0, 1.0) };
+        if !(amount > 0.0) {
+            return hit.spawn_origin(wi);
+        }
+        // 2. The lift toward the smooth surface, and the origin just off the triangle's side
+        //    the shading normal is on (so that a ray below the plane can hit the triangle).
+        match self.smooth_surface_lift(hit, ng) {
+            Some(lift) if lift.is_finite() => offset_ray_origin(hit.position + lift * amount, ng),
+            _ => hit.spawn_origin(wi),
+        }
+    }
+
+    /// The vector from `hit` to the smooth surface its triangle's vertex normals describe (a
+    /// quadratic patch through the vertices, held within the vertices' tangent planes; world
+    /// space), for `ng` the geometric normal on the viewer's side. None for meshes without
+    /// vertex normals.
+    fn smooth_surface_lift(&self, hit: &SurfaceHit, ng: Vec3) -> Option<Vec3> {
+        let (mesh, info) = self.mesh_of(hit.instance);
+        if !info.has_normals {
+            return None;
+        }
+        // 1. The triangle in object space, and the point and interpolated normal on it.
+        let idx = mesh.indices[hit.triangle as usize].map(|i| i as usize);
+        let v = idx.map(|i| mesh.positions[i]);
+        let nv = idx.map(|i| mesh.normals[i]);
+        let w = [1.0 - hit.barycentrics.x - hit.barycentrics.y, hit.barycentrics.x, hit.barycentrics.y];
+        let p = v[0] * w[0] + v[1] * w[1] + v[2] * w[2];
+        let n_obj = nv[0] * w[0] + nv[1] * w[1] + nv[2] * w[2];
+        let xf = &self.xforms[hit.instance as usize];
+        let n = if xf.identity { n_obj } else { xf.object_to_world.transform_vector3(n_obj) };
+        // 2. Height of the quadratic patch over the flat triangle (along n).
+        let e02 = (nv[2] - nv[0]).dot(v[0] - v[2]);
+        let e12 = (nv[2] - nv[1]).dot(v[1] - v[2]);
+        let e01 = (nv[1] - nv[0]).dot(v[1] - v[0]);
+        let (a, b) = (w[0], w[1]);
+        let quadratic = e02 * a * (a - 1.0) + (e02 + e12 + e01) * a * b + e12 * b * (b - 1.0);
+        // 3. Held by the tangent planes at the vertices (each vertex's plane, raised to the
+        //    triangle's far corner along its normal), on the side the normals face.
+        let outward = n.dot(ng) > 0.0;
+        let s = if outward { 1.0 } else { -1.0 };
+        let plane = |i: usize| {
+            let reach = (0..3).filter(|&j| j != i).map(|j| s * (v[j] - v[i]).dot(nv[i])).fold(0.0f32, f32::max);
+            (s * (v[i] - p).dot(nv[i]) + reach).max(0.0)
+        };
+        let envelope = plane(0).min(plane(1)).min(plane(2));
+        let h = if outward { envelope.max(0.5 * quadratic) } else { (-envelope).min(0.5 * quadratic) };
+        Some(n * h)
+    }
+
     /// [`RenderScene::intersect`] as camera rays see the scene: surfaces hidden from the camera
     /// are passed through.
     pub fn intersect_seen(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<SurfaceHit> {

@@ -517,6 +517,20 @@ impl SurfaceBsdf {
         self.bsdf.eval(self.to_local(wo), self.to_local(wi))
     }
 
+    /// f·cos for a light sample's direction: as [`SurfaceBsdf::eval`] without the geometric
+    /// normal's test, as Cycles evaluates light samples. Near the terminator of a smooth-shaded
+    /// mesh the light may lie below the flat triangle yet above the shading normal; the shadow
+    /// ray then decides ([`super::accel::RenderScene::shadow_origin`]).
+    pub fn eval_light(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        self.bsdf.eval(self.to_local(wo), self.to_local(wi))
+    }
+
+    /// The pdf that weights a light sample's direction against BSDF sampling (without the
+    /// geometric normal's test, as [`SurfaceBsdf::eval_light`]).
+    pub fn pdf_light(&self, wo: Vec3, wi: Vec3) -> f32 {
+        self.bsdf.pdf(self.to_local(wo), self.to_local(wi))
+    }
+
     /// Pdf for world directions.
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
         if wi.dot(self.ng) <= 0.0 {

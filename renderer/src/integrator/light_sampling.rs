@@ -153,7 +153,7 @@ impl RenderScene {
         self.lights.selection = selection;
     }
 
-    /// Picks a light for shading point `p` with normal `n` (the geometric normal on the side
+    /// Picks a light for shading point `p` with normal `n` (the shading normal on the side
     /// the light must be on, or zero when there is none): (light index, selection pmf). This is
     /// the choice [`RenderScene::sample_light_at`] makes with the same `u_pick`.
     pub fn pick_light(&self, p: Vec3, n: Vec3, u_pick: f32) -> Option<(usize, f32)> {
@@ -177,7 +177,7 @@ impl RenderScene {
         self.sample_light_at(p, Vec3::ZERO, u_pick, u)
     }
 
-    /// Samples a light for shading point `p` with normal `n` (the geometric normal on the side
+    /// Samples a light for shading point `p` with normal `n` (the shading normal on the side
     /// where light is wanted, or zero): `u_pick` selects the light, `u` the point on it. None
     /// when nothing can be sampled. Lights wholly below `n` are never chosen.
     pub fn sample_light_at(&self, p: Vec3, n: Vec3, u_pick: f32, u: Vec2) -> Option<LightSample> {

@@ -3,8 +3,13 @@
 //! * At each vertex: one light sample (NEE) and one BSDF sample. Emissive triangles and the
 //!   environment are reached by both and weighted with the power heuristic (β = 2); punctual
 //!   lights (delta) only by NEE. Emission seen by the camera ray counts fully. Light selection
-//!   depends on the shading point (position and geometric normal, see [`super::lights`]), so the
-//!   light pdf in the weight of an emitter hit is evaluated for the vertex the ray left from.
+//!   depends on the shading point (position and shading normal, as in Cycles; see
+//!   [`super::lights`]), so the light pdf in the weight of an emitter hit is evaluated for the
+//!   vertex the ray left from.
+//! * Light samples are evaluated without the geometric normal's test and their shadow rays
+//!   leave from the smooth surface near a terminator, as Cycles does with its default Shadow
+//!   Terminator Geometry Offset ([`RenderScene::shadow_origin`]): smooth-shaded low-poly meshes
+//!   are lit up to their terminator. BSDF samples through the geometric surface are dropped.
 //! * `max_depth` counts scattering events (pbrt's convention): 0 = emission only, 1 = direct
 //!   lighting, ... Emitters reached by the last BSDF sample still count.
 //! * Russian roulette as Cycles does it: at every hit after `rr_start_depth` bounces (default 1:
@@ -208,7 +213,7 @@ impl PathTracer {
         let mut l = Vec3::ZERO;
         let mut beta = Vec3::ONE;
         let mut prev_pdf = 0.0f32; // BSDF pdf of the ray being traced (0 for the camera ray)
-                                   // Shading point (position, geometric normal on the side of the path) the ray being
+                                   // Shading point (position, shading normal on the side of the path) the ray being
                                    // traced left from: light selection there depends on it, so MIS needs it.
         let (mut prev_p, mut prev_n) = (Vec3::ZERO, Vec3::ZERO);
         let mut depth = 0u32;
@@ -308,12 +313,13 @@ impl PathTracer {
             };
             let sb = SurfaceBsdf::new(bsdf, hit.geometric_normal, hit.shading_normal, wo);
 
-            // Next-event estimation.
-            if let Some(ls) = scene.sample_light_at(hit.position, sb.ng, u_pick, u_light) {
+            // Next-event estimation (lights chosen by the shading normal, as Cycles does; the
+            // shadow ray leaves from the smooth surface near a terminator).
+            if let Some(ls) = scene.sample_light_at(hit.position, sb.n, u_pick, u_light) {
                 if ls.delta || nee {
-                    let f = sb.eval(wo, ls.wi);
+                    let f = sb.eval_light(wo, ls.wi);
                     if f != Vec3::ZERO {
-                        let origin = hit.spawn_origin(ls.wi);
+                        let origin = scene.shadow_origin(&hit, sb.n, sb.ng, ls.wi);
                         let visible = match ls.target {
                             Some(t) => {
                                 let to = t - origin;
@@ -326,7 +332,7 @@ impl PathTracer {
                             let w = if ls.delta || self.strategy != LightStrategy::Mis {
                                 1.0
                             } else {
-                                power_heuristic(ls.pdf, sb.pdf(wo, ls.wi))
+                                power_heuristic(ls.pdf, sb.pdf_light(wo, ls.wi))
                             };
                             if ls.pdf > 0.0 {
                                 l += beta * f * ls.radiance * (w / ls.pdf);
@@ -344,7 +350,7 @@ impl PathTracer {
             }
             prev_pdf = bs.pdf;
             prev_p = hit.position;
-            prev_n = sb.ng;
+            prev_n = sb.n;
             o = hit.spawn_origin(bs.wi);
             d = bs.wi;
             t_max = f32::INFINITY;

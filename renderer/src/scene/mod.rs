@@ -15,6 +15,8 @@
 //! | `Light::Spot.inner_cone_rad`, `outer_cone_rad` | f32 | radians | 0, π/4 |
 //! | `Light::Directional.irradiance` | RGB | W/m² | — |
 //! | `Material.alpha_cutoff` | f32 (alpha mask) | — | 0.5 |
+//! | `Material.visible_to_camera` | bool: camera rays see the surface | — | true |
+//! | `Material.terminator_offset` | f32: Blender's Shadow Terminator Geometry Offset | cosine | 0.1 |
 //! | `Instance.mesh` | u32 | index into `Scene::meshes` | — |
 //! | `Instance.object_to_world` | [`Affine3A`] (any invertible affine map: rotation, non-uniform or negative scale, shear) | metres | — |
 //!
@@ -34,6 +36,11 @@ pub mod texture;
 
 pub use environment::Environment;
 pub use texture::Texture;
+
+/// Blender's default Shadow Terminator > Geometry Offset (0.1), [`Material::terminator_offset`]'s
+/// default: shadow rays whose light direction makes a cosine below about this with the shading
+/// or the geometric normal leave from the smooth surface.
+pub const TERMINATOR_OFFSET: f32 = 0.1;
 
 /// A reference to a texture and the UV set it reads.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -113,6 +120,11 @@ pub struct Material {
     /// turns off for lights). When false, a camera ray goes on through it; every other ray
     /// (reflections, bounces, shadow rays) treats it as before.
     pub visible_to_camera: bool,
+    /// Blender's Shadow Terminator > Geometry Offset of the objects using it: near the terminator
+    /// of a smooth-shaded mesh, shadow rays leave from the smooth surface its vertex normals
+    /// describe, within this cosine of grazing (0 = from the flat triangle). Blender's default,
+    /// 0.1, for glTF and USD, which do not carry it.
+    pub terminator_offset: f32,
 }
 
 impl Default for Material {
@@ -134,6 +146,7 @@ impl Default for Material {
             double_sided: false,
             light_emitter: false,
             visible_to_camera: true,
+            terminator_offset: TERMINATOR_OFFSET,
         }
     }
 }

@@ -14,8 +14,8 @@
 //!   probability proportional to its importance at (p, n) (pbrt-v4's
 //!   `LightBounds::Importance`, with two changes: the distance clamp is the squared
 //!   bounding-sphere radius, and the cosine at the receiver is one-sided, taken with the
-//!   geometric normal on the side the path arrived from, so lights wholly behind the surface
-//!   get importance 0 — the BSDFs here never transmit).
+//!   shading normal on the side the path arrived from, as Cycles takes it, so lights wholly
+//!   behind the shaded surface get importance 0 — the BSDFs here never transmit).
 //!   Lights at infinity (environment, directional) are chosen with the fixed probability
 //!   [`P_INFINITE`] = 1/2 as a group (by power among themselves), the tree otherwise (pbrt-v4
 //!   uses `nInfinite / (nInfinite + 1)`, uniform among them; with a sky and a sun that leaves a

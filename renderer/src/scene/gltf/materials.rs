@@ -227,6 +227,7 @@ impl Loader<'_> {
                 double_sided: m.double_sided(),
                 light_emitter: false,
                 visible_to_camera: true,
+                terminator_offset: crate::scene::TERMINATOR_OFFSET,
             });
         }
     }
