@@ -522,6 +522,9 @@ struct TlasLeaf {
 #[derive(Debug, Clone, Copy, Default)]
 struct MeshInfo {
     has_normals: bool,
+    /// Some triangle's vertex normals differ (smooth shading): only then can the shadow
+    /// terminator's lift be non-zero (Cycles' smooth-normal flag).
+    smooth_normals: bool,
     has_uv0: bool,
     has_uv1: bool,
     has_tangents: bool,
@@ -674,8 +677,15 @@ impl RenderScene {
             if !finite_uv0 || !finite_uv1 {
                 scene.warnings.push(format!("mesh {k}: non-finite texture coordinates; ignoring that UV set"));
             }
+            let has_normals = m.normals.len() == nv;
+            let smooth_normals = has_normals
+                && m.indices.iter().any(|t| {
+                    let [a, b, c] = t.map(|i| m.normals.get(i as usize).copied().unwrap_or_default());
+                    a != b || b != c
+                });
             let info = MeshInfo {
-                has_normals: m.normals.len() == nv,
+                has_normals,
+                smooth_normals,
                 has_uv0: m.uv0.len() == nv && finite_uv0,
                 has_uv1: m.uv1.len() == nv && m.uv0.len() == nv && finite_uv0 && finite_uv1,
                 has_tangents: m.tangents.len() == nv,
@@ -1479,10 +1489,10 @@ impl RenderScene {
     /// The vector from `hit` to the smooth surface its triangle's vertex normals describe (a
     /// quadratic patch through the vertices, held within the vertices' tangent planes; world
     /// space), for `ng` the geometric normal on the viewer's side. None for meshes without
-    /// vertex normals.
+    /// smooth vertex normals (flat shading).
     fn smooth_surface_lift(&self, hit: &SurfaceHit, ng: Vec3) -> Option<Vec3> {
         let (mesh, info) = self.mesh_of(hit.instance);
-        if !info.has_normals {
+        if !info.smooth_normals {
             return None;
         }
         // 1. The triangle in object space, and the point and interpolated normal on it.
