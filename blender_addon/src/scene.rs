@@ -173,7 +173,7 @@ impl PyScene {
     }
 
     /// Adds a glTF metallic-roughness material; returns its index.
-    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true, light_emitter = false, visible_to_camera = true))]
+    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true, light_emitter = false, visible_to_camera = true, transmission = 0.0))]
     #[allow(clippy::too_many_arguments)]
     fn add_material(
         &mut self,
@@ -194,6 +194,7 @@ impl PyScene {
         double_sided: bool,
         light_emitter: bool,
         visible_to_camera: bool,
+        transmission: f64,
     ) -> PyResult<usize> {
         guard(|| {
             let bc = match base_color.as_slice() {
@@ -215,6 +216,7 @@ impl PyScene {
                 ("specular", specular, 0.0, 100.0),
                 ("normal_scale", normal_scale, -100.0, 100.0),
                 ("alpha_cutoff", alpha_cutoff, 0.0, 1.0),
+                ("transmission", transmission, 0.0, 1.0),
             ] {
                 if !(v.is_finite() && v >= lo && v <= hi) {
                     return Err(scene_err(name, field, format!("{v} is outside [{lo}, {hi}]")));
@@ -243,6 +245,7 @@ impl PyScene {
                 light_emitter,
                 visible_to_camera,
                 terminator_offset: petzval_renderer::scene::TERMINATOR_OFFSET,
+                transmission: transmission as f32,
             };
             self.scene.materials.push(m);
             Ok(self.scene.materials.len() - 1)

@@ -75,3 +75,31 @@ pub fn icosphere(center: Vec3, radius: f32, level: u32, material: u32) -> Mesh {
         indices: f,
     }
 }
+
+/// Axis-aligned box from `lo` to `hi` (flat faces, outward counter-clockwise winding and
+/// normals, four vertices per face).
+pub fn box_mesh(lo: Vec3, hi: Vec3, material: u32) -> Mesh {
+    let mut m = Mesh::default();
+    // each face: an outward normal and two in-face axes (a × b = normal)
+    let faces = [(Vec3::X, Vec3::Y, Vec3::Z), (Vec3::Y, Vec3::Z, Vec3::X), (Vec3::Z, Vec3::X, Vec3::Y)];
+    let c = 0.5 * (lo + hi);
+    let h = 0.5 * (hi - lo);
+    for (n, a, b) in faces {
+        for s in [1.0f32, -1.0] {
+            let n = n * s;
+            let (a, b) = if s > 0.0 { (a, b) } else { (b, a) };
+            let (ha, hb, hn) = (a * h, b * h, n * h);
+            let base = m.positions.len() as u32;
+            for (u, v) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+                m.positions.push(c + hn + ha * u + hb * v);
+                m.normals.push(n);
+                m.tangents.push(Vec4::ZERO);
+                m.uv0.push(Vec2::new((u + 1.0) * 0.5, (v + 1.0) * 0.5));
+            }
+            m.indices.push([base, base + 1, base + 2]);
+            m.indices.push([base, base + 2, base + 3]);
+            m.material_ids.extend([material, material]);
+        }
+    }
+    m
+}

@@ -422,3 +422,25 @@ fn gltf_spot_inner_equal_to_outer_is_a_hard_edge() {
     assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
     assert!(s.warnings[0].contains("Inverted") && s.warnings[0].contains("innerConeAngle"), "{:?}", s.warnings);
 }
+
+/// `KHR_materials_transmission`: transmissionFactor becomes `Material::transmission`; a
+/// transmission texture is named in a warning; a factor outside [0, 1] is clamped with one.
+#[test]
+fn gltf_transmission_factor() {
+    let doc = r#"{"asset": {"version": "2.0"}, "extensionsUsed": ["KHR_materials_transmission", "KHR_materials_ior"],
+        "materials": [
+            {"name": "Glass", "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1.0},
+                                             "KHR_materials_ior": {"ior": 1.45}}},
+            {"name": "Half", "extensions": {"KHR_materials_transmission": {"transmissionFactor": 0.5,
+                                             "transmissionTexture": {"index": 0}}}},
+            {"name": "Over", "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1.5}}},
+            {"name": "Plain"}],
+        "textures": [{"source": 0}], "images": [{"uri": "missing.png"}],
+        "scenes": [{"nodes": []}]}"#;
+    let s = load_gltf_slice(doc.as_bytes(), None, "glass.gltf").unwrap();
+    let t: Vec<(f32, f32)> = s.materials.iter().map(|m| (m.transmission, m.ior)).collect();
+    assert_eq!(t, vec![(1.0, 1.45), (0.5, 1.5), (1.0, 1.5), (0.0, 1.5)]);
+    let w = s.warnings.join("\n");
+    assert!(w.contains("transmissionTexture") && w.contains("transmissionFactor 1.5"), "{w}");
+    assert!(!w.contains("KHR_materials_transmission is not supported"), "{w}");
+}

@@ -317,7 +317,9 @@ def build_lights_scene(variant: str):
     in view facing the camera (Blender 5 hides lights from camera rays) and a cube whose Camera ray
     visibility is off, both lighting or shadowing the scene, lit also by a sun (black world).
     "terminator" has smooth-shaded low-poly meshes lit from the side by a sun: Suzanne with
-    Blender's default Shadow Terminator Geometry Offset (0.1) and a 12 x 6 UV sphere with 0."""
+    Blender's default Shadow Terminator Geometry Offset (0.1) and a 12 x 6 UV sphere with 0.
+    "glass" makes the two spheres glass (Transmission Weight 1: clear IOR 1.45, and a tinted one
+    of roughness 0.3) over the checker ground, lit by the environment texture."""
     b = bpy()
     reset_blender()
     scene = b.context.scene
@@ -326,7 +328,7 @@ def build_lights_scene(variant: str):
         world.use_nodes = True
     nt = world.node_tree
     bg = nt.nodes.get("Background")
-    bg.inputs["Strength"].default_value = 0.5 if variant == "world" else 0.0
+    bg.inputs["Strength"].default_value = 0.5 if variant in ("world", "glass") else 0.0
     env = nt.nodes.new("ShaderNodeTexEnvironment")
     env.image = _environment_image()
     mapping = nt.nodes.new("ShaderNodeMapping")
@@ -339,13 +341,14 @@ def build_lights_scene(variant: str):
 
     b.ops.mesh.primitive_plane_add(size=8.0, location=(0.0, 2.0, 0.0))
     ground = _principled_lambert("Ground", (0.5, 0.5, 0.5))
-    if variant == "texture":
+    if variant in ("texture", "glass"):
         # the ground's colour from a coarse 8-bit checker with Linear interpolation
         tex = ground.node_tree.nodes.new("ShaderNodeTexImage")
         tex.image = _checker_image()
         tex.interpolation = "Linear"
         bsdf = ground.node_tree.nodes.get("Principled BSDF")
         ground.node_tree.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+    if variant == "texture":
         sun = b.data.lights.new("TexSun", "SUN")
         sun.energy = 2.0
         sun_obj = b.data.objects.new("TexSun", sun)
@@ -355,7 +358,16 @@ def build_lights_scene(variant: str):
     for loc, r, col in (((-0.5, 1.5, 0.35), 0.35, (0.7, 0.2, 0.15)), ((0.6, 2.2, 0.5), 0.5, (0.2, 0.6, 0.3))):
         b.ops.mesh.primitive_uv_sphere_add(segments=32, ring_count=16, radius=r, location=loc)
         b.ops.object.shade_smooth()
-        b.context.active_object.data.materials.append(_principled_lambert("Sphere", col))
+        mat = _principled_lambert("Sphere", col)
+        if variant == "glass":
+            p = mat.node_tree.nodes.get("Principled BSDF")
+            p.inputs["Transmission Weight"].default_value = 1.0
+            p.inputs["IOR"].default_value = 1.45
+            p.inputs["Specular IOR Level"].default_value = 0.5
+            rough = r < 0.4
+            p.inputs["Roughness"].default_value = 0.3 if rough else 0.0
+            p.inputs["Base Color"].default_value = (0.75, 0.9, 0.8, 1.0) if rough else (1.0, 1.0, 1.0, 1.0)
+        b.context.active_object.data.materials.append(mat)
 
     lights = (("Rect", "RECTANGLE", 1.0, 0.5, (0.8, 1.0, 2.6), 300.0, (1.0, 0.85, 0.7)),
               ("Disc", "DISK", 0.6, 0.6, (-1.2, 2.5, 2.4), 150.0, (0.7, 0.8, 1.0)))

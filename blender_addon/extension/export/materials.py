@@ -268,9 +268,13 @@ class Materials:
                     f"node{' (' + nn.space.lower() + ' space)' if nn.type == 'NORMAL_MAP' else ''}"
                 )
 
+        # transmission: that share of the dielectric part is glass (refracting by IOR)
+        kw["transmission"] = min(max(float(value(node, "Transmission Weight", 0.0)), 0.0), 1.0)
+        if source(node.inputs.get("Transmission Weight")) is not None:
+            self.notes.warn(f"material '{name}': Transmission Weight from a node (its unlinked value used)")
+
         # lobes glTF/Petzval's BSDF does not have
         for label, inp in (
-            ("Transmission", "Transmission Weight"),
             ("Coat", "Coat Weight"),
             ("Sheen", "Sheen Weight"),
             ("Subsurface", "Subsurface Weight"),

@@ -106,6 +106,7 @@ class Scene:
         double_sided: bool = True,
         light_emitter: bool = False,
         visible_to_camera: bool = True,
+        transmission: float = 0.0,
     ) -> int:
         """Adds a glTF metallic-roughness material and returns its index.
 
@@ -118,6 +119,8 @@ class Scene:
         it casts no shadow and is seen only from its front. ``visible_to_camera`` False hides
         the surface from camera rays (Blender's Ray Visibility > Camera, off for lights in
         Blender 5): they go on through it, while reflections, bounces and shadows still see it.
+        ``transmission`` (Blender's Transmission Weight, glTF's transmissionFactor) makes that
+        share of the dielectric part glass, refracting by ``ior`` and tinted by the base colour.
         Texture indices come from :meth:`add_texture`."""
     def material_variant(self, material: int, visible_to_camera: bool = True, terminator_offset: float = 0.1) -> int:
         """Adds a copy of material ``material`` with an object's settings and returns its index:

@@ -266,6 +266,9 @@ pub struct Bsdf {
     /// The cosine lobes depend on the albedo tables (a specular layer, or M); false for a pure
     /// Lambertian base, whose lookups are then skipped.
     layered: bool,
+    /// The glass lobe of a transmissive material and its weight (1 − m)·transmission; the
+    /// opaque lobes above are weighted by the rest.
+    glass: Option<(f32, Glass)>,
 }
 
 impl Bsdf {
@@ -318,6 +321,40 @@ impl Bsdf {
             ms_scale,
             ms_colour,
             layered,
+            glass: None,
+        }
+    }
+
+    /// The same BSDF with glTF's `KHR_materials_transmission` (Blender's Transmission Weight):
+    /// the dielectric part becomes glass by `transmission` in [0, 1] (a rough dielectric
+    /// interface of the BSDF's roughness and ior whose refracted light is tinted by the square
+    /// root of the base colour at each crossing, the base colour through a solid object). Metals do not transmit: the glass lobe weighs (1 − metallic)·transmission, and
+    /// every opaque lobe the rest (exact for metallic 0 or 1).
+    pub fn with_transmission(self, transmission: f32, ior: f32) -> Self {
+        let t = if transmission.is_finite() { transmission.clamp(0.0, 1.0) } else { 0.0 };
+        let weight = (1.0 - self.metallic) * t;
+        if !(weight > 0.0) {
+            return self;
+        }
+        let ior = if ior.is_finite() && ior >= 1.0 { ior } else { 1.5 };
+        // each interface tints by √base, so light through a solid object (in and out) takes the
+        // base colour, as in Cycles' Principled BSDF
+        let tint = Vec3::new(self.base.x.sqrt(), self.base.y.sqrt(), self.base.z.sqrt());
+        Bsdf { glass: Some((weight, Glass::new(self.alpha.sqrt(), ior, tint))), ..self }
+    }
+
+    /// Whether the BSDF transmits (light from below the surface counts).
+    #[inline]
+    pub fn transmits(&self) -> bool {
+        self.glass.is_some()
+    }
+
+    /// The BSDF seen from inside its object (`inside`: the outgoing direction is on the back of
+    /// the surface), for the glass lobe's relative index of refraction.
+    pub fn seen_from_inside(self, inside: bool) -> Self {
+        match self.glass {
+            Some((w, g)) => Bsdf { glass: Some((w, g.facing(inside))), ..self },
+            None => self,
         }
     }
 
@@ -377,8 +414,53 @@ impl Bsdf {
         }
     }
 
-    /// f(wo, wi)·cos θi; zero unless both directions are above the surface.
+    /// f(wo, wi)·|cos θi| (local frame, `wo` above the surface; `wi` below counts only for
+    /// a transmissive BSDF).
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        match &self.glass {
+            None => self.eval_opaque(wo, wi),
+            Some((w, g)) => {
+                let opaque = if wi.z > 0.0 { self.eval_opaque(wo, wi) * (1.0 - w) } else { Vec3::ZERO };
+                opaque + g.eval(wo, wi) * *w
+            }
+        }
+    }
+
+    /// Solid-angle pdf of [`Bsdf::sample`] producing `wi`.
+    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        match &self.glass {
+            None => self.pdf_opaque(wo, wi),
+            // the lobes are chosen by their weights
+            Some((w, g)) => {
+                let opaque = if *w < 1.0 { self.pdf_opaque(wo, wi) * (1.0 - w) } else { 0.0 };
+                opaque + g.pdf(wo, wi) * w
+            }
+        }
+    }
+
+    /// Samples wi: `u1` picks the lobe, `u2` the direction. None when the BSDF is black, the
+    /// sample falls below the surface (through it, for an opaque BSDF), or its pdf is zero.
+    pub fn sample(&self, wo: Vec3, u2: Vec2, u1: f32) -> Option<BsdfSample> {
+        let Some((w, g)) = &self.glass else { return self.sample_opaque(wo, u2, u1) };
+        // 1. A lobe by its weight (u1 reused within it), 2. the mixture's pdf and value.
+        let wi = if u1 < *w {
+            g.sample_direction(wo, u2, (u1 / w).min(ONE_BELOW))?
+        } else {
+            self.sample_opaque(wo, u2, ((u1 - w) / (1.0 - w)).min(ONE_BELOW))?.wi
+        };
+        let pdf = self.pdf(wo, wi);
+        if !(pdf > 0.0) {
+            return None;
+        }
+        let weight = self.eval(wo, wi) / pdf;
+        if !weight.is_finite() || weight == Vec3::ZERO {
+            return None;
+        }
+        Some(BsdfSample { wi, weight, pdf, is_delta: false })
+    }
+
+    /// The opaque lobes' f·cos θi; zero unless both directions are above the surface.
+    fn eval_opaque(&self, wo: Vec3, wi: Vec3) -> Vec3 {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return Vec3::ZERO;
         }
@@ -409,8 +491,8 @@ impl Bsdf {
         }
     }
 
-    /// Solid-angle pdf of [`Bsdf::sample`] producing `wi`.
-    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+    /// The opaque lobes' pdf.
+    fn pdf_opaque(&self, wo: Vec3, wi: Vec3) -> f32 {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return 0.0;
         }
@@ -430,9 +512,8 @@ impl Bsdf {
         }
     }
 
-    /// Samples wi: `u1` picks the lobe, `u2` the direction. None when the BSDF is black, the
-    /// sample falls below the surface, or its pdf is zero.
-    pub fn sample(&self, wo: Vec3, u2: Vec2, u1: f32) -> Option<BsdfSample> {
+    /// Samples the opaque lobes.
+    fn sample_opaque(&self, wo: Vec3, u2: Vec2, u1: f32) -> Option<BsdfSample> {
         if wo.z <= 0.0 {
             return None;
         }
@@ -449,16 +530,244 @@ impl Bsdf {
         if wi.z <= 0.0 {
             return None;
         }
-        let pdf = self.pdf(wo, wi);
+        let pdf = self.pdf_opaque(wo, wi);
         if !(pdf > 0.0) {
             return None;
         }
-        let f = self.eval(wo, wi);
+        let f = self.eval_opaque(wo, wi);
         let weight = f / pdf;
         if !weight.is_finite() || weight == Vec3::ZERO {
             return None;
         }
         Some(BsdfSample { wi, weight, pdf, is_delta: false })
+    }
+}
+
+/// The largest f32 below 1 (a remapped sample number stays in [0, 1)).
+const ONE_BELOW: f32 = 1.0 - f32::EPSILON / 2.0;
+
+/// Fresnel reflectance of a dielectric interface for unpolarised light, at `cos_i` (negative:
+/// arriving from the inside) and relative index `eta` = n_inside / n_outside; 1 under total
+/// internal reflection.
+#[inline]
+pub fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
+    let (cos_i, eta) = if cos_i < 0.0 { (-cos_i.max(-1.0), 1.0 / eta) } else { (cos_i.min(1.0), eta) };
+    let sin2_t = (1.0 - cos_i * cos_i) / (eta * eta);
+    if sin2_t >= 1.0 {
+        return 1.0;
+    }
+    let cos_t = (1.0 - sin2_t).max(0.0).sqrt();
+    let r_parallel = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    let r_perpendicular = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    0.5 * (r_parallel * r_parallel + r_perpendicular * r_perpendicular)
+}
+
+/// Refracts `wi` (pointing away from the surface, on `n`'s side) through a surface of normal `n`
+/// into a medium of relative index `eta`; None under total internal reflection.
+#[inline]
+fn refract(wi: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
+    let cos_i = n.dot(wi);
+    let sin2_t = (1.0 - cos_i * cos_i).max(0.0) / (eta * eta);
+    if sin2_t >= 1.0 {
+        return None;
+    }
+    let cos_t = (1.0 - sin2_t).sqrt();
+    Some(-wi / eta + n * (cos_i / eta - cos_t))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Directional albedo of the single-scattering glass lobe (reflection + refraction, radiance
+// scaling undone), for the energy compensation Cycles' multiscatter GGX glass applies.
+
+/// Glass albedo table nodes: roughness (linear, 0…1), interface (x = (ior − 1)/(ior + 1),
+/// linear over 0…0.5, i.e. ior 1…3), and √μ.
+const GLASS_NR: usize = 16;
+const GLASS_NI: usize = 16;
+const GLASS_NMU: usize = 32;
+
+/// One (roughness, ior) node's albedos E(μo) seen from outside (index 0) and inside (1).
+struct GlassRow {
+    e: [[f32; GLASS_NMU]; 2],
+}
+
+/// Row (`ri`, `ii`), computed once per process on first use.
+fn glass_row(ri: usize, ii: usize) -> &'static GlassRow {
+    static ROWS: [OnceLock<GlassRow>; GLASS_NR * GLASS_NI] = [const { OnceLock::new() }; GLASS_NR * GLASS_NI];
+    ROWS[ri * GLASS_NI + ii].get_or_init(|| build_glass_row(ri, ii))
+}
+
+fn build_glass_row(ri: usize, ii: usize) -> GlassRow {
+    // 1. The node's glass, single scattering (no compensation), untinted.
+    let r = ri as f32 / (GLASS_NR - 1) as f32;
+    let x = 0.5 * ii as f32 / (GLASS_NI - 1) as f32;
+    let ior = (1.0 + x) / (1.0 - x);
+    let mut row = GlassRow { e: [[1.0; GLASS_NMU]; 2] };
+    for (side, inside) in [false, true].into_iter().enumerate() {
+        let g = Glass::single_scatter((r * r).max(MIN_ALPHA), ior, Vec3::ONE).facing(inside);
+        // 2. Per μ node: the mean of f·|cos|/pdf over stratified samples, refraction's 1/η′²
+        //    taken back out (energy, not radiance).
+        for mi in 0..GLASS_NMU {
+            let s = mi as f32 / (GLASS_NMU - 1) as f32;
+            let mu = (s * s).max(1e-4);
+            let wo = Vec3::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
+            const N: u32 = 2048;
+            let mut sum = 0.0f64;
+            for k in 0..N {
+                let u2 = Vec2::new((k as f32 + 0.5) / N as f32, radical_inverse_vdc(k));
+                // an additive golden-ratio sequence, independent of the Hammersley pair
+                let u1 = ((k as f64 * 0.618_033_988_749_894_9 + 0.5).fract()) as f32;
+                let Some(wi) = g.sample_direction(wo, u2, u1) else { continue };
+                let pdf = g.pdf(wo, wi);
+                if !(pdf > 0.0) {
+                    continue;
+                }
+                let etap2 = if wi.z < 0.0 { g.eta * g.eta } else { 1.0 };
+                sum += (g.eval(wo, wi).y / pdf * etap2) as f64;
+            }
+            row.e[side][mi] = ((sum / N as f64) as f32).clamp(0.05, 1.0);
+        }
+    }
+    row
+}
+
+/// The glass albedo E(μ) for `roughness` and `ior`, from `inside` or outside, interpolated.
+fn glass_albedo(roughness: f32, ior: f32, inside: bool, mu: f32) -> f32 {
+    let rx = roughness.clamp(0.0, 1.0) * (GLASS_NR - 1) as f32;
+    let r0 = (rx as usize).min(GLASS_NR - 2);
+    let fr = rx - r0 as f32;
+    let ix = ((ior - 1.0) / (ior + 1.0) / 0.5).clamp(0.0, 1.0) * (GLASS_NI - 1) as f32;
+    let i0 = (ix as usize).min(GLASS_NI - 2);
+    let fi = ix - i0 as f32;
+    let mx = mu.clamp(0.0, 1.0).sqrt() * (GLASS_NMU - 1) as f32;
+    let m0 = (mx as usize).min(GLASS_NMU - 2);
+    let fm = mx - m0 as f32;
+    let side = inside as usize;
+    let at = |ri: usize, ii: usize| {
+        let e = &glass_row(ri, ii).e[side];
+        e[m0] + (e[m0 + 1] - e[m0]) * fm
+    };
+    let lo = at(r0, i0) + (at(r0, i0 + 1) - at(r0, i0)) * fi;
+    let hi = at(r0 + 1, i0) + (at(r0 + 1, i0 + 1) - at(r0 + 1, i0)) * fi;
+    lo + (hi - lo) * fr
+}
+
+/// A rough dielectric interface (glass): GGX microfacets reflecting by the exact Fresnel
+/// equations and refracting the rest (Walter et al. 2007), sampled by visible normals and
+/// choosing reflection or refraction by the Fresnel reflectance, as pbrt-v4's DielectricBxDF
+/// does. Local frame, `wo` above the surface; refracted light is tinted and carries the
+/// 1/η² of radiance crossing into a denser medium. The energy single scattering loses between
+/// microfacets comes back as Cycles' multiscatter GGX brings it: f is divided by the lobe's
+/// albedo E(μo) (tabulated per roughness, ior and side).
+#[derive(Debug, Clone, Copy)]
+pub struct Glass {
+    /// Perceptual roughness (for the albedo table); negative: no compensation.
+    roughness: f32,
+    alpha: f32,
+    a2: f32,
+    /// n_inside / n_outside.
+    ior: f32,
+    /// The relative index for light going from `wo`'s side across: `ior` from outside, 1/ior
+    /// from inside.
+    eta: f32,
+    /// Colour of the refracted light (the base colour).
+    tint: Vec3,
+}
+
+impl Glass {
+    /// Glass of perceptual `roughness` and `ior`, its refracted light tinted by `tint`, seen
+    /// from outside, with the multiple-scattering compensation.
+    pub fn new(roughness: f32, ior: f32, tint: Vec3) -> Self {
+        let roughness = roughness.clamp(0.0, 1.0);
+        Glass { roughness, ..Glass::single_scatter((roughness * roughness).max(MIN_ALPHA), ior, tint) }
+    }
+
+    /// Glass of GGX `alpha` without the compensation (what the albedo table integrates).
+    fn single_scatter(alpha: f32, ior: f32, tint: Vec3) -> Self {
+        let alpha = alpha.max(MIN_ALPHA);
+        Glass { roughness: -1.0, alpha, a2: alpha * alpha, ior, eta: ior, tint }
+    }
+
+    /// 1 / E(μo): the compensation of energy lost between microfacets (1 without it).
+    #[inline]
+    fn energy_scale(&self, wo: Vec3) -> f32 {
+        if self.roughness < 0.0 {
+            return 1.0;
+        }
+        1.0 / glass_albedo(self.roughness, self.ior, self.eta < 1.0, wo.z)
+    }
+
+    /// The same glass seen from inside (`inside`) or outside.
+    pub fn facing(self, inside: bool) -> Self {
+        Glass { eta: if inside { 1.0 / self.ior } else { self.ior }, ..self }
+    }
+
+    /// The microfacet normal joining `wo` and `wi` (reflection or refraction), facing up, with
+    /// η′ (1 for reflection, η for refraction); None where no microfacet can join them.
+    #[inline]
+    fn half_vector(&self, wo: Vec3, wi: Vec3) -> Option<(Vec3, f32)> {
+        if wo.z <= 0.0 || wi.z == 0.0 {
+            return None;
+        }
+        let etap = if wi.z > 0.0 { 1.0 } else { self.eta };
+        let wm = (wi * etap + wo).normalize_or_zero();
+        let wm = if wm.z < 0.0 { -wm } else { wm };
+        // back-facing microfacets join nothing
+        if wm == Vec3::ZERO || wm.dot(wi) * wi.z < 0.0 || wm.dot(wo) < 0.0 {
+            return None;
+        }
+        Some((wm, etap))
+    }
+
+    /// f(wo, wi)·|cos θi|.
+    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        let Some((wm, etap)) = self.half_vector(wo, wi) else { return Vec3::ZERO };
+        let f = fresnel_dielectric(wo.dot(wm), self.eta);
+        let d = ggx_d(wm.z, self.a2);
+        let g = 1.0 / (1.0 + smith_lambda(wo.z, self.a2) + smith_lambda(wi.z, self.a2));
+        let value = if wi.z > 0.0 {
+            Vec3::splat(d * g * f / (4.0 * wo.z))
+        } else {
+            let denom = wi.dot(wm) + wo.dot(wm) / etap;
+            let ft = d * (1.0 - f) * g * (wi.dot(wm) * wo.dot(wm) / (denom * denom * wo.z)).abs() / (etap * etap);
+            self.tint * ft
+        } * self.energy_scale(wo);
+        if value.is_finite() {
+            value
+        } else {
+            Vec3::ZERO
+        }
+    }
+
+    /// Solid-angle pdf of [`Glass::sample_direction`] producing `wi`.
+    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        let Some((wm, etap)) = self.half_vector(wo, wi) else { return 0.0 };
+        let r = fresnel_dielectric(wo.dot(wm), self.eta);
+        // visible-normal density of wm, then its Jacobian to wi
+        let vndf = ggx_d(wm.z, self.a2) * wo.dot(wm) / ((1.0 + smith_lambda(wo.z, self.a2)) * wo.z);
+        let pdf = if wi.z > 0.0 {
+            vndf / (4.0 * wo.dot(wm)) * r
+        } else {
+            let denom = wi.dot(wm) + wo.dot(wm) / etap;
+            vndf * wi.dot(wm).abs() / (denom * denom) * (1.0 - r)
+        };
+        if pdf.is_finite() {
+            pdf
+        } else {
+            0.0
+        }
+    }
+
+    /// A direction: a visible microfacet normal from `u2`, then reflection or refraction by
+    /// its Fresnel reflectance (`u1`).
+    pub fn sample_direction(&self, wo: Vec3, u2: Vec2, u1: f32) -> Option<Vec3> {
+        if wo.z <= 0.0 {
+            return None;
+        }
+        let wm = sample_vndf(wo, self.alpha, u2);
+        let r = fresnel_dielectric(wo.dot(wm), self.eta);
+        let wi = if u1 < r { 2.0 * wo.dot(wm) * wm - wo } else { refract(wo, wm, self.eta)? };
+        // reflection stays above, refraction goes below
+        ((u1 < r) == (wi.z > 0.0) && wi.z != 0.0).then_some(wi.normalize())
     }
 }
 
@@ -482,7 +791,9 @@ impl SurfaceBsdf {
     /// Places `bsdf` with the given normals for outgoing direction `wo` (unit, world, pointing
     /// away from the surface). Normals may face either way.
     pub fn new(bsdf: Bsdf, geometric_normal: Vec3, shading_normal: Vec3, wo: Vec3) -> Self {
-        let ng = if geometric_normal.dot(wo) >= 0.0 { geometric_normal } else { -geometric_normal };
+        let inside = geometric_normal.dot(wo) < 0.0;
+        let bsdf = bsdf.seen_from_inside(inside);
+        let ng = if inside { -geometric_normal } else { geometric_normal };
         let mut n = if shading_normal.dot(ng) >= 0.0 { shading_normal } else { -shading_normal };
         const EPS: f32 = 1e-4;
         let c = n.dot(wo);
@@ -509,12 +820,27 @@ impl SurfaceBsdf {
         self.t * w.x + self.b * w.y + self.n * w.z
     }
 
-    /// f·cos for world directions (zero when wi goes through the geometric surface).
+    /// Whether world direction `wi` leaves on the side of the geometric surface that the
+    /// shading frame puts it on (above for reflection, below for a transmissive BSDF's
+    /// refraction); directions the two normals disagree on carry nothing.
+    #[inline]
+    fn consistent(&self, wi: Vec3, local: Vec3) -> bool {
+        let geometric = wi.dot(self.ng);
+        if self.bsdf.transmits() {
+            (geometric > 0.0) == (local.z > 0.0) && geometric != 0.0
+        } else {
+            geometric > 0.0
+        }
+    }
+
+    /// f·|cos| for world directions (zero when wi goes through the geometric surface, unless
+    /// the BSDF transmits and wi is refracted).
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
-        if wi.dot(self.ng) <= 0.0 {
+        let local = self.to_local(wi);
+        if !self.consistent(wi, local) {
             return Vec3::ZERO;
         }
-        self.bsdf.eval(self.to_local(wo), self.to_local(wi))
+        self.bsdf.eval(self.to_local(wo), local)
     }
 
     /// f·cos for a light sample's direction: as [`SurfaceBsdf::eval`] without the geometric
@@ -533,17 +859,19 @@ impl SurfaceBsdf {
 
     /// Pdf for world directions.
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        if wi.dot(self.ng) <= 0.0 {
+        let local = self.to_local(wi);
+        if !self.consistent(wi, local) {
             return 0.0;
         }
-        self.bsdf.pdf(self.to_local(wo), self.to_local(wi))
+        self.bsdf.pdf(self.to_local(wo), local)
     }
 
-    /// Samples a world direction (None when it would go through the geometric surface).
+    /// Samples a world direction (None when it would go through the geometric surface, or,
+    /// refracted, would not).
     pub fn sample(&self, wo: Vec3, u2: Vec2, u1: f32) -> Option<BsdfSample> {
         let s = self.bsdf.sample(self.to_local(wo), u2, u1)?;
         let wi = self.to_world(s.wi).normalize_or_zero();
-        if wi.dot(self.ng) <= 0.0 {
+        if !self.consistent(wi, s.wi) {
             return None;
         }
         Some(BsdfSample { wi, ..s })

@@ -125,7 +125,7 @@ pub fn material_bsdf(scene: &RenderScene, hit: &SurfaceHit) -> (Bsdf, Vec3) {
         metallic *= mr.z;
         roughness *= mr.y;
     }
-    (Bsdf::new(base, metallic, roughness, mat.specular, mat.ior), base)
+    (Bsdf::new(base, metallic, roughness, mat.specular, mat.ior).with_transmission(mat.transmission, mat.ior), base)
 }
 
 impl PathTracer {
@@ -313,9 +313,11 @@ impl PathTracer {
             };
             let sb = SurfaceBsdf::new(bsdf, hit.geometric_normal, hit.shading_normal, wo);
 
-            // Next-event estimation (lights chosen by the shading normal, as Cycles does; the
-            // shadow ray leaves from the smooth surface near a terminator).
-            if let Some(ls) = scene.sample_light_at(hit.position, sb.n, u_pick, u_light) {
+            // Next-event estimation (lights chosen by the shading normal, as Cycles does, from
+            // both sides where the BSDF transmits; the shadow ray leaves from the smooth surface
+            // near a terminator).
+            let select_n = if sb.bsdf.transmits() { Vec3::ZERO } else { sb.n };
+            if let Some(ls) = scene.sample_light_at(hit.position, select_n, u_pick, u_light) {
                 if ls.delta || nee {
                     let f = sb.eval_light(wo, ls.wi);
                     if f != Vec3::ZERO {
@@ -350,7 +352,7 @@ impl PathTracer {
             }
             prev_pdf = bs.pdf;
             prev_p = hit.position;
-            prev_n = sb.n;
+            prev_n = select_n;
             o = hit.spawn_origin(bs.wi);
             d = bs.wi;
             t_max = f32::INFINITY;

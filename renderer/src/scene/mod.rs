@@ -17,6 +17,7 @@
 //! | `Material.alpha_cutoff` | f32 (alpha mask) | — | 0.5 |
 //! | `Material.visible_to_camera` | bool: camera rays see the surface | — | true |
 //! | `Material.terminator_offset` | f32: Blender's Shadow Terminator Geometry Offset | cosine | 0.1 |
+//! | `Material.transmission` | f32 in [0, 1]: glass share of the dielectric part | — | 0 |
 //! | `Instance.mesh` | u32 | index into `Scene::meshes` | — |
 //! | `Instance.object_to_world` | [`Affine3A`] (any invertible affine map: rotation, non-uniform or negative scale, shear) | metres | — |
 //!
@@ -125,6 +126,9 @@ pub struct Material {
     /// describe, within this cosine of grazing (0 = from the flat triangle). Blender's default,
     /// 0.1, for glTF and USD, which do not carry it.
     pub terminator_offset: f32,
+    /// Transmission (`KHR_materials_transmission` transmissionFactor, Blender's Transmission
+    /// Weight): the share of the dielectric part that is glass, refracting by `ior`.
+    pub transmission: f32,
 }
 
 impl Default for Material {
@@ -147,6 +151,7 @@ impl Default for Material {
             light_emitter: false,
             visible_to_camera: true,
             terminator_offset: TERMINATOR_OFFSET,
+            transmission: 0.0,
         }
     }
 }

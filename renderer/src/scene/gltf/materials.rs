@@ -201,6 +201,15 @@ impl Loader<'_> {
                 }
                 None => 1.5,
             };
+            let transmission = match m.transmission() {
+                Some(t) => {
+                    if t.transmission_texture().is_some() {
+                        self.warn(&loc, "KHR_materials_transmission: transmissionTexture ignored (the factor is used)");
+                    }
+                    self.unit_factor(&loc, "transmissionFactor", t.transmission_factor(), 0.0)
+                }
+                None => 0.0,
+            };
             let alpha_mode = match m.alpha_mode() {
                 gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
                 gltf::material::AlphaMode::Mask => {
@@ -228,6 +237,7 @@ impl Loader<'_> {
                 light_emitter: false,
                 visible_to_camera: true,
                 terminator_offset: crate::scene::TERMINATOR_OFFSET,
+                transmission,
             });
         }
     }

@@ -21,6 +21,7 @@
 //! | `KHR_materials_emissive_strength` | × `Material::emissive` | |
 //! | `KHR_materials_specular` `specularFactor` | `Material::specular` | specular colour and textures ignored (warning) |
 //! | `KHR_materials_ior` | `Material::ior` | |
+//! | `KHR_materials_transmission` `transmissionFactor` | `Material::transmission` (solid glass refracting by `ior`, as Cycles renders Blender's Transmission) | transmission texture ignored (warning); no `KHR_materials_volume` thin-walled case |
 //! | `KHR_texture_transform` | offset, rotation, scale and texCoord on base colour, metallic-roughness and emissive textures (a normal map's tangent frame is not rotated) | |
 //! | no material | [`Material::default`] (white, metallic 1, roughness 1) | |
 //! | image (PNG, JPEG; file, data URI or bufferView) | [`Texture`], sampler wrap modes, `magFilter` nearest → nearest | missing or undecodable: warning and a 1×1 fallback: magenta for base colour, flat for normal maps, white for metallic-roughness, black for emission |
@@ -265,6 +266,7 @@ impl<'a> Loader<'a> {
             "KHR_materials_emissive_strength",
             "KHR_materials_ior",
             "KHR_materials_specular",
+            "KHR_materials_transmission",
             "KHR_mesh_quantization",
             "KHR_texture_transform",
         ];
