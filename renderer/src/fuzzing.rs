@@ -246,7 +246,10 @@ pub fn check_scene_values(scene: &Scene) -> std::result::Result<(), Bug> {
     for m in &scene.materials {
         let ok = m.base_color.is_finite()
             && m.emissive.is_finite()
-            && [m.metallic, m.roughness, m.normal_scale, m.specular, m.ior].iter().all(|v| v.is_finite());
+            && [m.metallic, m.roughness, m.normal_scale, m.specular, m.ior, m.terminator_offset]
+                .iter()
+                .all(|v| v.is_finite())
+            && (0.0..=1.0).contains(&m.transmission);
         bug_if(!ok, || format!("material '{}' has non-finite values: {m:?}", m.name))?;
     }
     for l in &scene.lights {

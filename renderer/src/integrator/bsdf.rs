@@ -1,5 +1,6 @@
 //! The glTF metallic-roughness BSDF (glTF 2.0 spec appendix B, with `KHR_materials_specular` /
-//! `KHR_materials_ior` dielectric F0), reflection only.
+//! `KHR_materials_ior` dielectric F0), and glass for `KHR_materials_transmission` ([`Glass`],
+//! weighted by (1 − metallic)·transmission against everything below, which only reflects).
 //!
 //! ```text
 //! f = (1 − m)·[ F_d(v·h)·D·V + F_ms,d·M  +  base/π·(1 − E_d(μo))(1 − E_d(μi))/(1 − Ē_d) ]
@@ -34,6 +35,9 @@
 //! Sampling: the specular lobe (visible normals, Heitz 2018) or the cosine-weighted lobe that
 //! serves the diffuse base and M, chosen with probability proportional to the Fresnel reflectance
 //! at μo versus their albedo; `pdf` is the mixture, so sample/pdf/eval agree exactly.
+//!
+//! Glass: see [`Glass`] (a rough dielectric interface with Cycles' multiscatter energy
+//! compensation). Lobes are chosen by weight, and `pdf` is the mixture's.
 //!
 //! Everything here is in the local shading frame (normal = +z); [`SurfaceBsdf`] handles the
 //! world frame and the geometric-normal checks.
