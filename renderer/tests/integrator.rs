@@ -164,6 +164,36 @@ fn normal_map_tilts_shading_normal() {
     assert!(h.geometric_normal.distance(Vec3::Z) < 1e-6);
 }
 
+/// A normal-mapped quad keeps the geometric normal's test for light samples (Cycles' bump
+/// shadowing term is zero below the geometric surface): a point light just behind it, above its
+/// tilted shading normal, lights nothing in front (it leaked through when light samples skipped
+/// the test); the same light just in front does.
+#[test]
+fn no_light_leaks_through_a_normal_mapped_quad() {
+    let q = quad(Vec3::new(-1.0, -1.0, 0.0), Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 2.0, 0.0), 0);
+    let tn = Vec3::new(1.0, 0.0, 1.0).normalize();
+    let tex = Texture::constant("n", (tn * 0.5 + Vec3::splat(0.5)).extend(1.0));
+    let mat =
+        Material { normal_texture: Some(TextureRef { index: 0, uv_set: 0, transform: None }), ..diffuse(Vec3::ONE) };
+    let lit = |z: f32| {
+        let mut scene = scene_of(&[q.clone()], vec![mat.clone()]);
+        scene.textures.push(Arc::new(tex.clone()));
+        scene.lights.push(Light::Point {
+            position: Vec3::new(10.0, 0.0, z),
+            intensity: Vec3::splat(100.0),
+            range: None,
+            radius_m: 0.0,
+            sphere: false,
+        });
+        let rs = RenderScene::new(scene).unwrap();
+        let tracer = PathTracer { max_depth: 1, ..PathTracer::default() };
+        mean_radiance(&tracer, &rs, Vec3::new(0.0, 0.0, 2.0), -Vec3::Z, 3, 16).0
+    };
+    // behind: n·L = 0.63 > 0 but ng·L = −0.1 < 0
+    assert_eq!(lit(-1.0), Vec3::ZERO, "light behind the quad leaked through");
+    assert!(lit(1.0).y > 0.1, "light in front: {}", lit(1.0));
+}
+
 #[test]
 fn spawned_rays_do_not_self_intersect_far_from_origin() {
     // A sphere 10⁴ m from the origin: positions have ULPs of ~1 mm.

@@ -9,7 +9,9 @@
 //! * Light samples are evaluated without the geometric normal's test and their shadow rays
 //!   leave from the smooth surface near a terminator, as Cycles does with its default Shadow
 //!   Terminator Geometry Offset ([`RenderScene::shadow_origin`]): smooth-shaded low-poly meshes
-//!   are lit up to their terminator. BSDF samples through the geometric surface are dropped.
+//!   are lit up to their terminator. Normal-mapped surfaces keep the test (Cycles' bump
+//!   shadowing term is zero there), so no light leaks through a normal-mapped wall. BSDF
+//!   samples through the geometric surface are dropped.
 //! * `max_depth` counts scattering events (pbrt's convention): 0 = emission only, 1 = direct
 //!   lighting, ... Emitters reached by the last BSDF sample still count.
 //! * Russian roulette as Cycles does it: at every hit after `rr_start_depth` bounces (default 1:
@@ -317,9 +319,12 @@ impl PathTracer {
             // both sides where the BSDF transmits; the shadow ray leaves from the smooth surface
             // near a terminator).
             let select_n = if sb.bsdf.transmits() { Vec3::ZERO } else { sb.n };
+            // A normal-mapped surface keeps the geometric normal's test: Cycles' bump shadowing
+            // term is zero for light below the geometric surface.
+            let bumped = scene.scene().materials[hit.material_id as usize].normal_texture.is_some();
             if let Some(ls) = scene.sample_light_at(hit.position, select_n, u_pick, u_light) {
                 if ls.delta || nee {
-                    let f = sb.eval_light(wo, ls.wi);
+                    let f = if bumped { sb.eval(wo, ls.wi) } else { sb.eval_light(wo, ls.wi) };
                     if f != Vec3::ZERO {
                         let origin = scene.shadow_origin(&hit, sb.n, sb.ng, ls.wi);
                         let visible = match ls.target {
@@ -334,7 +339,8 @@ impl PathTracer {
                             let w = if ls.delta || self.strategy != LightStrategy::Mis {
                                 1.0
                             } else {
-                                power_heuristic(ls.pdf, sb.pdf_light(wo, ls.wi))
+                                let bsdf_pdf = if bumped { sb.pdf(wo, ls.wi) } else { sb.pdf_light(wo, ls.wi) };
+                                power_heuristic(ls.pdf, bsdf_pdf)
                             };
                             if ls.pdf > 0.0 {
                                 l += beta * f * ls.radiance * (w / ls.pdf);
