@@ -176,7 +176,7 @@ fn no_light_leaks_through_a_normal_mapped_quad() {
     let mat =
         Material { normal_texture: Some(TextureRef { index: 0, uv_set: 0, transform: None }), ..diffuse(Vec3::ONE) };
     let lit = |z: f32| {
-        let mut scene = scene_of(&[q.clone()], vec![mat.clone()]);
+        let mut scene = scene_of(std::slice::from_ref(&q), vec![mat.clone()]);
         scene.textures.push(Arc::new(tex.clone()));
         scene.lights.push(Light::Point {
             position: Vec3::new(10.0, 0.0, z),
