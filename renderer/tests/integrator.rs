@@ -329,6 +329,23 @@ fn bsdf_cases() -> Vec<(&'static str, Bsdf)> {
     ]
 }
 
+/// The means of two estimators drawn together `n` times, and the standard error of their
+/// difference (the two taken as independent).
+fn paired_means(n: usize, mut draw: impl FnMut() -> (f64, f64)) -> (f64, f64, f64) {
+    let (mut a, mut a2, mut c, mut c2) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    for _ in 0..n {
+        let (x, y) = draw();
+        a += x;
+        a2 += x * x;
+        c += y;
+        c2 += y * y;
+    }
+    let nf = n as f64;
+    let (ma, mc) = (a / nf, c / nf);
+    let se = (((a2 / nf - ma * ma) / nf).max(0.0) + ((c2 / nf - mc * mc) / nf).max(0.0)).sqrt();
+    (ma, mc, se)
+}
+
 fn wo_at(theta_deg: f32) -> Vec3 {
     let t = theta_deg.to_radians();
     Vec3::new(t.sin(), 0.0, t.cos())
@@ -413,22 +430,11 @@ fn glass_sample_pdf_eval_consistent() {
                 assert!(n_ok > 15_000, "{name}: {n_ok} of 20000 samples");
                 if roughness >= 0.3 {
                     // ∫ f |cos| by BSDF sampling and by uniform sphere sampling, with errors
-                    let n = 400_000;
-                    let (mut a, mut a2, mut c, mut c2) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-                    for _ in 0..n {
-                        if let Some(s) = b.sample(wo, rng.v2(), rng.next()) {
-                            let x = luminance(s.weight) as f64;
-                            a += x;
-                            a2 += x * x;
-                        }
+                    let (ma, mc, se) = paired_means(400_000, || {
+                        let sampled = b.sample(wo, rng.v2(), rng.next()).map_or(0.0, |s| luminance(s.weight) as f64);
                         let wi = uniform_sphere(rng.v2());
-                        let x = luminance(b.eval(wo, wi)) as f64 * 4.0 * std::f64::consts::PI;
-                        c += x;
-                        c2 += x * x;
-                    }
-                    let nf = n as f64;
-                    let (ma, mc) = (a / nf, c / nf);
-                    let se = (((a2 / nf - ma * ma) / nf).max(0.0) + ((c2 / nf - mc * mc) / nf).max(0.0)).sqrt();
+                        (sampled, luminance(b.eval(wo, wi)) as f64 * 4.0 * std::f64::consts::PI)
+                    });
                     assert!((ma - mc).abs() < 4.0 * se + 2e-3, "{name}: sampled {ma} vs uniform {mc} (σ {se})");
                 }
             }
@@ -586,25 +592,13 @@ fn bsdf_sample_pdf_eval_consistent() {
             // Compare ∫ f cos: BSDF sampling vs cosine-hemisphere sampling of eval (rough lobes
             // only; sharp lobes are not resolved by blind sampling).
             if b.alpha() >= 0.09 {
-                let n = 400_000;
                 // Luminance estimates with their standard errors.
-                let (mut a, mut a2, mut c, mut c2) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-                for _ in 0..n {
-                    if let Some(s) = b.sample(wo, rng.v2(), rng.next()) {
-                        let x = luminance(s.weight) as f64;
-                        a += x;
-                        a2 += x * x;
-                    }
+                let (ma, mc, se) = paired_means(400_000, || {
+                    let sampled = b.sample(wo, rng.v2(), rng.next()).map_or(0.0, |s| luminance(s.weight) as f64);
                     let wi = sample_cosine_hemisphere(rng.v2());
-                    if wi.z > 0.0 {
-                        let x = luminance(b.eval(wo, wi) * (PI / wi.z)) as f64;
-                        c += x;
-                        c2 += x * x;
-                    }
-                }
-                let nf = n as f64;
-                let (ma, mc) = (a / nf, c / nf);
-                let se = (((a2 / nf - ma * ma) / nf).max(0.0) + ((c2 / nf - mc * mc) / nf).max(0.0)).sqrt();
+                    let uniform = if wi.z > 0.0 { luminance(b.eval(wo, wi) * (PI / wi.z)) as f64 } else { 0.0 };
+                    (sampled, uniform)
+                });
                 assert!((ma - mc).abs() < 4.0 * se + 2e-3, "{name} θ={theta}: sampled {ma} vs uniform {mc} (σ = {se})");
             }
         }

@@ -264,12 +264,7 @@ def _checker_image():
     dark = ((i + j) % 2 == 0)[..., None]
     px = np.where(dark, np.array([0.35, 0.05, 0.05, 1.0]), np.array([0.9, 0.9, 0.85, 1.0])).astype(np.float32)
     img.pixels.foreach_set(px.ravel())
-    OUT.mkdir(parents=True, exist_ok=True)
-    img.filepath_raw = str(OUT / "checker8.png")
-    img.file_format = "PNG"
-    img.save()
-    img.pack()
-    return img
+    return _save_packed(img, "checker8.png", "PNG")
 
 
 def _environment_image():
@@ -298,9 +293,14 @@ def _environment_image():
     blob = ((uu - u0) ** 2 / 0.02**2 + (vv - 0.53) ** 2 / 0.025**2) < 1.0
     sky[blob, :3] = (20.0, 15.0, 10.0)
     img.pixels.foreach_set(sky[::-1].ravel())  # rows bottom-first for Blender
+    return _save_packed(img, "sky.exr", "OPEN_EXR")
+
+
+def _save_packed(img, file_name: str, file_format: str):
+    """Saves a generated image under OUT and packs it into the .blend; returns it."""
     OUT.mkdir(parents=True, exist_ok=True)
-    img.filepath_raw = str(OUT / "sky.exr")
-    img.file_format = "OPEN_EXR"
+    img.filepath_raw = str(OUT / file_name)
+    img.file_format = file_format
     img.save()
     img.pack()
     return img

@@ -1459,21 +1459,22 @@ impl RenderScene {
 
     /// Where a shadow ray from `hit` toward unit `wi` starts: Cycles' shadow-terminator geometry
     /// offset (Hanika, "Hacking the Shadow Terminator", 2021) with the material's cutoff
-    /// ([`crate::scene::Material::terminator_offset`], Blender's default 0.1). Near the terminator of a smooth-shaded mesh (the light grazing the
-    /// shading normal `n`, or below the flat triangle, `ng`; both on the viewer's side) the origin
+    /// ([`crate::scene::Material::terminator_offset`], Blender's default 0.1). Near the
+    /// terminator of a smooth-shaded mesh (the light grazing the shading normal `n`, or below
+    /// the flat triangle, `ng`; both on the viewer's side) the origin
     /// is lifted toward the smooth surface the vertex normals describe, so that low-poly meshes
     /// are not shadowed by their own facets; elsewhere it is the usual offset origin. A ray
     /// toward a light below the triangle's plane may still hit the triangle (then it is shadowed).
     pub fn shadow_origin(&self, hit: &SurfaceHit, n: Vec3, ng: Vec3, wi: Vec3) -> Vec3 {
+        let c = self.scene.materials[hit.material_id as usize].terminator_offset;
+        if !(c > 0.0) {
+            return hit.spawn_origin(wi);
+        }
         // 1. How far into the terminator region: by the shading and the geometric cosines.
         let mut nl = n.dot(wi);
         let ng = if nl < 0.0 { -ng } else { ng };
         nl = nl.abs();
         let ngl = ng.dot(wi);
-        let c = self.scene.materials[hit.material_id as usize].terminator_offset;
-        if !(c > 0.0) {
-            return hit.spawn_origin(wi);
-        }
         let amount = if nl < c { (2.0 - (ngl + nl) / c).clamp(0.0, 1.0) } else { (1.0 - ngl / c).clamp(0.0, 1.0) };
         if !(amount > 0.0) {
             return hit.spawn_origin(wi);
