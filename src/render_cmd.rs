@@ -68,6 +68,10 @@ pub struct RenderArgs {
     /// Focal length for thin/pinhole (default: from the scene camera's field of view).
     #[arg(long)]
     pub focal_length: Option<f64>,
+    /// Orthographic camera spanning this many metres across the larger image side (Blender's
+    /// Orthographic Scale) [default: a glTF or USD orthographic camera's own; else perspective].
+    #[arg(long)]
+    pub ortho_scale: Option<f64>,
     /// Pixel aspect ratio, width over height of one pixel (default 1, or a USD shot's
     /// RenderSettings `pixelAspectRatio`).
     #[arg(long)]
@@ -520,6 +524,7 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
             to_world: glam::Affine3A::from_mat4(c.to_world.as_mat4()),
             yfov_rad: 0.5,
             aspect_ratio: None,
+            ortho_scale_m: None,
             znear: c.clipping_range_m.0 as f32,
             zfar: Some(c.clipping_range_m.1 as f32),
         },
@@ -584,8 +589,16 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
             flags_camera.lens
         );
     }
+    // An orthographic scene camera stays orthographic unless the flags ask for a focal length;
+    // it has no depth of field unless --fstop asks (which it then warns of).
+    if let (None, None, Some(s)) = (args.ortho_scale, args.focal_length, scene_cam.ortho_scale_m) {
+        flags_camera.ortho_scale_m = Some(s as f64);
+    }
+    if flags_camera.ortho_scale_m.is_some() && args.fstop.is_none() {
+        flags_camera.f_number = None;
+    }
     // Focal length for thin/pinhole: given, else from the scene camera's field of view.
-    if args.focal_length.is_none() {
+    if args.focal_length.is_none() && flags_camera.ortho_scale_m.is_none() {
         let sensor = flags_camera.film_back.sensor(width, height, flags_camera.tilt_deg)?;
         flags_camera.focal_length_mm =
             host::focal_length_from_yfov_mm(scene_cam.yfov_rad as f64, width, height, &sensor)?;
@@ -818,6 +831,11 @@ fn usd_host_camera(c: &petzval_usd::UsdCamera, args: &RenderArgs, focus_m: Optio
         h.aperture = Some(host::parse_aperture(a)?);
     }
     h.natural_vignetting = host::parse_on_off("natural_vignetting", &args.natural_vignetting)?;
+    if let Some(s) = args.ortho_scale {
+        // the larger side spans it, whatever the stage's aperture policy
+        h.film_back.fit = SensorFit::Auto;
+        h.ortho_scale_m = Some(s);
+    }
     Ok(h)
 }
 
@@ -879,6 +897,7 @@ fn flags_host_camera(
         clip_m: (0.0, f64::INFINITY),
         natural_vignetting: host::parse_on_off("natural_vignetting", &args.natural_vignetting)?,
         lrtf_file: args.lrtf_file.clone(),
+        ortho_scale_m: args.ortho_scale,
     })
 }
 

@@ -123,10 +123,17 @@ def camera_kwargs(scene, cam_obj, depsgraph, notes) -> dict:
     import bpy
 
     cam = cam_obj.data
-    if cam.type != "PERSP":
-        raise SettingsError(f"camera '{cam_obj.name}' is {cam.type.lower()}: Petzval renders perspective cameras only")
+    if cam.type not in ("PERSP", "ORTHO"):
+        raise SettingsError(
+            f"camera '{cam_obj.name}' is {cam.type.lower()}: Petzval renders perspective and orthographic cameras"
+        )
     p = cam.petzval
     lens, real = lens_choice(cam)
+    ortho = cam.type == "ORTHO"
+    if ortho and real:
+        raise SettingsError(
+            f"camera '{cam_obj.name}' is orthographic: it has no lens, so Lens must be Thin Lens or Pinhole"
+        )
     dof = cam.dof
     kw: dict = {
         "camera_to_world": camera_to_world(cam_obj.matrix_world),
@@ -148,7 +155,13 @@ def camera_kwargs(scene, cam_obj, depsgraph, notes) -> dict:
         "aperture_ratio": float(dof.aperture_ratio),
         "natural_vignetting": bool(scene.petzval.natural_vignetting),
     }
-    if lens == "pinhole":
+    if ortho:
+        kw["ortho_scale_m"] = float(cam.ortho_scale)
+        kw["fstop"] = None
+        kw["focus_distance_m"] = None
+        if dof.use_dof:
+            notes.warn("depth of field is not rendered with an orthographic camera: everything is sharp")
+    elif lens == "pinhole":
         kw["fstop"] = None
         kw["focus_distance_m"] = None
     elif not real:  # Blender's thin lens

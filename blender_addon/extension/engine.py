@@ -230,7 +230,7 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
             return camera_mod.camera_kwargs(scene, scene.camera.evaluated_get(depsgraph), depsgraph, Notes())
         if not rv3d.is_perspective:
             raise camera_mod.SettingsError(
-                "orthographic views are not previewed (Petzval renders perspective cameras only)"
+                "orthographic 3D views are not previewed; look through an orthographic camera instead"
             )
         space = context.space_data
         return viewport_mod.free_view_kwargs(

@@ -103,8 +103,10 @@ class PETZVAL_PT_camera_lens(CameraPanel, bpy.types.Panel):
             if p.lens_model == "AUTO":
                 col.prop(p, "tolerance_px", text="Tolerance (px)")
         col.prop(p, "aperture_image")
-        if cam.type != "PERSP":
-            layout.label(text="Petzval renders perspective cameras only", icon="ERROR")
+        if cam.type == "PANO":
+            layout.label(text="Petzval renders perspective and orthographic cameras", icon="ERROR")
+        elif cam.type == "ORTHO":
+            layout.label(text="Orthographic: no lens, no depth of field", icon="INFO")
 
 
 class PETZVAL_PT_camera_tilt(CameraPanel, bpy.types.Panel):

@@ -21,6 +21,7 @@
 //! | `aperture_image` | optional mask image path | — | None |
 //! | `clip_start_m`, `clip_end_m` | f64 | m | 0, inf |
 //! | `natural_vignetting` | bool (thin, pinhole; off as Cycles) | — | false |
+//! | `ortho_scale_m` | optional f64: orthographic, Blender's Orthographic Scale (spans the fitted sensor side) | m | None (perspective) |
 
 use glam::{DAffine3, DMat3, DVec2, DVec3};
 use numpy::{AllowTypeChange, PyArrayLike2};
@@ -55,7 +56,7 @@ pub(crate) struct PyCamera {
 #[pymethods]
 impl PyCamera {
     #[new]
-    #[pyo3(signature = (camera_to_world, *, lens = "thin", lens_model = "auto", tolerance_px = 0.25, focal_length_mm = 50.0, sensor_width_mm = 36.0, sensor_height_mm = 24.0, sensor_fit = "auto", shift_x = 0.0, shift_y = 0.0, tilt_x_deg = 0.0, tilt_y_deg = 0.0, fstop = None, focus_distance_m = None, aperture_blades = 0, aperture_rotation_rad = 0.0, aperture_ratio = 1.0, aperture_image = None, clip_start_m = 0.0, clip_end_m = f64::INFINITY, natural_vignetting = false))]
+    #[pyo3(signature = (camera_to_world, *, lens = "thin", lens_model = "auto", tolerance_px = 0.25, focal_length_mm = 50.0, sensor_width_mm = 36.0, sensor_height_mm = 24.0, sensor_fit = "auto", shift_x = 0.0, shift_y = 0.0, tilt_x_deg = 0.0, tilt_y_deg = 0.0, fstop = None, focus_distance_m = None, aperture_blades = 0, aperture_rotation_rad = 0.0, aperture_ratio = 1.0, aperture_image = None, clip_start_m = 0.0, clip_end_m = f64::INFINITY, natural_vignetting = false, ortho_scale_m = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         camera_to_world: PyArrayLike2<'_, f64, AllowTypeChange>,
@@ -79,6 +80,7 @@ impl PyCamera {
         clip_start_m: f64,
         clip_end_m: f64,
         natural_vignetting: bool,
+        ortho_scale_m: Option<f64>,
     ) -> PyResult<Self> {
         guard(|| {
             // 1. Parse into typed values.
@@ -118,6 +120,7 @@ impl PyCamera {
                 clip_m: (clip_start_m, clip_end_m),
                 natural_vignetting,
                 lrtf_file: None,
+                ortho_scale_m,
             };
             host.validate().map_err(py_err)?;
             host.film_back.sensor(1, 1, host.tilt_deg).map_err(py_err)?;

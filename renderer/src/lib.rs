@@ -34,6 +34,6 @@ pub use petzval_optics::write_atomic;
 pub mod camera;
 pub use camera::{
     BuiltCamera, Camera, CameraRay, CameraSpec, ExactCamera, FocusPlane, LensModel, LrtfCamera, ModelChoice,
-    PinholeCamera, Sensor, ShotContext, ThickCamera, ThinCamera,
+    OrthographicCamera, PinholeCamera, Sensor, ShotContext, ThickCamera, ThinCamera,
 };
 pub use integrator::{PathSample, PathTracer, RenderScene, SurfaceHit};

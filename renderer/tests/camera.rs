@@ -1,7 +1,10 @@
-//! Cameras: radiometry (cos⁴), sensor tilt and the plane of sharp focus.
+//! Cameras: radiometry (cos⁴), sensor tilt, the plane of sharp focus and orthographic cameras.
 
 use glam::{DVec2, DVec3};
-use petzval_renderer::{library_lens, Aperture, Camera, ExactCamera, PinholeCamera, Sensor, ThinCamera};
+use petzval_renderer::camera::host::{FilmBack, HostCamera, SensorFit, Shift};
+use petzval_renderer::{
+    library_lens, Aperture, Camera, CameraSpec, ExactCamera, PinholeCamera, Sensor, ShotContext, ThinCamera,
+};
 
 const WL: f64 = 587.5618;
 
@@ -235,4 +238,63 @@ mod host_conventions {
         assert!((f2 - 50.0 * s2.height_mm / s.height_mm).abs() < 1e-12, "{f2}, sensor {s2:?}");
         assert!((s2.height_mm - 0.5 * s.height_mm).abs() < 1e-12, "{s2:?} vs {s:?}");
     }
+}
+
+// ------------------------------------------------------------------------------------------
+// Orthographic cameras.
+
+/// The host camera of Blender's orthographic camera: Orthographic Scale `scale_m`, sensor fit
+/// `fit`, shift (fractions of the fitted side), a `w` × `h` frame.
+fn ortho(scale_m: f64, fit: SensorFit, shift: DVec2, w: u32, h: u32) -> petzval_renderer::Result<Camera> {
+    let host = HostCamera {
+        film_back: FilmBack { fit, shift: Shift::FitFraction(shift), ..FilmBack::default() },
+        ortho_scale_m: Some(scale_m),
+        ..HostCamera::default()
+    };
+    let spec = host.camera_spec(w, h)?;
+    Ok(spec.build(&ShotContext { width: w, height: h, ..ShotContext::default() })?.camera)
+}
+
+#[test]
+fn orthographic_rays_are_parallel_and_leave_blenders_window() {
+    // AUTO fit, landscape: the width spans the scale; shift (0.1, −0.05) of it.
+    let cam = ortho(3.0, SensorFit::Auto, DVec2::new(0.1, -0.05), 300, 200).unwrap();
+    assert!(matches!(cam, Camera::Orthographic(_)));
+    assert_eq!(cam.model().to_string(), "orthographic");
+    assert!(!cam.can_connect() && cam.focus_plane().is_none() && cam.entrance_pupil_radius_m().is_none());
+    for (u, v) in [(0.0, 0.0), (1.0, 1.0), (0.5, 0.5), (0.25, 0.8)] {
+        let r = cam.generate_ray(DVec2::new(u, v), DVec2::new(0.3, 0.7), WL).unwrap();
+        let expect = DVec3::new((u - 0.5) * 3.0 + 0.3, (0.5 - v) * 2.0 - 0.15, 0.0);
+        assert!((r.origin - expect).length() < 1e-12, "{u},{v}: {} vs {expect}", r.origin);
+        assert_eq!((r.direction, r.weight), (DVec3::NEG_Z, 1.0));
+    }
+    // AUTO fit, portrait: the height (the larger side) spans the scale.
+    let cam = ortho(3.0, SensorFit::Auto, DVec2::ZERO, 200, 300).unwrap();
+    let r = cam.generate_ray(DVec2::new(0.5, 0.0), DVec2::ZERO, WL).unwrap();
+    assert!((r.origin.y - 1.5).abs() < 1e-12, "{}", r.origin);
+    // VERTICAL fit: the height spans the scale even in a landscape frame.
+    let cam = ortho(3.0, SensorFit::Vertical, DVec2::ZERO, 300, 200).unwrap();
+    let r = cam.generate_ray(DVec2::new(1.0, 0.0), DVec2::ZERO, WL).unwrap();
+    assert!((r.origin - DVec3::new(2.25, 1.5, 0.0)).length() < 1e-12, "{}", r.origin);
+}
+
+#[test]
+fn orthographic_cameras_refuse_lenses_and_tilts_by_name() {
+    let real = HostCamera { lens: "double-gauss-50mm".into(), ortho_scale_m: Some(2.0), ..HostCamera::default() };
+    let e = real.camera_spec(300, 200).unwrap().build(&ShotContext::default()).unwrap_err().to_string();
+    assert!(e.contains("orthographic") && e.contains("double-gauss"), "{e}");
+    let tilted = HostCamera { tilt_deg: DVec2::new(5.0, 0.0), ortho_scale_m: Some(2.0), ..HostCamera::default() };
+    let e = tilted.camera_spec(300, 200).unwrap().build(&ShotContext::default()).unwrap_err().to_string();
+    assert!(e.contains("tilt"), "{e}");
+    for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        let h = HostCamera { ortho_scale_m: Some(bad), ..HostCamera::default() };
+        let e = h.camera_spec(300, 200).unwrap_err().to_string();
+        assert!(e.contains("ortho_scale_m"), "{bad}: {e}");
+    }
+    let e = CameraSpec { model: "orthographic".parse().unwrap(), ..CameraSpec::default() }.validate().unwrap_err();
+    assert!(e.to_string().contains("orthographic scale"), "{e}");
+    // depth of field is not rendered: said, not silently dropped
+    let dof = HostCamera { f_number: Some(2.8), ortho_scale_m: Some(2.0), ..HostCamera::default() };
+    let built = dof.camera_spec(300, 200).unwrap().build(&ShotContext::default()).unwrap();
+    assert!(built.warnings.iter().any(|w| w.contains("depth of field")), "{:?}", built.warnings);
 }

@@ -220,8 +220,8 @@ fn gltf_lights_convert_to_blender_radiometric_units() {
 #[test]
 fn gltf_cameras() {
     let s = load("camera.gltf");
-    assert_eq!(s.cameras.len(), 2, "the orthographic camera is skipped");
-    assert!(s.warnings.iter().any(|w| w.contains("orthographic") && w.contains("OrthoNode")), "{:?}", s.warnings);
+    assert_eq!(s.cameras.len(), 3);
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
 
     let c = &s.cameras[0];
     assert_eq!(c.name, "MainCam");
@@ -233,7 +233,13 @@ fn gltf_cameras() {
     assert!(close(c.to_world.transform_vector3(Vec3::X), Vec3::new(cos, 0.0, -sin)));
     assert_eq!((c.yfov_rad, c.aspect_ratio, c.znear, c.zfar), (0.6, Some(1.5), 0.1, Some(100.0)));
 
+    // orthographic: xmag 1.5, ymag −1 (the sign is ignored) → Blender's Orthographic Scale 3
     let c = &s.cameras[1];
+    assert_eq!(c.name, "OrthoNode");
+    assert_eq!((c.ortho_scale_m, c.aspect_ratio, c.znear, c.zfar), (Some(3.0), Some(1.5), 0.0, Some(10.0)));
+    assert_eq!(s.cameras[0].ortho_scale_m, None);
+
+    let c = &s.cameras[2];
     assert_eq!(c.name, "Unnamed node cam", "an unnamed node takes the camera's name");
     assert_eq!((c.yfov_rad, c.aspect_ratio, c.zfar), (1.0, None, None));
     assert!(close(c.to_world.translation.into(), Vec3::new(0.0, 0.0, 10.0)));

@@ -13,13 +13,15 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use glam::{DAffine3, DVec2, DVec3, Vec2, Vec3, Vec4};
+use petzval_renderer::camera::host::{FilmBack, HostCamera};
 use petzval_renderer::film::{Image, PixelFilter};
 use petzval_renderer::integrator::RenderScene;
 use petzval_renderer::render::{render, CameraRig, RenderResult, RenderSettings};
 use petzval_renderer::scene::texture::Wrap;
 use petzval_renderer::scene::{demo, Environment, Material, Mesh, Scene, Texture, TextureRef};
 use petzval_renderer::{
-    library_lens, Aperture, ApertureShape, Camera, ExactCamera, PinholeCamera, Sensor, ThickCamera, ThinCamera,
+    library_lens, Aperture, ApertureShape, Camera, ExactCamera, PinholeCamera, Sensor, ShotContext, ThickCamera,
+    ThinCamera,
 };
 
 // ------------------------------------------------------------------------------------------
@@ -1164,6 +1166,41 @@ fn render_is_deterministic_across_thread_counts() {
     let differing = one.rgba.iter().zip(&other.rgba).filter(|(a, b)| a != b).count();
     eprintln!("determinism: seed 42 vs 43 differ in {differing} of {} pixels", one.rgba.len());
     assert!(differing > one.rgba.len() / 2, "another seed should give another image: {differing} pixels differ");
+}
+
+/// An orthographic camera (Orthographic Scale 2 m, square frame) sees a flat emitter disc at its
+/// true size wherever it stands along the view axis: the image's sum is the disc's area over
+/// the window's, its centroid the disc centre's window position, at 2 m and at 20 m alike.
+#[test]
+fn render_orthographic_camera_keeps_sizes_at_any_distance() {
+    let (w, le, r) = (64u32, 2.0f32, 0.5f32);
+    let host = HostCamera {
+        film_back: FilmBack { width_mm: 36.0, height_mm: 36.0, ..FilmBack::default() },
+        ortho_scale_m: Some(2.0),
+        ..HostCamera::default()
+    };
+    let spec = host.camera_spec(w, w).unwrap();
+    let camera = spec.build(&ShotContext { width: w, height: w, ..ShotContext::default() }).unwrap().camera;
+    let centre = Vec3::new(0.4, 0.2, 0.0);
+    let expected_sum = polygon_area(r as f64, DISC_SIDES) / 4.0 * le as f64 * (w * w) as f64;
+    let expected_centroid = (32.0 + 0.4 / 2.0 * 64.0, 32.0 - 0.2 / 2.0 * 64.0);
+    for z in [-2.0f32, -20.0] {
+        let rs = scene_of(&[disc(centre + Vec3::Z * z, r, 0)], vec![emitter(le)], Environment::Constant(Vec3::ZERO));
+        let img = shoot_img(&rs, camera.clone(), &settings(w, w, 64, 1, BOX1));
+        let red = red(&img);
+        let sum: f64 = red.iter().sum();
+        let (mut cx, mut cy) = (0.0, 0.0);
+        for (i, v) in red.iter().enumerate() {
+            cx += v * ((i % w as usize) as f64 + 0.5);
+            cy += v * ((i / w as usize) as f64 + 0.5);
+        }
+        let (cx, cy) = (cx / sum, cy / sum);
+        eprintln!(
+            "orthographic, disc at {z} m: sum {sum:.3} (expected {expected_sum:.3}), centroid ({cx:.4}, {cy:.4})"
+        );
+        assert!((sum / expected_sum - 1.0).abs() < 2e-3, "{sum} vs {expected_sum}");
+        assert!((cx - expected_centroid.0).abs() < 0.02 && (cy - expected_centroid.1).abs() < 0.02, "({cx}, {cy})");
+    }
 }
 
 // ------------------------------------------------------------------------------------------

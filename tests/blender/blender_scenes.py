@@ -11,11 +11,12 @@ factory state and builds
   only punctual lights, which glTF's KHR_lights_punctual carries (Blender area lights do not
   export), plus the emissive meshes (KHR_materials_emissive_strength),
 * a world of constant colour (glTF has no world: it is passed to petzval with --environment),
-* two cameras: ``MainCam`` (50 mm, 36 mm sensor, f/2.8, focused at 1.5 m, 6 blades at 10 deg)
+* three cameras: ``MainCam`` (50 mm, 36 mm sensor, f/2.8, focused at 1.5 m, 6 blades at 10 deg)
   for the whole-image comparison, and ``BokehCam`` (50 mm on a 9 mm sensor, i.e. a 4x crop of
   the same lens so the circles of confusion span many pixels, f/2.8, focused at 1.2 m) looking
   at two tiny emitters against the dark world, one far behind and one in front of the focus
-  plane, for measuring the circle of confusion and the blade orientation.
+  plane, for measuring the circle of confusion and the blade orientation; and ``OrthoCam``, an
+  orthographic camera (Orthographic Scale 2.2 m, shifted) for test_ortho_cycles.py.
 
 Materials are within what glTF round-trips and what both BSDFs agree on: Principled BSDF with
 metallic 0, roughness 1 and **Specular IOR Level 0**, i.e. no specular layer at all, so Cycles'
@@ -99,6 +100,28 @@ BOKEH_CAM = CameraSpec(
     focus_m=1.2,
     blades=6,
     rotation_deg=10.0,
+)
+
+
+@dataclass(frozen=True)
+class OrthoSpec:
+    name: str
+    location: tuple[float, float, float]
+    target: tuple[float, float, float]
+    ortho_scale: float  # Blender's Orthographic Scale (m across the larger image side, AUTO fit)
+    shift: tuple[float, float]  # Blender's shift_x, shift_y (fractions of the fitted side)
+    clip: tuple[float, float]
+
+
+# OrthoCam looks down at the scene from the front right, shifted (glTF carries no shift: the
+# comparison passes it as --shift-x/-y in mm of the 36 mm sensor width).
+ORTHO_CAM = OrthoSpec(
+    name="OrthoCam",
+    location=(1.5, -3.0, 2.2),
+    target=(0.0, 0.3, 0.1),
+    ortho_scale=2.2,
+    shift=(0.08, -0.05),
+    clip=(0.5, 100.0),
 )
 
 
@@ -269,6 +292,22 @@ def _add_camera(bpy, spec: CameraSpec):
     return obj
 
 
+def _add_ortho_camera(bpy, spec: OrthoSpec):
+    cam_data = bpy.data.cameras.new(spec.name)
+    cam_data.type = "ORTHO"
+    cam_data.ortho_scale = spec.ortho_scale
+    cam_data.sensor_fit = "AUTO"
+    cam_data.shift_x, cam_data.shift_y = spec.shift
+    cam_data.clip_start, cam_data.clip_end = spec.clip
+    cam_data.dof.use_dof = False
+    obj = bpy.data.objects.new(spec.name, cam_data)
+    bpy.context.scene.collection.objects.link(obj)
+    obj.location = spec.location
+    obj.rotation_mode = "QUATERNION"
+    obj.rotation_quaternion = _look_at_quat(spec.location, spec.target)
+    return obj
+
+
 def _add_light(bpy, kind, name, location, energy, target=None, spot_deg=None):
     data = bpy.data.lights.new(name, kind)
     data.energy = energy
@@ -335,6 +374,7 @@ def build_scene(tmpdir: Path) -> BuiltScene:
     for spec in (MAIN_CAM, BOKEH_CAM):
         _add_camera(bpy, spec)
         built.cameras[spec.name] = spec
+    _add_ortho_camera(bpy, ORTHO_CAM)
     scene.camera = bpy.data.objects[MAIN_CAM.name]
     scene.render.resolution_x, scene.render.resolution_y = RESOLUTION
     scene.render.resolution_percentage = 100

@@ -9,7 +9,7 @@
 //! | `fStop` | — | f-number; 0 = no depth of field (a pinhole for `thin`) | 0 |
 //! | `focusDistance` | scene units | m; 0 = not set (the CLI autofocuses) | 0 |
 //! | `clippingRange` | scene units | m | (1, 1000000) |
-//! | `projection` | token | only `perspective` renders; `orthographic` is an error | perspective |
+//! | `projection` | token | `perspective`, or `orthographic`: a window of the apertures' size in tenths of a scene unit (GfCamera's convention), parallel rays | perspective |
 //! | `petzval:lens` | asset | a library name, or a lens file resolved relative to its layer | thin |
 //! | `petzval:lensModel` | token | auto, exact, lrtf, thick, thin, pinhole | auto |
 //! | `petzval:tolerancePx` | float | error budget of auto | 0.25 |
@@ -185,12 +185,18 @@ impl UsdCamera {
             prim: self.path.clone(),
             message: format!("{attr}: {message}"),
         };
-        if self.projection != "perspective" {
-            return Err(bad(
-                "projection",
-                format!("'{}' is not supported (only perspective cameras render through lenses)", self.projection),
-            ));
-        }
+        // Orthographic: the window is the apertures in tenths of a scene unit, so the
+        // aperture read as millimetres (× 100 × metersPerUnit) is the window in metres × 1000.
+        let ortho_scale_m = match self.projection.as_str() {
+            "perspective" => None,
+            "orthographic" => Some(self.horizontal_aperture_mm * 1e-3),
+            p => {
+                return Err(bad(
+                    "projection",
+                    format!("'{p}' is not a UsdGeomCamera projection (perspective or orthographic)"),
+                ))
+            }
+        };
         let mut cam = HostCamera {
             focal_length_mm: self.focal_length_mm,
             film_back: FilmBack::usd(
@@ -202,6 +208,7 @@ impl UsdCamera {
             f_number: if self.f_stop > 0.0 { Some(self.f_stop) } else { None },
             focus_distance_m: self.focus_distance_m,
             clip_m: self.clipping_range_m,
+            ortho_scale_m,
             ..HostCamera::default()
         };
         if let Some(p) = &self.petzval {

@@ -235,7 +235,10 @@ class Camera:
     ``lens_model_reason``; or ``"exact"``, ``"lrtf"``, ``"lrtf:RES"``, ``"thick"``, ``"thin"``,
     ``"pinhole"``. ``clip_start_m``/``clip_end_m`` are planes perpendicular to the view axis,
     as in Cycles; beyond them the world shows. ``natural_vignetting`` adds the cos^4 falloff
-    of thin and pinhole cameras (off, as in Cycles)."""
+    of thin and pinhole cameras (off, as in Cycles). ``ortho_scale_m`` makes the camera
+    orthographic (Blender's Orthographic Scale: the metres the fitted sensor side spans; the
+    lens must be thin or pinhole; depth of field is not rendered and ``fstop`` is reported as
+    ignored)."""
 
     def __new__(
         cls,
@@ -261,6 +264,7 @@ class Camera:
         clip_start_m: float = 0.0,
         clip_end_m: float = float("inf"),
         natural_vignetting: bool = False,
+        ortho_scale_m: float | None = None,
     ) -> Camera: ...
     @property
     def lens(self) -> str:

@@ -52,7 +52,7 @@ fn real_lens_data(c: &ExactCamera) -> (f64, f64, f64) {
 /// mm). None for the pinhole.
 pub(crate) fn thin_lens_data(cam: &Camera) -> Option<(f64, f64, f64)> {
     Some(match cam {
-        Camera::Pinhole(_) => return None,
+        Camera::Pinhole(_) | Camera::Orthographic(_) => return None,
         Camera::Thin(c) => (c.lens_focal_length_mm(), c.film_distance_mm(), 0.0),
         Camera::Thick(c) => (
             c.focal_length_mm(),

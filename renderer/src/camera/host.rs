@@ -17,6 +17,7 @@
 //! | `clip_m` | (start, end): 0 ≤ start < end, planes perpendicular to the view axis | m | (0, ∞) |
 //! | `natural_vignetting` | bool: cos⁴ falloff for thin and pinhole | — | true |
 //! | `lrtf_file` | optional baked table for `lrtf` | — | None |
+//! | `ortho_scale_m` | optional f64 > 0: an orthographic camera whose film back's fitted side (its height for [`SensorFit::Vertical`], else its width) spans this many metres, as Blender's Orthographic Scale | m | None (perspective) |
 //!
 //! Sensor fit ([`SensorFit`]): Blender's `AUTO` (the sensor width spans the larger image side),
 //! `HORIZONTAL` (the width spans the image width), `VERTICAL` (the height spans the image
@@ -109,6 +110,15 @@ impl FilmBack {
             fit: SensorFit::Expand,
             shift: Shift::Mm(DVec2::new(horizontal_offset_mm, vertical_offset_mm)),
             pixel_aspect: 1.0,
+        }
+    }
+
+    /// The side an orthographic scale spans: the height for [`SensorFit::Vertical`], else the
+    /// width (Blender's AUTO and HORIZONTAL fits, and USD's horizontal aperture).
+    pub fn fitted_side_mm(&self) -> f64 {
+        match self.fit {
+            SensorFit::Vertical => self.height_mm,
+            _ => self.width_mm,
         }
     }
 
@@ -280,6 +290,8 @@ pub struct HostCamera {
     pub natural_vignetting: bool,
     /// A baked LRTF table.
     pub lrtf_file: Option<PathBuf>,
+    /// Orthographic: the metres the film back's fitted side spans (None = perspective).
+    pub ortho_scale_m: Option<f64>,
 }
 
 impl Default for HostCamera {
@@ -297,6 +309,7 @@ impl Default for HostCamera {
             clip_m: (0.0, f64::INFINITY),
             natural_vignetting: true,
             lrtf_file: None,
+            ortho_scale_m: None,
         }
     }
 }
@@ -311,6 +324,9 @@ impl HostCamera {
         }
         focus_distance_m(self.focus_distance_m)?;
         clip_range_m(self.clip_m.0, self.clip_m.1)?;
+        if let Some(s) = self.ortho_scale_m {
+            check_positive("ortho_scale_m", s)?;
+        }
         for (f, t) in [("tilt_x_deg", self.tilt_deg.x), ("tilt_y_deg", self.tilt_deg.y)] {
             if !(t.is_finite() && t.abs() < 60.0) {
                 return Err(Error::camera(f, format!("must be within ±60°, got {t}")));
@@ -333,6 +349,7 @@ impl HostCamera {
             sensor: self.film_back.sensor(width, height, self.tilt_deg)?,
             natural_vignetting: self.natural_vignetting,
             lrtf_file: self.lrtf_file.clone(),
+            orthographic_m_per_mm: self.ortho_scale_m.map(|s| s / self.film_back.fitted_side_mm()),
         };
         spec.validate()?;
         Ok(spec)

@@ -36,6 +36,7 @@ mod ideal;
 pub mod lrtf;
 mod model;
 mod model_choice;
+pub mod orthographic;
 pub mod pinhole;
 pub mod sensor;
 mod spec;
@@ -49,6 +50,7 @@ pub use focus_plane::FocusPlane;
 pub use lrtf::LrtfCamera;
 pub use model::cached_lrtf;
 pub use model_choice::{CandidateReport, ModelChoice, ShotContext};
+pub use orthographic::OrthographicCamera;
 pub use pinhole::PinholeCamera;
 pub use sensor::Sensor;
 pub(crate) use spec::SpecLens;
@@ -98,6 +100,8 @@ pub enum Camera {
     Exact(ExactCamera),
     /// A real lens through its ray transfer table.
     Lrtf(LrtfCamera),
+    /// Parallel projection (no lens).
+    Orthographic(OrthographicCamera),
 }
 
 /// Thin-lens refraction: direction of the ray that left film point `p` (relative to the lens,
@@ -174,6 +178,7 @@ impl Camera {
             Camera::Thick(c) => c.generate_ray(film, lens_u),
             Camera::Exact(c) => c.generate_ray(film, lens_u, wavelength_nm),
             Camera::Lrtf(c) => c.generate_ray(film, lens_u, wavelength_nm),
+            Camera::Orthographic(c) => c.generate_ray(film),
         }
     }
 
@@ -196,9 +201,10 @@ impl Camera {
     /// Whether light can be traced from the scene onto the film ([`Camera::connect`]): every
     /// model with a lens. The thin and thick lenses map light exactly as they map camera rays;
     /// the LRTF model's light paths are traced exactly (its table maps film → scene only; the
-    /// two agree within the table's error, a fraction of a pixel). Not the pinhole.
+    /// two agree within the table's error, a fraction of a pixel). Not the pinhole nor the
+    /// orthographic camera.
     pub fn can_connect(&self) -> bool {
-        !matches!(self, Camera::Pinhole(_))
+        !matches!(self, Camera::Pinhole(_) | Camera::Orthographic(_))
     }
 
     /// The camera strategy's density for sample (`film`, `lens_u`) in the ray (étendue)
@@ -206,7 +212,7 @@ impl Camera {
     /// combining camera paths with light paths. None for models that cannot connect.
     pub fn sample_density(&self, film: DVec2, lens_u: DVec2) -> Option<f64> {
         match self {
-            Camera::Pinhole(_) => None,
+            Camera::Pinhole(_) | Camera::Orthographic(_) => None,
             Camera::Thin(c) => c.sample_density(film, lens_u),
             Camera::Thick(c) => c.sample_density(film, lens_u),
             Camera::Exact(c) => c.sample_density(film, lens_u),
@@ -218,7 +224,7 @@ impl Camera {
     /// on the film, at `wavelength_nm`; None when blocked or for models that cannot connect.
     pub fn connect(&self, from_m: DVec3, to_m: DVec3, wavelength_nm: f64) -> Option<FilmConnection> {
         match self {
-            Camera::Pinhole(_) => None,
+            Camera::Pinhole(_) | Camera::Orthographic(_) => None,
             Camera::Thin(c) => c.connect(from_m, to_m),
             Camera::Thick(c) => c.connect(from_m, to_m),
             Camera::Exact(c) => c.connect(from_m, to_m, wavelength_nm),
@@ -230,7 +236,7 @@ impl Camera {
     /// that can connect: the aperture's circumradius for the thin and thick lenses.
     pub fn entrance_pupil_radius_m(&self) -> Option<f64> {
         match self {
-            Camera::Pinhole(_) => None,
+            Camera::Pinhole(_) | Camera::Orthographic(_) => None,
             Camera::Thin(c) => Some(1e-3 * c.aperture_radius_mm()),
             Camera::Thick(c) => Some(1e-3 * c.aperture_radius_mm()),
             Camera::Exact(c) => Some(0.5e-3 * c.lens().paraxial().entrance_pupil_diameter_mm),
@@ -246,6 +252,7 @@ impl Camera {
             Camera::Thick(c) => c.sensor(),
             Camera::Exact(c) => c.sensor(),
             Camera::Lrtf(c) => c.exact().sensor(),
+            Camera::Orthographic(c) => c.sensor(),
         }
     }
 
@@ -277,6 +284,7 @@ impl Camera {
             Camera::Thick(_) => LensModel::Thick,
             Camera::Exact(_) => LensModel::Exact,
             Camera::Lrtf(c) => LensModel::Lrtf { resolution: c.table().header.resolution },
+            Camera::Orthographic(_) => LensModel::Orthographic,
         }
     }
 

@@ -2,7 +2,7 @@
 //! and the `auto` chooser, and the process-wide cache of baked LRTF tables.
 
 use super::spec::{CameraSpec, LensModel, SpecLens};
-use super::{Camera, ExactCamera, LrtfCamera, PinholeCamera, ThickCamera, ThinCamera};
+use super::{Camera, ExactCamera, LrtfCamera, OrthographicCamera, PinholeCamera, ThickCamera, ThinCamera};
 use crate::error::{Error, Result};
 use crate::optics::lens::Lens;
 use crate::optics::lrtf::{BakeOptions, LrtfTable};
@@ -21,6 +21,26 @@ pub(crate) fn build_model(
 ) -> Result<Camera> {
     let sensor = spec.sensor;
     let focus = spec.focus_distance_m;
+    // An orthographic projection has no lens: any ideal lens and model but a real lens's.
+    if let Some(m_per_mm) = spec.orthographic_m_per_mm {
+        return match (lens, model) {
+            (
+                SpecLens::Ideal,
+                LensModel::Auto | LensModel::Orthographic | LensModel::Exact | LensModel::Thin | LensModel::Pinhole,
+            ) => Ok(Camera::Orthographic(OrthographicCamera::new(sensor, m_per_mm)?)),
+            (SpecLens::Ideal, m) => Err(Error::camera(
+                "lens_model",
+                format!("an orthographic camera has no lens to model as {m}; use auto or orthographic"),
+            )),
+            (SpecLens::Real(l), _) => Err(Error::camera(
+                "lens",
+                format!(
+                    "an orthographic camera has no lens: '{}' cannot be used with it (use thin or pinhole)",
+                    l.name()
+                ),
+            )),
+        };
+    }
     match lens {
         SpecLens::Ideal => match (model, spec.is_pinhole()) {
             (LensModel::Pinhole, _) | (LensModel::Exact | LensModel::Thin | LensModel::Auto, true) => {
@@ -34,12 +54,19 @@ pub(crate) fn build_model(
                 let c = ThinCamera::new(sensor, spec.focal_length_mm, n, focus, aperture)?;
                 Ok(Camera::Thin(c.with_natural_vignetting(spec.natural_vignetting)))
             }
+            (LensModel::Orthographic, _) => {
+                Err(Error::camera("lens_model", "the orthographic model needs an orthographic scale"))
+            }
             (m, _) => Err(Error::camera(
                 "lens_model",
                 format!("the {} model needs a real lens (a library name or a lens file), not '{}'", m, spec.lens),
             )),
         },
         SpecLens::Real(lens) => match model {
+            LensModel::Orthographic => Err(Error::camera(
+                "lens_model",
+                format!("an orthographic camera has no lens: '{}' cannot be used with it", lens.name()),
+            )),
             LensModel::Exact | LensModel::Auto => {
                 Ok(Camera::Exact(ExactCamera::with_bounds_for(sensor, (**lens).clone(), focus, spectral)?))
             }

@@ -133,6 +133,13 @@ fn pixel_pitch_mm(spec: &CameraSpec, shot: &ShotContext) -> f64 {
 }
 
 fn choose_ideal(spec: &CameraSpec, shot: &ShotContext) -> ModelChoice {
+    if spec.orthographic_m_per_mm.is_some() {
+        return ModelChoice {
+            model: LensModel::Orthographic,
+            reason: "orthographic camera: parallel rays, no lens".into(),
+            candidates: Vec::new(),
+        };
+    }
     let Some(n) = spec.f_number.filter(|_| !spec.is_pinhole()) else {
         return ModelChoice {
             model: LensModel::Pinhole,

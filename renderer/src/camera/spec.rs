@@ -13,6 +13,7 @@
 //! | `sensor` | [`Sensor`] | mm, degrees | 36 × 24 |
 //! | `natural_vignetting` | bool, thin and pinhole (cos⁴) | — | true |
 //! | `lrtf_file` | optional baked table to use for `lrtf` | — | None |
+//! | `orthographic_m_per_mm` | optional f64: an orthographic projection, scene metres per sensor millimetre (ideal lenses only) | m/mm | None (perspective) |
 
 use super::Sensor;
 use crate::error::{Error, Result};
@@ -43,6 +44,8 @@ pub enum LensModel {
     Thin,
     /// Pinhole (no depth of field, no aberrations).
     Pinhole,
+    /// Parallel projection ([`CameraSpec::orthographic_m_per_mm`]; no lens at all).
+    Orthographic,
 }
 
 impl LensModel {
@@ -64,7 +67,7 @@ impl LensModel {
     pub fn nominal_ns_per_ray(self, surfaces: usize) -> f64 {
         let exact = 40.0 * surfaces as f64;
         match self {
-            LensModel::Pinhole => 30.0,
+            LensModel::Pinhole | LensModel::Orthographic => 30.0,
             LensModel::Thin => 50.0,
             LensModel::Thick => 60.0,
             LensModel::Lrtf { .. } => 30.0 + 0.02 * exact,
@@ -79,7 +82,7 @@ impl FromStr for LensModel {
         let bad = || {
             Error::camera(
                 "lens_model",
-                format!("expected auto, exact, lrtf[:RESOLUTION], thick, thin or pinhole, got '{s}'"),
+                format!("expected auto, exact, lrtf[:RESOLUTION], thick, thin, pinhole or orthographic, got '{s}'"),
             )
         };
         Ok(match s {
@@ -89,6 +92,7 @@ impl FromStr for LensModel {
             "thick" => LensModel::Thick,
             "thin" => LensModel::Thin,
             "pinhole" => LensModel::Pinhole,
+            "orthographic" => LensModel::Orthographic,
             _ => match s.strip_prefix("lrtf:") {
                 Some(r) => {
                     let resolution: u32 = r.parse().map_err(|_| bad())?;
@@ -115,6 +119,7 @@ impl std::fmt::Display for LensModel {
             LensModel::Thick => write!(f, "thick"),
             LensModel::Thin => write!(f, "thin"),
             LensModel::Pinhole => write!(f, "pinhole"),
+            LensModel::Orthographic => write!(f, "orthographic"),
         }
     }
 }
@@ -142,6 +147,8 @@ pub struct CameraSpec {
     pub natural_vignetting: bool,
     /// A baked LRTF table to use instead of baking.
     pub lrtf_file: Option<PathBuf>,
+    /// An orthographic projection: scene metres per sensor millimetre (None = perspective).
+    pub orthographic_m_per_mm: Option<f64>,
 }
 
 impl Default for CameraSpec {
@@ -157,6 +164,7 @@ impl Default for CameraSpec {
             sensor: Sensor::default(),
             natural_vignetting: true,
             lrtf_file: None,
+            orthographic_m_per_mm: None,
         }
     }
 }
@@ -190,6 +198,14 @@ impl CameraSpec {
             if !(d.is_finite() && d > 0.0) {
                 return bad("focus_distance_m", format!("must be positive, got {d}"));
             }
+        }
+        if let Some(k) = self.orthographic_m_per_mm {
+            if !(k.is_finite() && k > 0.0) {
+                return bad("orthographic_m_per_mm", format!("must be positive, got {k}"));
+            }
+        }
+        if self.model == LensModel::Orthographic && self.orthographic_m_per_mm.is_none() {
+            return bad("lens_model", "the orthographic model needs an orthographic scale".into());
         }
         Ok(())
     }

@@ -439,6 +439,7 @@ pub fn pinhole_view_error(camera: &Camera, lens_u: DVec2, grid: usize, wavelengt
     let plane_z = match camera {
         Camera::Thin(_) | Camera::Thick(_) | Camera::Pinhole(_) => axis_ray.origin.z,
         Camera::Exact(_) | Camera::Lrtf(_) => 0.0,
+        Camera::Orthographic(_) => return None,
     };
     let crossing = |ray: &CameraRay| -> Option<DVec3> {
         (ray.direction.z.abs() > 1e-12).then(|| {

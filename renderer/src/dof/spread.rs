@@ -789,6 +789,12 @@ impl Optics {
                 check_camera(camera)?;
                 Optics::Table(Box::new(PsfTable::new(camera, layers, w_max, view_size, spread)?))
             }
+            Camera::Orthographic(_) => {
+                return Err(Error::settings(
+                    "method",
+                    "spread: an orthographic camera has no depth of field to spread; use --method mc",
+                ))
+            }
         })
     }
 

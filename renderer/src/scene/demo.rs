@@ -276,6 +276,7 @@ pub fn demo_scene() -> (Scene, DemoShot) {
         to_world: view.inverse(),
         yfov_rad: 0.45,
         aspect_ratio: Some(1.5),
+        ortho_scale_m: None,
         znear: 0.01,
         zfar: None,
     });

@@ -239,6 +239,9 @@ pub struct SceneCamera {
     pub yfov_rad: f32,
     /// Aspect ratio width / height if the file states one.
     pub aspect_ratio: Option<f32>,
+    /// Orthographic: the metres the larger image side spans (Blender's Orthographic Scale;
+    /// glTF's 2·max(xmag, ymag)); None = perspective (`yfov_rad`).
+    pub ortho_scale_m: Option<f32>,
     /// Near clip distance.
     pub znear: f32,
     /// Far clip distance (None = infinite).

@@ -27,7 +27,7 @@
 //! | image (PNG, JPEG; file, data URI or bufferView) | [`Texture`], sampler wrap modes, `magFilter` nearest → nearest | missing or undecodable: warning and a 1×1 fallback: magenta for base colour, flat for normal maps, white for metallic-roughness, black for emission |
 //! | `KHR_lights_punctual` point, spot | [`Light::Point`], [`Light::Spot`]: `color × intensity / 683` W/sr | see below |
 //! | `KHR_lights_punctual` directional | [`Light::Directional`]: `color × intensity / 683` W/m² | |
-//! | perspective camera | [`SceneCamera`] (rigid part of the node's world transform) | orthographic cameras skipped with a warning |
+//! | perspective and orthographic cameras | [`SceneCamera`] (rigid part of the node's world transform); orthographic: `ortho_scale_m` = 2·max(xmag, ymag), as Blender's importer reads it | node scale ignored |
 //!
 //! Light units. Blender's glTF exporter (io_scene_gltf2, as bundled with Blender 5.0.1:
 //! `io_scene_gltf2/blender/exp/lights.py`, `__gather_intensity`, lines 138–159, with

@@ -199,18 +199,29 @@ impl Loader<'_> {
 
     pub(super) fn add_camera(&mut self, camera: &gltf::Camera, world: &Mat4, node: &gltf::Node, node_loc: &str) {
         let loc = format!("{node_loc}, {}", named("camera", camera.index(), camera.name()));
-        let p = match camera.projection() {
-            gltf::camera::Projection::Perspective(p) => p,
-            gltf::camera::Projection::Orthographic(_) => {
-                self.warn(&loc, "orthographic cameras are not supported; skipped");
-                return;
+        // Perspective: the vertical field of view; orthographic: the larger side's extent,
+        // 2·max(xmag, ymag), as Blender's importer reads it back into its Orthographic Scale.
+        let (yfov, ortho_scale_m, aspect_ratio, znear, zfar) = match camera.projection() {
+            gltf::camera::Projection::Perspective(p) => {
+                let yfov = p.yfov();
+                if !yfov.is_finite() || yfov <= 0.0 || yfov >= std::f32::consts::PI {
+                    self.warn(&loc, format!("yfov {yfov} is outside (0, π); camera skipped"));
+                    return;
+                }
+                (yfov, None, p.aspect_ratio().filter(|a| a.is_finite() && *a > 0.0), p.znear(), p.zfar())
+            }
+            gltf::camera::Projection::Orthographic(o) => {
+                let (xmag, ymag) = (o.xmag().abs(), o.ymag().abs());
+                if !(xmag.is_finite() && ymag.is_finite() && xmag > 0.0 && ymag > 0.0) {
+                    self.warn(
+                        &loc,
+                        format!("orthographic xmag {} / ymag {} must be non-zero; camera skipped", o.xmag(), o.ymag()),
+                    );
+                    return;
+                }
+                (0.5, Some(2.0 * xmag.max(ymag)), Some(xmag / ymag), o.znear(), Some(o.zfar()))
             }
         };
-        let yfov = p.yfov();
-        if !yfov.is_finite() || yfov <= 0.0 || yfov >= std::f32::consts::PI {
-            self.warn(&loc, format!("yfov {yfov} is outside (0, π); camera skipped"));
-            return;
-        }
         // Rigid part: keep the viewing direction (−z) exactly, make +y orthogonal to it.
         let position = world.w_axis.truncate();
         let back = world.transform_vector3(Vec3::Z);
@@ -229,14 +240,21 @@ impl Loader<'_> {
             .or(camera.name().filter(|n| !n.is_empty()))
             .map(str::to_string)
             .unwrap_or_else(|| format!("camera {}", camera.index()));
-        let aspect_ratio = p.aspect_ratio().filter(|a| a.is_finite() && *a > 0.0);
-        let mut znear = p.znear();
+        let mut znear = znear;
         if !znear.is_finite() || znear < 0.0 {
             self.warn(&loc, format!("znear {znear} is invalid; using 0"));
             znear = 0.0;
         }
-        let zfar = p.zfar().filter(|f| f.is_finite() && *f > znear);
-        self.scene.cameras.push(SceneCamera { name, to_world, yfov_rad: yfov, aspect_ratio, znear, zfar });
+        let zfar = zfar.filter(|f| f.is_finite() && *f > znear);
+        self.scene.cameras.push(SceneCamera {
+            name,
+            to_world,
+            yfov_rad: yfov,
+            aspect_ratio,
+            ortho_scale_m,
+            znear,
+            zfar,
+        });
     }
 
     // ---------------------------------------------------------------- meshes
