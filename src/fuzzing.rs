@@ -76,6 +76,7 @@ const FLAGS: &[(&str, Kind)] = &[
     ("--shift-y", Kind::Float),
     ("--aperture", Kind::Aperture),
     ("--focal-length", Kind::Float),
+    ("--ortho-scale", Kind::Float),
     ("--pixel-aspect", Kind::Float),
     ("--sensor-width", Kind::Float),
     ("--spp", Kind::Int),

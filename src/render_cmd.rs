@@ -859,6 +859,8 @@ fn flags_host_camera(
     demo_shot: Option<&demo::DemoShot>,
     focus_m: Option<f64>,
 ) -> Result<HostCamera, Error> {
+    // the demo's lens, tilt and stop belong to its perspective shot, not to an orthographic view
+    let demo_shot = demo_shot.filter(|_| args.ortho_scale.is_none());
     // an explicit --tilt-x (0 too) wins over the demo's own tilt
     let tilt_x = args.tilt_x.unwrap_or_else(|| demo_shot.map(|d| d.tilt_x_deg).unwrap_or(0.0));
     let film_back = FilmBack {

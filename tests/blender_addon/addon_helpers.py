@@ -319,7 +319,8 @@ def build_lights_scene(variant: str):
     "terminator" has smooth-shaded low-poly meshes lit from the side by a sun: Suzanne with
     Blender's default Shadow Terminator Geometry Offset (0.1) and a 12 x 6 UV sphere with 0.
     "glass" makes the two spheres glass (Transmission Weight 1: clear IOR 1.45, and a tinted one
-    of roughness 0.3) over the checker ground, lit by the environment texture."""
+    of roughness 0.3) over the checker ground, lit by the environment texture. "ortho" is "texture"
+    seen through an orthographic camera (Orthographic Scale 3 m, VERTICAL fit, shifted)."""
     b = bpy()
     reset_blender()
     scene = b.context.scene
@@ -341,14 +342,14 @@ def build_lights_scene(variant: str):
 
     b.ops.mesh.primitive_plane_add(size=8.0, location=(0.0, 2.0, 0.0))
     ground = _principled_lambert("Ground", (0.5, 0.5, 0.5))
-    if variant in ("texture", "glass"):
+    if variant in ("texture", "glass", "ortho"):
         # the ground's colour from a coarse 8-bit checker with Linear interpolation
         tex = ground.node_tree.nodes.new("ShaderNodeTexImage")
         tex.image = _checker_image()
         tex.interpolation = "Linear"
         bsdf = ground.node_tree.nodes.get("Principled BSDF")
         ground.node_tree.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
-    if variant == "texture":
+    if variant in ("texture", "ortho"):
         sun = b.data.lights.new("TexSun", "SUN")
         sun.energy = 2.0
         sun_obj = b.data.objects.new("TexSun", sun)
@@ -454,6 +455,11 @@ def build_lights_scene(variant: str):
         ball.shadow_terminator_geometry_offset = 0.0
     cam = add_camera("LightsCam", (0.0, -2.6, 0.9), (math.radians(80.0), 0.0, 0.0), lens_mm=28.0)
     cam.data.dof.use_dof = False
+    if variant == "ortho":
+        cam.data.type = "ORTHO"
+        cam.data.ortho_scale = 3.0
+        cam.data.sensor_fit = "VERTICAL"  # the image height spans the scale
+        cam.data.shift_x, cam.data.shift_y = 0.06, 0.04
     scene.render.resolution_x, scene.render.resolution_y = LIGHTS_RESOLUTION
     scene.render.resolution_percentage = 100
     return cam

@@ -285,7 +285,9 @@ def test_real_lens_round_trip_matches_gltf_path(main_scene, report):
 SPP_LIGHTS = 128
 
 
-@pytest.mark.parametrize("variant", ["area", "world", "spots", "soft", "texture", "hidden", "terminator", "glass"])
+@pytest.mark.parametrize(
+    "variant", ["area", "world", "spots", "soft", "texture", "hidden", "terminator", "glass", "ortho"]
+)
 def test_area_lights_and_environment_match_cycles(addon, report, variant):
     """What tests/blender's glTF scene cannot carry, against Cycles (8x8 block z-test and image
     means, both sides two seeds): "area": a rectangle and a disc area light (one-sided emitters of
@@ -301,7 +303,8 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
     was seen before); "terminator": smooth-shaded low-poly meshes lit from the side, Suzanne with
     Blender's default Shadow Terminator Geometry Offset and a coarse sphere with 0 (their
     terminators were darker than Cycles'); "glass": a clear and a rough tinted glass sphere over a
-    checker, lit by the environment (Transmission Weight was ignored: opaque spheres)."""
+    checker, lit by the environment (Transmission Weight was ignored: opaque spheres); "ortho": the
+    "texture" scene through an orthographic camera (VERTICAL fit, shifted; it was refused)."""
     H.build_lights_scene(variant)
     cyc = [B.read_rgb(H.lights_cycles_reference(variant, seed, SPP_LIGHTS)) for seed in SEEDS]
     pz = []
@@ -322,6 +325,7 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
         "hidden": "an area light in view and a cube hidden from camera rays",
         "terminator": "smooth low-poly meshes lit from the side (geometry offsets 0.1 and 0)",
         "glass": "a clear and a rough tinted glass sphere over a checker",
+        "ortho": "an orthographic camera (scale 3 m, VERTICAL fit, shifted) over a checker lit by a sun",
     }[variant]
     report.line(f"{what} vs Cycles, {w}x{h} {SPP_LIGHTS} spp x seeds {SEEDS} ({secs:.1f} s per F12)")
     report.line(f"  blocks: {_fmt(v)}; image mean add-on/Cycles R,G,B {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f}")

@@ -113,6 +113,10 @@ BAD_RENDER_ARGS = [
     ("nan-shift", ["--shift-x", "nan"], ["shift"]),
     ("zero-sensor", ["--sensor-width", "0"], ["sensor_width_mm"]),
     ("zero-focal-length", ["--lens", "thin", "--focal-length", "0"], ["focal_length_mm"]),
+    ("zero-ortho-scale", ["--lens", "thin", "--ortho-scale", "0"], ["ortho_scale_m"]),
+    ("nan-ortho-scale", ["--lens", "thin", "--ortho-scale", "nan"], ["ortho_scale_m"]),
+    ("ortho-real-lens", ["--lens", "double-gauss-50mm", "--ortho-scale", "2"], ["orthographic", "double-gauss"]),
+    ("ortho-tilted", ["--lens", "thin", "--ortho-scale", "2", "--tilt-x", "5"], ["orthographic", "tilt"]),
     ("bad-vignetting", ["--natural-vignetting", "maybe"], ["natural_vignetting"]),
     # issue 12: outputs and numbers checked before the render (they failed after it, or gave
     # black or infinite images with exit code 0)

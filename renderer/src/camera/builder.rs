@@ -48,6 +48,10 @@ impl CameraSpec {
     pub fn check(&self) -> Result<()> {
         self.validate()?;
         let lens = self.load_lens()?;
+        if self.orthographic_m_per_mm.is_some() {
+            // no lens to trace: the build is the check (it refuses a real lens)
+            return build_model(self, &lens, self.model, None, false).map(|_| ());
+        }
         let SpecLens::Real(l) = &lens else {
             // ideal lenses build at no cost
             let model = if self.model == LensModel::Auto { LensModel::Thin } else { self.model };
