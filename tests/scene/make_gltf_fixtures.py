@@ -250,7 +250,8 @@ def camera():
         "cameras": [
             {"name": "Lens", "type": "perspective",
              "perspective": {"yfov": 0.6, "aspectRatio": 1.5, "znear": 0.1, "zfar": 100}},
-            {"name": "Ortho", "type": "orthographic", "orthographic": {"xmag": 1.5, "ymag": -1, "znear": 0, "zfar": 10}},
+            {"name": "Ortho", "type": "orthographic",
+             "orthographic": {"xmag": 1.5, "ymag": -1, "znear": 0, "zfar": 10}},
             {"name": "Unnamed node cam", "type": "perspective", "perspective": {"yfov": 1.0, "znear": 0.01}},
         ],
     }
