@@ -284,11 +284,16 @@ def _add_camera(bpy, spec: CameraSpec):
     cam_data.dof.aperture_blades = spec.blades
     cam_data.dof.aperture_rotation = math.radians(spec.rotation_deg)
     cam_data.dof.aperture_ratio = 1.0
-    obj = bpy.data.objects.new(spec.name, cam_data)
+    return _place_camera(bpy, spec.name, cam_data, spec.location, spec.target)
+
+
+def _place_camera(bpy, name, cam_data, location, target):
+    """A camera object `name` of `cam_data` at `location`, looking at `target`."""
+    obj = bpy.data.objects.new(name, cam_data)
     bpy.context.scene.collection.objects.link(obj)
-    obj.location = spec.location
+    obj.location = location
     obj.rotation_mode = "QUATERNION"
-    obj.rotation_quaternion = _look_at_quat(spec.location, spec.target)
+    obj.rotation_quaternion = _look_at_quat(location, target)
     return obj
 
 
@@ -300,12 +305,7 @@ def _add_ortho_camera(bpy, spec: OrthoSpec):
     cam_data.shift_x, cam_data.shift_y = spec.shift
     cam_data.clip_start, cam_data.clip_end = spec.clip
     cam_data.dof.use_dof = False
-    obj = bpy.data.objects.new(spec.name, cam_data)
-    bpy.context.scene.collection.objects.link(obj)
-    obj.location = spec.location
-    obj.rotation_mode = "QUATERNION"
-    obj.rotation_quaternion = _look_at_quat(spec.location, spec.target)
-    return obj
+    return _place_camera(bpy, spec.name, cam_data, spec.location, spec.target)
 
 
 def _add_light(bpy, kind, name, location, energy, target=None, spot_deg=None):
