@@ -590,7 +590,7 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
         );
     }
     // An orthographic scene camera stays orthographic unless the flags ask for a focal length;
-    // it has no depth of field unless --fstop asks (which it then warns of).
+    // it has no depth of field unless --fstop asks (an aperture of radius 1/(2N) m, as Cycles).
     if let (None, None, Some(s)) = (args.ortho_scale, args.focal_length, scene_cam.ortho_scale_m) {
         flags_camera.ortho_scale_m = Some(s as f64);
     }

@@ -156,11 +156,10 @@ def camera_kwargs(scene, cam_obj, depsgraph, notes) -> dict:
         "natural_vignetting": bool(scene.petzval.natural_vignetting),
     }
     if ortho:
+        # Cycles' orthographic depth of field: an aperture of radius 1/(2N) scene units
         kw["ortho_scale_m"] = float(cam.ortho_scale)
-        kw["fstop"] = None
-        kw["focus_distance_m"] = None
-        if dof.use_dof:
-            notes.warn("depth of field is not rendered with an orthographic camera: everything is sharp")
+        kw["fstop"] = float(dof.aperture_fstop) if dof.use_dof and lens != "pinhole" else None
+        kw["focus_distance_m"] = focus_distance(cam_obj, depsgraph) if kw["fstop"] is not None else None
     elif lens == "pinhole":
         kw["fstop"] = None
         kw["focus_distance_m"] = None

@@ -106,7 +106,7 @@ class PETZVAL_PT_camera_lens(CameraPanel, bpy.types.Panel):
         if cam.type == "PANO":
             layout.label(text="Petzval renders perspective and orthographic cameras", icon="ERROR")
         elif cam.type == "ORTHO":
-            layout.label(text="Orthographic: no lens, no depth of field", icon="INFO")
+            layout.label(text="Orthographic: no lens; F-Stop gives an aperture of 1/(2N) m", icon="INFO")
 
 
 class PETZVAL_PT_camera_tilt(CameraPanel, bpy.types.Panel):

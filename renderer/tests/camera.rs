@@ -293,8 +293,40 @@ fn orthographic_cameras_refuse_lenses_and_tilts_by_name() {
     }
     let e = CameraSpec { model: "orthographic".parse().unwrap(), ..CameraSpec::default() }.validate().unwrap_err();
     assert!(e.to_string().contains("orthographic scale"), "{e}");
-    // depth of field is not rendered: said, not silently dropped
-    let dof = HostCamera { f_number: Some(2.8), ortho_scale_m: Some(2.0), ..HostCamera::default() };
-    let built = dof.camera_spec(300, 200).unwrap().build(&ShotContext::default()).unwrap();
-    assert!(built.warnings.iter().any(|w| w.contains("depth of field")), "{:?}", built.warnings);
+}
+
+/// Depth of field as Cycles gives an orthographic camera: an aperture of circumradius 1/(2N) m
+/// around the window point, every ray of a film point through the point `s` straight ahead of
+/// it, unit mean weight.
+#[test]
+fn orthographic_depth_of_field_focuses_straight_ahead() {
+    let host = HostCamera {
+        f_number: Some(2.0),
+        focus_distance_m: Some(3.0),
+        ortho_scale_m: Some(2.0),
+        ..HostCamera::default()
+    };
+    let built = host.camera_spec(300, 200).unwrap().build(&ShotContext::default()).unwrap();
+    assert!(built.warnings.is_empty(), "{:?}", built.warnings);
+    let cam = built.camera;
+    for film in [DVec2::new(0.5, 0.5), DVec2::new(0.1, 0.9)] {
+        let window = DVec3::new((film.x - 0.5) * 2.0, (0.5 - film.y) * 2.0 * 200.0 / 300.0, 0.0);
+        let (n, mut sum, mut r_max) = (64usize, 0.0, 0.0f64);
+        for i in 0..n {
+            for j in 0..n {
+                let u = DVec2::new((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
+                let r = cam.generate_ray(film, u, WL).unwrap();
+                sum += r.weight;
+                let l = r.origin - window;
+                r_max = r_max.max(l.length());
+                assert!(l.z.abs() < 1e-15, "{l}");
+                // through the focused point straight ahead of the window point
+                let t = 3.0 / -r.direction.z;
+                let p = r.origin + r.direction * t;
+                assert!((p - (window + DVec3::new(0.0, 0.0, -3.0))).length() < 1e-12, "{p}");
+            }
+        }
+        assert!((sum / (n * n) as f64 - 1.0).abs() < 1e-12, "{}", sum / (n * n) as f64);
+        assert!(r_max <= 0.25 + 1e-12 && r_max > 0.24, "aperture circumradius 1/(2N) = 0.25 m: {r_max}");
+    }
 }

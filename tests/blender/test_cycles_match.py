@@ -210,8 +210,14 @@ def test_gltf_export_carries_the_scene(blender_run, report):
     scene shows up here first, not as an unexplained image difference."""
     g = _glb_json(blender_run.glb)
     cams = {n["name"]: g["cameras"][n["camera"]] for n in g["nodes"] if "camera" in n}
-    assert set(cams) == {S.MAIN_CAM.name, S.BOKEH_CAM.name}
+    assert set(cams) == {S.MAIN_CAM.name, S.BOKEH_CAM.name, S.ORTHO_CAM.name}
     w, h = S.RESOLUTION
+    # orthographic: half the window, the larger (landscape: horizontal) side spanning the scale
+    o = cams[S.ORTHO_CAM.name]["orthographic"]
+    assert (o["xmag"], o["ymag"]) == (
+        pytest.approx(S.ORTHO_CAM.ortho_scale / 2, rel=1e-6),
+        pytest.approx(S.ORTHO_CAM.ortho_scale / 2 * h / w, rel=1e-6),
+    )
     for spec in (S.MAIN_CAM, S.BOKEH_CAM):
         p = cams[spec.name]["perspective"]
         # AUTO fit, landscape: the sensor width spans the image width

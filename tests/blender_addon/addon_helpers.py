@@ -320,7 +320,8 @@ def build_lights_scene(variant: str):
     Blender's default Shadow Terminator Geometry Offset (0.1) and a 12 x 6 UV sphere with 0.
     "glass" makes the two spheres glass (Transmission Weight 1: clear IOR 1.45, and a tinted one
     of roughness 0.3) over the checker ground, lit by the environment texture. "ortho" is "texture"
-    seen through an orthographic camera (Orthographic Scale 3 m, VERTICAL fit, shifted)."""
+    seen through an orthographic camera (Orthographic Scale 3 m, VERTICAL fit, shifted, f/4 focused
+    at 2.5 m)."""
     b = bpy()
     reset_blender()
     scene = b.context.scene
@@ -460,6 +461,10 @@ def build_lights_scene(variant: str):
         cam.data.ortho_scale = 3.0
         cam.data.sensor_fit = "VERTICAL"  # the image height spans the scale
         cam.data.shift_x, cam.data.shift_y = 0.06, 0.04
+        # Cycles' orthographic depth of field: aperture radius 1/(2N) = 0.125 m, focused at 2.5 m
+        cam.data.dof.use_dof = True
+        cam.data.dof.aperture_fstop = 4.0
+        cam.data.dof.focus_distance = 2.5
     scene.render.resolution_x, scene.render.resolution_y = LIGHTS_RESOLUTION
     scene.render.resolution_percentage = 100
     return cam

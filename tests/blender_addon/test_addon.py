@@ -304,7 +304,8 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
     Blender's default Shadow Terminator Geometry Offset and a coarse sphere with 0 (their
     terminators were darker than Cycles'); "glass": a clear and a rough tinted glass sphere over a
     checker, lit by the environment (Transmission Weight was ignored: opaque spheres); "ortho": the
-    "texture" scene through an orthographic camera (VERTICAL fit, shifted; it was refused)."""
+    "texture" scene through an orthographic camera (VERTICAL fit, shifted, Cycles' depth of field;
+    it was refused)."""
     H.build_lights_scene(variant)
     cyc = [B.read_rgb(H.lights_cycles_reference(variant, seed, SPP_LIGHTS)) for seed in SEEDS]
     pz = []
@@ -325,7 +326,7 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
         "hidden": "an area light in view and a cube hidden from camera rays",
         "terminator": "smooth low-poly meshes lit from the side (geometry offsets 0.1 and 0)",
         "glass": "a clear and a rough tinted glass sphere over a checker",
-        "ortho": "an orthographic camera (scale 3 m, VERTICAL fit, shifted) over a checker lit by a sun",
+        "ortho": "an orthographic camera (scale 3 m, VERTICAL fit, shifted, f/4 at 2.5 m) over a sun-lit checker",
     }[variant]
     report.line(f"{what} vs Cycles, {w}x{h} {SPP_LIGHTS} spp x seeds {SEEDS} ({secs:.1f} s per F12)")
     report.line(f"  blocks: {_fmt(v)}; image mean add-on/Cycles R,G,B {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f}")
@@ -912,8 +913,21 @@ def test_camera_settings_mapping(addon):
     kw, _ = kwargs()
     assert kw["lens"] == bpy.path.abspath("//lenses/my.toml")
 
+    # orthographic: no lens file; Blender's Orthographic Scale; Cycles' depth of field
     cam.type = "ORTHO"
-    with pytest.raises(mod.camera.SettingsError, match="perspective"):
+    with pytest.raises(mod.camera.SettingsError, match=r"orthographic.*Thin Lens or Pinhole"):
+        kwargs()
+    cam.petzval.lens = "THIN"
+    cam.ortho_scale = 4.5
+    dof.use_dof = True
+    kw, _ = kwargs()
+    assert kw["ortho_scale_m"] == pytest.approx(4.5) and kw["fstop"] == pytest.approx(dof.aperture_fstop)
+    assert kw["focus_distance_m"] == pytest.approx(2.5, abs=1e-5)
+    dof.use_dof = False
+    kw, _ = kwargs()
+    assert kw["fstop"] is None and kw["focus_distance_m"] is None
+    cam.type = "PANO"
+    with pytest.raises(mod.camera.SettingsError, match="perspective and orthographic"):
         kwargs()
 
     # sampling: Cycles' noise threshold, off unless switched on

@@ -237,8 +237,8 @@ class Camera:
     as in Cycles; beyond them the world shows. ``natural_vignetting`` adds the cos^4 falloff
     of thin and pinhole cameras (off, as in Cycles). ``ortho_scale_m`` makes the camera
     orthographic (Blender's Orthographic Scale: the metres the fitted sensor side spans; the
-    lens must be thin or pinhole; depth of field is not rendered and ``fstop`` is reported as
-    ignored)."""
+    lens must be thin or pinhole; ``fstop`` gives Cycles' orthographic depth of field, an
+    aperture of radius 1/(2·fstop) m, focused ``focus_distance_m`` from the window)."""
 
     def __new__(
         cls,

@@ -90,18 +90,13 @@ impl CameraSpec {
         };
         let (lens_label, focal_length_mm, f_number) = match &lens {
             SpecLens::Ideal if self.orthographic_m_per_mm.is_some() => {
-                ("orthographic".to_string(), self.focal_length_mm, f64::INFINITY)
+                ("orthographic".to_string(), self.focal_length_mm, self.f_number.unwrap_or(f64::INFINITY))
             }
             SpecLens::Ideal if self.is_pinhole() => ("pinhole".to_string(), self.focal_length_mm, f64::INFINITY),
             SpecLens::Ideal => ("thin".to_string(), self.focal_length_mm, self.f_number.unwrap_or(f64::INFINITY)),
             SpecLens::Real(l) => (l.name().to_string(), l.paraxial().efl_mm, l.paraxial().f_number),
         };
         let mut warnings = Vec::new();
-        if let (Camera::Orthographic(_), Some(n)) = (&camera, self.f_number) {
-            warnings.push(format!(
-                "depth of field (f/{n}) is not rendered with an orthographic camera: everything is sharp"
-            ));
-        }
         if let (SpecLens::Real(_), Some(asked)) = (&lens, self.f_number) {
             if f_number > asked * (1.0 + 1e-6) {
                 warnings.push(format!(

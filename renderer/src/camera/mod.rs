@@ -178,7 +178,7 @@ impl Camera {
             Camera::Thick(c) => c.generate_ray(film, lens_u),
             Camera::Exact(c) => c.generate_ray(film, lens_u, wavelength_nm),
             Camera::Lrtf(c) => c.generate_ray(film, lens_u, wavelength_nm),
-            Camera::Orthographic(c) => c.generate_ray(film),
+            Camera::Orthographic(c) => c.generate_ray(film, lens_u),
         }
     }
 

@@ -27,7 +27,13 @@ pub(crate) fn build_model(
             (
                 SpecLens::Ideal,
                 LensModel::Auto | LensModel::Orthographic | LensModel::Exact | LensModel::Thin | LensModel::Pinhole,
-            ) => Ok(Camera::Orthographic(OrthographicCamera::new(sensor, m_per_mm)?)),
+            ) => {
+                let camera = OrthographicCamera::new(sensor, m_per_mm)?;
+                Ok(Camera::Orthographic(match spec.f_number.filter(|_| !spec.is_pinhole()) {
+                    Some(n) => camera.with_depth_of_field(n, focus, spec.aperture.clone().unwrap_or_default())?,
+                    None => camera,
+                }))
+            }
             (SpecLens::Ideal, m) => Err(Error::camera(
                 "lens_model",
                 format!("an orthographic camera has no lens to model as {m}; use auto or orthographic"),

@@ -792,7 +792,7 @@ impl Optics {
             Camera::Orthographic(_) => {
                 return Err(Error::settings(
                     "method",
-                    "spread: an orthographic camera has no depth of field to spread; use --method mc",
+                    "spread: an orthographic camera is not supported (its depth of field is rendered by --method mc)",
                 ))
             }
         })
