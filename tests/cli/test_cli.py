@@ -117,6 +117,7 @@ BAD_RENDER_ARGS = [
     ("nan-ortho-scale", ["--lens", "thin", "--ortho-scale", "nan"], ["ortho_scale_m"]),
     ("ortho-real-lens", ["--lens", "double-gauss-50mm", "--ortho-scale", "2"], ["orthographic", "double-gauss"]),
     ("ortho-tilted", ["--lens", "thin", "--ortho-scale", "2", "--tilt-x", "5"], ["orthographic", "tilt"]),
+    ("ortho-layers", ["--lens", "thin", "--ortho-scale", "2", "--method", "ibrt"], ["orthographic", "method mc"]),
     ("bad-vignetting", ["--natural-vignetting", "maybe"], ["natural_vignetting"]),
     # issue 12: outputs and numbers checked before the render (they failed after it, or gave
     # black or infinite images with exit code 0)

@@ -62,6 +62,13 @@ impl LayerFrame {
         margin: f64,
         texels_per_pixel: u32,
     ) -> Result<LayerFrame> {
+        // 0. Layers are seen through a centre of projection, which an orthographic camera has not.
+        if matches!(camera, Camera::Orthographic(_)) {
+            return Err(Error::settings(
+                "method",
+                "an orthographic camera renders with --method mc only (the layered methods need a centre of projection)",
+            ));
+        }
         // 1. Chief rays on a 33 × 33 grid over the frame (edges included).
         let n = 33;
         let (mut lo, mut hi) = (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY));
