@@ -746,12 +746,17 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
     }
     // 5. Output with metadata.
     let s = rig.camera.sensor();
+    let ortho_window_m = match &rig.camera {
+        Camera::Orthographic(c) => Some(c.window_m()),
+        _ => None,
+    };
     let metadata: Metadata = vec![
         ("lens".into(), lens_label.clone()),
         ("lensModel".into(), built.choice.model.to_string()),
         ("lensModelReason".into(), built.choice.reason.clone()),
         ("lensModelTolerancePx".into(), format!("{}", args.tolerance)),
-        ("focalLengthMM".into(), format!("{focal_mm:.4}")),
+        // an orthographic camera has no focal length (its rays are parallel): "inf"
+        ("focalLengthMM".into(), ortho_window_m.map_or_else(|| format!("{focal_mm:.4}"), |_| "inf".into())),
         ("fNumber".into(), format!("{f_number:.4}")),
         ("focusDistanceM".into(), focus_m.map(|f| format!("{f:.4}")).unwrap_or_else(|| "inf".into())),
         ("tiltXDeg".into(), format!("{}", s.tilt_x_deg)),
@@ -774,6 +779,10 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
         ("dofMethod".into(), method.to_string()),
     ];
     let mut metadata = metadata;
+    if let Some((w, h)) = ortho_window_m {
+        // Blender's Orthographic Scale is the fitted side; the window's both sides are given
+        metadata.push(("orthoWindowM".into(), format!("{w:.6}x{h:.6}")));
+    }
     if let Some((file, c, time)) = &usd_cam {
         metadata.push(("usdShot".into(), file.clone()));
         metadata.push(("usdCamera".into(), c.path.clone()));

@@ -597,7 +597,13 @@ mod tests {
 
     /// The splat as it was before it kept three weights per axis (five, each cell checked):
     /// the reference the faster one must match bit for bit.
-    fn splat_five_weights(landing: &Landing, shift_px: DVec2, footprint_px: f64, width: usize, height: usize) -> Vec<f64> {
+    fn splat_five_weights(
+        landing: &Landing,
+        shift_px: DVec2,
+        footprint_px: f64,
+        width: usize,
+        height: usize,
+    ) -> Vec<f64> {
         let own = footprint_px <= 0.0 && landing.half_widths_px.len() == landing.positions_px.len();
         let square = if footprint_px > 0.0 {
             footprint_px

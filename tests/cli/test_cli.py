@@ -501,6 +501,24 @@ def test_a_small_image_circle_is_warned(petzval, tmp_path, sensor, warned):
         assert "fisheye-10mm" in lines[0] and "13.1" in lines[0], lines[0]
 
 
+def test_orthographic_metadata(petzval, tmp_path):
+    """An orthographic render records its window (Blender's Orthographic Scale spans the larger
+    side of the demo's 3:2 frame) and no focal length ("inf": its rays are parallel), where it
+    recorded the unused perspective 50 mm."""
+    r = run(petzval, ["render", *FAST, "--lens", "thin", "--ortho-scale", "3", "-o", "o.exr", "--no-png"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    meta, _ = read_exr(tmp_path / "o.exr")
+    assert meta["petzval/lensModel"] == "orthographic", meta["petzval/lensModel"]
+    assert meta["petzval/focalLengthMM"] == "inf", meta["petzval/focalLengthMM"]
+    w, h = (float(v) for v in meta["petzval/orthoWindowM"].split("x"))
+    assert abs(w - 3.0) < 1e-6 and abs(h - 2.0) < 1e-6, meta["petzval/orthoWindowM"]
+    # a perspective render has no window
+    r = run(petzval, ["render", *FAST, "--lens", "thin", "-o", "p.exr", "--no-png"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    meta, _ = read_exr(tmp_path / "p.exr")
+    assert "petzval/orthoWindowM" not in meta and float(meta["petzval/focalLengthMM"]) > 0
+
+
 def test_render_demo_without_arguments(petzval, tmp_path):
     r = run(petzval, ["render", *FAST, "--seed", "7"], tmp_path)
     assert r.returncode == 0, r.stderr
