@@ -544,13 +544,10 @@ fn overlaps(x: f64, h: f64) -> (i64, [f64; 3]) {
     (first, w)
 }
 
-/// The model image (row-major, top row first) of a landing shifted by `shift_px`: each ray's
-/// box footprint integrated over the pixels it covers. The footprint is a square of
-/// `footprint_px` when that is positive, else the ray's own (`half_widths_px`), else a square
-/// from the landing's density ([`auto_footprint_px`]); own half-widths within [0.0005, 1] px.
-pub fn splat(landing: &Landing, shift_px: DVec2, footprint_px: f64, width: usize, height: usize) -> Vec<f64> {
+/// Whether `splat` uses the rays' own half-widths, and the square's half-width where a ray has
+/// none (the density pass only then).
+fn footprints(landing: &Landing, footprint_px: f64) -> (bool, DVec2) {
     let own = footprint_px <= 0.0 && landing.half_widths_px.len() == landing.positions_px.len();
-    // the square footprint, where some ray has none of its own (the density pass only then)
     let square = if footprint_px > 0.0 {
         footprint_px
     } else if !own || landing.half_widths_px.contains(&DVec2::ZERO) {
@@ -558,7 +555,15 @@ pub fn splat(landing: &Landing, shift_px: DVec2, footprint_px: f64, width: usize
     } else {
         1.0
     };
-    let square = DVec2::splat(0.5 * square.clamp(1e-3, 2.0));
+    (own, DVec2::splat(0.5 * square.clamp(1e-3, 2.0)))
+}
+
+/// The model image (row-major, top row first) of a landing shifted by `shift_px`: each ray's
+/// box footprint integrated over the pixels it covers. The footprint is a square of
+/// `footprint_px` when that is positive, else the ray's own (`half_widths_px`), else a square
+/// from the landing's density ([`auto_footprint_px`]); own half-widths within [0.0005, 1] px.
+pub fn splat(landing: &Landing, shift_px: DVec2, footprint_px: f64, width: usize, height: usize) -> Vec<f64> {
+    let (own, square) = footprints(landing, footprint_px);
     let mut img = vec![0.0; width * height];
     for (k, (p, &w)) in landing.positions_px.iter().zip(&landing.weights).enumerate() {
         let p = *p + shift_px;
@@ -595,8 +600,8 @@ pub fn splat(landing: &Landing, shift_px: DVec2, footprint_px: f64, width: usize
 mod tests {
     use super::*;
 
-    /// The splat as it was before it kept three weights per axis (five, each cell checked):
-    /// the reference the faster one must match bit for bit.
+    /// The splat as it was before it kept three weights per axis (five, each cell checked; the
+    /// footprint choice is the same): the reference the faster one must match bit for bit.
     fn splat_five_weights(
         landing: &Landing,
         shift_px: DVec2,
@@ -604,15 +609,7 @@ mod tests {
         width: usize,
         height: usize,
     ) -> Vec<f64> {
-        let own = footprint_px <= 0.0 && landing.half_widths_px.len() == landing.positions_px.len();
-        let square = if footprint_px > 0.0 {
-            footprint_px
-        } else if !own || landing.half_widths_px.contains(&DVec2::ZERO) {
-            auto_footprint_px(landing)
-        } else {
-            1.0
-        };
-        let square = DVec2::splat(0.5 * square.clamp(1e-3, 2.0));
+        let (own, square) = footprints(landing, footprint_px);
         let five = |x: f64, h: f64| {
             let lo = x - h;
             let first = lo.floor();
