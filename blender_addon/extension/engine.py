@@ -228,11 +228,15 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
         rv3d = context.region_data
         if rv3d.view_perspective == "CAMERA" and scene.camera is not None and scene.camera.type == "CAMERA":
             return camera_mod.camera_kwargs(scene, scene.camera.evaluated_get(depsgraph), depsgraph, Notes())
-        if not rv3d.is_perspective:
-            raise camera_mod.SettingsError(
-                "orthographic 3D views are not previewed; look through an orthographic camera instead"
-            )
         space = context.space_data
+        if not rv3d.is_perspective:
+            return viewport_mod.free_ortho_view_kwargs(
+                rv3d.view_matrix.inverted(),
+                rv3d.view_distance,
+                space.lens,
+                space.clip_end,
+                natural_vignetting=bool(scene.petzval.natural_vignetting),
+            )
         return viewport_mod.free_view_kwargs(
             rv3d.view_matrix.inverted(),
             space.lens,

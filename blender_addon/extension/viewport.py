@@ -44,6 +44,35 @@ def free_view_kwargs(
     }
 
 
+def free_ortho_view_kwargs(
+    view_matrix_inverted, view_distance: float, lens_mm: float, clip_end: float, natural_vignetting: bool = False
+) -> dict:
+    """``petzval.Camera`` arguments for a free orthographic 3D view, as Blender frames it
+    (``BKE_camera_params_from_view3d``): an Orthographic Scale of distance × 36 mm / lens at
+    zoom 2, i.e. distance × 72 / lens across the larger side, and depth from −clip_end/2 to
+    +clip_end/2 about the view point. Petzval clips from the window's own plane, so the window
+    moves back by clip_end/2 along the view axis and keeps [0, clip_end]."""
+    half = 0.5 * float(clip_end)
+    m = view_matrix_inverted.copy()
+    # the view looks along its −Z axis: +Z points behind it
+    m.translation = m.translation + m.col[2].xyz.normalized() * half
+    return {
+        "camera_to_world": camera_mod.camera_to_world(m),
+        "lens": "thin",
+        "lens_model": "auto",
+        "focal_length_mm": float(lens_mm),
+        "sensor_width_mm": VIEWPORT_SENSOR_MM,
+        "sensor_height_mm": VIEWPORT_SENSOR_MM,
+        "sensor_fit": "auto",
+        "ortho_scale_m": float(view_distance) * VIEWPORT_SENSOR_MM / float(lens_mm),
+        "fstop": None,
+        "focus_distance_m": None,
+        "clip_start_m": 0.0,
+        "clip_end_m": 2.0 * half,
+        "natural_vignetting": bool(natural_vignetting),
+    }
+
+
 def view_key(kwargs: dict, width: int, height: int) -> tuple:
     """What identifies a view: a change restarts the preview."""
     items = []

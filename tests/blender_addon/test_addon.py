@@ -1066,6 +1066,68 @@ def test_viewport_preview_renders_the_view_in_the_background(main_scene, report)
         cam_obj.data.dof.use_dof = True
 
 
+def test_orthographic_free_view_frames_as_blender(main_scene, report):
+    """A free orthographic 3D view (numpad 5) is previewed as Blender frames it: an Orthographic
+    Scale of view distance × 72 / lens across the larger side, depth ±clip_end/2 about the view
+    point. Placed so that it sees what OrthoCam (shift and depth of field off) sees, the preview
+    gives OrthoCam's image; a view 3 % farther (a wider window) does not."""
+    import importlib
+
+    import petzval
+
+    _use_main_scene(main_scene)
+    H.configure_petzval(spp=8, camera="MainCam")
+    vp = importlib.import_module(H.ADDON_MODULE + ".viewport")
+    cam_mod = importlib.import_module(H.ADDON_MODULE + ".camera")
+    export_mod = importlib.import_module(H.ADDON_MODULE + ".export")
+    notes_mod = importlib.import_module(H.ADDON_MODULE + ".notes")
+    scene = bpy.context.scene
+    cam_obj = bpy.data.objects["OrthoCam"]
+    cam = cam_obj.data
+    saved = (cam.shift_x, cam.shift_y, cam.dof.use_dof, cam.clip_start)
+    cam.shift_x = cam.shift_y = 0.0
+    cam.dof.use_dof = False
+    cam.clip_start = 1e-6  # the free view's window clips nothing in front of it
+    try:
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        notes = notes_mod.Notes()
+        pz_scene, _ = export_mod.build(petzval, depsgraph, notes)
+        export_mod.add_world(pz_scene, scene.world, notes, None)
+        render_kw = cam_mod.render_kwargs(scene, scene.frame_current)
+        render_kw.pop("spp")
+        w, h = 60, 40
+        cam_kw = cam_mod.camera_kwargs(scene, cam_obj.evaluated_get(depsgraph), depsgraph, notes)
+        ref = petzval.render(pz_scene, petzval.Camera(**cam_kw), w, h, spp=8, **render_kw)["rgba"]
+        # the view point sits clip_end/2 in front of the camera (depth ±clip_end/2 about it)
+        lens_mm, clip_end = 50.0, float(cam.clip_end)
+        view = cam_obj.matrix_world.copy()
+        view.translation = view.translation - view.col[2].xyz.normalized() * (0.5 * clip_end)
+
+        def free_view(distance_scale: float):
+            distance = distance_scale * cam.ortho_scale * lens_mm / vp.VIEWPORT_SENSOR_MM
+            kw = vp.free_ortho_view_kwargs(view, distance, lens_mm, clip_end)
+            return kw, petzval.render(pz_scene, petzval.Camera(**kw), w, h, spp=8, **render_kw)["rgba"]
+
+        kw, got = free_view(1.0)
+        assert kw["ortho_scale_m"] == pytest.approx(cam.ortho_scale, rel=1e-12)
+        assert kw["clip_start_m"] == 0.0 and kw["clip_end_m"] == pytest.approx(clip_end)
+        assert np.allclose(np.asarray(kw["camera_to_world"]), np.asarray(cam_kw["camera_to_world"]), atol=1e-9)
+        rgb, ref_rgb = got[..., :3], ref[..., :3]
+        scale = float(ref_rgb.mean())
+        off = np.abs(rgb - ref_rgb).max(axis=2) > 1e-4 * scale
+        _, wide = free_view(1.03)
+        wide_off = np.abs(wide[..., :3] - ref_rgb).max(axis=2) > 1e-4 * scale
+        report.line(
+            f"orthographic free view vs OrthoCam: {off.mean() * 100:.2f} % of pixels differ "
+            f"(view 3 % farther: {wide_off.mean() * 100:.1f} %)"
+        )
+        # the same rays up to the last bits of the window's position
+        assert off.mean() <= 0.005, f"{off.mean() * 100:.2f} % of pixels differ"
+        assert wide_off.mean() > 0.2, f"a 3 % wider window changed only {wide_off.mean() * 100:.1f} % of pixels"
+    finally:
+        cam.shift_x, cam.shift_y, cam.dof.use_dof, cam.clip_start = saved
+
+
 def test_viewport_preview_with_a_fast_depth_of_field_method(main_scene, report):
     """The viewport's Depth of Field setting reaches the preview render: layered ray tracing
     through the camera's lens gives an image near Monte Carlo's (mean within 5 %, the blur in the
