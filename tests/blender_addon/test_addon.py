@@ -1121,6 +1121,25 @@ def test_orthographic_free_view_frames_as_blender(main_scene, report):
             f"orthographic free view vs OrthoCam: {off.mean() * 100:.2f} % of pixels differ "
             f"(view 3 % farther: {wide_off.mean() * 100:.1f} %)"
         )
+        # the engine's dispatch: an orthographic region gets this framing, a perspective one the
+        # perspective view's (a stand-in context: bpy as a module has no 3D view region)
+        import types
+
+        engine = importlib.import_module(H.ADDON_MODULE + ".engine").PetzvalRenderEngine
+        space = types.SimpleNamespace(lens=lens_mm, clip_start=0.01, clip_end=clip_end)
+        distance = cam.ortho_scale * lens_mm / vp.VIEWPORT_SENSOR_MM
+        for persp in (False, True):
+            rv3d = types.SimpleNamespace(
+                view_perspective="ORTHO" if not persp else "PERSP",
+                is_perspective=persp,
+                view_matrix=view.inverted(),
+                view_distance=distance,
+            )
+            ctx = types.SimpleNamespace(region_data=rv3d, space_data=space)
+            got_kw = engine._view_kwargs(None, ctx, depsgraph)
+            assert ("ortho_scale_m" in got_kw) == (not persp), got_kw
+            if not persp:
+                assert got_kw["ortho_scale_m"] == pytest.approx(cam.ortho_scale, rel=1e-6)
         # the same rays up to the last bits of the window's position
         assert off.mean() <= 0.005, f"{off.mean() * 100:.2f} % of pixels differ"
         assert wide_off.mean() > 0.2, f"a 3 % wider window changed only {wide_off.mean() * 100:.1f} % of pixels"
