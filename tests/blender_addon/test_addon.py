@@ -998,28 +998,39 @@ def test_panels_draw(addon):
 # tests what view_draw runs — the free-view camera, the background render, restart and cancel)
 
 
-def test_viewport_preview_renders_the_view_in_the_background(main_scene, report):
+def _viewport_setup():
+    """What the viewport tests share, once the scene and its cameras are set: (the add-on's
+    viewport and camera modules, the translated scene, the render arguments without spp, the
+    depsgraph, the notes)."""
     import importlib
+
+    import petzval
+
+    vp = importlib.import_module(H.ADDON_MODULE + ".viewport")
+    cam_mod = importlib.import_module(H.ADDON_MODULE + ".camera")
+    export_mod = importlib.import_module(H.ADDON_MODULE + ".export")
+    notes = importlib.import_module(H.ADDON_MODULE + ".notes").Notes()
+    scene = bpy.context.scene
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    pz_scene, _ = export_mod.build(petzval, depsgraph, notes)
+    export_mod.add_world(pz_scene, scene.world, notes, None)
+    render_kw = cam_mod.render_kwargs(scene, scene.frame_current)
+    render_kw.pop("spp")
+    return vp, cam_mod, pz_scene, render_kw, depsgraph, notes
+
+
+def test_viewport_preview_renders_the_view_in_the_background(main_scene, report):
     import time
 
     import petzval
 
     _use_main_scene(main_scene)
     H.configure_petzval(spp=16, camera="MainCam")
-    vp = importlib.import_module(H.ADDON_MODULE + ".viewport")
-    cam_mod = importlib.import_module(H.ADDON_MODULE + ".camera")
-    export_mod = importlib.import_module(H.ADDON_MODULE + ".export")
-    notes_mod = importlib.import_module(H.ADDON_MODULE + ".notes")
     scene = bpy.context.scene
     cam_obj = bpy.data.objects["MainCam"]
     cam_obj.data.dof.use_dof = False
     try:
-        depsgraph = bpy.context.evaluated_depsgraph_get()
-        notes = notes_mod.Notes()
-        pz_scene, _ = export_mod.build(petzval, depsgraph, notes)
-        export_mod.add_world(pz_scene, scene.world, notes, None)
-        render_kw = cam_mod.render_kwargs(scene, scene.frame_current)
-        render_kw.pop("spp")
+        vp, cam_mod, pz_scene, render_kw, depsgraph, notes = _viewport_setup()
         w, h = 60, 40
         # A free view with the camera's matrix and twice its focal length (Blender's viewport
         # sensor is 72 mm) sees exactly what the depth-of-field-free camera sees.
@@ -1077,10 +1088,6 @@ def test_orthographic_free_view_frames_as_blender(main_scene, report):
 
     _use_main_scene(main_scene)
     H.configure_petzval(spp=8, camera="MainCam")
-    vp = importlib.import_module(H.ADDON_MODULE + ".viewport")
-    cam_mod = importlib.import_module(H.ADDON_MODULE + ".camera")
-    export_mod = importlib.import_module(H.ADDON_MODULE + ".export")
-    notes_mod = importlib.import_module(H.ADDON_MODULE + ".notes")
     scene = bpy.context.scene
     cam_obj = bpy.data.objects["OrthoCam"]
     cam = cam_obj.data
@@ -1089,12 +1096,7 @@ def test_orthographic_free_view_frames_as_blender(main_scene, report):
     cam.dof.use_dof = False
     cam.clip_start = 1e-6  # the free view's window clips nothing in front of it
     try:
-        depsgraph = bpy.context.evaluated_depsgraph_get()
-        notes = notes_mod.Notes()
-        pz_scene, _ = export_mod.build(petzval, depsgraph, notes)
-        export_mod.add_world(pz_scene, scene.world, notes, None)
-        render_kw = cam_mod.render_kwargs(scene, scene.frame_current)
-        render_kw.pop("spp")
+        vp, cam_mod, pz_scene, render_kw, depsgraph, notes = _viewport_setup()
         w, h = 60, 40
         cam_kw = cam_mod.camera_kwargs(scene, cam_obj.evaluated_get(depsgraph), depsgraph, notes)
         ref = petzval.render(pz_scene, petzval.Camera(**cam_kw), w, h, spp=8, **render_kw)["rgba"]
@@ -1158,21 +1160,12 @@ def test_viewport_preview_with_a_fast_depth_of_field_method(main_scene, report):
 
     _use_main_scene(main_scene)
     H.configure_petzval(spp=16, camera="MainCam")
-    vp = importlib.import_module(H.ADDON_MODULE + ".viewport")
-    cam_mod = importlib.import_module(H.ADDON_MODULE + ".camera")
-    export_mod = importlib.import_module(H.ADDON_MODULE + ".export")
-    notes_mod = importlib.import_module(H.ADDON_MODULE + ".notes")
     props = importlib.import_module(H.ADDON_MODULE + ".properties")
     scene = bpy.context.scene
     assert [m[0].lower() for m in props.VIEWPORT_METHODS] == ["mc", "ibrt", "spread", "multiview"]
     scene.petzval.viewport_method = "IBRT"
     cam_obj = bpy.data.objects["MainCam"]
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    notes = notes_mod.Notes()
-    pz_scene, _ = export_mod.build(petzval, depsgraph, notes)
-    export_mod.add_world(pz_scene, scene.world, notes, None)
-    render_kw = cam_mod.render_kwargs(scene, scene.frame_current)
-    render_kw.pop("spp")
+    vp, cam_mod, pz_scene, render_kw, depsgraph, notes = _viewport_setup()
     cam_kw = cam_mod.camera_kwargs(scene, cam_obj.evaluated_get(depsgraph), depsgraph, notes)
     w, h = 60, 40
 
