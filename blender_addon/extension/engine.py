@@ -229,20 +229,14 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
         if rv3d.view_perspective == "CAMERA" and scene.camera is not None and scene.camera.type == "CAMERA":
             return camera_mod.camera_kwargs(scene, scene.camera.evaluated_get(depsgraph), depsgraph, Notes())
         space = context.space_data
+        view = rv3d.view_matrix.inverted()
+        vignetting = bool(scene.petzval.natural_vignetting)
         if not rv3d.is_perspective:
             return viewport_mod.free_ortho_view_kwargs(
-                rv3d.view_matrix.inverted(),
-                rv3d.view_distance,
-                space.lens,
-                space.clip_end,
-                natural_vignetting=bool(scene.petzval.natural_vignetting),
+                view, rv3d.view_distance, space.lens, space.clip_end, natural_vignetting=vignetting
             )
         return viewport_mod.free_view_kwargs(
-            rv3d.view_matrix.inverted(),
-            space.lens,
-            space.clip_start,
-            space.clip_end,
-            natural_vignetting=bool(scene.petzval.natural_vignetting),
+            view, space.lens, space.clip_start, space.clip_end, natural_vignetting=vignetting
         )
 
     def view_draw(self, context, depsgraph):

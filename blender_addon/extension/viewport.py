@@ -52,10 +52,9 @@ def free_ortho_view_kwargs(
     zoom 2, i.e. distance × 72 / lens across the larger side, and depth from −clip_end/2 to
     +clip_end/2 about the view point. Petzval clips from the window's own plane, so the window
     moves back by clip_end/2 along the view axis and keeps [0, clip_end]."""
-    half = 0.5 * float(clip_end)
     m = view_matrix_inverted.copy()
     # the view looks along its −Z axis: +Z points behind it
-    m.translation = m.translation + m.col[2].xyz.normalized() * half
+    m.translation = m.translation + m.col[2].xyz.normalized() * (0.5 * float(clip_end))
     return {
         "camera_to_world": camera_mod.camera_to_world(m),
         "lens": "thin",
@@ -68,7 +67,7 @@ def free_ortho_view_kwargs(
         "fstop": None,
         "focus_distance_m": None,
         "clip_start_m": 0.0,
-        "clip_end_m": 2.0 * half,
+        "clip_end_m": float(clip_end),
         "natural_vignetting": bool(natural_vignetting),
     }
 
