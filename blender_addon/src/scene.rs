@@ -173,7 +173,7 @@ impl PyScene {
     }
 
     /// Adds a glTF metallic-roughness material; returns its index.
-    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true, light_emitter = false, visible_to_camera = true, transmission = 0.0))]
+    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true, light_emitter = false, visible_to_camera = true, transmission = 0.0, coat_weight = 0.0, coat_roughness = 0.03, coat_ior = 1.5, coat_tint = vec![1.0, 1.0, 1.0]))]
     #[allow(clippy::too_many_arguments)]
     fn add_material(
         &mut self,
@@ -195,6 +195,10 @@ impl PyScene {
         light_emitter: bool,
         visible_to_camera: bool,
         transmission: f64,
+        coat_weight: f64,
+        coat_roughness: f64,
+        coat_ior: f64,
+        coat_tint: Vec<f64>,
     ) -> PyResult<usize> {
         guard(|| {
             let bc = match base_color.as_slice() {
@@ -217,6 +221,9 @@ impl PyScene {
                 ("normal_scale", normal_scale, -100.0, 100.0),
                 ("alpha_cutoff", alpha_cutoff, 0.0, 1.0),
                 ("transmission", transmission, 0.0, 1.0),
+                ("coat_weight", coat_weight, 0.0, 1.0),
+                ("coat_roughness", coat_roughness, 0.0, 1.0),
+                ("coat_ior", coat_ior, 1.0, 10.0),
             ] {
                 if !(v.is_finite() && v >= lo && v <= hi) {
                     return Err(scene_err(name, field, format!("{v} is outside [{lo}, {hi}]")));
@@ -246,6 +253,10 @@ impl PyScene {
                 visible_to_camera,
                 terminator_offset: petzval_renderer::scene::TERMINATOR_OFFSET,
                 transmission: transmission as f32,
+                coat: coat_weight as f32,
+                coat_roughness: coat_roughness as f32,
+                coat_ior: coat_ior as f32,
+                coat_tint: non_negative_rgb(name, "coat_tint", &coat_tint)?,
             };
             self.scene.materials.push(m);
             Ok(self.scene.materials.len() - 1)

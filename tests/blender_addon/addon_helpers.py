@@ -319,7 +319,9 @@ def build_lights_scene(variant: str):
     "terminator" has smooth-shaded low-poly meshes lit from the side by a sun: Suzanne with
     Blender's default Shadow Terminator Geometry Offset (0.1) and a 12 x 6 UV sphere with 0.
     "glass" makes the two spheres glass (Transmission Weight 1: clear IOR 1.45, and a tinted one
-    of roughness 0.3) over the checker ground, lit by the environment texture. "ortho" is "texture"
+    of roughness 0.3) over the checker ground, lit by the environment texture. "coat" coats the
+    two spheres (a red dielectric under a smooth coat of weight 1; a metal under a rougher,
+    tinted coat of weight 0.6 and IOR 1.8) over the same ground and light. "ortho" is "texture"
     seen through an orthographic camera (Orthographic Scale 3 m, VERTICAL fit, shifted, f/4 focused
     at 2.5 m)."""
     b = bpy()
@@ -330,7 +332,7 @@ def build_lights_scene(variant: str):
         world.use_nodes = True
     nt = world.node_tree
     bg = nt.nodes.get("Background")
-    bg.inputs["Strength"].default_value = 0.5 if variant in ("world", "glass") else 0.0
+    bg.inputs["Strength"].default_value = 0.5 if variant in ("world", "glass", "coat") else 0.0
     env = nt.nodes.new("ShaderNodeTexEnvironment")
     env.image = _environment_image()
     mapping = nt.nodes.new("ShaderNodeMapping")
@@ -343,7 +345,7 @@ def build_lights_scene(variant: str):
 
     b.ops.mesh.primitive_plane_add(size=8.0, location=(0.0, 2.0, 0.0))
     ground = _principled_lambert("Ground", (0.5, 0.5, 0.5))
-    if variant in ("texture", "glass", "ortho"):
+    if variant in ("texture", "glass", "ortho", "coat"):
         # the ground's colour from a coarse 8-bit checker with Linear interpolation
         tex = ground.node_tree.nodes.new("ShaderNodeTexImage")
         tex.image = _checker_image()
@@ -369,6 +371,15 @@ def build_lights_scene(variant: str):
             rough = r < 0.4
             p.inputs["Roughness"].default_value = 0.3 if rough else 0.0
             p.inputs["Base Color"].default_value = (0.75, 0.9, 0.8, 1.0) if rough else (1.0, 1.0, 1.0, 1.0)
+        if variant == "coat":
+            p = mat.node_tree.nodes.get("Principled BSDF")
+            small = r < 0.4
+            p.inputs["Coat Weight"].default_value = 1.0 if small else 0.6
+            p.inputs["Coat Roughness"].default_value = 0.05 if small else 0.25
+            p.inputs["Coat IOR"].default_value = 1.5 if small else 1.8
+            p.inputs["Coat Tint"].default_value = (1.0, 1.0, 1.0, 1.0) if small else (0.9, 0.6, 0.3, 1.0)
+            p.inputs["Roughness"].default_value = 0.5 if small else 0.35
+            p.inputs["Metallic"].default_value = 0.0 if small else 1.0
         b.context.active_object.data.materials.append(mat)
 
     lights = (("Rect", "RECTANGLE", 1.0, 0.5, (0.8, 1.0, 2.6), 300.0, (1.0, 0.85, 0.7)),

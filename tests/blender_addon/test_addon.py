@@ -286,7 +286,7 @@ SPP_LIGHTS = 128
 
 
 @pytest.mark.parametrize(
-    "variant", ["area", "world", "spots", "soft", "texture", "hidden", "terminator", "glass", "ortho"]
+    "variant", ["area", "world", "spots", "soft", "texture", "hidden", "terminator", "glass", "coat", "ortho"]
 )
 def test_area_lights_and_environment_match_cycles(addon, report, variant):
     """What tests/blender's glTF scene cannot carry, against Cycles (8x8 block z-test and image
@@ -303,7 +303,8 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
     was seen before); "terminator": smooth-shaded low-poly meshes lit from the side, Suzanne with
     Blender's default Shadow Terminator Geometry Offset and a coarse sphere with 0 (their
     terminators were darker than Cycles'); "glass": a clear and a rough tinted glass sphere over a
-    checker, lit by the environment (Transmission Weight was ignored: opaque spheres); "ortho": the
+    checker, lit by the environment (Transmission Weight was ignored: opaque spheres); "coat": a
+    coated dielectric and a coated, tinted metal sphere (the coat was ignored); "ortho": the
     "texture" scene through an orthographic camera (VERTICAL fit, shifted, Cycles' depth of field;
     it was refused)."""
     H.build_lights_scene(variant)
@@ -326,6 +327,7 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
         "hidden": "an area light in view and a cube hidden from camera rays",
         "terminator": "smooth low-poly meshes lit from the side (geometry offsets 0.1 and 0)",
         "glass": "a clear and a rough tinted glass sphere over a checker",
+        "coat": "a coated dielectric and a coated metal sphere (Coat Weight, Roughness, IOR, Tint) over a checker",
         "ortho": "an orthographic camera (scale 3 m, VERTICAL fit, shifted, f/4 at 2.5 m) over a sun-lit checker",
     }[variant]
     report.line(f"{what} vs Cycles, {w}x{h} {SPP_LIGHTS} spp x seeds {SEEDS} ({secs:.1f} s per F12)")
@@ -725,7 +727,7 @@ def test_border_crop_and_depth_pass(addon, report):
 
 
 def test_unsupported_features_listed_once(addon, report):
-    """A Glass BSDF and a Principled BSDF with coat on two objects each: one WARNING listing each
+    """A Glass BSDF and a Principled BSDF with sheen on two objects each: one WARNING listing each
     unsupported thing once, and the render still completes."""
     _depth_scene()
     H.configure_petzval(2, seed=0, camera="DepthCam")
@@ -734,9 +736,9 @@ def test_unsupported_features_listed_once(addon, report):
     nt.nodes.remove(nt.nodes.get("Principled BSDF"))
     g = nt.nodes.new("ShaderNodeBsdfGlass")
     nt.links.new(g.outputs[0], nt.nodes.get("Material Output").inputs["Surface"])
-    coat = bpy.data.materials.new("CoatMat")
-    coat.node_tree.nodes.get("Principled BSDF").inputs["Coat Weight"].default_value = 0.5
-    for i, m in enumerate((glass, glass, coat, coat)):
+    sheen = bpy.data.materials.new("SheenMat")
+    sheen.node_tree.nodes.get("Principled BSDF").inputs["Sheen Weight"].default_value = 0.5
+    for i, m in enumerate((glass, glass, sheen, sheen)):
         bpy.ops.mesh.primitive_cube_add(size=0.3, location=(-0.9 + 0.6 * i, 2.5, 0.0))
         bpy.context.active_object.data.materials.append(m)
     _, entry = H.render_still(OUT / "unsupported.exr")
@@ -744,7 +746,7 @@ def test_unsupported_features_listed_once(addon, report):
     report.line(f"unsupported features reported once: {unsupported}")
     assert len(unsupported) == len(set(unsupported)) == 2, unsupported
     assert any("GlassMat" in u and "Glass" in u for u in unsupported)
-    assert any("CoatMat" in u and "Coat" in u for u in unsupported)
+    assert any("SheenMat" in u and "Sheen" in u for u in unsupported)
     assert entry.get("complete") is True
 
 

@@ -265,6 +265,8 @@ impl UsdShot {
                 "roughness": m.roughness,
                 "emissive": m.emissive.to_array(),
                 "ior": m.ior,
+                "coat": m.coat,
+                "coat_roughness": m.coat_roughness,
                 "double_sided": m.double_sided,
                 "base_color_texture": m.base_color_texture.map(|t| self.scene.textures[t.index].name.clone()),
                 "base_color_uv_transform": m.base_color_texture.and_then(|t| t.transform).map(|t| {

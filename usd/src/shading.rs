@@ -10,6 +10,7 @@
 //! | `emissiveColor` | emitted radiance | 0 |
 //! | `opacity`, `opacityThreshold` | alpha; threshold > 0 = mask, else blend when < 1 | 1, 0 |
 //! | `ior` | dielectric F0 | 1.5 |
+//! | `clearcoat`, `clearcoatRoughness` | clear coat weight and roughness (IOR 1.5, untinted) | 0, 0.01 |
 //! | `specular` (Blender's Specular IOR Level, not in the spec) | specular strength × 2 (0.5 = F0 of the IOR) | 0.5 |
 //! | `normal` (UsdUVTexture, raw) | tangent-space normal map | none |
 //!
@@ -180,6 +181,19 @@ impl Materials {
                 }
             }
         }
+        // The clear coat (IOR 1.5 and untinted, as the spec has it).
+        for input in ["inputs:clearcoat", "inputs:clearcoatRoughness"] {
+            if source_prim(stage, &shader, input).is_some() {
+                warnings.push(format!("{}: {input} from a texture is not supported; its value is used", shader.path()));
+            }
+        }
+        if let Some(v) = reader.f64(&shader, "inputs:clearcoat")? {
+            m.coat = if v.is_finite() { (v as f32).clamp(0.0, 1.0) } else { 0.0 };
+        }
+        m.coat_roughness = match reader.f64(&shader, "inputs:clearcoatRoughness")? {
+            Some(v) if v.is_finite() => (v as f32).clamp(0.0, 1.0),
+            _ => 0.01,
+        };
         // Not a UsdPreviewSurface input in the spec: Blender's exporter writes its Principled
         // BSDF's Specular IOR Level here (0.5 = the dielectric F0 of the IOR), which is half of
         // the renderer's (KHR_materials_specular) factor.

@@ -330,3 +330,26 @@ fn cameras_are_found_by_name() {
     let e = shot.camera(Some("Nope")).err().unwrap().to_string();
     assert!(e.contains("Nope") && e.contains("/root/Camera/Camera"), "{e}");
 }
+
+/// UsdPreviewSurface's clear coat (Blender's USD export writes Coat Weight and Coat Roughness
+/// there): read as the material's coat of IOR 1.5, untinted; without it the coat weight is 0 and
+/// the roughness the spec's fallback, 0.01.
+#[test]
+fn preview_surface_clearcoat_is_read() {
+    let stage = |name: &str, inputs: &str| {
+        write(
+            name,
+            &format!(
+                "#usda 1.0\n(\n metersPerUnit = 1\n)\ndef Mesh \"Card\"\n{{\n point3f[] points = [(-1,-1,0),(1,-1,0),(1,1,0),(-1,1,0)]\n int[] faceVertexCounts = [4]\n int[] faceVertexIndices = [0,1,2,3]\n rel material:binding = </M>\n}}\ndef Material \"M\"\n{{\n token outputs:surface.connect = </M/S.outputs:surface>\n def Shader \"S\"\n {{\n  uniform token info:id = \"UsdPreviewSurface\"\n{inputs}  token outputs:surface\n }}\n}}\n"
+            ),
+        )
+    };
+    let shot =
+        load(&stage("coat.usda", "  float inputs:clearcoat = 0.6\n  float inputs:clearcoatRoughness = 0.25\n"), None)
+            .unwrap();
+    let m = &shot.scene.materials[0];
+    assert_eq!((m.coat, m.coat_roughness, m.coat_ior, m.coat_tint), (0.6, 0.25, 1.5, glam::Vec3::ONE));
+    assert!(shot.scene.warnings.is_empty(), "{:?}", shot.scene.warnings);
+    let m = &load(&stage("nocoat.usda", ""), None).unwrap().scene.materials[0];
+    assert_eq!((m.coat, m.coat_roughness), (0.0, 0.01));
+}

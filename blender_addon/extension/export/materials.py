@@ -273,9 +273,21 @@ class Materials:
         if source(node.inputs.get("Transmission Weight")) is not None:
             self.notes.warn(f"material '{name}': Transmission Weight from a node (its unlinked value used)")
 
+        # the clear coat (Coat Weight, Roughness, IOR, Tint; its own Normal input is not read)
+        coat = min(max(float(value(node, "Coat Weight", 0.0)), 0.0), 1.0)
+        if coat > 0.0:
+            kw["coat_weight"] = coat
+            kw["coat_roughness"] = min(max(float(value(node, "Coat Roughness", 0.03)), 0.0), 1.0)
+            kw["coat_ior"] = min(max(float(value(node, "Coat IOR", 1.5)), 1.0), 10.0)
+            kw["coat_tint"] = tuple(max(float(c), 0.0) for c in value(node, "Coat Tint", (1.0, 1.0, 1.0, 1.0))[:3])
+        for inp in ("Coat Weight", "Coat Roughness", "Coat IOR", "Coat Tint"):
+            if source(node.inputs.get(inp)) is not None:
+                self.notes.warn(f"material '{name}': {inp} from a node (its unlinked value used)")
+        if coat > 0.0 and source(node.inputs.get("Coat Normal")) is not None:
+            self.notes.warn(f"material '{name}': Coat Normal (the coat uses the surface's normal)")
+
         # lobes glTF/Petzval's BSDF does not have
         for label, inp in (
-            ("Coat", "Coat Weight"),
             ("Sheen", "Sheen Weight"),
             ("Subsurface", "Subsurface Weight"),
             ("Anisotropy", "Anisotropic"),

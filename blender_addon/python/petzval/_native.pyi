@@ -107,6 +107,10 @@ class Scene:
         light_emitter: bool = False,
         visible_to_camera: bool = True,
         transmission: float = 0.0,
+        coat_weight: float = 0.0,
+        coat_roughness: float = 0.03,
+        coat_ior: float = 1.5,
+        coat_tint: Sequence[float] = (1.0, 1.0, 1.0),
     ) -> int:
         """Adds a glTF metallic-roughness material and returns its index.
 
@@ -121,7 +125,10 @@ class Scene:
         Blender 5): they go on through it, while reflections, bounces and shadows still see it.
         ``transmission`` (Blender's Transmission Weight, glTF's transmissionFactor) makes that
         share of the dielectric part glass, refracting by ``ior`` and tinted by the base colour.
-        Texture indices come from :meth:`add_texture`."""
+        ``coat_weight``, ``coat_roughness``, ``coat_ior`` and ``coat_tint`` are the Principled
+        BSDF's Coat: a glossy layer over everything else, which dims what lies under it by its
+        reflectance and tints it by ``coat_tint`` (linear RGB, head-on) along the refracted
+        view ray, as Cycles does. Texture indices come from :meth:`add_texture`."""
     def material_variant(self, material: int, visible_to_camera: bool = True, terminator_offset: float = 0.1) -> int:
         """Adds a copy of material ``material`` with an object's settings and returns its index:
         ``visible_to_camera`` (its Ray Visibility > Camera) and ``terminator_offset`` (its

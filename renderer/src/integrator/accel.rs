@@ -53,6 +53,7 @@ use obvhs::{
     BvhBuildParams,
 };
 
+use super::bsdf::Coat;
 use super::lights::{EmitterGroup, LightSet};
 use super::packet::{self, PACKET};
 use super::traverse;
@@ -580,6 +581,8 @@ pub struct RenderScene {
     /// Per mesh.
     mesh_info: Vec<MeshInfo>,
     pub(crate) alpha_tests: Vec<AlphaTest>,
+    /// Per material: its clear coat, built once.
+    coats: Vec<Option<Coat>>,
     any_stochastic: bool,
     /// Some material is hidden from camera rays.
     any_hidden_from_camera: bool,
@@ -704,6 +707,8 @@ impl RenderScene {
         let alpha_tests: Vec<AlphaTest> = scene.materials.iter().map(alpha_test_of).collect();
         let any_stochastic = alpha_tests.contains(&AlphaTest::Stochastic);
         let any_hidden_from_camera = scene.materials.iter().any(|m| !m.visible_to_camera);
+        let coats: Vec<Option<Coat>> =
+            scene.materials.iter().map(|m| Coat::new(m.coat, m.coat_roughness, m.coat_ior, m.coat_tint)).collect();
         let alpha_flag = |mesh: &Mesh, t: u32| {
             if alpha_tests[mesh.material_ids[t as usize] as usize] != AlphaTest::None {
                 ALPHA_BIT
@@ -946,6 +951,7 @@ impl RenderScene {
             alpha_tests,
             any_stochastic,
             any_hidden_from_camera,
+            coats,
             lights,
             bounds_min,
             bounds_max,
@@ -1072,6 +1078,12 @@ impl RenderScene {
         let uv0 = m.uv0[i0] * b0 + m.uv0[i1] * b1 + m.uv0[i2] * b2;
         let uv1 = if info.has_uv1 { m.uv1[i0] * b0 + m.uv1[i1] * b1 + m.uv1[i2] * b2 } else { uv0 };
         (uv0, uv1)
+    }
+
+    /// The clear coat of material `material_id` (None: uncoated).
+    #[inline]
+    pub fn coat(&self, material_id: u32) -> Option<&Coat> {
+        self.coats.get(material_id as usize).and_then(Option::as_ref)
     }
 
     /// Material id of triangle `tri` of instance `inst`.

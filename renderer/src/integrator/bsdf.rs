@@ -251,7 +251,7 @@ impl RoughnessRow {
 
 /// The glTF metallic-roughness BSDF in its local frame (normal = +z).
 #[derive(Debug, Clone, Copy)]
-pub struct Bsdf {
+pub struct Bsdf<'a> {
     base: Vec3,
     metallic: f32,
     alpha: f32,
@@ -273,9 +273,12 @@ pub struct Bsdf {
     /// The glass lobe of a transmissive material and its weight (1 − m)·transmission; the
     /// opaque lobes above are weighted by the rest.
     glass: Option<(f32, Glass)>,
+    /// A clear coat over everything above ([`Coat`]), where the material has one (built once
+    /// per material, so the BSDF stays small).
+    coat: Option<&'a Coat>,
 }
 
-impl Bsdf {
+impl<'a> Bsdf<'a> {
     /// A BSDF from glTF parameters: linear base colour, metallic, perceptual roughness,
     /// `KHR_materials_specular` specularFactor and `KHR_materials_ior` ior.
     pub fn new(base_color: Vec3, metallic: f32, roughness: f32, specular: f32, ior: f32) -> Self {
@@ -326,6 +329,7 @@ impl Bsdf {
             ms_colour,
             layered,
             glass: None,
+            coat: None,
         }
     }
 
@@ -347,6 +351,12 @@ impl Bsdf {
         Bsdf { glass: Some((weight, Glass::new(self.alpha.sqrt(), ior, tint))), ..self }
     }
 
+    /// The same BSDF under a clear coat ([`Coat`], Blender's Principled Coat); None leaves it
+    /// uncoated.
+    pub fn with_coat(self, coat: Option<&'a Coat>) -> Self {
+        Bsdf { coat, ..self }
+    }
+
     /// Whether the BSDF transmits (light from below the surface counts).
     #[inline]
     pub fn transmits(&self) -> bool {
@@ -362,9 +372,10 @@ impl Bsdf {
         }
     }
 
-    /// GGX alpha (roughness², clamped).
+    /// The smallest GGX alpha (roughness², clamped) of its lobes: the base's, or the coat's
+    /// where that is sharper.
     pub fn alpha(&self) -> f32 {
-        self.alpha
+        self.coat.map_or(self.alpha, |c| self.alpha.min(c.alpha))
     }
 
     /// Directional albedo of the dielectric specular layer at `mu` (what the diffuse base
@@ -395,6 +406,18 @@ impl Bsdf {
     /// Probability of choosing the specular lobe for `wo`.
     #[inline]
     fn spec_probability(&self, wo: Vec3) -> f32 {
+        let (ws, wd) = self.lobe_albedos(wo);
+        let sum = ws + wd;
+        if sum > 0.0 {
+            ws / sum
+        } else {
+            0.0
+        }
+    }
+
+    /// The specular lobe's and the cosine lobes' albedo estimates at `wo` (luminance).
+    #[inline]
+    fn lobe_albedos(&self, wo: Vec3) -> (f32, f32) {
         let ws = luminance(self.fresnel(wo.z));
         let wd = if !self.layered {
             (1.0 - self.metallic) * luminance(self.base)
@@ -410,17 +433,84 @@ impl Bsdf {
         } else {
             0.0
         };
-        let sum = ws + wd;
-        if sum > 0.0 {
-            ws / sum
-        } else {
-            0.0
-        }
+        (ws, wd)
     }
 
     /// f(wo, wi)·|cos θi| (local frame, `wo` above the surface; `wi` below counts only for
     /// a transmissive BSDF).
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        match self.coat {
+            None => self.eval_under(wo, wi),
+            Some(c) => {
+                let under = self.eval_under(wo, wi);
+                let under = if under == Vec3::ZERO { under } else { under * c.under_weight(wo.z) };
+                under + Vec3::splat(c.eval(wo, wi))
+            }
+        }
+    }
+
+    /// Solid-angle pdf of [`Bsdf::sample`] producing `wi`.
+    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        match self.coat {
+            None => self.pdf_under(wo, wi),
+            Some(c) => {
+                let pc = self.coat_probability(c, wo);
+                let under = if pc < 1.0 { self.pdf_under(wo, wi) * (1.0 - pc) } else { 0.0 };
+                under + if pc > 0.0 { c.pdf(wo, wi) * pc } else { 0.0 }
+            }
+        }
+    }
+
+    /// Samples wi: `u1` picks the lobe, `u2` the direction. None when the BSDF is black, the
+    /// sample falls below the surface (through it, for an opaque BSDF), or its pdf is zero.
+    pub fn sample(&self, wo: Vec3, u2: Vec2, u1: f32) -> Option<BsdfSample> {
+        let Some(c) = self.coat else { return self.sample_under(wo, u2, u1) };
+        // 1. The coat or what lies under it, by their albedos at μo (u1 reused within), 2. the
+        //    mixture's pdf and value.
+        let pc = self.coat_probability(c, wo);
+        let wi = if u1 < pc {
+            c.sample_direction(wo, u2)?
+        } else {
+            self.sample_under(wo, u2, ((u1 - pc) / (1.0 - pc)).min(ONE_BELOW))?.wi
+        };
+        let pdf = self.pdf(wo, wi);
+        if !(pdf > 0.0) {
+            return None;
+        }
+        let weight = self.eval(wo, wi) / pdf;
+        if !weight.is_finite() || weight == Vec3::ZERO {
+            return None;
+        }
+        Some(BsdfSample { wi, weight, pdf, is_delta: false })
+    }
+
+    /// The probability of sampling the coat for `wo`: its albedo against the rest's, as the
+    /// coat leaves it.
+    #[inline]
+    fn coat_probability(&self, c: &Coat, wo: Vec3) -> f32 {
+        if wo.z <= 0.0 {
+            return 0.0;
+        }
+        let coat = c.albedo(wo.z);
+        let under = luminance(c.under_weight(wo.z)) * self.albedo_estimate(wo);
+        if coat + under > 0.0 {
+            coat / (coat + under)
+        } else {
+            0.0
+        }
+    }
+
+    /// A rough estimate of the albedo under the coat at `wo` (lobe selection only).
+    fn albedo_estimate(&self, wo: Vec3) -> f32 {
+        let (ws, wd) = self.lobe_albedos(wo);
+        match &self.glass {
+            None => ws + wd,
+            Some((w, _)) => (ws + wd) * (1.0 - w) + w,
+        }
+    }
+
+    /// f·|cos θi| of everything under the coat (all of it for an uncoated BSDF).
+    fn eval_under(&self, wo: Vec3, wi: Vec3) -> Vec3 {
         match &self.glass {
             None => self.eval_opaque(wo, wi),
             Some((w, g)) => {
@@ -430,8 +520,8 @@ impl Bsdf {
         }
     }
 
-    /// Solid-angle pdf of [`Bsdf::sample`] producing `wi`.
-    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+    /// The pdf of [`Bsdf::sample_under`].
+    fn pdf_under(&self, wo: Vec3, wi: Vec3) -> f32 {
         match &self.glass {
             None => self.pdf_opaque(wo, wi),
             // the lobes are chosen by their weights
@@ -442,9 +532,8 @@ impl Bsdf {
         }
     }
 
-    /// Samples wi: `u1` picks the lobe, `u2` the direction. None when the BSDF is black, the
-    /// sample falls below the surface (through it, for an opaque BSDF), or its pdf is zero.
-    pub fn sample(&self, wo: Vec3, u2: Vec2, u1: f32) -> Option<BsdfSample> {
+    /// Samples everything under the coat (all of it for an uncoated BSDF).
+    fn sample_under(&self, wo: Vec3, u2: Vec2, u1: f32) -> Option<BsdfSample> {
         let Some((w, g)) = &self.glass else { return self.sample_opaque(wo, u2, u1) };
         // 1. A lobe by its weight (u1 reused within it), 2. the mixture's pdf and value.
         let wi = if u1 < *w {
@@ -452,11 +541,11 @@ impl Bsdf {
         } else {
             self.sample_opaque(wo, u2, ((u1 - w) / (1.0 - w)).min(ONE_BELOW))?.wi
         };
-        let pdf = self.pdf(wo, wi);
+        let pdf = self.pdf_under(wo, wi);
         if !(pdf > 0.0) {
             return None;
         }
-        let weight = self.eval(wo, wi) / pdf;
+        let weight = self.eval_under(wo, wi) / pdf;
         if !weight.is_finite() || weight == Vec3::ZERO {
             return None;
         }
@@ -544,6 +633,158 @@ impl Bsdf {
             return None;
         }
         Some(BsdfSample { wi, weight, pdf, is_delta: false })
+    }
+}
+
+/// A clear coat: a GGX reflection of its own roughness over the rest of the BSDF, as in
+/// Blender's Principled BSDF (Cycles' `svm_closure.h`, the coat layer):
+///
+/// ```text
+/// f = w·F(v·h)·D_c·V_c  +  (1 − w·E_c(μo)) · mix(1, tint^(1/cos θt), w) · f_under
+/// ```
+///
+/// `F` is the exact dielectric Fresnel reflectance at the coat's ior (as in Cycles); `E_c(μo)`
+/// the coat lobe's own directional albedo, integrated once per material (so a coat over a
+/// white base reflects exactly 1); θt the view ray's angle refracted into the coat (Beer's law
+/// through a coat of unit thickness whose colour head-on is `tint`). Like Cycles, the layering
+/// depends on the outgoing direction only, so a coated BSDF is not reciprocal. Not modelled:
+/// Cycles' multiple-scattering compensation of the coat lobe (under 0.1 % of its albedo at
+/// ior 1.5) and its attenuation of a coated material's emission. Built once per material
+/// ([`super::RenderScene`] holds them) and borrowed by each hit's [`Bsdf`].
+#[derive(Debug, Clone, Copy)]
+pub struct Coat {
+    weight: f32,
+    alpha: f32,
+    a2: f32,
+    ior: f32,
+    /// E_c at √μ nodes (single scattering, exact Fresnel).
+    albedo: [f32; COAT_MU],
+    /// ln(tint) (zero: no tint).
+    log_tint: Vec3,
+    /// 1/ior².
+    inv_ior2: f32,
+}
+
+/// Nodes of a coat's albedo curve, in √μ.
+const COAT_MU: usize = 32;
+
+impl Coat {
+    /// A coat of `weight` (0…1), perceptual `roughness`, `ior` and head-on `tint`; None when the
+    /// weight is 0 (or not finite).
+    pub fn new(weight: f32, roughness: f32, ior: f32, tint: Vec3) -> Option<Coat> {
+        let weight = if weight.is_finite() { weight.clamp(0.0, 1.0) } else { 0.0 };
+        if !(weight > 0.0) {
+            return None;
+        }
+        let roughness = if roughness.is_finite() { roughness.clamp(0.0, 1.0) } else { 0.0 };
+        let ior = if ior.is_finite() && ior >= 1.0 { ior } else { 1.5 };
+        let alpha = (roughness * roughness).max(MIN_ALPHA);
+        // a tint of 0 in a channel absorbs it entirely (ln → a large negative number)
+        let log_tint =
+            if tint.is_finite() { tint.clamp(Vec3::ZERO, Vec3::ONE).max(Vec3::splat(1e-12)) } else { Vec3::ONE };
+        let log_tint = Vec3::new(log_tint.x.ln(), log_tint.y.ln(), log_tint.z.ln());
+        let mut coat = Coat {
+            weight,
+            alpha,
+            a2: alpha * alpha,
+            ior,
+            albedo: [0.0; COAT_MU],
+            log_tint,
+            inv_ior2: 1.0 / (ior * ior),
+        };
+        // The lobe's albedo per μ node: 1024 visible-normal samples (f·μi/pdf = F·G2/G1).
+        const N: u32 = 1024;
+        for mi in 0..COAT_MU {
+            let x = mi as f32 / (COAT_MU - 1) as f32;
+            let mu = (x * x).max(1e-5);
+            let wo = Vec3::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
+            let lo = smith_lambda(mu, coat.a2);
+            let mut sum = 0.0f64;
+            for k in 0..N {
+                let u = Vec2::new((k as f32 + 0.5) / N as f32, radical_inverse_vdc(k));
+                let h = sample_vndf(wo, alpha, u);
+                let wi = 2.0 * wo.dot(h) * h - wo;
+                if wi.z > 0.0 {
+                    let g = (1.0 + lo) / (1.0 + lo + smith_lambda(wi.z, coat.a2));
+                    sum += (fresnel_dielectric(wo.dot(h), ior) * g) as f64;
+                }
+            }
+            coat.albedo[mi] = ((sum / N as f64) as f32).clamp(0.0, 1.0);
+        }
+        Some(coat)
+    }
+
+    /// The coat's albedo at `mu`, weight included: w·E_c(μ).
+    #[inline]
+    fn albedo(&self, mu: f32) -> f32 {
+        let x = mu.clamp(0.0, 1.0).sqrt() * (COAT_MU - 1) as f32;
+        let i = (x as usize).min(COAT_MU - 2);
+        let f = x - i as f32;
+        self.weight * (self.albedo[i] + (self.albedo[i + 1] - self.albedo[i]) * f)
+    }
+
+    /// What reaches the layers under the coat and comes back, seen from `mu`.
+    #[inline]
+    fn under_weight(&self, mu: f32) -> Vec3 {
+        let through = 1.0 - self.albedo(mu);
+        if self.log_tint == Vec3::ZERO {
+            return Vec3::splat(through);
+        }
+        // Beer's law along the refracted view ray, blended by the weight as Cycles does
+        let cos_t = (1.0 - self.inv_ior2 * (1.0 - mu * mu)).max(1e-6).sqrt();
+        let t = Vec3::new(
+            (self.log_tint.x / cos_t).exp(),
+            (self.log_tint.y / cos_t).exp(),
+            (self.log_tint.z / cos_t).exp(),
+        );
+        (Vec3::ONE + (t - Vec3::ONE) * self.weight) * through
+    }
+
+    /// The coat lobe's f·cos θi, weight included.
+    #[inline]
+    fn eval(&self, wo: Vec3, wi: Vec3) -> f32 {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return 0.0;
+        }
+        let h = (wo + wi).normalize_or_zero();
+        if h.z <= 0.0 {
+            return 0.0;
+        }
+        let f = fresnel_dielectric(wo.dot(h).max(0.0), self.ior);
+        let g2 = 1.0 / (1.0 + smith_lambda(wo.z, self.a2) + smith_lambda(wi.z, self.a2));
+        let r = self.weight * f * ggx_d(h.z, self.a2) * g2 / (4.0 * wo.z);
+        if r.is_finite() {
+            r
+        } else {
+            0.0
+        }
+    }
+
+    /// The pdf of [`Coat::sample_direction`] (visible normals).
+    #[inline]
+    fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return 0.0;
+        }
+        let h = (wo + wi).normalize_or_zero();
+        if h.z <= 0.0 || wo.dot(h) <= 0.0 {
+            return 0.0;
+        }
+        let g1 = 1.0 / (1.0 + smith_lambda(wo.z, self.a2));
+        let pdf = g1 * ggx_d(h.z, self.a2) / (4.0 * wo.z);
+        if pdf.is_finite() {
+            pdf
+        } else {
+            0.0
+        }
+    }
+
+    /// A reflected direction about a visible microfacet normal; None below the surface.
+    #[inline]
+    fn sample_direction(&self, wo: Vec3, u2: Vec2) -> Option<Vec3> {
+        let h = sample_vndf(wo, self.alpha, u2);
+        let wi = 2.0 * wo.dot(h) * h - wo;
+        (wi.z > 0.0).then_some(wi)
     }
 }
 
@@ -780,9 +1021,9 @@ impl Glass {
 /// faces shade as front faces), and the geometric normal that rejects directions through the
 /// surface (no light leaks from shading normals).
 #[derive(Debug, Clone, Copy)]
-pub struct SurfaceBsdf {
+pub struct SurfaceBsdf<'a> {
     /// The local BSDF.
-    pub bsdf: Bsdf,
+    pub bsdf: Bsdf<'a>,
     /// Shading normal on wo's side (bent so that wo is above it).
     pub n: Vec3,
     t: Vec3,
@@ -791,10 +1032,10 @@ pub struct SurfaceBsdf {
     pub ng: Vec3,
 }
 
-impl SurfaceBsdf {
+impl<'a> SurfaceBsdf<'a> {
     /// Places `bsdf` with the given normals for outgoing direction `wo` (unit, world, pointing
     /// away from the surface). Normals may face either way.
-    pub fn new(bsdf: Bsdf, geometric_normal: Vec3, shading_normal: Vec3, wo: Vec3) -> Self {
+    pub fn new(bsdf: Bsdf<'a>, geometric_normal: Vec3, shading_normal: Vec3, wo: Vec3) -> Self {
         let inside = geometric_normal.dot(wo) < 0.0;
         let bsdf = bsdf.seen_from_inside(inside);
         let ng = if inside { -geometric_normal } else { geometric_normal };

@@ -13,7 +13,7 @@ pub mod path;
 mod traverse;
 
 pub use accel::{offset_ray_origin, BvhQuality, RenderScene, SurfaceHit};
-pub use bsdf::{Bsdf, BsdfSample, SurfaceBsdf};
+pub use bsdf::{Bsdf, BsdfSample, Coat, SurfaceBsdf};
 pub use light_sampling::spot_attenuation;
 pub use lights::{LightSample, LightSelection};
 pub use packet::PACKET;

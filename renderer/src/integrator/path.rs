@@ -119,7 +119,7 @@ pub fn base_color(scene: &RenderScene, hit: &SurfaceHit) -> Vec3 {
 }
 
 /// The BSDF of a hit's material (and its base colour).
-pub fn material_bsdf(scene: &RenderScene, hit: &SurfaceHit) -> (Bsdf, Vec3) {
+pub fn material_bsdf<'s>(scene: &'s RenderScene, hit: &SurfaceHit) -> (Bsdf<'s>, Vec3) {
     let mat = &scene.scene().materials[hit.material_id as usize];
     let base = base_color(scene, hit);
     let (mut metallic, mut roughness) = (mat.metallic, mat.roughness);
@@ -127,7 +127,10 @@ pub fn material_bsdf(scene: &RenderScene, hit: &SurfaceHit) -> (Bsdf, Vec3) {
         metallic *= mr.z;
         roughness *= mr.y;
     }
-    (Bsdf::new(base, metallic, roughness, mat.specular, mat.ior).with_transmission(mat.transmission, mat.ior), base)
+    let bsdf = Bsdf::new(base, metallic, roughness, mat.specular, mat.ior)
+        .with_transmission(mat.transmission, mat.ior)
+        .with_coat(scene.coat(hit.material_id));
+    (bsdf, base)
 }
 
 impl PathTracer {

@@ -129,6 +129,16 @@ pub struct Material {
     /// Transmission (`KHR_materials_transmission` transmissionFactor, Blender's Transmission
     /// Weight): the share of the dielectric part that is glass, refracting by `ior`.
     pub transmission: f32,
+    /// Clear coat weight (Blender's Coat Weight, `KHR_materials_clearcoat` clearcoatFactor,
+    /// UsdPreviewSurface clearcoat): 0 = none.
+    pub coat: f32,
+    /// The coat's perceptual roughness (Coat Roughness, clearcoatRoughnessFactor,
+    /// clearcoatRoughness).
+    pub coat_roughness: f32,
+    /// The coat's index of refraction (Coat IOR; 1.5 for glTF and USD).
+    pub coat_ior: f32,
+    /// The coat's colour head-on (Coat Tint, linear RGB; white for glTF and USD).
+    pub coat_tint: Vec3,
 }
 
 impl Default for Material {
@@ -152,6 +162,10 @@ impl Default for Material {
             visible_to_camera: true,
             terminator_offset: TERMINATOR_OFFSET,
             transmission: 0.0,
+            coat: 0.0,
+            coat_roughness: 0.03,
+            coat_ior: 1.5,
+            coat_tint: Vec3::ONE,
         }
     }
 }

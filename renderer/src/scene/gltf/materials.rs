@@ -210,6 +210,7 @@ impl Loader<'_> {
                 }
                 None => 0.0,
             };
+            let (coat, coat_roughness) = self.clearcoat(&loc, m.extension_value("KHR_materials_clearcoat"));
             let alpha_mode = match m.alpha_mode() {
                 gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
                 gltf::material::AlphaMode::Mask => {
@@ -238,8 +239,37 @@ impl Loader<'_> {
                 visible_to_camera: true,
                 terminator_offset: crate::scene::TERMINATOR_OFFSET,
                 transmission,
+                coat,
+                coat_roughness,
+                coat_ior: 1.5,
+                coat_tint: Vec3::ONE,
             });
         }
+    }
+
+    /// `KHR_materials_clearcoat` (coat weight and roughness; a coat of IOR 1.5, untinted): the
+    /// factors are used, the textures and the coat's own normal map are reported and ignored.
+    fn clearcoat(&mut self, loc: &str, ext: Option<&serde_json::Value>) -> (f32, f32) {
+        let Some(ext) = ext else { return (0.0, 0.0) };
+        let parsed: Clearcoat = match serde_json::from_value(ext.clone()) {
+            Ok(c) => c,
+            Err(e) => {
+                self.warn(loc, format!("KHR_materials_clearcoat: {e}; the coat is ignored"));
+                return (0.0, 0.0);
+            }
+        };
+        for (what, present) in [
+            ("clearcoatTexture", parsed.clearcoat_texture.is_some()),
+            ("clearcoatRoughnessTexture", parsed.clearcoat_roughness_texture.is_some()),
+            ("clearcoatNormalTexture", parsed.clearcoat_normal_texture.is_some()),
+        ] {
+            if present {
+                self.warn(loc, format!("KHR_materials_clearcoat: {what} ignored (the factors are used)"));
+            }
+        }
+        let weight = self.unit_factor(loc, "clearcoatFactor", parsed.clearcoat_factor, 0.0);
+        let roughness = self.unit_factor(loc, "clearcoatRoughnessFactor", parsed.clearcoat_roughness_factor, 0.0);
+        (weight, roughness)
     }
 
     pub(super) fn unit_factor(&mut self, loc: &str, what: &str, v: f32, default: f32) -> f32 {
@@ -310,4 +340,26 @@ fn image_texels(img: &image::DynamicImage, srgb: bool) -> Vec<Vec4> {
             })
             .collect()
     }
+}
+
+/// The `KHR_materials_clearcoat` extension object of a material.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields, rename_all = "camelCase")]
+struct Clearcoat {
+    #[serde(default)]
+    clearcoat_factor: f32,
+    #[serde(default)]
+    clearcoat_roughness_factor: f32,
+    #[serde(default)]
+    clearcoat_texture: Option<serde_json::Value>,
+    #[serde(default)]
+    clearcoat_roughness_texture: Option<serde_json::Value>,
+    #[serde(default)]
+    clearcoat_normal_texture: Option<serde_json::Value>,
+    #[serde(default)]
+    #[allow(dead_code)]
+    extensions: Option<serde_json::Value>,
+    #[serde(default)]
+    #[allow(dead_code)]
+    extras: Option<serde_json::Value>,
 }

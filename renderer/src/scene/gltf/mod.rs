@@ -263,6 +263,7 @@ impl<'a> Loader<'a> {
     fn warn_extensions(&mut self) {
         const HANDLED: &[&str] = &[
             "KHR_lights_punctual",
+            "KHR_materials_clearcoat",
             "KHR_materials_emissive_strength",
             "KHR_materials_ior",
             "KHR_materials_specular",
