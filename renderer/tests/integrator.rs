@@ -411,6 +411,17 @@ fn bsdf_energy_at_most_one() {
     eprintln!("{report}");
 }
 
+/// ∫ f cos dωi at `wo`, estimated from `n` BSDF samples.
+fn sampled_albedo(b: &Bsdf, wo: Vec3, n: usize, rng: &mut Rng) -> Vec3 {
+    let mut sum = Vec3::ZERO;
+    for _ in 0..n {
+        if let Some(s) = b.sample(wo, rng.v2(), rng.next()) {
+            sum += s.weight;
+        }
+    }
+    sum / n as f32
+}
+
 /// A clear coat (Blender's Principled Coat): over a white base nothing is lost or gained (the
 /// coat passes on exactly what it does not reflect); over a black base the albedo is the coat
 /// lobe's alone, w·E_c(μo), the Fresnel reflectance F0 = ((n − 1)/(n + 1))² head-on for a
@@ -419,16 +430,7 @@ fn bsdf_energy_at_most_one() {
 #[test]
 fn coat_layers_conserve_energy_and_tint_the_base() {
     let mut rng = Rng(29);
-    let albedo = |b: &Bsdf, wo: Vec3, rng: &mut Rng| {
-        let n = 400_000;
-        let mut sum = Vec3::ZERO;
-        for _ in 0..n {
-            if let Some(s) = b.sample(wo, rng.v2(), rng.next()) {
-                sum += s.weight;
-            }
-        }
-        sum / n as f32
-    };
+    let albedo = |b: &Bsdf, wo: Vec3, rng: &mut Rng| sampled_albedo(b, wo, 400_000, rng);
     for (coat_roughness, theta) in [(0.05f32, 0.0f32), (0.05, 60.0), (0.5, 30.0), (0.5, 80.0)] {
         let wo = wo_at(theta);
         // 1. White base (a white dielectric conserves energy, see above): still 1.
@@ -614,16 +616,7 @@ fn light_passes_through_a_glass_block() {
 #[test]
 fn rough_white_metal_keeps_its_energy() {
     let mut rng = Rng(53);
-    let albedo = |b: &Bsdf, wo: Vec3, rng: &mut Rng| {
-        let n = 200_000;
-        let mut sum = Vec3::ZERO;
-        for _ in 0..n {
-            if let Some(s) = b.sample(wo, rng.v2(), rng.next()) {
-                sum += s.weight;
-            }
-        }
-        sum / n as f32
-    };
+    let albedo = |b: &Bsdf, wo: Vec3, rng: &mut Rng| sampled_albedo(b, wo, 200_000, rng);
     // Glossy metals pick the multiple-scattering lobe by its albedo, F_ms·(1 − E(μo)), so
     // nearly every sample goes to the GGX lobe: the one-sample weights of a white metal at
     // roughness 0.15 stay close to 1 (variance 1.96 at 75° when M was weighted 1/(1 − Ē) ≈

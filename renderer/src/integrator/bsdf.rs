@@ -473,15 +473,7 @@ impl<'a> Bsdf<'a> {
         } else {
             self.sample_under(wo, u2, ((u1 - pc) / (1.0 - pc)).min(ONE_BELOW))?.wi
         };
-        let pdf = self.pdf(wo, wi);
-        if !(pdf > 0.0) {
-            return None;
-        }
-        let weight = self.eval(wo, wi) / pdf;
-        if !weight.is_finite() || weight == Vec3::ZERO {
-            return None;
-        }
-        Some(BsdfSample { wi, weight, pdf, is_delta: false })
+        weighted_sample(wi, self.pdf(wo, wi), || self.eval(wo, wi))
     }
 
     /// The probability of sampling the coat for `wo`: its albedo against the rest's, as the
@@ -541,15 +533,7 @@ impl<'a> Bsdf<'a> {
         } else {
             self.sample_opaque(wo, u2, ((u1 - w) / (1.0 - w)).min(ONE_BELOW))?.wi
         };
-        let pdf = self.pdf_under(wo, wi);
-        if !(pdf > 0.0) {
-            return None;
-        }
-        let weight = self.eval_under(wo, wi) / pdf;
-        if !weight.is_finite() || weight == Vec3::ZERO {
-            return None;
-        }
-        Some(BsdfSample { wi, weight, pdf, is_delta: false })
+        weighted_sample(wi, self.pdf_under(wo, wi), || self.eval_under(wo, wi))
     }
 
     /// The opaque lobes' f·cos θi; zero unless both directions are above the surface.
@@ -623,16 +607,7 @@ impl<'a> Bsdf<'a> {
         if wi.z <= 0.0 {
             return None;
         }
-        let pdf = self.pdf_opaque(wo, wi);
-        if !(pdf > 0.0) {
-            return None;
-        }
-        let f = self.eval_opaque(wo, wi);
-        let weight = f / pdf;
-        if !weight.is_finite() || weight == Vec3::ZERO {
-            return None;
-        }
-        Some(BsdfSample { wi, weight, pdf, is_delta: false })
+        weighted_sample(wi, self.pdf_opaque(wo, wi), || self.eval_opaque(wo, wi))
     }
 }
 
@@ -786,6 +761,21 @@ impl Coat {
         let wi = 2.0 * wo.dot(h) * h - wo;
         (wi.z > 0.0).then_some(wi)
     }
+}
+
+/// A sampled direction `wi` with its pdf and its f·|cos| (`eval`, called only for a positive
+/// pdf) as a [`BsdfSample`]; None when the pdf is not positive or the weight is zero or not
+/// finite.
+#[inline]
+fn weighted_sample(wi: Vec3, pdf: f32, eval: impl FnOnce() -> Vec3) -> Option<BsdfSample> {
+    if !(pdf > 0.0) {
+        return None;
+    }
+    let weight = eval() / pdf;
+    if !weight.is_finite() || weight == Vec3::ZERO {
+        return None;
+    }
+    Some(BsdfSample { wi, weight, pdf, is_delta: false })
 }
 
 /// The largest f32 below 1 (a remapped sample number stays in [0, 1)).
