@@ -48,6 +48,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 # Bump when anything here changes in a way that changes the images (part of the cache key,
 # together with this file's text itself).
 SCENE_VERSION = 1
@@ -73,6 +75,13 @@ class CameraSpec:
     focus_m: float
     blades: int
     rotation_deg: float
+
+
+def pinhole_camera(name: str, location, target, lens_mm: float) -> CameraSpec:
+    """A 36 mm-wide camera rendered without depth of field (f/8, focused on `target`, no blades),
+    as the material comparisons use it with :func:`pinhole_args`."""
+    focus = math.dist(location, target)
+    return CameraSpec(name, location, target, lens_mm, 36.0, 8.0, focus, 0, 0.0)
 
 
 MAIN_CAM = CameraSpec(
@@ -612,3 +621,86 @@ def set_world_colour(bpy, scene, rgb) -> None:
     bg.inputs["Color"].default_value = (*rgb, 1.0)
     bg.inputs["Strength"].default_value = 1.0
     scene.world = world
+
+
+def sphere_windows(camera: str, resolution: tuple[int, int], centres, radius: float) -> list[tuple[slice, slice]]:
+    """Per sphere centre (world, in the built scene), the pixel rows and columns of a square of
+    half side 0.6 radius about its projection through `camera` (inside the disc)."""
+    bpy = _import_bpy()
+    from bpy_extras.object_utils import world_to_camera_view
+    from mathutils import Vector
+
+    bpy.context.view_layer.update()
+    scene = bpy.context.scene
+    cam = bpy.data.objects[camera]
+    w, h = resolution
+    out = []
+    for centre in centres:
+        c = world_to_camera_view(scene, cam, Vector(centre))
+        e = world_to_camera_view(scene, cam, Vector(centre) + Vector((radius, 0.0, 0.0)))
+        px, py = c.x * w, (1.0 - c.y) * h
+        half = max(2, int(0.6 * abs(e.x - c.x) * w))
+        out.append((slice(int(py) - half, int(py) + half), slice(int(px) - half, int(px) + half)))
+    return out
+
+
+def window_means(cyc, pz, windows) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per window: petzval's two-seed mean over Cycles' per channel, and the standard error of
+    that ratio from the seed-to-seed differences."""
+    out = []
+    for rows, cols in windows:
+        c = [img[rows, cols].reshape(-1, 3).mean(axis=0) for img in cyc]
+        p = [img[rows, cols].reshape(-1, 3).mean(axis=0) for img in pz]
+        cm, pm = (c[0] + c[1]) / 2, (p[0] + p[1]) / 2
+        se = np.sqrt(((c[0] - c[1]) / 2) ** 2 / cm**2 + ((p[0] - p[1]) / 2) ** 2 / pm**2)
+        out.append((pm / cm, se))
+    return out
+
+
+def glb_pairs(blender_run, name: str, key_files, build, camera: CameraSpec, world_rgb, resolution, spp: int, seeds):
+    """Builds a scene with `build(workdir)`, exports it as GLB and renders it with Cycles (cached
+    by `key_files`' text) and `petzval render` (pinhole args), once per seed: (glb, Cycles
+    images, petzval images). The caller rebuilds the main scene afterwards."""
+    from renders import cache_key, cached_render, run_petzval
+
+    import blender_compare as B
+
+    bpy = _import_bpy()
+    workdir = blender_run.workdir / name
+    cache_dir = blender_run.cache_dir.parent / f"cycles-{name}-{cache_key(bpy, *key_files)}"
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    build(workdir)
+    glb = export_glb(workdir / f"{name}.glb")
+    args = pinhole_args(camera, world_rgb, PETZVAL_MAX_DEPTH, resolution)
+    cyc, pz = [], []
+    for seed in seeds:
+        cfg = CyclesSettings(samples=spp, seed=seed)
+        render = lambda out, cfg=cfg: render_cycles(cfg, camera.name, out)  # noqa: E731
+        exr, _, _ = cached_render(bpy, cache_dir, f"cycles_spp{spp}_seed{seed}", render)
+        cyc.append(B.read_rgb(exr))
+        out = workdir / f"petzval_spp{spp}_seed{seed}.exr"
+        run_petzval(blender_run.binary, glb, out, args, spp, seed)
+        pz.append(B.read_rgb(out))
+    return glb, cyc, pz
+
+
+def spheres_on_floor(workdir: Path, world_rgb, materials, radius: float, light, camera: CameraSpec, resolution) -> None:
+    """Resets Blender and builds a row of spheres of `radius` resting on a 20 m floor under a
+    world of colour `world_rgb`: `materials()` (called after the reset) gives the floor's
+    material and the spheres as (name, material, x), centred at (x, 0, 0); `light` is a point
+    light's (location, watts); seen through `camera` without depth of field at `resolution`."""
+    bpy = _import_bpy()
+    workdir.mkdir(parents=True, exist_ok=True)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    floor, spheres = materials()
+    set_world_colour(bpy, scene, world_rgb)
+    _add_mesh(bpy, "plane", floor.name, (0.0, 0.0, -radius), floor, 20.0, smooth=False)
+    for name, material, x in spheres:
+        _add_mesh(bpy, "uv_sphere", name, (x, 0.0, 0.0), material, radius)
+    _add_light(bpy, "POINT", "Key", light[0], light[1])
+    cam = _add_camera(bpy, camera)
+    cam.data.dof.use_dof = False
+    scene.camera = cam
+    scene.render.resolution_x, scene.render.resolution_y = resolution
+    scene.render.resolution_percentage = 100

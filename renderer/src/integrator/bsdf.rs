@@ -3,34 +3,40 @@
 //! weighted by (1 − metallic)·transmission against everything below, which only reflects).
 //!
 //! ```text
-//! f = (1 − m)·[ F_d(v·h)·D·V + F_ms,d·M  +  base/π·(1 − E_d(μo))(1 − E_d(μi))/(1 − Ē_d) ]
+//! f = (1 − m)·[ F_d(v·h)·(1 + F_ms,d·(1 − E(μo))/E(μo))·D·V  +  base/π·(1 − E_d(μo)) ]
 //!   + m·[ F_m(v·h)·D·V + F_ms,m·M ]
-//! F_d = Schlick(F0 = specular·((ior−1)/(ior+1))², F90 = specular)    (dielectric)
+//! F_d = exact dielectric Fresnel of η′, the index whose F0 is specular·((ior−1)/(ior+1))²
+//!       (Cycles' Principled BSDF: Specular IOR Level × 2 = specular; η′ = ior at 1)
 //! F_m = Schlick(F0 = base colour, F90 = 1)                              (metal)
 //! D = GGX / Trowbridge–Reitz, V = Smith height-correlated G2 / (4 μo μi), α = roughness² ≥ 1e-3
 //! M = (1 − E(μo))(1 − E(μi)) / (π (1 − Ē))        multiple scattering (Kulla & Conty 2017)
-//! F_ms = F̄² Ē / (1 − F̄ (1 − Ē)),  F̄ = F0 + (F90 − F0)/21 (Schlick's hemispherical average)
-//! E_d = the dielectric layer's albedo, single scattering plus F_ms,d·(1 − E(μ))
+//! F_ms,m = F̄² Ē / (1 − F̄ (1 − Ē)),  F̄ = F0 + (F90 − F0)/21 (Schlick's hemispherical average)
+//! F_ms,d = F̄ Ē / (1 − F̄ (1 − Ē)),   F̄ = 2∫ F_d(μ) μ dμ (Cycles' multiscatter GGX)
+//! E_d = the dielectric layer's albedo: ∫ F_d D V μi dωi · (1 + F_ms,d·(1 − E(μ))/E(μ))
 //! ```
 //!
-//! One deliberate deviation from appendix B: the spec weights the diffuse base by
-//! `1 − F_d(v·h)` (`mix(diffuse, specular, F)`), which is reciprocal but gains energy at grazing
-//! angles (a white dielectric reflects up to ~1.36 of the incident energy at roughness 0.3,
-//! 89°). Here the base is weighted by the specular layer's directional albedo `E_d(μ)` in the
-//! reciprocal form of Kelemen & Szirmay-Kalos / Kulla & Conty, so the total albedo is
-//! `E_d(μo) + base·(1 − E_d(μo)) ≤ 1` and `f(wo, wi) = f(wi, wo)`. `E_d` is exact for Schlick
-//! (linear in F0 and F90) from two tabulated integrals (64×64 in √μ and roughness, computed once).
-//! Blender's Principled BSDF also scales its base by the specular layer's albedo.
+//! The diffuse base is layered as Cycles layers its Principled BSDF: weighted by what the
+//! dielectric layer does not reflect toward the viewer, `1 − E_d(μo)`, so the total albedo is
+//! `E_d(μo) + base·(1 − E_d(μo)) ≤ 1`. This depends on the outgoing direction only (not
+//! reciprocal), as does the dielectric lobe's multiple-scattering scale. The glTF spec's
+//! `1 − F_d(v·h)` (`mix(diffuse, specular, F)`) would gain energy at grazing angles (a white
+//! dielectric reflects up to ~1.36 of the incident energy at roughness 0.3, 89°). `E_d` is
+//! tabulated per η′ (64 × 64 in √μ and roughness, rows built on first use;
+//! `DielectricTable`). Until session 26 the dielectric layer used Schlick's Fresnel (F90 =
+//! specular) and a reciprocal layering; a point light's reflection seen 56° off a glossy plane
+//! was 0.75× Cycles' (docs/cycles-comparison.md, "Specular layers").
 //!
 //! Multiple scattering between microfacets: single-scatter GGX loses the energy of light that
 //! bounces more than once, up to 70 % for a white metal at roughness 1 (Blender's Principled
 //! BSDF, multiscatter GGX by default, loses none). The lost share 1 − E(μo) (E = the lobe's
-//! albedo with F = 1, tabulated) comes back as the reciprocal lobe M above, coloured by the
+//! albedo with F = 1, tabulated) comes back for metals as the reciprocal lobe M above, coloured by the
 //! Fresnel average over repeated bounces (Kulla & Conty, "Revisiting Physically Based Shading at
 //! Imageworks", SIGGRAPH 2017): a white metal then reflects exactly 1 at every angle and
 //! roughness. Cycles adds the same energy by scaling the single-scatter lobe (Turquin 2019), which
 //! keeps the lobe's shape but is not reciprocal; M is broad where it matters (it is large only at
-//! high roughness, where the lobe is broad too).
+//! high roughness, where the lobe is broad too). The dielectric layer, whose share of that energy
+//! is small, takes Cycles' scaling, which a glossy dielectric's highlight shows (0.5 % at
+//! roughness 0.35).
 //!
 //! Sampling: the specular lobe (visible normals, Heitz 2018) or the cosine-weighted lobe that
 //! serves the diffuse base and M, chosen with probability proportional to the Fresnel reflectance
@@ -215,6 +221,133 @@ fn interp_mu(row1: &[f32; TABLE_N], row2: &[f32; TABLE_N], mu: f32) -> (f32, f32
     (row1[i] + (row1[i + 1] - row1[i]) * f, row2[i] + (row2[i + 1] - row2[i]) * f)
 }
 
+/// The roughness node below `roughness` and the weight of the one above.
+#[inline]
+fn roughness_node(roughness: f32) -> (usize, f32) {
+    let x = roughness.clamp(0.0, 1.0) * (TABLE_N - 1) as f32;
+    let i = (x as usize).min(TABLE_N - 2);
+    (i, x - i as f32)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Directional albedo of the dielectric specular layer with the exact Fresnel reflectance of
+// its index η′: E_F(μ) = ∫ F(v·h; η′)·D·V·μi dωi, per η′ a table of roughness rows (built on
+// first use), as Cycles tabulates it for its Principled BSDF (`ggx_gen_schlick_ior_s`).
+
+/// One roughness row of a dielectric table.
+struct DielectricRow {
+    /// E_F per μ node (√μ spacing, as [`EnergyRow`]).
+    e: [f32; TABLE_N],
+    /// 2∫ E_F(μ) μ dμ of the interpolated row.
+    avg: f32,
+}
+
+impl std::fmt::Debug for DielectricRow {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DielectricRow").field("avg", &self.avg).finish_non_exhaustive()
+    }
+}
+
+impl DielectricRow {
+    /// E_F(μ), interpolated.
+    #[inline]
+    fn at(&self, mu: f32) -> f32 {
+        let x = mu.clamp(0.0, 1.0).sqrt() * (TABLE_N - 1) as f32;
+        let i = (x as usize).min(TABLE_N - 2);
+        self.e[i] + (self.e[i + 1] - self.e[i]) * (x - i as f32)
+    }
+}
+
+/// The rows of one index η′, and its hemispherical Fresnel average F̄ = 2∫ F(μ) μ dμ.
+struct DielectricTable {
+    eta: f32,
+    f_avg: f32,
+    rows: [OnceLock<DielectricRow>; TABLE_N],
+}
+
+impl DielectricTable {
+    fn new(eta: f32) -> Self {
+        const M: usize = 2048;
+        let f_avg = (0..M)
+            .map(|k| {
+                let mu = (k as f32 + 0.5) / M as f32;
+                (2.0 * fresnel_dielectric(mu, eta) * mu) as f64
+            })
+            .sum::<f64>()
+            / M as f64;
+        DielectricTable { eta, f_avg: f_avg as f32, rows: [const { OnceLock::new() }; TABLE_N] }
+    }
+
+    /// Row `ri` (roughness ri / (TABLE_N − 1)): 1024 visible-normal samples per μ node, as
+    /// [`build_energy_row`].
+    fn row(&'static self, ri: usize) -> &'static DielectricRow {
+        self.rows[ri].get_or_init(|| {
+            const N: u32 = 1024;
+            let r = ri as f32 / (TABLE_N - 1) as f32;
+            let alpha = (r * r).max(MIN_ALPHA);
+            let a2 = alpha * alpha;
+            let mut row = DielectricRow { e: [0.0; TABLE_N], avg: 0.0 };
+            for mi in 0..TABLE_N {
+                let x = mi as f32 / (TABLE_N - 1) as f32;
+                let mu = (x * x).max(1e-5);
+                let wo = Vec3::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
+                let lo = smith_lambda(mu, a2);
+                let mut sum = 0.0f64;
+                for k in 0..N {
+                    let u = Vec2::new((k as f32 + 0.5) / N as f32, radical_inverse_vdc(k));
+                    let h = sample_vndf(wo, alpha, u);
+                    let voh = wo.dot(h);
+                    let wi = 2.0 * voh * h - wo;
+                    if wi.z > 0.0 {
+                        let g = (1.0 + lo) / (1.0 + lo + smith_lambda(wi.z, a2));
+                        sum += (fresnel_dielectric(voh, self.eta) * g) as f64;
+                    }
+                }
+                row.e[mi] = (sum / N as f64) as f32;
+            }
+            const M: usize = 2048;
+            let avg: f64 = (0..M)
+                .map(|k| {
+                    let mu = (k as f32 + 0.5) / M as f32;
+                    (2.0 * row.at(mu) * mu) as f64
+                })
+                .sum();
+            row.avg = (avg / M as f64) as f32;
+            row
+        })
+    }
+}
+
+/// The table of index `eta` (one per distinct value in the process, kept for its life; each
+/// thread remembers the ones it has used, so a BSDF finds its table without a lock).
+fn dielectric_table(eta: f32) -> &'static DielectricTable {
+    use std::cell::RefCell;
+    use std::sync::Mutex;
+    static ALL: Mutex<Vec<&'static DielectricTable>> = Mutex::new(Vec::new());
+    thread_local! {
+        static SEEN: RefCell<Vec<&'static DielectricTable>> = const { RefCell::new(Vec::new()) };
+    }
+    let key = eta.to_bits();
+    SEEN.with(|seen| {
+        if let Some(t) = seen.borrow().iter().find(|t| t.eta.to_bits() == key) {
+            return *t;
+        }
+        let t = {
+            let mut all = ALL.lock().unwrap_or_else(|e| e.into_inner());
+            match all.iter().find(|t| t.eta.to_bits() == key) {
+                Some(t) => *t,
+                None => {
+                    let t: &'static DielectricTable = Box::leak(Box::new(DielectricTable::new(eta)));
+                    all.push(t);
+                    t
+                }
+            }
+        };
+        seen.borrow_mut().push(t);
+        t
+    })
+}
+
 /// The two roughness rows around a roughness, and the weight between them.
 #[derive(Clone, Copy)]
 struct RoughnessRow {
@@ -231,9 +364,8 @@ impl std::fmt::Debug for RoughnessRow {
 
 impl RoughnessRow {
     fn new(roughness: f32) -> Self {
-        let x = roughness.clamp(0.0, 1.0) * (TABLE_N - 1) as f32;
-        let i = (x as usize).min(TABLE_N - 2);
-        RoughnessRow { lo: energy_row(i), hi: energy_row(i + 1), f: x - i as f32 }
+        let (i, f) = roughness_node(roughness);
+        RoughnessRow { lo: energy_row(i), hi: energy_row(i + 1), f }
     }
 
     /// (E1(μ), E2(μ)).
@@ -256,10 +388,12 @@ pub struct Bsdf<'a> {
     metallic: f32,
     alpha: f32,
     a2: f32,
-    f0_d: f32,
-    f90_d: f32,
+    /// The dielectric layer's index η′ (1: no layer).
+    eta_d: f32,
     row: RoughnessRow,
-    /// (1 − m)·base / (π·(1 − Ē_d)), or zero.
+    /// The dielectric layer's albedo rows around the roughness (weight `row.f`), where it has one.
+    diel: Option<(&'static DielectricRow, &'static DielectricRow)>,
+    /// (1 − m)·base / π, or zero.
     diffuse_scale: Vec3,
     /// F_ms,d: the dielectric layer's multiple-scattering colour (grey).
     fms_d: f32,
@@ -285,44 +419,55 @@ impl<'a> Bsdf<'a> {
         let base = base_color.clamp(Vec3::ZERO, Vec3::ONE);
         let metallic = if metallic.is_finite() { metallic.clamp(0.0, 1.0) } else { 0.0 };
         let roughness = if roughness.is_finite() { roughness.clamp(0.0, 1.0) } else { 1.0 };
-        let specular = if specular.is_finite() { specular.clamp(0.0, 1.0) } else { 1.0 };
+        let specular = if specular.is_finite() { specular.max(0.0) } else { 1.0 };
         let ior = if ior.is_finite() && ior >= 1.0 { ior } else { 1.5 };
+        // The dielectric layer as Cycles' Principled BSDF has it: F0 = F0(ior)·specular (Specular
+        // IOR Level × 2), and the exact Fresnel of the index η′ with that F0.
         let r = (ior - 1.0) / (ior + 1.0);
-        let f0_d = (r * r).min(1.0) * specular;
-        let f90_d = specular;
+        let f0_d = ((r * r) * specular).min(0.99);
+        let eta_d = if f0_d <= 0.0 {
+            1.0
+        } else if specular == 1.0 {
+            ior
+        } else {
+            (1.0 + f0_d.sqrt()) / (1.0 - f0_d.sqrt())
+        };
         let alpha = (roughness * roughness).max(MIN_ALPHA);
         let row = RoughnessRow::new(roughness);
-        let (a1, a2) = row.avg();
+        let (a1, _) = row.avg();
+        let table = (eta_d > 1.0).then(|| dielectric_table(eta_d));
+        let ri = roughness_node(roughness).0;
+        let diel = table.map(|t| (t.row(ri), t.row(ri + 1)));
         // 1. Multiple scattering: Fresnel averages over repeated bounces, and M's normalisation
         //    (none where single scattering keeps nearly everything).
         let has_ms = 1.0 - a1 > 1e-4;
         let fms = |f_avg: f32| f_avg * f_avg * a1 / (1.0 - f_avg * (1.0 - a1));
-        let fms_d = if has_ms { fms(f0_d + (f90_d - f0_d) / 21.0) } else { 0.0 };
+        // The dielectric layer keeps its lost energy as Cycles' multiscatter GGX does: its lobe
+        // is scaled by 1 + F_ms,d·(1 − E(μo))/E(μo), F_ms,d = F̄·Ē/(1 − F̄·(1 − Ē)).
+        let fms_d = match table {
+            Some(t) if has_ms => t.f_avg * a1 / (1.0 - t.f_avg * (1.0 - a1)),
+            _ => 0.0,
+        };
         let fms_m = if has_ms {
             let f_avg = base + (Vec3::ONE - base) / 21.0;
             Vec3::new(fms(f_avg.x), fms(f_avg.y), fms(f_avg.z))
         } else {
             Vec3::ZERO
         };
-        let ms_colour = if has_ms { Vec3::splat((1.0 - metallic) * fms_d) + fms_m * metallic } else { Vec3::ZERO };
+        let ms_colour = if has_ms { fms_m * metallic } else { Vec3::ZERO };
         let ms_scale = if has_ms { ms_colour * (FRAC_1_PI / (1.0 - a1)) } else { Vec3::ZERO };
-        // 2. The dielectric layer's average albedo (M's average share is F_ms,d·(1 − Ē)), which
-        //    normalises the base under it.
-        let e_avg = (f0_d * a1 + (f90_d - f0_d) * a2 + fms_d * (1.0 - a1)).clamp(0.0, 1.0);
-        let diffuse_scale = if 1.0 - e_avg > 1e-4 && metallic < 1.0 {
-            base * ((1.0 - metallic) * FRAC_1_PI / (1.0 - e_avg))
-        } else {
-            Vec3::ZERO
-        };
-        let layered = f0_d != 0.0 || f90_d != 0.0 || ms_scale != Vec3::ZERO;
+        // 2. The diffuse base under the dielectric layer: what the layer does not reflect at μo
+        //    (Cycles' layering of its Principled BSDF), so the albedo is E_d(μo) + base·(1 − E_d(μo)).
+        let diffuse_scale = if metallic < 1.0 { base * ((1.0 - metallic) * FRAC_1_PI) } else { Vec3::ZERO };
+        let layered = diel.is_some() || ms_scale != Vec3::ZERO;
         Bsdf {
             base,
             metallic,
             alpha,
             a2: alpha * alpha,
-            f0_d,
-            f90_d,
+            eta_d,
             row,
+            diel,
             diffuse_scale,
             fms_d,
             ms_scale,
@@ -379,13 +524,19 @@ impl<'a> Bsdf<'a> {
     }
 
     /// Directional albedo of the dielectric specular layer at `mu` (what the diffuse base
-    /// loses), multiple scattering included, from the lobe's tabulated (E, E2) at `mu`.
+    /// loses), its multiple-scattering energy included; `e1` is the lobe's albedo E(μ) with F = 1.
     #[inline]
-    fn e_d(&self, (e1, e2): (f32, f32)) -> f32 {
-        if self.f90_d == 0.0 && self.f0_d == 0.0 {
-            return 0.0;
-        }
-        (self.f0_d * e1 + (self.f90_d - self.f0_d) * e2 + self.fms_d * (1.0 - e1)).clamp(0.0, 1.0)
+    fn e_d(&self, mu: f32, e1: f32) -> f32 {
+        let Some((lo, hi)) = self.diel else { return 0.0 };
+        let (a, b) = (lo.at(mu), hi.at(mu));
+        ((a + (b - a) * self.row.f) * self.ms_boost(e1)).clamp(0.0, 1.0)
+    }
+
+    /// The dielectric lobe's scale for the energy single scattering loses at μo, whose E(μo)
+    /// is `e1` (Cycles' multiscatter GGX).
+    #[inline]
+    fn ms_boost(&self, e1: f32) -> f32 {
+        1.0 + self.fms_d * (1.0 - e1).max(0.0) / e1.max(1e-3)
     }
 
     /// Whether the cosine-sampled lobes (the diffuse base, multiple scattering) are present.
@@ -397,8 +548,15 @@ impl<'a> Bsdf<'a> {
     /// Combined Fresnel (dielectric and metal, mixed by metallic) at `cos`.
     #[inline]
     fn fresnel(&self, cos: f32) -> Vec3 {
+        self.fresnel_boosted(cos, 1.0)
+    }
+
+    /// [`Bsdf::fresnel`] with the dielectric part scaled for multiple scattering at a μo
+    /// whose E(μo) is `e1o` (1: no scaling).
+    #[inline]
+    fn fresnel_boosted(&self, cos: f32, e1o: f32) -> Vec3 {
         let w = schlick_weight(cos);
-        let fd = self.f0_d + (self.f90_d - self.f0_d) * w;
+        let fd = if self.diel.is_some() { fresnel_dielectric(cos, self.eta_d) * self.ms_boost(e1o) } else { 0.0 };
         let fm = self.base + (Vec3::ONE - self.base) * w;
         Vec3::splat((1.0 - self.metallic) * fd) + fm * self.metallic
     }
@@ -427,7 +585,7 @@ impl<'a> Bsdf<'a> {
             let diffuse = if self.diffuse_scale == Vec3::ZERO {
                 0.0
             } else {
-                (1.0 - self.metallic) * luminance(self.base) * (1.0 - self.e_d(e))
+                (1.0 - self.metallic) * luminance(self.base) * (1.0 - self.e_d(wo.z, e.0))
             };
             diffuse + luminance(self.ms_colour) * (1.0 - e.0).max(0.0)
         } else {
@@ -542,15 +700,19 @@ impl<'a> Bsdf<'a> {
             return Vec3::ZERO;
         }
         let mut f = Vec3::ZERO;
+        // E(μo) with F = 1, where a table is read at all
+        let mut e1o = 1.0;
         if !self.layered {
             f += self.diffuse_scale;
-        } else if self.has_cosine_lobes() {
-            // the diffuse base under the layer, and the multiple-scattering lobe M
-            let (eo, ei) = (self.row.e(wo.z), self.row.e(wi.z));
+        } else {
+            e1o = self.row.e(wo.z).0;
+            // the diffuse base under the layer, and the metal's multiple-scattering lobe M
             if self.diffuse_scale != Vec3::ZERO {
-                f += self.diffuse_scale * ((1.0 - self.e_d(eo)) * (1.0 - self.e_d(ei)));
+                f += self.diffuse_scale * (1.0 - self.e_d(wo.z, e1o));
             }
-            f += self.ms_scale * ((1.0 - eo.0).max(0.0) * (1.0 - ei.0).max(0.0));
+            if self.ms_scale != Vec3::ZERO {
+                f += self.ms_scale * ((1.0 - e1o).max(0.0) * (1.0 - self.row.e(wi.z).0).max(0.0));
+            }
         }
         let h = (wo + wi).normalize_or_zero();
         if h.z > 0.0 {
@@ -558,7 +720,7 @@ impl<'a> Bsdf<'a> {
             let d = ggx_d(h.z, self.a2);
             let g2 = 1.0 / (1.0 + smith_lambda(wo.z, self.a2) + smith_lambda(wi.z, self.a2));
             let v = g2 / (4.0 * wo.z * wi.z);
-            f += self.fresnel(voh) * (d * v);
+            f += self.fresnel_boosted(voh, e1o) * (d * v);
         }
         let r = f * wi.z;
         if r.is_finite() {

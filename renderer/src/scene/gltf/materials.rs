@@ -172,22 +172,24 @@ impl Loader<'_> {
             }
             let emissive_texture =
                 self.info_ref(m.emissive_texture(), TexKind::Emissive, &format!("{loc} emissiveTexture"));
+            // KHR_materials_specular: F0 = F0(ior)·specularColorFactor·specularFactor. Blender's
+            // exporter writes Specular IOR Level × 2 as specularFactor up to 1 and as a grey
+            // specularColorFactor above it (its F90 is 1 either way, as here).
             let specular = match m.specular() {
                 Some(s) => {
-                    if s.specular_texture().is_some()
-                        || s.specular_color_texture().is_some()
-                        || s.specular_color_factor() != [1.0, 1.0, 1.0]
-                    {
+                    let c = s.specular_color_factor();
+                    let grey = c[0] == c[1] && c[1] == c[2];
+                    if s.specular_texture().is_some() || s.specular_color_texture().is_some() || !grey {
                         self.warn(
                             &loc,
-                            "KHR_materials_specular: only specularFactor is used (colour and textures ignored)",
+                            "KHR_materials_specular: a coloured specularColorFactor and the textures are not supported (the factor times the colour's mean is used)",
                         );
                     }
-                    let f = s.specular_factor();
+                    let f = s.specular_factor() * (c[0] + c[1] + c[2]) / 3.0;
                     if f.is_finite() && f >= 0.0 {
                         f
                     } else {
-                        self.warn(&loc, "invalid specularFactor; using 1");
+                        self.warn(&loc, "invalid specularFactor or specularColorFactor; using 1");
                         1.0
                     }
                 }
