@@ -319,31 +319,40 @@ impl DielectricTable {
 }
 
 /// The table of index `eta` (one per distinct value in the process, kept for its life; each
-/// thread remembers the ones it has used, so a BSDF finds its table without a lock).
+/// thread remembers the ones it has used, the last one first, so a BSDF finds its table without
+/// a lock).
 fn dielectric_table(eta: f32) -> &'static DielectricTable {
     use std::cell::RefCell;
+    use std::collections::HashMap;
     use std::sync::Mutex;
     static ALL: Mutex<Vec<&'static DielectricTable>> = Mutex::new(Vec::new());
+    type Seen = (Option<&'static DielectricTable>, HashMap<u32, &'static DielectricTable>);
     thread_local! {
-        static SEEN: RefCell<Vec<&'static DielectricTable>> = const { RefCell::new(Vec::new()) };
+        static SEEN: RefCell<Seen> = RefCell::new((None, HashMap::new()));
     }
     let key = eta.to_bits();
     SEEN.with(|seen| {
-        if let Some(t) = seen.borrow().iter().find(|t| t.eta.to_bits() == key) {
-            return *t;
+        let mut seen = seen.borrow_mut();
+        if let Some(t) = seen.0.filter(|t| t.eta.to_bits() == key) {
+            return t;
         }
-        let t = {
-            let mut all = ALL.lock().unwrap_or_else(|e| e.into_inner());
-            match all.iter().find(|t| t.eta.to_bits() == key) {
-                Some(t) => *t,
-                None => {
-                    let t: &'static DielectricTable = Box::leak(Box::new(DielectricTable::new(eta)));
-                    all.push(t);
-                    t
-                }
+        let t = match seen.1.get(&key) {
+            Some(t) => *t,
+            None => {
+                let mut all = ALL.lock().unwrap_or_else(|e| e.into_inner());
+                let t = match all.iter().find(|t| t.eta.to_bits() == key) {
+                    Some(t) => *t,
+                    None => {
+                        let t: &'static DielectricTable = Box::leak(Box::new(DielectricTable::new(eta)));
+                        all.push(t);
+                        t
+                    }
+                };
+                seen.1.insert(key, t);
+                t
             }
         };
-        seen.borrow_mut().push(t);
+        seen.0 = Some(t);
         t
     })
 }
