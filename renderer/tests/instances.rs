@@ -132,7 +132,7 @@ fn instanced_hits_match_the_flattened_scene() {
                 assert!(a.shading_normal.dot(b.shading_normal) > 0.999, "{a:?}\n{b:?}");
                 assert_eq!((a.material_id, a.front_face), (b.material_id, b.front_face));
                 assert!((a.uv0 - b.uv0).length() < 1e-4);
-                assert_eq!(inst.emission(&a), flat.emission(&b));
+                assert_eq!(inst.emission(&a, d), flat.emission(&b, d));
             }
             (None, None) => {}
             _ => differ += 1,

@@ -1,7 +1,8 @@
 """Blender materials as petzval materials.
 
 Materials: the Principled BSDF (base colour, metallic, roughness, IOR, Specular IOR Level,
-alpha, emission, normal map) with Image Texture nodes where glTF can take them; Diffuse BSDF and
+alpha, emission, normal map, Transmission Weight, Coat Weight, Roughness, IOR and Tint) with
+Image Texture nodes where glTF can take them; Diffuse BSDF and
 Emission shaders. Anything else falls back to the material's viewport display colour and is
 listed (once) in the render's warning report.
 """

@@ -1566,15 +1566,21 @@ impl RenderScene {
         None
     }
 
-    /// Emitted radiance of the hit's material toward the side the ray came from: front side
-    /// only unless the material is double sided (glTF). Zero for non-emissive materials.
-    pub fn emission(&self, hit: &SurfaceHit) -> Vec3 {
+    /// Emitted radiance of the hit's material toward the side the ray (direction `dir`) came
+    /// from: front side only unless the material is double sided (glTF), dimmed by a clear coat
+    /// over it. Zero for non-emissive materials.
+    pub fn emission(&self, hit: &SurfaceHit, dir: Vec3) -> Vec3 {
         let mat = &self.scene.materials[hit.material_id as usize];
         if !mat.is_emissive() || !(hit.front_face || mat.double_sided) {
             return Vec3::ZERO;
         }
         let tex = self.texture(mat.emissive_texture, hit.uv0, hit.uv1).map_or(Vec3::ONE, |t| t.truncate());
-        mat.emissive * tex
+        let le = mat.emissive * tex;
+        // a clear coat dims the emission under it as it dims the base (as in Cycles)
+        match self.coat(hit.material_id) {
+            Some(c) => le * c.emission_weight(hit.shading_normal.dot(dir)),
+            None => le,
+        }
     }
 }
 

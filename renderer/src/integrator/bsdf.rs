@@ -795,7 +795,8 @@ impl<'a> Bsdf<'a> {
 /// through a coat of unit thickness whose colour head-on is `tint`). Like Cycles, the layering
 /// depends on the outgoing direction only, so a coated BSDF is not reciprocal. Not modelled:
 /// Cycles' multiple-scattering compensation of the coat lobe (under 0.1 % of its albedo at
-/// ior 1.5) and its attenuation of a coated material's emission. Built once per material
+/// ior 1.5). A coated material's emission is dimmed by the same weight, as in Cycles
+/// ([`super::RenderScene::emission`]). Built once per material
 /// ([`super::RenderScene`] holds them) and borrowed by each hit's [`Bsdf`].
 #[derive(Debug, Clone, Copy)]
 pub struct Coat {
@@ -867,6 +868,13 @@ impl Coat {
         let i = (x as usize).min(COAT_MU - 2);
         let f = x - i as f32;
         self.weight * (self.albedo[i] + (self.albedo[i + 1] - self.albedo[i]) * f)
+    }
+
+    /// What the coat lets through of the emission under it toward a direction at `mu` (cosine
+    /// to the normal, either side): as it weights the layers under it.
+    #[inline]
+    pub(crate) fn emission_weight(&self, mu: f32) -> Vec3 {
+        self.under_weight(mu.abs().min(1.0))
     }
 
     /// What reaches the layers under the coat and comes back, seen from `mu`.

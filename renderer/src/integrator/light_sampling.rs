@@ -287,6 +287,10 @@ impl RenderScene {
                 let (uv0, uv1) = self.uvs_at(instance, tri, w1, w2);
                 let mut le =
                     mat.emissive * self.texture(mat.emissive_texture, uv0, uv1).map_or(Vec3::ONE, |t| t.truncate());
+                // a clear coat dims the emission under it (seen at the flat triangle's cos_l)
+                if let Some(c) = self.coat(material_id) {
+                    le *= c.emission_weight(cos_l);
+                }
                 // Cut-outs of the emitter itself: Mask removes, Blend emits with weight alpha
                 // (the expected value of stochastic opacity).
                 match self.alpha_tests[material_id as usize] {

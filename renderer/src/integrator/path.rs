@@ -272,7 +272,7 @@ impl PathTracer {
             }
 
             // Emission.
-            let le = scene.emission(&hit);
+            let le = scene.emission(&hit, d);
             if le != Vec3::ZERO {
                 let w = if depth == 0 {
                     direct_weight.map_or(1.0, |f| f(&hit, d))
