@@ -234,28 +234,47 @@ fn roughness_node(roughness: f32) -> (usize, f32) {
 // its index η′: E_F(μ) = ∫ F(v·h; η′)·D·V·μi dωi, per η′ a table of roughness rows (built on
 // first use), as Cycles tabulates it for its Principled BSDF (`ggx_gen_schlick_ior_s`).
 
-/// One roughness row of a dielectric table.
-struct DielectricRow {
-    /// E_F per μ node (√μ spacing, as [`EnergyRow`]).
-    e: [f32; TABLE_N],
-    /// 2∫ E_F(μ) μ dμ of the interpolated row.
-    avg: f32,
-}
-
-impl std::fmt::Debug for DielectricRow {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("DielectricRow").field("avg", &self.avg).finish_non_exhaustive()
-    }
-}
+/// One roughness row of a dielectric table: E_F per μ node (√μ spacing, as [`EnergyRow`]).
+#[derive(Debug)]
+struct DielectricRow([f32; TABLE_N]);
 
 impl DielectricRow {
     /// E_F(μ), interpolated.
     #[inline]
     fn at(&self, mu: f32) -> f32 {
-        let x = mu.clamp(0.0, 1.0).sqrt() * (TABLE_N - 1) as f32;
-        let i = (x as usize).min(TABLE_N - 2);
-        self.e[i] + (self.e[i + 1] - self.e[i]) * (x - i as f32)
+        interp_sqrt_mu(&self.0, mu)
     }
+}
+
+/// `row` (nodes at √μ = k/(N − 1)) at `mu`, linearly interpolated.
+#[inline]
+fn interp_sqrt_mu<const N: usize>(row: &[f32; N], mu: f32) -> f32 {
+    let x = mu.clamp(0.0, 1.0).sqrt() * (N - 1) as f32;
+    let i = (x as usize).min(N - 2);
+    row[i] + (row[i + 1] - row[i]) * (x - i as f32)
+}
+
+/// The directional albedo ∫ F(v·h; η)·D·V·μi dωi of a GGX reflection of `alpha` at the √μ node
+/// `x` (μ = x²), with the exact dielectric Fresnel of `eta`: 1024 visible-normal samples
+/// (f·μi/pdf = F·G2/G1), as [`build_energy_row`].
+fn fresnel_albedo(x: f32, alpha: f32, eta: f32) -> f32 {
+    const N: u32 = 1024;
+    let a2 = alpha * alpha;
+    let mu = (x * x).max(1e-5);
+    let wo = Vec3::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
+    let lo = smith_lambda(mu, a2);
+    let mut sum = 0.0f64;
+    for k in 0..N {
+        let u = Vec2::new((k as f32 + 0.5) / N as f32, radical_inverse_vdc(k));
+        let h = sample_vndf(wo, alpha, u);
+        let voh = wo.dot(h);
+        let wi = 2.0 * voh * h - wo;
+        if wi.z > 0.0 {
+            let g = (1.0 + lo) / (1.0 + lo + smith_lambda(wi.z, a2));
+            sum += (fresnel_dielectric(voh, eta) * g) as f64;
+        }
+    }
+    (sum / N as f64) as f32
 }
 
 /// The rows of one index η′, and its hemispherical Fresnel average F̄ = 2∫ F(μ) μ dμ.
@@ -278,42 +297,12 @@ impl DielectricTable {
         DielectricTable { eta, f_avg: f_avg as f32, rows: [const { OnceLock::new() }; TABLE_N] }
     }
 
-    /// Row `ri` (roughness ri / (TABLE_N − 1)): 1024 visible-normal samples per μ node, as
-    /// [`build_energy_row`].
+    /// Row `ri` (roughness ri / (TABLE_N − 1)), built on first use.
     fn row(&'static self, ri: usize) -> &'static DielectricRow {
         self.rows[ri].get_or_init(|| {
-            const N: u32 = 1024;
             let r = ri as f32 / (TABLE_N - 1) as f32;
             let alpha = (r * r).max(MIN_ALPHA);
-            let a2 = alpha * alpha;
-            let mut row = DielectricRow { e: [0.0; TABLE_N], avg: 0.0 };
-            for mi in 0..TABLE_N {
-                let x = mi as f32 / (TABLE_N - 1) as f32;
-                let mu = (x * x).max(1e-5);
-                let wo = Vec3::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
-                let lo = smith_lambda(mu, a2);
-                let mut sum = 0.0f64;
-                for k in 0..N {
-                    let u = Vec2::new((k as f32 + 0.5) / N as f32, radical_inverse_vdc(k));
-                    let h = sample_vndf(wo, alpha, u);
-                    let voh = wo.dot(h);
-                    let wi = 2.0 * voh * h - wo;
-                    if wi.z > 0.0 {
-                        let g = (1.0 + lo) / (1.0 + lo + smith_lambda(wi.z, a2));
-                        sum += (fresnel_dielectric(voh, self.eta) * g) as f64;
-                    }
-                }
-                row.e[mi] = (sum / N as f64) as f32;
-            }
-            const M: usize = 2048;
-            let avg: f64 = (0..M)
-                .map(|k| {
-                    let mu = (k as f32 + 0.5) / M as f32;
-                    (2.0 * row.at(mu) * mu) as f64
-                })
-                .sum();
-            row.avg = (avg / M as f64) as f32;
-            row
+            DielectricRow(std::array::from_fn(|mi| fresnel_albedo(mi as f32 / (TABLE_N - 1) as f32, alpha, self.eta)))
         })
     }
 }
@@ -839,35 +828,16 @@ impl Coat {
             log_tint,
             inv_ior2: 1.0 / (ior * ior),
         };
-        // The lobe's albedo per μ node: 1024 visible-normal samples (f·μi/pdf = F·G2/G1).
-        const N: u32 = 1024;
-        for mi in 0..COAT_MU {
-            let x = mi as f32 / (COAT_MU - 1) as f32;
-            let mu = (x * x).max(1e-5);
-            let wo = Vec3::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
-            let lo = smith_lambda(mu, coat.a2);
-            let mut sum = 0.0f64;
-            for k in 0..N {
-                let u = Vec2::new((k as f32 + 0.5) / N as f32, radical_inverse_vdc(k));
-                let h = sample_vndf(wo, alpha, u);
-                let wi = 2.0 * wo.dot(h) * h - wo;
-                if wi.z > 0.0 {
-                    let g = (1.0 + lo) / (1.0 + lo + smith_lambda(wi.z, coat.a2));
-                    sum += (fresnel_dielectric(wo.dot(h), ior) * g) as f64;
-                }
-            }
-            coat.albedo[mi] = ((sum / N as f64) as f32).clamp(0.0, 1.0);
-        }
+        // The lobe's albedo per μ node.
+        coat.albedo =
+            std::array::from_fn(|mi| fresnel_albedo(mi as f32 / (COAT_MU - 1) as f32, alpha, ior).clamp(0.0, 1.0));
         Some(coat)
     }
 
     /// The coat's albedo at `mu`, weight included: w·E_c(μ).
     #[inline]
     fn albedo(&self, mu: f32) -> f32 {
-        let x = mu.clamp(0.0, 1.0).sqrt() * (COAT_MU - 1) as f32;
-        let i = (x as usize).min(COAT_MU - 2);
-        let f = x - i as f32;
-        self.weight * (self.albedo[i] + (self.albedo[i + 1] - self.albedo[i]) * f)
+        self.weight * interp_sqrt_mu(&self.albedo, mu)
     }
 
     /// What the coat lets through of the emission under it toward a direction at `mu` (cosine
