@@ -100,6 +100,10 @@ pub struct RenderArgs {
     /// USD time code to render (default: the stage's startTimeCode, else the default values).
     #[arg(long, allow_hyphen_values = true)]
     pub frame: Option<f64>,
+    /// Catmull-Clark levels for USD meshes whose subdivisionScheme is catmullClark (Blender's
+    /// "Best Match" export of a Subdivision modifier); 0 renders the cage.
+    #[arg(long, default_value_t = petzval_usd::subdiv::DEFAULT_LEVEL, value_parser = clap::value_parser!(u32).range(0..=8))]
+    pub subdivision_level: u32,
     /// USD frames START-END[xSTEP] (inclusive), rendered one after another; `-o` names each
     /// frame with a run of `#` (`out.####.exr` → `out.1001.exr`).
     #[arg(long)]
@@ -496,7 +500,8 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
     let (mut scene, demo_shot): (Scene, Option<demo::DemoShot>) = match &args.scene {
         Some(path) if petzval_usd::is_usd_path(path) => {
             let usd_err = |e: petzval_usd::Error| usd_error(path, e);
-            let shot = petzval_usd::load(path, args.frame).map_err(usd_err)?;
+            let options = petzval_usd::LoadOptions { time: args.frame, subdivision_level: args.subdivision_level };
+            let shot = petzval_usd::load_with(path, &options).map_err(usd_err)?;
             let cam = shot.camera(args.camera.as_deref()).map_err(usd_err)?.clone();
             usd_cam = Some((shot.file.clone(), cam, shot.time));
             (shot.scene, None)

@@ -20,6 +20,9 @@ pub enum UsdCommand {
         /// List every instance with its transforms (JSON only; large for big scatters).
         #[arg(long)]
         instances: bool,
+        /// Catmull-Clark levels for meshes whose subdivisionScheme is catmullClark; 0: the cage.
+        #[arg(long, default_value_t = petzval_usd::subdiv::DEFAULT_LEVEL, value_parser = clap::value_parser!(u32).range(0..=8))]
+        subdivision_level: u32,
     },
     /// Write a lens onto a camera as a new layer over the shot (PetzvalLensAPI).
     SetLens {
@@ -52,8 +55,8 @@ pub enum UsdCommand {
 /// Runs a `petzval usd` subcommand.
 pub fn run(cmd: UsdCommand) -> Result<(), petzval_usd::Error> {
     match cmd {
-        UsdCommand::Info { shot, json, frame, instances } => {
-            let s = petzval_usd::load(&shot, frame)?;
+        UsdCommand::Info { shot, json, frame, instances, subdivision_level } => {
+            let s = petzval_usd::load_with(&shot, &petzval_usd::LoadOptions { time: frame, subdivision_level })?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&s.info_json(instances)).unwrap_or_default());
                 return Ok(());
@@ -73,6 +76,14 @@ pub fn run(cmd: UsdCommand) -> Result<(), petzval_usd::Error> {
                 s.scene.instanced_triangle_count(),
                 s.scene.materials.len()
             );
+            let subdivided: Vec<_> = s.info.meshes.iter().filter(|m| m.subdivision_level.is_some()).collect();
+            if let Some(level) = subdivided.first().and_then(|m| m.subdivision_level) {
+                println!(
+                    "  {} subdivision surfaces (catmullClark), refined {level} levels: {} triangles",
+                    subdivided.len(),
+                    subdivided.iter().map(|m| m.triangles).sum::<usize>()
+                );
+            }
             for c in &s.cameras {
                 println!(
                     "  camera {}: {:.2} mm, aperture {:.3} × {:.3} mm, f/{:.2}, focus {}{}",

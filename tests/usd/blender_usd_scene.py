@@ -1,6 +1,8 @@
-"""Builds a small Blender scene (ground, cube, smooth metal sphere, sun, point light, camera,
-a constant-colour world) and exports it with Blender's own exporters as glTF (scene.glb) and
-USD (scene.usdc, the world as a dome light). Run by tests/usd/test_blender_usd.py in a
+"""Builds a small Blender scene (ground, cube, smooth metal sphere, a cube rounded by a
+Subdivision modifier, sun, point light, camera, a constant-colour world) and exports it with
+Blender's own exporters as glTF (scene.glb, modifiers applied: the subdivided mesh) and USD
+(scene.usdc, the world as a dome light; "Best Match" writes the rounded cube's cage with
+subdivisionScheme = catmullClark, which the USD path subdivides itself). Run by tests/usd/test_blender_usd.py in a
 separate process (bpy bundles its own pxr): `python blender_usd_scene.py OUT_DIR`.
 """
 
@@ -31,6 +33,11 @@ bpy.context.object.data.materials.append(mat("Red", (0.8, 0.1, 0.05), 0.4))
 bpy.ops.mesh.primitive_uv_sphere_add(radius=0.4, location=(1.2, 0.3, 0.4))
 bpy.ops.object.shade_smooth()
 bpy.context.object.data.materials.append(mat("Gold", (0.9, 0.7, 0.3), 0.3, 1.0))
+bpy.ops.mesh.primitive_cube_add(size=0.8, location=(0.2, -1.4, 0.4), rotation=(0, 0, -0.3))
+bpy.ops.object.shade_smooth()
+rounded = bpy.context.object.modifiers.new("Subdivision", "SUBSURF")
+rounded.levels = rounded.render_levels = 2
+bpy.context.object.data.materials.append(mat("Teal", (0.1, 0.6, 0.5), 0.5))
 
 
 def add_object(name: str, data: bpy.types.ID) -> bpy.types.Object:
@@ -56,5 +63,5 @@ w = bpy.data.worlds.new("W")
 s.world = w
 w.node_tree.nodes["Background"].inputs[0].default_value = (0.3, 0.4, 0.5, 1)
 w.node_tree.nodes["Background"].inputs[1].default_value = 1.0
-bpy.ops.export_scene.gltf(filepath=out + "/scene.glb", export_lights=True, export_cameras=True)
+bpy.ops.export_scene.gltf(filepath=out + "/scene.glb", export_lights=True, export_cameras=True, export_apply=True)
 bpy.ops.wm.usd_export(filepath=out + "/scene.usdc")

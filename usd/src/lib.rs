@@ -6,9 +6,10 @@
 //! |---|---|---|---|
 //! | `path` | file | the shot's root layer | — |
 //! | `time` | optional f64 | time code to read (`--frame`) | the stage's `startTimeCode` if authored, else the default values |
+//! | `subdivision_level` | u32 | Catmull-Clark levels of `subdivisionScheme = catmullClark` meshes (`--subdivision-level`) | 2 |
 //!
 //! Modules: [`value`] (typed reads, errors naming layer/prim/attribute), [`xform`] (xform ops,
-//! up axis, units), [`mesh`] (UsdGeomMesh), [`shapes`] (intrinsic shapes), [`stage`] (the walk, instancing),
+//! up axis, units), [`mesh`] (UsdGeomMesh), [`subdiv`] (Catmull-Clark), [`shapes`] (intrinsic shapes), [`stage`] (the walk, instancing),
 //! [`camera`] (UsdGeomCamera + `PetzvalLensAPI`), [`lights`] (UsdLux), [`shading`]
 //! (UsdPreviewSurface), [`render_settings`] (UsdRender), [`author`] (`set-lens`). What is and is not read: `docs/usd.md`.
 //!
@@ -26,6 +27,7 @@ pub mod render_settings;
 pub mod shading;
 pub mod shapes;
 pub mod stage;
+pub mod subdiv;
 pub mod value;
 pub mod xform;
 
@@ -147,6 +149,28 @@ pub fn open_stage(path: &Path) -> Result<usd::Stage, Error> {
 
 /// Loads the shot at `path` at time code `time` (see the module table for the default).
 pub fn load(path: &Path, time: Option<f64>) -> Result<UsdShot, Error> {
+    load_with(path, &LoadOptions { time, ..Default::default() })
+}
+
+/// How a shot is read: [`load`]'s time code and the subdivision level.
+#[derive(Debug, Clone, Copy)]
+pub struct LoadOptions {
+    /// Time code to read (`--frame`); None: the stage's `startTimeCode` if authored.
+    pub time: Option<f64>,
+    /// Catmull-Clark levels for meshes whose `subdivisionScheme` is `catmullClark`
+    /// (`--subdivision-level`; 0 renders the cage).
+    pub subdivision_level: u32,
+}
+
+impl Default for LoadOptions {
+    fn default() -> Self {
+        LoadOptions { time: None, subdivision_level: subdiv::DEFAULT_LEVEL }
+    }
+}
+
+/// [`load`] with every option.
+pub fn load_with(path: &Path, options: &LoadOptions) -> Result<UsdShot, Error> {
+    let time = options.time;
     let stage = open_stage(path)?;
     let file = path.display().to_string();
     let frame_range = if stage.has_authored_time_code_range() {
@@ -156,6 +180,7 @@ pub fn load(path: &Path, time: Option<f64>) -> Result<UsdShot, Error> {
     };
     let time = time.or(frame_range.map(|r| r.0));
     let mut walker = stage::Walker::new(&stage, time)?;
+    walker.subdivision_level = options.subdivision_level;
     let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| walker.run()));
     match run {
         Ok(r) => r?,

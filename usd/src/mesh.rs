@@ -13,11 +13,13 @@
 //! Vertices stay shared when every primvar is per point (vertex/varying/constant); a uniform
 //! or faceVarying primvar gives each face corner its own vertex.
 
+use crate::subdiv::{BoundaryRule, Cage, EdgeSharpness, VertexSharpness, INFINITELY_SHARP};
 use crate::value::{attr_error, Reader};
 use crate::Error;
 use glam::{DVec2, DVec3, Vec2, Vec3};
 use openusd::{sdf, usd};
 use petzval_renderer::scene::Mesh;
+use rustc_hash::FxHashMap as HashMap;
 
 /// Primvar interpolation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -159,6 +161,8 @@ pub struct MeshReport {
     pub hole_faces: usize,
     /// The texture-coordinate primvar read.
     pub st_primvar: Option<String>,
+    /// Catmull-Clark levels applied (None: rendered as authored).
+    pub subdivision_level: Option<u32>,
 }
 
 /// A face subset: its faces and the material id the caller bound to it.
@@ -171,13 +175,15 @@ pub struct Subset {
     pub path: String,
 }
 
-/// Builds the mesh of `prim` (material ids: `material` for faces outside every subset).
+/// Builds the mesh of `prim` (material ids: `material` for faces outside every subset),
+/// Catmull-Clark subdivided to `subdivision` levels when that is given (see [`crate::subdiv`]).
 pub fn build_mesh(
     reader: &Reader,
     prim: &usd::Prim,
     material: u32,
     subsets: &[Subset],
     st_preferred: Option<&str>,
+    subdivision: Option<u32>,
 ) -> Result<(Mesh, MeshReport), Error> {
     let points = reader.vec3s(prim, "points")?.ok_or_else(|| attr_error(prim, "points", "a Mesh needs points"))?;
     let counts = reader.ints(prim, "faceVertexCounts")?.unwrap_or_default();
@@ -246,6 +252,18 @@ pub fn build_mesh(
                 }
             }
         }
+    }
+    if let Some(level) = subdivision {
+        let topo = Topology { counts: &counts, indices: &indices, holes: &holes, left, face_material: &face_material };
+        return subdivided(
+            reader,
+            prim,
+            &points,
+            &topo,
+            st.as_ref(),
+            level,
+            MeshReport { faces: nfaces, st_primvar, ..Default::default() },
+        );
     }
     let welded = [normals.as_ref().map(|n| n.interp), st.as_ref().map(|s| s.interp)]
         .iter()
@@ -317,4 +335,254 @@ pub fn smooth_normals(mesh: &Mesh) -> Vec<Vec3> {
         }
     }
     n.iter().map(|v| v.try_normalize().unwrap_or(Vec3::Y)).collect()
+}
+
+/// Triangles a subdivision level may make per mesh; a higher level is lowered to fit.
+pub const MAX_SUBDIVIDED_TRIANGLES: usize = 20_000_000;
+
+/// A mesh's faces as read and checked.
+struct Topology<'a> {
+    counts: &'a [i64],
+    indices: &'a [i64],
+    holes: &'a std::collections::HashSet<i64>,
+    left: bool,
+    face_material: &'a [u32],
+}
+
+/// The triangles `level` Catmull-Clark steps make of faces with these vertex counts.
+pub fn subdivided_triangles(counts: &[i64], level: u32) -> usize {
+    let quads: usize = counts.iter().filter(|&&c| c >= 3).map(|&c| c as usize).sum();
+    match level {
+        0 => counts.iter().filter(|&&c| c >= 3).map(|&c| c as usize - 2).sum(),
+        l => quads.saturating_mul(2).saturating_mul(1usize.checked_shl(2 * (l - 1)).unwrap_or(usize::MAX)),
+    }
+}
+
+/// Sharpness of creased edges and corners (`creaseIndices`/`Lengths`/`Sharpnesses`,
+/// `cornerIndices`/`Sharpnesses`), checked against the points.
+fn creases(reader: &Reader, prim: &usd::Prim, npoints: usize) -> Result<(EdgeSharpness, VertexSharpness), Error> {
+    let point = |name: &str, i: i64| -> Result<u32, Error> {
+        u32::try_from(i)
+            .ok()
+            .filter(|&v| (v as usize) < npoints)
+            .ok_or_else(|| attr_error(prim, name, format!("index {i} is outside the {npoints} points")))
+    };
+    let mut edges = HashMap::default();
+    let idx = reader.ints(prim, "creaseIndices")?.unwrap_or_default();
+    let lens = reader.ints(prim, "creaseLengths")?.unwrap_or_default();
+    let sharp = reader.floats(prim, "creaseSharpnesses")?.unwrap_or_default();
+    if lens.iter().any(|&l| l < 2) {
+        return Err(attr_error(prim, "creaseLengths", "a crease needs at least 2 vertices"));
+    }
+    let total: i64 = lens.iter().sum();
+    if total as usize != idx.len() {
+        return Err(attr_error(
+            prim,
+            "creaseIndices",
+            format!("has {} indices but creaseLengths adds up to {total}", idx.len()),
+        ));
+    }
+    let crease_edges = (total as usize).saturating_sub(lens.len());
+    let per_edge = sharp.len() == crease_edges && sharp.len() != lens.len();
+    if !per_edge && sharp.len() != lens.len() {
+        return Err(attr_error(
+            prim,
+            "creaseSharpnesses",
+            format!(
+                "has {} values: one per crease ({}) or one per crease edge ({crease_edges}) is needed",
+                sharp.len(),
+                lens.len()
+            ),
+        ));
+    }
+    let (mut at, mut edge) = (0usize, 0usize);
+    for (c, &l) in lens.iter().enumerate() {
+        for k in 0..l as usize - 1 {
+            let (a, b) = (point("creaseIndices", idx[at + k])?, point("creaseIndices", idx[at + k + 1])?);
+            let s = if per_edge { sharp[edge] } else { sharp[c] };
+            edges.insert((a.min(b), a.max(b)), if s.is_finite() { s.min(INFINITELY_SHARP) } else { INFINITELY_SHARP });
+            edge += 1;
+        }
+        at += l as usize;
+    }
+    let mut corners = HashMap::default();
+    let ci = reader.ints(prim, "cornerIndices")?.unwrap_or_default();
+    let cs = reader.floats(prim, "cornerSharpnesses")?.unwrap_or_default();
+    if ci.len() != cs.len() {
+        return Err(attr_error(
+            prim,
+            "cornerSharpnesses",
+            format!("has {} values, cornerIndices has {}", cs.len(), ci.len()),
+        ));
+    }
+    for (&i, &s) in ci.iter().zip(&cs) {
+        corners
+            .insert(point("cornerIndices", i)?, if s.is_finite() { s.min(INFINITELY_SHARP) } else { INFINITELY_SHARP });
+    }
+    Ok((edges, corners))
+}
+
+/// Refines `cage` by `level` steps and returns the limit positions and the final cage.
+fn refine(mut cage: Cage, level: u32, rule: BoundaryRule) -> (Vec<DVec3>, Cage) {
+    for _ in 0..level {
+        cage = cage.refine(rule);
+    }
+    if level == 0 {
+        return (cage.points.clone(), cage);
+    }
+    // Semi-sharp creases left after the last level: their vertices' limits need the steps
+    // that end them (a refined cage keeps its vertices first), up to two extra steps and the
+    // triangle cap; past that the limit weighs the sharp rule by the sharpness left.
+    let left = cage.creases.values().chain(cage.corners.values()).copied().filter(|&s| s < INFINITELY_SHARP);
+    let extra = left.fold(0.0f64, f64::max).ceil() as u32;
+    let fits = cage.counts.len().saturating_mul(2 << (2 * extra.min(2))) <= MAX_SUBDIVIDED_TRIANGLES;
+    let limit = if extra > 0 && extra <= 2 && fits {
+        let mut finer = cage.refine(rule);
+        for _ in 1..extra {
+            finer = finer.refine(rule);
+        }
+        let mut l = finer.limit_points(rule);
+        l.truncate(cage.points.len());
+        l
+    } else {
+        cage.limit_points(rule)
+    };
+    (limit, cage)
+}
+
+/// A Catmull-Clark subdivided mesh: the cage refined `level` times, vertices on the limit
+/// surface, smooth normals of the result (authored normals do not apply to a subdivision
+/// surface), texture coordinates refined by their own interpolation.
+fn subdivided(
+    reader: &Reader,
+    prim: &usd::Prim,
+    points: &[DVec3],
+    topo: &Topology,
+    st: Option<&Primvar<DVec2>>,
+    level: u32,
+    mut report: MeshReport,
+) -> Result<(Mesh, MeshReport), Error> {
+    let boundary = match reader.token(prim, "interpolateBoundary")?.as_deref() {
+        None | Some("edgeAndCorner") => BoundaryRule::EdgeAndCorner,
+        Some("edgeOnly") | Some("none") => BoundaryRule::EdgeOnly,
+        Some(o) => {
+            return Err(attr_error(
+                prim,
+                "interpolateBoundary",
+                format!("must be none, edgeOnly or edgeAndCorner, got '{o}'"),
+            ))
+        }
+    };
+    let fvar_rule = match reader.token(prim, "faceVaryingLinearInterpolation")?.as_deref() {
+        Some("none") => Some(BoundaryRule::EdgeOnly),
+        None | Some("cornersOnly") | Some("cornersPlus1") | Some("cornersPlus2") => Some(BoundaryRule::EdgeAndCorner),
+        Some("boundaries") => Some(BoundaryRule::Linear),
+        Some("all") => None,
+        Some(o) => {
+            return Err(attr_error(
+                prim,
+                "faceVaryingLinearInterpolation",
+                format!("must be none, cornersOnly, cornersPlus1, cornersPlus2, boundaries or all, got '{o}'"),
+            ))
+        }
+    };
+    let (creases, corners) = creases(reader, prim, points.len())?;
+    // 1. the cage: faces with ≥ 3 vertices (holes stay in it: they shape their neighbours)
+    let mut cage = Cage { points: points.to_vec(), creases, corners, ..Default::default() };
+    let mut face_corner = Vec::new();
+    let mut corner = 0usize;
+    for (f, &c) in topo.counts.iter().enumerate() {
+        if c >= 3 {
+            cage.counts.push(c as u32);
+            cage.indices.extend(topo.indices[corner..corner + c as usize].iter().map(|&i| i as u32));
+            cage.parent.push(f as u32);
+            face_corner.push(corner);
+        } else {
+            report.degenerate_faces += 1;
+        }
+        corner += c as usize;
+    }
+    // 2. the level, lowered if it would make too many triangles
+    let mut level = level;
+    while level > 0 && subdivided_triangles(topo.counts, level) > MAX_SUBDIVIDED_TRIANGLES {
+        level -= 1;
+    }
+    report.subdivision_level = Some(level);
+    // 3. texture coordinates: their own cage where they are per corner
+    let uv_cage = st.map(|s| {
+        let mut uv = Cage { counts: cage.counts.clone(), parent: cage.parent.clone(), ..Default::default() };
+        let mut weld: HashMap<(u32, u64), u32> = HashMap::default();
+        let mut k = 0usize;
+        for (face, &c) in cage.counts.iter().enumerate() {
+            let f = cage.parent[face] as usize;
+            let first = face_corner[face];
+            for j in 0..c as usize {
+                let p = cage.indices[k + j];
+                let v = s.at(f, p as usize, first + j).unwrap_or(DVec2::ZERO);
+                let id = match s.interp {
+                    Interp::Vertex | Interp::Constant => p,
+                    _ => {
+                        let bits = v.x.to_bits().rotate_left(17) ^ v.y.to_bits();
+                        *weld.entry((p, bits)).or_insert_with(|| {
+                            uv.points.push(DVec3::new(v.x, v.y, 0.0));
+                            (uv.points.len() - 1) as u32
+                        })
+                    }
+                };
+                uv.indices.push(id);
+            }
+            k += c as usize;
+        }
+        if matches!(s.interp, Interp::Vertex | Interp::Constant) {
+            uv.points = (0..points.len()).map(|p| s.at(0, p, 0).unwrap_or(DVec2::ZERO).extend(0.0)).collect();
+            uv.creases = cage.creases.clone();
+            uv.corners = cage.corners.clone();
+        }
+        let rule = match (s.interp, fvar_rule) {
+            (Interp::Vertex | Interp::Constant, _) => boundary,
+            (_, Some(r)) => r,
+            (_, None) => BoundaryRule::Bilinear,
+        };
+        refine(uv, level, rule)
+    });
+    let (limit, fine) = refine(cage, level, boundary);
+    // 4. triangles, normals of the refined surface, and per-corner vertices where the
+    //    coordinates need them
+    let mut mesh = Mesh { positions: limit.iter().map(|p| p.as_vec3()).collect(), ..Default::default() };
+    let mut tri_uv: Vec<[u32; 3]> = Vec::new();
+    let mut k = 0usize;
+    for (face, &c) in fine.counts.iter().enumerate() {
+        let f = fine.parent[face] as usize;
+        let c = c as usize;
+        if !topo.holes.contains(&(f as i64)) {
+            for j in 1..c - 1 {
+                let t = if topo.left { [0, j + 1, j] } else { [0, j, j + 1] };
+                mesh.indices.push(t.map(|i| fine.indices[k + i]));
+                tri_uv.push(t.map(|i| uv_cage.as_ref().map_or(0, |(_, u)| u.indices[k + i])));
+                mesh.material_ids.push(topo.face_material[f]);
+            }
+        }
+        k += c;
+    }
+    report.hole_faces = topo.counts.iter().enumerate().filter(|(f, _)| topo.holes.contains(&(*f as i64))).count();
+    mesh.normals = smooth_normals(&mesh);
+    let to_v2 = |v: DVec3| Vec2::new(v.x as f32, 1.0 - v.y as f32);
+    if let Some((uvs, _)) = uv_cage {
+        // one vertex per (position, coordinate) pair
+        let mut out = Mesh { material_ids: std::mem::take(&mut mesh.material_ids), ..Default::default() };
+        let mut seen: HashMap<(u32, u32), u32> = HashMap::default();
+        for (t, tu) in mesh.indices.iter().zip(&tri_uv) {
+            let tri = [0, 1, 2].map(|i| {
+                *seen.entry((t[i], tu[i])).or_insert_with(|| {
+                    out.positions.push(mesh.positions[t[i] as usize]);
+                    out.normals.push(mesh.normals[t[i] as usize]);
+                    out.uv0.push(to_v2(uvs[tu[i] as usize]));
+                    (out.positions.len() - 1) as u32
+                })
+            });
+            out.indices.push(tri);
+        }
+        mesh = out;
+    }
+    Ok((mesh, report))
 }

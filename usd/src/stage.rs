@@ -49,6 +49,9 @@ pub struct MeshInfo {
     pub bounds: [[f32; 3]; 2],
     /// The texture-coordinate primvar read.
     pub st_primvar: Option<String>,
+    /// Catmull-Clark levels the mesh was subdivided by (absent: rendered as authored).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub subdivision_level: Option<u32>,
 }
 
 fn bounds(m: &petzval_renderer::scene::Mesh) -> [[f32; 3]; 2] {
@@ -96,6 +99,8 @@ pub struct Walker<'a> {
     pub info: StageInfo,
     /// Warnings (deduplicated at the end).
     pub warnings: Vec<String>,
+    /// Catmull-Clark levels for meshes with `subdivisionScheme = catmullClark`.
+    pub subdivision_level: u32,
     materials: Materials,
     meshes_by_prim: HashMap<String, u32>,
     prototypes: HashMap<String, Vec<Placement>>,
@@ -127,6 +132,7 @@ impl<'a> Walker<'a> {
     /// A walker over `stage` at `time`.
     pub fn new(stage: &'a usd::Stage, time: Option<f64>) -> Result<Self, Error> {
         Ok(Walker {
+            subdivision_level: crate::subdiv::DEFAULT_LEVEL,
             reader: Reader { stage, time },
             units: StageUnits::read(stage)?,
             scene: Scene::default(),
@@ -321,24 +327,37 @@ impl<'a> Walker<'a> {
                 self.materials.material_for(&self.reader, &mut self.scene, &child, double_sided, &mut self.warnings)?;
             subsets.push(Subset { faces, material: m, path: child.path().to_string() });
         }
+        // A subdivision surface (Blender writes its Subdivision modifier's cage with the scheme
+        // when exporting "Best Match"): Catmull-Clark refined. Only an authored scheme counts
+        // (every Blender mesh authors "none"; USD's fallback is catmullClark, which most files
+        // leave unauthored for plain polygon meshes).
+        let scheme = if ty == "Mesh" { self.reader.token(prim, "subdivisionScheme")? } else { None };
+        let subdivision = match scheme.as_deref() {
+            Some("catmullClark") => Some(self.subdivision_level),
+            None | Some("none") | Some("bilinear") => None,
+            Some(other) => {
+                self.warnings.push(format!(
+                    "{}: {path}: subdivisionScheme = {other}: rendered as its control cage (only catmullClark is subdivided)",
+                    layer_of_prim(prim)
+                ));
+                None
+            }
+        };
         let (mesh, report) = if ty == "Mesh" {
             let st = self.materials.st_name(material).map(str::to_string);
-            build_mesh(&self.reader, prim, material, &subsets, st.as_deref())?
+            build_mesh(&self.reader, prim, material, &subsets, st.as_deref(), subdivision)?
         } else {
             let mut m = crate::shapes::shape_mesh(&self.reader, prim, ty)?.unwrap_or_default();
             m.material_ids = vec![material; m.indices.len()];
             let faces = m.indices.len();
             (m, crate::mesh::MeshReport { faces, ..Default::default() })
         };
-        // A subdivision surface (Blender writes its Subdivision modifier's cage with the scheme
-        // when exporting "Best Match"): rendered as its cage, which Cycles would smooth. Only an
-        // authored scheme counts (every Blender mesh authors "none"; USD's fallback is
-        // catmullClark, which most files leave unauthored for plain polygon meshes).
-        if ty == "Mesh" {
-            if let Some(scheme) = self.reader.token(prim, "subdivisionScheme")?.filter(|s| s != "none") {
+        if let (Some(want), Some(got)) = (subdivision, report.subdivision_level) {
+            if got < want {
                 self.warnings.push(format!(
-                    "{}: {path}: subdivisionScheme = {scheme}: rendered as its control cage, not subdivided (export it tessellated: Blender's USD export, Subdivision = Tessellate)",
-                    layer_of_prim(prim)
+                    "{}: {path}: subdivided {got} levels, not {want}: {want} would make more than {} triangles",
+                    layer_of_prim(prim),
+                    crate::mesh::MAX_SUBDIVIDED_TRIANGLES
                 ));
             }
         }
@@ -360,6 +379,7 @@ impl<'a> Walker<'a> {
             instances: 0,
             bounds: bounds(&mesh),
             st_primvar: report.st_primvar.clone(),
+            subdivision_level: report.subdivision_level,
         });
         let id = self.scene.add_mesh(mesh);
         self.meshes_by_prim.insert(path, id);
@@ -459,6 +479,7 @@ impl<'a> Walker<'a> {
             instances: 1,
             bounds: bounds(&mesh),
             st_primvar: None,
+            subdivision_level: None,
         });
         let id = self.scene.add_mesh(mesh);
         self.scene.add_instance(id, Affine3A::from_mat4(m.as_mat4()));

@@ -228,25 +228,60 @@ fn rect_lights_are_hidden_from_the_camera_on_blender_stages() {
     }
 }
 
-/// A mesh that says it is a subdivision surface (Blender's "Best Match" export of a Subdivision
-/// modifier) is rendered as its cage with a warning naming the prim; "none" (what Blender writes
-/// for every other mesh) and an unauthored scheme say nothing.
+/// A `catmullClark` mesh (Blender's "Best Match" export of a Subdivision modifier) is
+/// subdivided, two levels by default, without a warning; `loop` is named in a warning and
+/// rendered as its cage; "none" (what Blender writes for every other mesh), `bilinear` and an
+/// unauthored scheme render the mesh as authored.
 #[test]
-fn a_subdivision_surface_is_named_in_a_warning() {
+fn subdivision_schemes() {
+    const QUAD: &str = "point3f[] points = [(0,0,0),(1,0,0),(1,1,0),(0,1,0)]
+    int[] faceVertexCounts = [4]
+    int[] faceVertexIndices = [0, 1, 2, 3]";
     let stage = |name: &str, scheme: &str| {
         let p = write(
             name,
-            &format!("#usda 1.0\n(\n metersPerUnit = 1\n)\ndef Mesh \"Blob\"\n{{\n {TRI}\n {scheme}\n}}\n"),
+            &format!("#usda 1.0\n(\n metersPerUnit = 1\n)\ndef Mesh \"Blob\"\n{{\n {QUAD}\n {scheme}\n}}\n"),
         );
-        load(&p, None).unwrap().scene.warnings
+        let shot = load(&p, None).unwrap();
+        (shot.scene.warnings, shot.info.meshes[0].triangles, shot.info.meshes[0].subdivision_level)
     };
-    let w = stage("subdiv_cc.usda", "uniform token subdivisionScheme = \"catmullClark\"");
-    assert!(w.iter().any(|w| w.contains("/Blob") && w.contains("catmullClark")), "{w:?}");
-    for (name, scheme) in
-        [("subdiv_none.usda", "uniform token subdivisionScheme = \"none\""), ("subdiv_unset.usda", "")]
-    {
-        let w = stage(name, scheme);
-        assert!(!w.iter().any(|w| w.contains("subdivision")), "{name}: {w:?}");
+    let (w, tris, level) = stage("subdiv_cc.usda", "uniform token subdivisionScheme = \"catmullClark\"");
+    assert!(w.is_empty(), "{w:?}");
+    assert_eq!((tris, level), (32, Some(2)));
+    let (w, tris, level) = stage("subdiv_loop.usda", "uniform token subdivisionScheme = \"loop\"");
+    assert!(w.iter().any(|w| w.contains("/Blob") && w.contains("loop")), "{w:?}");
+    assert_eq!((tris, level), (2, None));
+    for (name, scheme) in [
+        ("subdiv_none.usda", "uniform token subdivisionScheme = \"none\""),
+        ("subdiv_bilinear.usda", "uniform token subdivisionScheme = \"bilinear\""),
+        ("subdiv_unset.usda", ""),
+    ] {
+        let (w, tris, level) = stage(name, scheme);
+        assert!(w.is_empty(), "{name}: {w:?}");
+        assert_eq!((tris, level), (2, None), "{name}");
+    }
+}
+
+/// Malformed crease data is an error naming the prim and attribute.
+#[test]
+fn bad_creases_name_the_attribute() {
+    let cases = [
+        ("int[] creaseIndices = [0, 9]\n int[] creaseLengths = [2]\n float[] creaseSharpnesses = [1]", "creaseIndices"),
+        ("int[] creaseIndices = [0, 1]\n int[] creaseLengths = [3]\n float[] creaseSharpnesses = [1]", "creaseIndices"),
+        (
+            "int[] creaseIndices = [0, 1]\n int[] creaseLengths = [2]\n float[] creaseSharpnesses = [1, 2, 3]",
+            "creaseSharpnesses",
+        ),
+        ("int[] cornerIndices = [0]\n float[] cornerSharpnesses = []", "cornerSharpnesses"),
+        ("token interpolateBoundary = \"sideways\"", "interpolateBoundary"),
+    ];
+    for (k, (attrs, attr)) in cases.iter().enumerate() {
+        let p = write(
+            &format!("bad_crease_{k}.usda"),
+            &format!("#usda 1.0\ndef Mesh \"Blob\"\n{{\n {TRI}\n uniform token subdivisionScheme = \"catmullClark\"\n {attrs}\n}}\n"),
+        );
+        let e = load(&p, None).err().unwrap_or_else(|| panic!("{attrs}: loaded")).to_string();
+        assert!(e.contains("/Blob") && e.contains(attr), "{attrs}: {e}");
     }
 }
 
