@@ -354,7 +354,9 @@ pub fn subdivided_triangles(counts: &[i64], level: u32) -> usize {
     let quads: usize = counts.iter().filter(|&&c| c >= 3).map(|&c| c as usize).sum();
     match level {
         0 => counts.iter().filter(|&&c| c >= 3).map(|&c| c as usize - 2).sum(),
-        l => quads.saturating_mul(2).saturating_mul(1usize.checked_shl(2 * (l - 1)).unwrap_or(usize::MAX)),
+        l => {
+            quads.saturating_mul(2).saturating_mul(1usize.checked_shl((l - 1).saturating_mul(2)).unwrap_or(usize::MAX))
+        }
     }
 }
 
