@@ -295,7 +295,7 @@ impl PyScene {
     }
 
     /// Adds a triangle mesh (see the stub).
-    #[pyo3(signature = (positions, triangles, material_ids = None, normals = None, uvs = None, tangents = None, transform = None, name = ""))]
+    #[pyo3(signature = (positions, triangles, material_ids = None, normals = None, uvs = None, tangents = None, transform = None, name = "", colors = None))]
     #[allow(clippy::too_many_arguments)]
     fn add_mesh(
         &mut self,
@@ -307,6 +307,7 @@ impl PyScene {
         tangents: Option<PyArrayLike2<'_, f32, AllowTypeChange>>,
         transform: Option<PyArrayLike2<'_, f64, AllowTypeChange>>,
         name: &str,
+        colors: Option<PyArrayLike2<'_, f32, AllowTypeChange>>,
     ) -> PyResult<usize> {
         guard(|| {
             // 1. Shapes and values.
@@ -394,6 +395,22 @@ impl PyScene {
                     self.all_tangents = false;
                     mesh.tangents = vec![Vec4::ZERO; nv];
                 }
+            }
+            if let Some(c) = &colors {
+                let c = c.as_array();
+                if c.nrows() != nv || !(c.ncols() == 3 || c.ncols() == 4) {
+                    return Err(scene_err(
+                        name,
+                        "colors",
+                        format!("expected ({nv}, 3) or ({nv}, 4), got {:?}", c.shape()),
+                    ));
+                }
+                if c.iter().any(|v| !v.is_finite()) {
+                    return Err(scene_err(name, "colors", "contain non-finite values".into()));
+                }
+                let alpha = |i: usize| if c.ncols() == 4 { c[[i, 3]] } else { 1.0 };
+                mesh.colors =
+                    (0..nv).map(|i| Vec4::new(c[[i, 0]], c[[i, 1]], c[[i, 2]], alpha(i)).max(Vec4::ZERO)).collect();
             }
             let id = self.scene.add_mesh(mesh);
             self.scene.add_instance(id, affine_f32(&xf));

@@ -71,6 +71,7 @@ pub fn icosphere(center: Vec3, radius: f32, level: u32, material: u32) -> Mesh {
         tangents: vec![Vec4::ZERO; n],
         uv0: vec![Vec2::ZERO; n],
         uv1: vec![],
+        colors: vec![],
         material_ids: vec![material; f.len()],
         indices: f,
     }

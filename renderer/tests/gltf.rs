@@ -459,3 +459,28 @@ fn gltf_transmission_factor() {
     assert!(w.contains("transmissionTexture") && w.contains("transmissionFactor 1.5"), "{w}");
     assert!(!w.contains("KHR_materials_transmission is not supported"), "{w}");
 }
+
+/// `COLOR_0` as normalized bytes (VEC4) and as floats (VEC3, clamped to [0, 1], alpha 1), and a
+/// primitive without it (white), merged into one mesh.
+#[test]
+fn gltf_vertex_colours() {
+    let s = load("vertex_colours.gltf");
+    let m = &s.meshes[0];
+    assert_eq!(m.colors.len(), m.positions.len());
+    assert_eq!(m.positions.len(), 9);
+    let want = [
+        Vec4::new(1.0, 0.0, 0.0, 1.0),
+        Vec4::new(0.0, 1.0, 0.0, 128.0 / 255.0),
+        Vec4::new(0.0, 0.0, 1.0, 0.0),
+        Vec4::new(0.25, 0.5, 0.75, 1.0),
+        Vec4::new(1.0, 0.0, 0.5, 1.0),
+        Vec4::new(0.0, 0.0, 0.0, 1.0),
+        Vec4::ONE,
+        Vec4::ONE,
+        Vec4::ONE,
+    ];
+    for (k, (got, want)) in m.colors.iter().zip(want).enumerate() {
+        assert!(got.distance(want) < 1e-6, "vertex {k}: {got}, expected {want}");
+    }
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+}

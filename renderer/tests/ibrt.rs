@@ -31,6 +31,7 @@ fn rect(x0: f32, x1: f32, y0: f32, y1: f32, z: f32, material: u32) -> Mesh {
         tangents: vec![Vec4::ZERO; 4],
         uv0: vec![Vec2::ZERO; 4],
         uv1: vec![],
+        colors: vec![],
         indices: vec![[0, 1, 2], [0, 2, 3]],
         material_ids: vec![material; 2],
     }
@@ -138,6 +139,7 @@ fn ibrt_rays_meet_a_plane_layer_at_its_depth() {
         tangents: vec![Vec4::ZERO; 4],
         uv0: vec![Vec2::ZERO; 4],
         uv1: vec![],
+        colors: vec![],
         indices: vec![[0, 1, 2], [0, 2, 3]],
         material_ids: vec![0; 2],
     };

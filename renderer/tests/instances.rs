@@ -25,6 +25,7 @@ fn quad(n: Vec3, material: u32) -> Mesh {
         tangents: vec![Vec4::ZERO; 4],
         uv0: vec![Vec2::ZERO, Vec2::X, Vec2::ONE, Vec2::Y],
         uv1: vec![],
+        colors: vec![],
         indices: vec![[0, 1, 2], [0, 2, 3]],
         material_ids: vec![material; 2],
     }

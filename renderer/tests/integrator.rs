@@ -43,6 +43,7 @@ fn quad(o: Vec3, a: Vec3, b: Vec3, material: u32) -> Mesh {
         tangents: vec![Vec4::ZERO; 4],
         uv0: vec![Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0), Vec2::new(1.0, 1.0), Vec2::new(0.0, 1.0)],
         uv1: vec![],
+        colors: vec![],
         indices: vec![[0, 1, 2], [0, 2, 3]],
         material_ids: vec![material; 2],
     }
@@ -286,6 +287,55 @@ fn alpha_mask_cuts_out() {
     assert_eq!(s.alpha, 0.0);
     assert!(s.depth_m.is_infinite());
     assert!(s.radiance.distance(Vec3::splat(0.25)) < 1e-6);
+}
+
+/// Vertex colours (glTF `COLOR_0`) multiply the base colour and alpha: a diffuse plane of base
+/// 0.5 with red, green, blue and white corners under a constant sky of radiance 1 reflects
+/// base × colour (an open Lambertian plane under a uniform sky: L = albedo), the colour
+/// interpolated across each triangle; corners of alpha 0 cut a masked, untextured material out
+/// where the interpolated alpha is below the cutoff.
+#[test]
+fn vertex_colours_multiply_the_base_colour_and_alpha() {
+    let mut plane = quad(Vec3::new(-1.0, 0.0, 1.0), Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -2.0), 0);
+    plane.colors =
+        vec![Vec4::new(1.0, 0.0, 0.0, 1.0), Vec4::new(0.0, 1.0, 0.0, 1.0), Vec4::new(0.0, 0.0, 1.0, 1.0), Vec4::ONE];
+    let mut scene = scene_of(&[plane], vec![diffuse(Vec3::splat(0.5))]);
+    scene.environment = Environment::Constant(Vec3::ONE);
+    let rs = RenderScene::new(scene).unwrap();
+    let eye = Vec3::new(0.0, 3.0, 0.0);
+    // (point on the plane, its colour) for corners red (−1, 1), green (1, 1), blue (1, −1) and
+    // white (−1, −1) in (x, z): the centre is halfway along the diagonal red–blue; (−0.5, −0.5)
+    // is red, blue, white at barycentrics (0.25, 0.25, 0.5); (0.5, 0.5) red, green, blue at
+    // (0.25, 0.5, 0.25)
+    for (p, colour) in [
+        (Vec3::new(0.0, 0.0, 0.0), Vec3::new(0.5, 0.0, 0.5)),
+        (Vec3::new(-0.5, 0.0, -0.5), Vec3::new(0.75, 0.5, 0.75)),
+        (Vec3::new(0.5, 0.0, 0.5), Vec3::new(0.25, 0.5, 0.25)),
+    ] {
+        let hit = rs.intersect(eye, (p - eye).normalize(), f32::INFINITY).unwrap();
+        let c = rs.vertex_color(hit.instance, hit.triangle, hit.barycentrics.x, hit.barycentrics.y);
+        assert!(c.truncate().distance(colour) < 1e-5, "{p}: vertex colour {c}, expected {colour}");
+        let (l, _) = mean_radiance(&PathTracer::default(), &rs, eye, p - eye, 5, 512);
+        let want = 0.5 * colour;
+        for k in 0..3 {
+            assert!((l[k] - want[k]).abs() <= 0.03 * want.max_element(), "{p}: radiance {l}, expected {want}");
+        }
+    }
+    // alpha: 0 on the left corners, 1 on the right; Mask(0.5) without a texture
+    let rs = {
+        let mut scene = alpha_quads(AlphaMode::Mask(0.5), 1.0, false).into_scene();
+        let front = &mut scene.meshes[0];
+        front.colors = front
+            .positions
+            .iter()
+            .map(|p| if p.z == 0.0 { Vec4::new(1.0, 1.0, 1.0, (p.x > 0.0) as u8 as f32) } else { Vec4::ONE })
+            .collect();
+        RenderScene::new(scene).unwrap()
+    };
+    let left = rs.intersect(Vec3::new(-0.6, 0.0, 1.0), Vec3::NEG_Z, f32::INFINITY).unwrap();
+    assert_eq!(left.material_id, 1, "interpolated alpha 0.2: cut out");
+    let right = rs.intersect(Vec3::new(0.6, 0.0, 1.0), Vec3::NEG_Z, f32::INFINITY).unwrap();
+    assert_eq!(right.material_id, 0, "interpolated alpha 0.8: kept");
 }
 
 #[test]

@@ -1095,6 +1095,7 @@ fn render_alpha_is_coverage_through_a_real_lens() {
         tangents: vec![Vec4::ZERO; 4],
         uv0: vec![Vec2::ZERO; 4],
         uv1: vec![],
+        colors: vec![],
         indices: vec![[0, 1, 2], [0, 2, 3]],
         material_ids: vec![0, 0],
     };

@@ -96,6 +96,7 @@ fn scatter_scene(mesh: Mesh, n: usize) -> (Scene, f32) {
         tangents: vec![Vec4::ZERO; 4],
         uv0: vec![Vec2::ZERO; 4],
         uv1: vec![],
+        colors: vec![],
         indices: vec![[0, 1, 2], [0, 2, 3]],
         material_ids: vec![1, 1],
     };

@@ -306,6 +306,33 @@ def _save_packed(img, file_name: str, file_format: str):
     return img
 
 
+def _paint_sphere(b, obj, mat, small: bool) -> None:
+    """Colours a sphere from its mesh (variant "paint"): small, the default colour attribute
+    (float, per corner: red to green across x, blue with height) read by an unnamed Color
+    Attribute node; big, a byte colour attribute "Tint" per point (orange to cyan with height,
+    stored in sRGB) read by an Attribute node."""
+    me = obj.data
+    nt = mat.node_tree
+    bsdf = nt.nodes.get("Principled BSDF")
+    if small:
+        attr = me.color_attributes.new("Paint", "FLOAT_COLOR", "CORNER")
+        me.attributes.default_color_name = "Paint"
+        for loop in me.loops:
+            co = me.vertices[loop.vertex_index].co.normalized()
+            u, h = 0.5 + 0.5 * co.x, 0.5 + 0.5 * co.z
+            attr.data[loop.index].color = (0.9 * u, 0.9 * (1.0 - u), 0.1 + 0.7 * h, 1.0)
+        node = nt.nodes.new("ShaderNodeVertexColor")
+    else:
+        attr = me.color_attributes.new("Tint", "BYTE_COLOR", "POINT")
+        for v in me.vertices:
+            h = 0.5 + 0.5 * v.co.normalized().z
+            attr.data[v.index].color = (0.9 - 0.7 * h, 0.4 + 0.2 * h, 0.1 + 0.8 * h, 1.0)
+        node = nt.nodes.new("ShaderNodeAttribute")
+        node.attribute_type = "GEOMETRY"
+        node.attribute_name = "Tint"
+    nt.links.new(node.outputs["Color"], bsdf.inputs["Base Color"])
+
+
 def build_lights_scene(variant: str):
     """Diffuse ground and spheres lit by a rectangular and a disc area light (``variant``
     "area", black world), by an environment texture rotated by a Mapping node ("world", no
@@ -321,7 +348,10 @@ def build_lights_scene(variant: str):
     "glass" makes the two spheres glass (Transmission Weight 1: clear IOR 1.45, and a tinted one
     of roughness 0.3) over the checker ground, lit by the environment texture. "coat" coats the
     two spheres (a red dielectric under a smooth coat of weight 1; a metal under a rougher,
-    tinted coat of weight 0.6 and IOR 1.8) over the same ground and light. "ortho" is "texture"
+    tinted coat of weight 0.6 and IOR 1.8) over the same ground and light. "paint" colours the
+    two spheres from the meshes: the small one's Base Color from a Color Attribute node with no
+    name (the default colour attribute, per corner, float), the big one's from an Attribute node
+    naming a per-point byte colour attribute, over the same ground and light. "ortho" is "texture"
     seen through an orthographic camera (Orthographic Scale 3 m, VERTICAL fit, shifted, f/4 focused
     at 2.5 m)."""
     b = bpy()
@@ -332,7 +362,7 @@ def build_lights_scene(variant: str):
         world.use_nodes = True
     nt = world.node_tree
     bg = nt.nodes.get("Background")
-    bg.inputs["Strength"].default_value = 0.5 if variant in ("world", "glass", "coat") else 0.0
+    bg.inputs["Strength"].default_value = 0.5 if variant in ("world", "glass", "coat", "paint") else 0.0
     env = nt.nodes.new("ShaderNodeTexEnvironment")
     env.image = _environment_image()
     mapping = nt.nodes.new("ShaderNodeMapping")
@@ -345,7 +375,7 @@ def build_lights_scene(variant: str):
 
     b.ops.mesh.primitive_plane_add(size=8.0, location=(0.0, 2.0, 0.0))
     ground = _principled_lambert("Ground", (0.5, 0.5, 0.5))
-    if variant in ("texture", "glass", "ortho", "coat"):
+    if variant in ("texture", "glass", "ortho", "coat", "paint"):
         # the ground's colour from a coarse 8-bit checker with Linear interpolation
         tex = ground.node_tree.nodes.new("ShaderNodeTexImage")
         tex.image = _checker_image()
@@ -380,6 +410,8 @@ def build_lights_scene(variant: str):
             p.inputs["Coat Tint"].default_value = (1.0, 1.0, 1.0, 1.0) if small else (0.9, 0.6, 0.3, 1.0)
             p.inputs["Roughness"].default_value = 0.5 if small else 0.35
             p.inputs["Metallic"].default_value = 0.0 if small else 1.0
+        if variant == "paint":
+            _paint_sphere(b, b.context.active_object, mat, small=r < 0.4)
         b.context.active_object.data.materials.append(mat)
 
     lights = (("Rect", "RECTANGLE", 1.0, 0.5, (0.8, 1.0, 2.6), 300.0, (1.0, 0.85, 0.7)),

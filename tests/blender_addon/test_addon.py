@@ -286,7 +286,7 @@ SPP_LIGHTS = 128
 
 
 @pytest.mark.parametrize(
-    "variant", ["area", "world", "spots", "soft", "texture", "hidden", "terminator", "glass", "coat", "ortho"]
+    "variant", ["area", "world", "spots", "soft", "texture", "hidden", "terminator", "glass", "coat", "paint", "ortho"]
 )
 def test_area_lights_and_environment_match_cycles(addon, report, variant):
     """What tests/blender's glTF scene cannot carry, against Cycles (8x8 block z-test and image
@@ -304,7 +304,9 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
     Blender's default Shadow Terminator Geometry Offset and a coarse sphere with 0 (their
     terminators were darker than Cycles'); "glass": a clear and a rough tinted glass sphere over a
     checker, lit by the environment (Transmission Weight was ignored: opaque spheres); "coat": a
-    coated dielectric and a coated, tinted metal sphere (the coat was ignored); "ortho": the
+    coated dielectric and a coated, tinted metal sphere (the coat was ignored); "paint": base
+    colours from the meshes' colour attributes through a Color Attribute and an Attribute node
+    (the viewport display colour was used); "ortho": the
     "texture" scene through an orthographic camera (VERTICAL fit, shifted, Cycles' depth of field;
     it was refused)."""
     H.build_lights_scene(variant)
@@ -328,6 +330,7 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
         "terminator": "smooth low-poly meshes lit from the side (geometry offsets 0.1 and 0)",
         "glass": "a clear and a rough tinted glass sphere over a checker",
         "coat": "a coated dielectric and a coated metal sphere (Coat Weight, Roughness, IOR, Tint) over a checker",
+        "paint": "spheres coloured by colour attributes (Color Attribute node, Attribute node) over a checker",
         "ortho": "an orthographic camera (scale 3 m, VERTICAL fit, shifted, f/4 at 2.5 m) over a sun-lit checker",
     }[variant]
     report.line(f"{what} vs Cycles, {w}x{h} {SPP_LIGHTS} spp x seeds {SEEDS} ({secs:.1f} s per F12)")

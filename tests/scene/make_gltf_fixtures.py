@@ -388,8 +388,35 @@ def accessors():
     write_json("accessors.gltf", doc)
 
 
+def vertex_colours():
+    """COLOR_0 three ways on one mesh: normalized unsigned bytes (VEC4), floats (VEC3), and a
+    primitive without it (white); each primitive a triangle."""
+    UBYTE = 5121
+    b = Builder()
+    tri = b.floats(TRIANGLE, "VEC3", minmax=True)
+    rgba = bytes([255, 0, 0, 255, 0, 255, 0, 128, 0, 0, 255, 0])
+    acc_bytes = {"bufferView": b.view(rgba, ARRAY_BUFFER), "componentType": UBYTE, "normalized": True,
+                 "count": 3, "type": "VEC4"}
+    b.accessors.append(acc_bytes)
+    c4 = len(b.accessors) - 1
+    c3 = b.floats([(0.25, 0.5, 0.75), (2.0, -1.0, 0.5), (0.0, 0.0, 0.0)], "VEC3")
+    doc = b.gltf(
+        None,
+        scenes=[{"nodes": [0]}],
+        nodes=[{"mesh": 0}],
+        meshes=[{"name": "Painted", "primitives": [
+            {"attributes": {"POSITION": tri, "COLOR_0": c4}},
+            {"attributes": {"POSITION": tri, "COLOR_0": c3}},
+            {"attributes": {"POSITION": tri}},
+        ]}],
+    )
+    doc["buffers"][0]["uri"] = data_uri(b.data)
+    write_json("vertex_colours.gltf", doc)
+
+
 def main():
     OUT.mkdir(parents=True, exist_ok=True)
+    vertex_colours()
     hierarchy()
     textured_quad()
     lights()

@@ -76,9 +76,21 @@ def build(petzval, depsgraph, notes, stop=None):
         for what, flag in (("holdout", "holdout_get"), ("indirect only", "indirect_only_get")):
             if _view_layer_flag(obj, flag, depsgraph) or (what == "holdout" and getattr(obj, "is_holdout", False)):
                 notes.warn(f"object '{obj.name}': {what} (rendered as an ordinary object)")
+        slots = obj.material_slots
+        if len(slots) == 0:
+            table = np.array([materials.default()], dtype=np.uint32)
+        else:
+            table = np.array([materials.index(s.material) for s in slots], dtype=np.uint32)
+        table = np.array([materials.for_object(int(k), visible_to_camera, offset) for k in table], dtype=np.uint32)
+        # the colour attribute the object's materials read (one per mesh: the first named)
+        wanted = sorted({materials.colour_attribute[int(k)] for k in table if int(k) in materials.colour_attribute})
+        if len(wanted) > 1:
+            notes.warn(f"object '{obj.name}': materials read different colour attributes ({', '.join(wanted)}); "
+                       f"'{wanted[0] or '(default)'}' used for all")
+        colour_attribute = wanted[0] if wanted else None
         data = obj.data
         key = data.as_pointer() if data is not None else ("object", obj.name_full)
-        md = meshes.get(key, False)
+        md = meshes.get((key, colour_attribute), False)
         if md is False:
             try:
                 mesh = obj.to_mesh()
@@ -87,26 +99,26 @@ def build(petzval, depsgraph, notes, stop=None):
             md = None
             if mesh is not None:
                 try:
-                    md = mesh_data(mesh)
+                    md = mesh_data(mesh, colour_attribute, notes.warn)
                 finally:
                     obj.to_mesh_clear()
-            meshes[key] = md
+            meshes[(key, colour_attribute)] = md
             stats["meshes_converted"] += 1
         if md is None:
             continue
-        slots = obj.material_slots
-        if len(slots) == 0:
-            table = np.array([materials.default()], dtype=np.uint32)
-        else:
-            table = np.array([materials.index(s.material) for s in slots], dtype=np.uint32)
-        table = np.array([materials.for_object(int(k), visible_to_camera, offset) for k in table], dtype=np.uint32)
         xf = to_gltf(inst.matrix_world)
         id_key = (key, tuple(table.tolist()))
         mesh_id = mesh_ids.get(id_key)
         if mesh_id is None:
             mat_ids = table[np.minimum(md.slot_index, len(table) - 1)]
+            colours = None
+            if md.colours is not None:
+                # white on the corners of triangles whose material does not read the colours
+                colours = md.colours.copy()
+                plain = np.array([int(k) not in materials.colour_attribute for k in mat_ids], dtype=bool)
+                colours[md.triangles[plain].ravel()] = 1.0
             mesh_ids[id_key] = pz.add_mesh(md.positions, md.triangles, material_ids=mat_ids, normals=md.normals,
-                                           uvs=md.uvs, transform=xf, name=obj.name)
+                                           uvs=md.uvs, transform=xf, name=obj.name, colors=colours)
         else:
             pz.add_instance(mesh_id, xf, name=obj.name)
         stats["objects" if not inst.is_instance else "instances"] += 1

@@ -2,7 +2,9 @@
 
 Materials: the Principled BSDF (base colour, metallic, roughness, IOR, Specular IOR Level,
 alpha, emission, normal map, Transmission Weight, Coat Weight, Roughness, IOR and Tint) with
-Image Texture nodes where glTF can take them; Diffuse BSDF and
+Image Texture nodes where glTF can take them, and a base colour from a Color Attribute node (or
+an Attribute node naming a geometry attribute): the mesh's colours, which the renderer
+multiplies into the base colour as glTF's ``COLOR_0``; Diffuse BSDF and
 Emission shaders. Anything else falls back to the material's viewport display colour and is
 listed (once) in the render's warning report.
 """
@@ -30,6 +32,10 @@ class Materials:
         self.textures: dict = {}
         self._default = None
         self._variants: dict = {}
+        # material index -> the colour attribute its base colour reads ("" = the mesh's default
+        # colour attribute), for materials whose base colour is a Color Attribute / Attribute node
+        self.colour_attribute: dict[int, str] = {}
+        self._reading: str | None = None
 
     # -- textures
 
@@ -90,7 +96,11 @@ class Materials:
             return self.default()
         key = mat.name_full
         if key not in self.index_of:
-            self.index_of[key] = self._convert(mat)
+            self._reading = None
+            index = self._convert(mat)
+            self.index_of[key] = index
+            if self._reading is not None:
+                self.colour_attribute[index] = self._reading
         return self.index_of[key]
 
     def for_object(self, index: int, visible_to_camera: bool, terminator_offset: float) -> int:
@@ -103,6 +113,8 @@ class Materials:
             self._variants[key] = self.scene.material_variant(
                 index, visible_to_camera=visible_to_camera, terminator_offset=terminator_offset
             )
+            if index in self.colour_attribute:
+                self.colour_attribute[self._variants[key]] = self.colour_attribute[index]
         return self._variants[key]
 
     def _fallback(self, mat, why: str) -> int:
@@ -172,6 +184,11 @@ class Materials:
             return {"base_color": (1.0, 1.0, 1.0, 1.0), "base_color_texture": tex}
         if n.type == "RGB":
             return {"base_color": tuple(out.default_value)}
+        geometry_attribute = n.type == "ATTRIBUTE" and n.attribute_type == "GEOMETRY"
+        if out.name == "Color" and (n.type == "VERTEX_COLOR" or geometry_attribute):
+            # the mesh's colours (added with the mesh) times white
+            self._reading = n.layer_name if n.type == "VERTEX_COLOR" else n.attribute_name
+            return {"base_color": (1.0, 1.0, 1.0, 1.0)}
         self.notes.warn(f"material '{mat.name}': base colour from a {n.bl_label} node, viewport display colour used")
         return {"base_color": tuple(mat.diffuse_color)}
 

@@ -146,6 +146,7 @@ class Scene:
         tangents: NDArray[np.float32] | None = None,
         transform: NDArray[np.float64] | None = None,
         name: str = "",
+        colors: NDArray[np.float32] | None = None,
     ) -> int:
         """Adds a triangle mesh, stored once in object space, placed once by ``transform``;
         returns its mesh id for :meth:`add_instance` / :meth:`add_instances`.
@@ -154,7 +155,10 @@ class Scene:
         without materials gets a grey default), optional per-vertex ``normals (N, 3)``
         (computed from faces when absent), ``uvs (N, 2)`` (glTF convention), ``tangents
         (N, 4)`` (xyz + handedness w), and ``transform`` a ``(4, 4)`` object-to-world matrix
-        (column vectors, i.e. Blender's ``matrix_world`` layout, already in glTF axes).
+        (column vectors, i.e. Blender's ``matrix_world`` layout, already in glTF axes), and
+        optional ``colors (N, 3)`` or ``(N, 4)``: linear RGB(A) vertex colours multiplying the
+        base colour and alpha of the triangles' materials (glTF's ``COLOR_0``; negative values
+        read as 0).
         Indices out of range, non-finite values or a singular transform raise
         InvalidSceneError naming ``name``."""
     def add_instance(self, mesh_id: int, transform: NDArray[np.float64], name: str = "") -> None:

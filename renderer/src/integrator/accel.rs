@@ -148,12 +148,14 @@ pub(crate) enum AlphaTest {
     LightEmitter,
 }
 
-fn alpha_test_of(m: &Material) -> AlphaTest {
+/// The alpha test of material `m`; `vertex_alpha`: a mesh using it has vertex colours with
+/// alpha below 1.
+fn alpha_test_of(m: &Material, vertex_alpha: bool) -> AlphaTest {
     if m.light_emitter {
         return AlphaTest::LightEmitter;
     }
     let factor = m.base_color.w;
-    let textured = m.base_color_texture.is_some();
+    let textured = m.base_color_texture.is_some() || vertex_alpha;
     match m.alpha_mode {
         AlphaMode::Opaque => AlphaTest::None,
         AlphaMode::Mask(cutoff) => {
@@ -529,6 +531,7 @@ struct MeshInfo {
     has_uv0: bool,
     has_uv1: bool,
     has_tangents: bool,
+    has_colors: bool,
 }
 
 /// A candidate hit during traversal.
@@ -692,6 +695,7 @@ impl RenderScene {
                 has_uv0: m.uv0.len() == nv && finite_uv0,
                 has_uv1: m.uv1.len() == nv && m.uv0.len() == nv && finite_uv0 && finite_uv1,
                 has_tangents: m.tangents.len() == nv,
+                has_colors: m.colors.len() == nv && nv > 0,
             };
             if !info.has_normals && !m.normals.is_empty() {
                 scene
@@ -704,7 +708,19 @@ impl RenderScene {
             mesh_info.push(info);
         }
 
-        let alpha_tests: Vec<AlphaTest> = scene.materials.iter().map(alpha_test_of).collect();
+        // a vertex colour's alpha below 1 varies its triangles' materials' alpha, as a texture does
+        let mut vertex_alpha = vec![false; scene.materials.len()];
+        for m in scene.meshes.iter().filter(|m| m.colors.len() == m.positions.len()) {
+            if m.colors.iter().any(|c| c.w < 1.0) {
+                for &id in &m.material_ids {
+                    if let Some(v) = vertex_alpha.get_mut(id as usize) {
+                        *v = true;
+                    }
+                }
+            }
+        }
+        let alpha_tests: Vec<AlphaTest> =
+            scene.materials.iter().zip(&vertex_alpha).map(|(m, &v)| alpha_test_of(m, v)).collect();
         let any_stochastic = alpha_tests.contains(&AlphaTest::Stochastic);
         let any_hidden_from_camera = scene.materials.iter().any(|m| !m.visible_to_camera);
         let coats: Vec<Option<Coat>> =
@@ -1098,7 +1114,19 @@ impl RenderScene {
         let mat = &self.scene.materials[self.material_of(inst, tri) as usize];
         let (uv0, uv1) = self.uvs_at(inst, tri, b1, b2);
         let tex = self.texture(mat.base_color_texture, uv0, uv1).map_or(1.0, |t| t.w);
-        mat.base_color.w * tex
+        mat.base_color.w * tex * self.vertex_color(inst, tri, b1, b2).w
+    }
+
+    /// The mesh's vertex colour (linear RGBA) at barycentrics (b1, b2) of triangle `tri` of
+    /// instance `inst`; white when the mesh has none.
+    #[inline]
+    pub fn vertex_color(&self, inst: u32, tri: u32, b1: f32, b2: f32) -> Vec4 {
+        let (m, info) = self.mesh_of(inst);
+        if !info.has_colors {
+            return Vec4::ONE;
+        }
+        let [i0, i1, i2] = m.indices[tri as usize].map(|i| i as usize);
+        m.colors[i0] * (1.0 - b1 - b2) + m.colors[i1] * b1 + m.colors[i2] * b2
     }
 
     /// Whether the surface is there for this ray at (b1, b2) of candidate `c`: not cut out by

@@ -111,11 +111,12 @@ pub fn power_heuristic(a: f32, b: f32) -> f32 {
     }
 }
 
-/// Base colour (factor × texture, linear RGB) at a hit.
+/// Base colour (factor × texture × vertex colour, linear RGB) at a hit.
 pub fn base_color(scene: &RenderScene, hit: &SurfaceHit) -> Vec3 {
     let mat = &scene.scene().materials[hit.material_id as usize];
     let base_tex = scene.texture(mat.base_color_texture, hit.uv0, hit.uv1).map_or(Vec3::ONE, |t| t.truncate());
-    mat.base_color.truncate() * base_tex
+    let vertex = scene.vertex_color(hit.instance, hit.triangle, hit.barycentrics.x, hit.barycentrics.y);
+    mat.base_color.truncate() * base_tex * vertex.truncate()
 }
 
 /// The BSDF of a hit's material (and its base colour).

@@ -275,6 +275,9 @@ pub struct Mesh {
     pub uv0: Vec<Vec2>,
     /// UV set 1 (empty when absent).
     pub uv1: Vec<Vec2>,
+    /// Vertex colours, linear RGBA, multiplying the material's base colour and alpha (glTF's
+    /// `COLOR_0`); empty when absent.
+    pub colors: Vec<Vec4>,
     /// Triangles (vertex indices).
     pub indices: Vec<[u32; 3]>,
     /// Material index per triangle.
@@ -295,6 +298,7 @@ impl Mesh {
             + self.tangents.len() * size_of::<Vec4>()
             + self.uv0.len() * size_of::<Vec2>()
             + self.uv1.len() * size_of::<Vec2>()
+            + self.colors.len() * size_of::<Vec4>()
             + self.indices.len() * size_of::<[u32; 3]>()
             + self.material_ids.len() * size_of::<u32>()
     }
@@ -322,6 +326,7 @@ impl Mesh {
                 .collect(),
             uv0: self.uv0.clone(),
             uv1: self.uv1.clone(),
+            colors: self.colors.clone(),
             indices: if det < 0.0 {
                 self.indices.iter().map(|t| [t[0], t[2], t[1]]).collect()
             } else {
@@ -347,6 +352,15 @@ impl Mesh {
                 self.uv1.extend(std::iter::repeat_n(Vec2::ZERO, other.positions.len()));
             } else {
                 self.uv1.extend_from_slice(&other.uv1);
+            }
+        }
+        // vertex colours: white where one side has none
+        if !self.colors.is_empty() || !other.colors.is_empty() {
+            self.colors.resize(base as usize, Vec4::ONE);
+            if other.colors.is_empty() {
+                self.colors.extend(std::iter::repeat_n(Vec4::ONE, other.positions.len()));
+            } else {
+                self.colors.extend_from_slice(&other.colors);
             }
         }
         self.indices.extend(other.indices.iter().map(|t| [t[0] + base, t[1] + base, t[2] + base]));

@@ -13,6 +13,7 @@
 //! | mesh | one [`Scene::meshes`] entry; each node using it one [`Scene::instances`] entry | the transform applies at render time |
 //! | mesh primitive, mode `TRIANGLES` | triangles of its mesh | other modes skipped with a warning |
 //! | `POSITION`, `NORMAL`, `TANGENT`, `TEXCOORD_0/1`, indices | object space, as stored; the renderer moves them by the instance (normals by the inverse transpose, tangents by the matrix with `w` × sign(det); det < 0 flips the winding) | any component type (normalized integers too, `KHR_mesh_quantization`) and sparse accessors |
+//! | `COLOR_0` (VEC3 or VEC4) | [`Mesh::colors`], multiplying the base colour and alpha (Blender writes it for a Color Attribute node feeding Base Color) | channels clamped to [0, 1]; `COLOR_1…` ignored |
 //! | no `NORMAL` | flat face normals (vertices unshared), as the glTF spec requires | |
 //! | no `TANGENT` | zero tangents | |
 //! | non-finite positions | those triangles dropped with a warning; an error if no triangle is left | |

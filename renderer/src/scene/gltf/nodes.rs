@@ -325,6 +325,28 @@ impl Loader<'_> {
         read_accessor(self, &acc).map(Some).map_err(|m| self.error(loc, format!("{what}: {m}")))
     }
 
+    /// `COLOR_0` (VEC3 or VEC4; floats or normalized integers) as linear RGBA, each channel
+    /// clamped to [0, 1] as the spec bounds it; a non-finite colour is white.
+    fn vertex_colors(&self, prim: &gltf::Primitive, n: usize, loc: &str) -> Result<Option<Vec<Vec4>>> {
+        let Some(acc) = prim.get(&Semantic::Colors(0)) else { return Ok(None) };
+        let dims = acc.dimensions();
+        let k = match dims {
+            Dimensions::Vec3 => 3,
+            Dimensions::Vec4 => 4,
+            d => {
+                return Err(self.error(
+                    loc,
+                    format!("attribute COLOR_0 (accessor {}) has type {d:?}, expected Vec3 or Vec4", acc.index()),
+                ))
+            }
+        };
+        let v = self.attribute_f32(prim, Semantic::Colors(0), dims, Some(n), loc)?.unwrap_or_default();
+        let rgba = |c: &[f32]| Vec4::new(c[0], c[1], c[2], if k == 4 { c[3] } else { 1.0 });
+        let colors =
+            v.chunks_exact(k).map(rgba).map(|c| if c.is_finite() { c.clamp(Vec4::ZERO, Vec4::ONE) } else { Vec4::ONE });
+        Ok(Some(colors.collect()))
+    }
+
     pub(super) fn read_primitive(
         &mut self,
         prim: &gltf::Primitive,
@@ -341,6 +363,7 @@ impl Loader<'_> {
         let tangents = self.attribute_f32(prim, Semantic::Tangents, Dimensions::Vec4, Some(n), loc)?;
         let uv0 = self.attribute_f32(prim, Semantic::TexCoords(0), Dimensions::Vec2, Some(n), loc)?;
         let uv1 = self.attribute_f32(prim, Semantic::TexCoords(1), Dimensions::Vec2, Some(n), loc)?;
+        let colors = self.vertex_colors(prim, n, loc)?;
 
         // Indices.
         let mut flat: Vec<u32> = match prim.indices() {
@@ -479,6 +502,9 @@ impl Loader<'_> {
                             if let Some(u) = &uv1 {
                                 out.uv1.push(u[i]);
                             }
+                            if let Some(c) = &colors {
+                                out.colors.push(c[i]);
+                            }
                         }
                         nt[k] = remap[i];
                     }
@@ -499,6 +525,9 @@ impl Loader<'_> {
                         out.uv0.push(uv0.as_ref().map_or(Vec2::ZERO, |u| u[i]));
                         if let Some(u) = &uv1 {
                             out.uv1.push(u[i]);
+                        }
+                        if let Some(c) = &colors {
+                            out.colors.push(c[i]);
                         }
                     }
                     out.indices.push([base, base + 1, base + 2]);
