@@ -657,6 +657,28 @@ def window_means(cyc, pz, windows) -> list[tuple[np.ndarray, np.ndarray]]:
     return out
 
 
+def assert_spheres_match(cyc, pz, windows, names, label: str, report, max_mean_z2, max_abs_z, mean_tol) -> None:
+    """The verdict of a sphere scene against Cycles: the 8×8-block z-test of the whole image
+    (mean z² ≤ `max_mean_z2`, max |z| ≤ `max_abs_z`) and each sphere's window mean (petzval over
+    Cycles within `mean_tol` or four standard errors), reported as one line starting `label`."""
+    import blender_compare as B
+
+    z = B.compare_blocks(cyc[0], cyc[1], pz[0], pz[1]).z
+    mean_z2, max_z = float(np.mean(z**2)), float(np.max(np.abs(z)))
+    ratios = [(name, r, se) for name, (r, se) in zip(names, window_means(cyc, pz, windows), strict=True)]
+    h, w = cyc[0].shape[:2]
+    means = "; ".join(
+        f"{n} " + " ".join(f"{x:.4f} ± {e:.4f}" for x, e in zip(r, se, strict=True)) for n, r, se in ratios
+    )
+    report.line(
+        f"{label}, {w}x{h} x seeds {len(cyc)}: blocks mean z² {mean_z2:.3f} (≤ {max_mean_z2}), max |z| {max_z:.2f} "
+        f"(≤ {max_abs_z}); sphere means petzval/Cycles {means}"
+    )
+    for name, r, se in ratios:
+        assert np.all(np.abs(r - 1.0) <= np.maximum(mean_tol, 4 * se)), f"{name}: sphere mean ratio {r} ± {se}"
+    assert mean_z2 <= max_mean_z2 and max_z <= max_abs_z, f"blocks: mean z² {mean_z2:.3f}, max |z| {max_z:.2f}"
+
+
 def glb_pairs(blender_run, name: str, key_files, build, camera: CameraSpec, world_rgb, resolution, spp: int, seeds):
     """Builds a scene with `build(workdir)`, exports it as GLB and renders it with Cycles (cached
     by `key_files`' text) and `petzval render` (pinhole args), once per seed: (glb, Cycles
