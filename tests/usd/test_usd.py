@@ -1064,3 +1064,70 @@ def test_textures_from_files_and_usdz_packages(petzval: Path, tmp_path: Path) ->
     (tmp_path / "tex" / "red.png").unlink()
     rep = info(petzval, src)
     assert any("/Looks/M/Tex" in w and "red.png" in w for w in rep["warnings"]), rep["warnings"]
+
+
+def test_colour_primvars_render_as_pxr_flattens_them(petzval: Path, tmp_path: Path) -> None:
+    """A 4 × 3 grid whose UsdPreviewSurface takes diffuseColor from a UsdPrimvarReader_float3
+    reading an indexed faceVarying primvar (one colour per face through `indices`), seen from
+    above through an orthographic camera under a white dome: a white-based Lambertian plane
+    under a uniform sky reflects its colour, so each face's pixels must show the colour pxr's
+    `ComputeFlattened` gives its corners (within 3 %, 64 spp). Before session 27 the reader was
+    taken for a texture and the grid rendered magenta."""
+    import OpenEXR
+
+    src = tmp_path / "painted.usda"
+    stage = Usd.Stage.CreateNew(str(src))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    nx, ny = 4, 3
+    m = UsdGeom.Mesh.Define(stage, "/Grid")
+    m.CreatePointsAttr([(x, y, 0) for y in range(ny + 1) for x in range(nx + 1)])
+    m.CreateFaceVertexCountsAttr([4] * (nx * ny))
+    idx = []
+    for j in range(ny):
+        for i in range(nx):
+            a = j * (nx + 1) + i
+            idx += [a, a + 1, a + nx + 2, a + nx + 1]
+    m.CreateFaceVertexIndicesAttr(idx)
+    rng = np.random.default_rng(7)
+    palette = [tuple(float(c) for c in rng.uniform(0.1, 0.9, 3)) for _ in range(5)]
+    cd = UsdGeom.PrimvarsAPI(m).CreatePrimvar("Cd", Sdf.ValueTypeNames.Color3fArray, UsdGeom.Tokens.faceVarying)
+    cd.Set(palette)
+    cd.SetIndices([f % len(palette) for f in range(nx * ny) for _ in range(4)])
+    mat = UsdShade.Material.Define(stage, "/Looks/Paint")
+    sh = UsdShade.Shader.Define(stage, "/Looks/Paint/S")
+    sh.CreateIdAttr("UsdPreviewSurface")
+    sh.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(1.0)
+    sh.CreateInput("specular", Sdf.ValueTypeNames.Float).Set(0.0)
+    reader = UsdShade.Shader.Define(stage, "/Looks/Paint/Reader")
+    reader.CreateIdAttr("UsdPrimvarReader_float3")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("Cd")
+    reader.CreateOutput("result", Sdf.ValueTypeNames.Float3)
+    sh.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(reader.ConnectableAPI(), "result")
+    mat.CreateSurfaceOutput().ConnectToSource(sh.ConnectableAPI(), "surface")
+    UsdShade.MaterialBindingAPI.Apply(m.GetPrim()).Bind(mat)
+    cam = UsdGeom.Camera.Define(stage, "/Cam")
+    cam.CreateProjectionAttr(UsdGeom.Tokens.orthographic)
+    cam.CreateHorizontalApertureAttr(10.0 * nx)
+    cam.CreateVerticalApertureAttr(10.0 * ny)
+    UsdGeom.Xformable(cam).AddTranslateOp().Set(Gf.Vec3d(nx / 2, ny / 2, 10.0))
+    UsdLux.DomeLight.Define(stage, "/Sky").CreateIntensityAttr(1.0)
+    stage.GetRootLayer().Save()
+    # pxr's flattened values: each face's four corners
+    flat = np.array(UsdGeom.PrimvarsAPI(m).GetPrimvar("Cd").ComputeFlattened()).reshape(nx * ny, 4, 3)
+    assert np.all(flat == flat[:, :1])
+    rep = info(petzval, src)
+    assert not rep["warnings"], rep["warnings"]
+    assert rep["meshes"][0]["color_primvar"] == "primvars:Cd"
+    px = 16
+    out = tmp_path / "painted.exr"
+    run(petzval, "render", str(src), "--camera", "/Cam", "--resolution", f"{nx * px}x{ny * px}", "--spp", "64",
+        "--no-png", "-o", str(out))  # fmt: skip
+    with OpenEXR.File(str(out), separate_channels=True) as f:
+        ch = f.channels()
+        img = np.stack([np.asarray(ch[c].pixels, dtype=np.float64) for c in ("R", "G", "B")], axis=-1)
+    for f in range(nx * ny):
+        i, j = f % nx, f // nx
+        rows = slice((ny - 1 - j) * px + 4, (ny - j) * px - 4)
+        cols = slice(i * px + 4, (i + 1) * px - 4)
+        got = img[rows, cols].reshape(-1, 3).mean(axis=0)
+        assert np.allclose(got, flat[f, 0], rtol=0.03, atol=0.005), (f, got, flat[f, 0])

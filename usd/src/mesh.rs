@@ -48,6 +48,16 @@ pub struct Primvar<T> {
 }
 
 impl<T: Copy> Primvar<T> {
+    /// The same primvar with every value mapped.
+    fn map<U>(&self, f: impl Fn(T) -> U) -> Primvar<U> {
+        Primvar {
+            values: self.values.iter().map(|&v| f(v)).collect(),
+            interp: self.interp,
+            indices: self.indices.clone(),
+            name: self.name.clone(),
+        }
+    }
+
     /// The value for face `face`, point `point`, face corner `corner`.
     fn at(&self, face: usize, point: usize, corner: usize) -> Option<T> {
         let e = match self.interp {
@@ -163,6 +173,8 @@ pub struct MeshReport {
     pub st_primvar: Option<String>,
     /// Catmull-Clark levels applied (None: rendered as authored).
     pub subdivision_level: Option<u32>,
+    /// The primvar read as vertex colours.
+    pub color_primvar: Option<String>,
 }
 
 /// A face subset: its faces and the material id the caller bound to it.
@@ -184,6 +196,7 @@ pub fn build_mesh(
     subsets: &[Subset],
     st_preferred: Option<&str>,
     subdivision: Option<u32>,
+    color: Option<(&str, Vec3)>,
 ) -> Result<(Mesh, MeshReport), Error> {
     let points = reader.vec3s(prim, "points")?.ok_or_else(|| attr_error(prim, "points", "a Mesh needs points"))?;
     let counts = reader.ints(prim, "faceVertexCounts")?.unwrap_or_default();
@@ -237,6 +250,29 @@ pub fn build_mesh(
     if let Some(s) = &st {
         s.check(prim, nfaces, npoints, ncorners)?;
     }
+    // vertex colours: the material's colour primvar, else its fallback everywhere
+    let colors = match color {
+        None => None,
+        Some((name, fallback)) => {
+            let read = if name.is_empty() {
+                None
+            } else {
+                primvar(reader, prim, &format!("primvars:{name}"), Interp::Constant, |r, p, n| r.vec3s(p, n))?
+            };
+            let pv = read.unwrap_or_else(|| Primvar {
+                values: vec![fallback.as_dvec3()],
+                interp: Interp::Constant,
+                indices: None,
+                name: format!("primvars:{name}"),
+            });
+            pv.check(prim, nfaces, npoints, ncorners)?;
+            if let Some(v) = pv.values.iter().find(|v| !v.is_finite()) {
+                return Err(attr_error(prim, &pv.name, format!("a colour is not finite: {v}")));
+            }
+            Some(pv)
+        }
+    };
+    let color_primvar = colors.as_ref().map(|c| c.name.clone());
     // material per face
     let mut face_material = vec![material; nfaces];
     for s in subsets {
@@ -261,16 +297,17 @@ pub fn build_mesh(
             &points,
             &topo,
             st.as_ref(),
+            colors.as_ref(),
             level,
-            MeshReport { faces: nfaces, st_primvar, ..Default::default() },
+            MeshReport { faces: nfaces, st_primvar, color_primvar, ..Default::default() },
         );
     }
-    let welded = [normals.as_ref().map(|n| n.interp), st.as_ref().map(|s| s.interp)]
+    let welded = [normals.as_ref().map(|n| n.interp), st.as_ref().map(|s| s.interp), colors.as_ref().map(|c| c.interp)]
         .iter()
         .flatten()
         .all(|i| matches!(i, Interp::Vertex | Interp::Constant));
 
-    let mut report = MeshReport { faces: nfaces, st_primvar: st_primvar.clone(), ..Default::default() };
+    let mut report = MeshReport { faces: nfaces, st_primvar: st_primvar.clone(), color_primvar, ..Default::default() };
     let mut mesh = Mesh::default();
     let to_v2 = |v: DVec2| Vec2::new(v.x as f32, 1.0 - v.y as f32);
     if welded {
@@ -281,6 +318,9 @@ pub fn build_mesh(
         }
         if let Some(s) = &st {
             mesh.uv0 = (0..npoints).map(|p| to_v2(s.at(0, p, 0).unwrap_or(DVec2::ZERO))).collect();
+        }
+        if let Some(c) = &colors {
+            mesh.colors = (0..npoints).map(|p| to_colour(c.at(0, p, 0).unwrap_or(DVec3::ZERO))).collect();
         }
     }
     let mut corner = 0usize;
@@ -309,6 +349,9 @@ pub fn build_mesh(
             if let Some(s) = &st {
                 mesh.uv0.push(to_v2(s.at(f, p, fv).unwrap_or(DVec2::ZERO)));
             }
+            if let Some(c) = &colors {
+                mesh.colors.push(to_colour(c.at(f, p, fv).unwrap_or(DVec3::ZERO)));
+            }
             (mesh.positions.len() - 1) as u32
         };
         let ids: Vec<u32> = (0..c).map(|k| vid(k, &mut mesh)).collect();
@@ -322,6 +365,12 @@ pub fn build_mesh(
         mesh.normals = smooth_normals(&mesh);
     }
     Ok((mesh, report))
+}
+
+/// A colour primvar's value as the renderer's vertex colour (linear RGB, alpha 1, negative
+/// channels 0).
+fn to_colour(c: DVec3) -> glam::Vec4 {
+    c.as_vec3().max(Vec3::ZERO).extend(1.0)
 }
 
 /// Area-weighted vertex normals following the triangles' winding.
@@ -424,6 +473,51 @@ fn creases(reader: &Reader, prim: &usd::Prim, npoints: usize) -> Result<(EdgeSha
     Ok((edges, corners))
 }
 
+/// A primvar's own cage, refined as the mesh's: vertex and constant primvars share the mesh's
+/// topology and rules; face-varying and uniform ones are welded per (point, value) and refined
+/// by the face-varying rule (`rules`: the boundary rule and the face-varying one, None =
+/// bilinear). Returns the refined values and the final cage (its indices per face corner).
+fn refine_primvar(
+    cage: &Cage,
+    face_corner: &[usize],
+    pv: &Primvar<DVec3>,
+    npoints: usize,
+    level: u32,
+    rules: (BoundaryRule, Option<BoundaryRule>),
+) -> (Vec<DVec3>, Cage) {
+    let per_point = matches!(pv.interp, Interp::Vertex | Interp::Constant);
+    let mut out = Cage { counts: cage.counts.clone(), parent: cage.parent.clone(), ..Default::default() };
+    let mut weld: HashMap<(u32, [u64; 3]), u32> = HashMap::default();
+    let mut k = 0usize;
+    for (face, &c) in cage.counts.iter().enumerate() {
+        let f = cage.parent[face] as usize;
+        let first = face_corner[face];
+        for j in 0..c as usize {
+            let p = cage.indices[k + j];
+            let id = if per_point {
+                p
+            } else {
+                let v = pv.at(f, p as usize, first + j).unwrap_or(DVec3::ZERO);
+                *weld.entry((p, v.to_array().map(f64::to_bits))).or_insert_with(|| {
+                    out.points.push(v);
+                    (out.points.len() - 1) as u32
+                })
+            };
+            out.indices.push(id);
+        }
+        k += c as usize;
+    }
+    let rule = if per_point {
+        out.points = (0..npoints).map(|p| pv.at(0, p, 0).unwrap_or(DVec3::ZERO)).collect();
+        out.creases = cage.creases.clone();
+        out.corners = cage.corners.clone();
+        rules.0
+    } else {
+        rules.1.unwrap_or(BoundaryRule::Bilinear)
+    };
+    refine(out, level, rule)
+}
+
 /// Refines `cage` by `level` steps and returns the limit positions and the final cage.
 fn refine(mut cage: Cage, level: u32, rule: BoundaryRule) -> (Vec<DVec3>, Cage) {
     for _ in 0..level {
@@ -455,12 +549,14 @@ fn refine(mut cage: Cage, level: u32, rule: BoundaryRule) -> (Vec<DVec3>, Cage) 
 /// A Catmull-Clark subdivided mesh: the cage refined `level` times, vertices on the limit
 /// surface, smooth normals of the result (authored normals do not apply to a subdivision
 /// surface), texture coordinates refined by their own interpolation.
+#[allow(clippy::too_many_arguments)]
 fn subdivided(
     reader: &Reader,
     prim: &usd::Prim,
     points: &[DVec3],
     topo: &Topology,
     st: Option<&Primvar<DVec2>>,
+    colors: Option<&Primvar<DVec3>>,
     level: u32,
     mut report: MeshReport,
 ) -> Result<(Mesh, MeshReport), Error> {
@@ -510,48 +606,17 @@ fn subdivided(
         level -= 1;
     }
     report.subdivision_level = Some(level);
-    // 3. texture coordinates: their own cage where they are per corner
-    let uv_cage = st.map(|s| {
-        let mut uv = Cage { counts: cage.counts.clone(), parent: cage.parent.clone(), ..Default::default() };
-        let mut weld: HashMap<(u32, u64), u32> = HashMap::default();
-        let mut k = 0usize;
-        for (face, &c) in cage.counts.iter().enumerate() {
-            let f = cage.parent[face] as usize;
-            let first = face_corner[face];
-            for j in 0..c as usize {
-                let p = cage.indices[k + j];
-                let v = s.at(f, p as usize, first + j).unwrap_or(DVec2::ZERO);
-                let id = match s.interp {
-                    Interp::Vertex | Interp::Constant => p,
-                    _ => {
-                        let bits = v.x.to_bits().rotate_left(17) ^ v.y.to_bits();
-                        *weld.entry((p, bits)).or_insert_with(|| {
-                            uv.points.push(DVec3::new(v.x, v.y, 0.0));
-                            (uv.points.len() - 1) as u32
-                        })
-                    }
-                };
-                uv.indices.push(id);
-            }
-            k += c as usize;
-        }
-        if matches!(s.interp, Interp::Vertex | Interp::Constant) {
-            uv.points = (0..points.len()).map(|p| s.at(0, p, 0).unwrap_or(DVec2::ZERO).extend(0.0)).collect();
-            uv.creases = cage.creases.clone();
-            uv.corners = cage.corners.clone();
-        }
-        let rule = match (s.interp, fvar_rule) {
-            (Interp::Vertex | Interp::Constant, _) => boundary,
-            (_, Some(r)) => r,
-            (_, None) => BoundaryRule::Bilinear,
-        };
-        refine(uv, level, rule)
-    });
+    // 3. texture coordinates and colours: their own cages where they are per corner
+    let rules = (boundary, fvar_rule);
+    let uv_cage =
+        st.map(|s| refine_primvar(&cage, &face_corner, &s.map(|v| v.extend(0.0)), points.len(), level, rules));
+    let colour_cage = colors.map(|c| refine_primvar(&cage, &face_corner, c, points.len(), level, rules));
     let (limit, fine) = refine(cage, level, boundary);
     // 4. triangles, normals of the refined surface, and per-corner vertices where the
     //    coordinates need them
     let mut mesh = Mesh { positions: limit.iter().map(|p| p.as_vec3()).collect(), ..Default::default() };
     let mut tri_uv: Vec<[u32; 3]> = Vec::new();
+    let mut tri_colour: Vec<[u32; 3]> = Vec::new();
     let mut k = 0usize;
     for (face, &c) in fine.counts.iter().enumerate() {
         let f = fine.parent[face] as usize;
@@ -561,6 +626,7 @@ fn subdivided(
                 let t = if topo.left { [0, j + 1, j] } else { [0, j, j + 1] };
                 mesh.indices.push(t.map(|i| fine.indices[k + i]));
                 tri_uv.push(t.map(|i| uv_cage.as_ref().map_or(0, |(_, u)| u.indices[k + i])));
+                tri_colour.push(t.map(|i| colour_cage.as_ref().map_or(0, |(_, u)| u.indices[k + i])));
                 mesh.material_ids.push(topo.face_material[f]);
             }
         }
@@ -569,16 +635,21 @@ fn subdivided(
     report.hole_faces = topo.counts.iter().enumerate().filter(|(f, _)| topo.holes.contains(&(*f as i64))).count();
     mesh.normals = smooth_normals(&mesh);
     let to_v2 = |v: DVec3| Vec2::new(v.x as f32, 1.0 - v.y as f32);
-    if let Some((uvs, _)) = uv_cage {
-        // one vertex per (position, coordinate) pair
+    if uv_cage.is_some() || colour_cage.is_some() {
+        // one vertex per (position, coordinate, colour)
         let mut out = Mesh { material_ids: std::mem::take(&mut mesh.material_ids), ..Default::default() };
-        let mut seen: HashMap<(u32, u32), u32> = HashMap::default();
-        for (t, tu) in mesh.indices.iter().zip(&tri_uv) {
+        let mut seen: HashMap<(u32, u32, u32), u32> = HashMap::default();
+        for ((t, tu), tc) in mesh.indices.iter().zip(&tri_uv).zip(&tri_colour) {
             let tri = [0, 1, 2].map(|i| {
-                *seen.entry((t[i], tu[i])).or_insert_with(|| {
+                *seen.entry((t[i], tu[i], tc[i])).or_insert_with(|| {
                     out.positions.push(mesh.positions[t[i] as usize]);
                     out.normals.push(mesh.normals[t[i] as usize]);
-                    out.uv0.push(to_v2(uvs[tu[i] as usize]));
+                    if let Some((uvs, _)) = &uv_cage {
+                        out.uv0.push(to_v2(uvs[tu[i] as usize]));
+                    }
+                    if let Some((colours, _)) = &colour_cage {
+                        out.colors.push(to_colour(colours[tc[i] as usize]));
+                    }
                     (out.positions.len() - 1) as u32
                 })
             });

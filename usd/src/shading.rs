@@ -4,7 +4,7 @@
 //!
 //! | UsdPreviewSurface input | renderer | fallback |
 //! |---|---|---|
-//! | `diffuseColor` | base colour (texture: `rgb`, `sourceColorSpace` sRGB/raw/auto) | (0.18, 0.18, 0.18) |
+//! | `diffuseColor` | base colour (texture: `rgb`, `sourceColorSpace` sRGB/raw/auto; a `UsdPrimvarReader_float3`: the gprim's primvar `varname` as vertex colours, its `fallback` where the primvar is missing) | (0.18, 0.18, 0.18) |
 //! | `metallic` | metallic | 0 |
 //! | `roughness` | roughness | 0.5 |
 //! | `emissiveColor` | emitted radiance | 0 |
@@ -14,7 +14,8 @@
 //! | `specular` (Blender's Specular IOR Level, not in the spec) | specular strength × 2 (0.5 = F0 of the IOR) | 0.5 |
 //! | `normal` (UsdUVTexture, raw) | tangent-space normal map | none |
 //!
-//! An unbound gprim uses its `primvars:displayColor` (constant) or 18 % grey. A shader that
+//! An unbound gprim uses its `primvars:displayColor` (one value: the material's colour; more:
+//! vertex colours, by their interpolation) or 18 % grey. A shader that
 //! is not UsdPreviewSurface, or a texture that cannot be read, is listed once as a warning and
 //! renders magenta (the project's visible fallback).
 
@@ -37,6 +38,10 @@ pub struct Materials {
     textures: HashMap<(String, bool), usize>,
     /// The primvar a material's textures read (`UsdPrimvarReader_float2.varname`), by id.
     st_names: HashMap<u32, String>,
+    /// The colour primvar a material's base colour reads (a `UsdPrimvarReader_float3`'s
+    /// varname, or an unbound gprim's `displayColor`) and the colour where it is missing, by id.
+    color_primvars: HashMap<u32, (String, Vec3)>,
+    pending_color: Option<(String, Vec3)>,
     /// The varname found while reading the current material.
     pending_st: Option<String>,
 }
@@ -76,6 +81,12 @@ impl Materials {
         self.st_names.get(&id).map(String::as_str)
     }
 
+    /// The primvar (without `primvars:`) whose values colour the vertices of gprims using
+    /// material `id`, and the colour where a gprim lacks it.
+    pub fn color_primvar(&self, id: u32) -> Option<(&str, Vec3)> {
+        self.color_primvars.get(&id).map(|(n, c)| (n.as_str(), *c))
+    }
+
     /// The material id for a gprim whose binding is `binding` (None: its display colour).
     pub fn material_for(
         &mut self,
@@ -88,18 +99,25 @@ impl Materials {
         let binding = bound_material(gprim);
         let key = match &binding {
             Some(b) => b.to_string(),
-            None => {
-                let c = display_color(reader, gprim)?;
-                format!("displayColor:{},{},{}", c.x, c.y, c.z)
-            }
+            None => match display_color(reader, gprim)? {
+                DisplayColor::One(c) => format!("displayColor:{},{},{}", c.x, c.y, c.z),
+                DisplayColor::PerElement => "displayColor:primvar".to_string(),
+            },
         };
         if let Some(&id) = self.by_key.get(&(key.clone(), double_sided)) {
             return Ok(id);
         }
         self.pending_st = None;
+        self.pending_color = None;
         let mut m = match &binding {
             Some(b) => self.read_material(reader, scene, &reader.stage.prim(b.clone()), warnings)?,
-            None => preview_default(&key, display_color(reader, gprim)?),
+            None => match display_color(reader, gprim)? {
+                DisplayColor::One(c) => preview_default(&key, c),
+                DisplayColor::PerElement => {
+                    self.pending_color = Some(("displayColor".into(), Vec3::splat(0.18)));
+                    preview_default(&key, Vec3::ONE)
+                }
+            },
         };
         m.double_sided = double_sided;
         // the values as the renderer takes them (f32): a 1e39 or inf would reach shading as inf
@@ -124,6 +142,9 @@ impl Materials {
         let id = (scene.materials.len() - 1) as u32;
         if let Some(st) = self.pending_st.take() {
             self.st_names.insert(id, st);
+        }
+        if let Some(c) = self.pending_color.take() {
+            self.color_primvars.insert(id, c);
         }
         self.by_key.insert((key, double_sided), id);
         Ok(id)
@@ -153,7 +174,27 @@ impl Materials {
         }
         let mut m = preview_default(&name, Vec3::splat(0.18));
         // colour inputs: value or texture
-        if let Some((tex, _)) = source_prim(stage, &shader, "inputs:diffuseColor") {
+        let diffuse_source = source_prim(stage, &shader, "inputs:diffuseColor");
+        let primvar_reader = match &diffuse_source {
+            Some((src, _)) => matches!(
+                reader.token(src, "info:id")?.as_deref(),
+                Some("UsdPrimvarReader_float3" | "UsdPrimvarReader_float4")
+            ),
+            None => false,
+        };
+        if let (true, Some((src, _))) = (primvar_reader, &diffuse_source) {
+            // the gprim's colour primvar, white here; the spec's fallback is black
+            let fallback = reader.vec3(src, "inputs:fallback")?.map_or(Vec3::ZERO, |c| c.as_vec3());
+            match reader.token(src, "inputs:varname")? {
+                Some(v) if !v.is_empty() => self.pending_color = Some((v, fallback)),
+                _ => {
+                    warnings
+                        .push(format!("{}: UsdPrimvarReader has no inputs:varname; its fallback is used", src.path()));
+                    self.pending_color = Some((String::new(), fallback));
+                }
+            }
+            m.base_color = Vec4::ONE;
+        } else if let Some((tex, _)) = diffuse_source {
             m.base_color_texture = self.texture(reader, scene, &tex, true, warnings)?;
             m.base_color = Vec4::ONE;
         } else if let Some(c) = reader.vec3(&shader, "inputs:diffuseColor")? {
@@ -363,10 +404,21 @@ fn load_image(path: &str, srgb: bool) -> Result<(u32, u32, Vec<Vec4>), String> {
     Ok((img.width(), img.height(), texels))
 }
 
-fn display_color(reader: &Reader, prim: &usd::Prim) -> Result<Vec3, Error> {
+/// An unbound gprim's `primvars:displayColor`.
+enum DisplayColor {
+    /// One colour (or none authored: 18 % grey).
+    One(Vec3),
+    /// A colour per face, point or corner: vertex colours.
+    PerElement,
+}
+
+fn display_color(reader: &Reader, prim: &usd::Prim) -> Result<DisplayColor, Error> {
     Ok(match reader.vec3s(prim, "primvars:displayColor")? {
-        Some(c) if !c.is_empty() => c[0].as_vec3(),
-        _ => Vec3::splat(0.18),
+        Some(c) if c.len() > 1 && prim.type_name().ok().flatten().is_some_and(|t| t.as_str() == "Mesh") => {
+            DisplayColor::PerElement
+        }
+        Some(c) if !c.is_empty() => DisplayColor::One(c[0].as_vec3()),
+        _ => DisplayColor::One(Vec3::splat(0.18)),
     })
 }
 

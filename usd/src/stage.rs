@@ -52,6 +52,9 @@ pub struct MeshInfo {
     /// Catmull-Clark levels the mesh was subdivided by (absent: rendered as authored).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub subdivision_level: Option<u32>,
+    /// The primvar read as vertex colours (absent: none).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub color_primvar: Option<String>,
 }
 
 fn bounds(m: &petzval_renderer::scene::Mesh) -> [[f32; 3]; 2] {
@@ -345,7 +348,16 @@ impl<'a> Walker<'a> {
         };
         let (mesh, report) = if ty == "Mesh" {
             let st = self.materials.st_name(material).map(str::to_string);
-            build_mesh(&self.reader, prim, material, &subsets, st.as_deref(), subdivision)?
+            let color = self.materials.color_primvar(material).map(|(n, c)| (n.to_string(), c));
+            build_mesh(
+                &self.reader,
+                prim,
+                material,
+                &subsets,
+                st.as_deref(),
+                subdivision,
+                color.as_ref().map(|(n, c)| (n.as_str(), *c)),
+            )?
         } else {
             let mut m = crate::shapes::shape_mesh(&self.reader, prim, ty)?.unwrap_or_default();
             m.material_ids = vec![material; m.indices.len()];
@@ -380,6 +392,7 @@ impl<'a> Walker<'a> {
             bounds: bounds(&mesh),
             st_primvar: report.st_primvar.clone(),
             subdivision_level: report.subdivision_level,
+            color_primvar: report.color_primvar.clone(),
         });
         let id = self.scene.add_mesh(mesh);
         self.meshes_by_prim.insert(path, id);
@@ -480,6 +493,7 @@ impl<'a> Walker<'a> {
             bounds: bounds(&mesh),
             st_primvar: None,
             subdivision_level: None,
+            color_primvar: None,
         });
         let id = self.scene.add_mesh(mesh);
         self.scene.add_instance(id, Affine3A::from_mat4(m.as_mat4()));

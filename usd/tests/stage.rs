@@ -388,3 +388,73 @@ fn preview_surface_clearcoat_is_read() {
     let m = &load(&stage("nocoat.usda", ""), None).unwrap().scene.materials[0];
     assert_eq!((m.coat, m.coat_roughness), (0.0, 0.01));
 }
+
+const QUAD_2: &str = "point3f[] points = [(0,0,0),(1,0,0),(2,0,0),(0,1,0),(1,1,0),(2,1,0)]
+    int[] faceVertexCounts = [4, 4]
+    int[] faceVertexIndices = [0, 1, 4, 3, 1, 2, 5, 4]";
+
+/// A UsdPreviewSurface whose diffuseColor is a `UsdPrimvarReader_float3` takes the gprim's
+/// primvar as vertex colours (base colour white; faceVarying values per corner); a gprim
+/// without the primvar gets the reader's fallback; an unbound mesh with a displayColor per face
+/// is coloured per face; `usd info` names the primvar.
+#[test]
+fn colour_primvars_become_vertex_colours() {
+    let material = "def Material \"M\"\n{\n token outputs:surface.connect = </M/S.outputs:surface>\n def Shader \"S\"\n {\n  uniform token info:id = \"UsdPreviewSurface\"\n  color3f inputs:diffuseColor.connect = </M/R.outputs:result>\n  token outputs:surface\n }\n def Shader \"R\"\n {\n  uniform token info:id = \"UsdPrimvarReader_float3\"\n  string inputs:varname = \"Cd\"\n  float3 inputs:fallback = (0.1, 0.2, 0.3)\n  float3 outputs:result\n }\n}\n";
+    let text = format!(
+        "#usda 1.0\n{material}def Mesh \"Painted\" (prepend apiSchemas = [\"MaterialBindingAPI\"])\n{{\n {QUAD_2}\n rel material:binding = </M>\n color3f[] primvars:Cd = [(1,0,0),(0,1,0),(0,0,1),(1,1,1),(1,0,0),(1,0,0),(1,0,0),(1,0,0)] (interpolation = \"faceVarying\")\n}}\ndef Mesh \"Bare\" (prepend apiSchemas = [\"MaterialBindingAPI\"])\n{{\n {QUAD_2}\n rel material:binding = </M>\n}}\ndef Mesh \"PerFace\"\n{{\n {QUAD_2}\n color3f[] primvars:displayColor = [(0.5, 0, 0), (0, 0.25, 0)] (interpolation = \"uniform\")\n}}\n"
+    );
+    let p = write("colour_primvars.usda", &text);
+    let shot = load(&p, None).unwrap();
+    assert!(shot.scene.warnings.is_empty(), "{:?}", shot.scene.warnings);
+    let mesh_of = |name: &str| {
+        let k = shot.info.meshes.iter().position(|m| m.prim.ends_with(name)).unwrap();
+        (&shot.scene.meshes[k], &shot.info.meshes[k])
+    };
+    let colour_at = |m: &petzval_renderer::scene::Mesh, p: glam::Vec3| -> Vec<glam::Vec4> {
+        m.positions.iter().zip(&m.colors).filter(|(q, _)| q.distance(p) < 1e-6).map(|(_, c)| *c).collect()
+    };
+    use glam::{Vec3, Vec4};
+    let (painted, info) = mesh_of("/Painted");
+    assert_eq!(info.color_primvar.as_deref(), Some("primvars:Cd"));
+    assert_eq!(painted.colors.len(), painted.positions.len());
+    assert_eq!(shot.scene.materials[painted.material_ids[0] as usize].base_color, Vec4::ONE);
+    // point 1 (1, 0, 0) is corner 1 of face 0 (green) and corner 0 of face 1 (red)
+    let mut c = colour_at(painted, Vec3::new(1.0, 0.0, 0.0));
+    c.sort_by(|a, b| a.x.total_cmp(&b.x));
+    assert_eq!(c, vec![Vec4::new(0.0, 1.0, 0.0, 1.0), Vec4::new(1.0, 0.0, 0.0, 1.0)]);
+    let (bare, _) = mesh_of("/Bare");
+    assert!(bare.colors.iter().all(|c| c.distance(Vec4::new(0.1, 0.2, 0.3, 1.0)) < 1e-6), "{:?}", bare.colors);
+    let (per_face, info) = mesh_of("/PerFace");
+    assert_eq!(info.color_primvar.as_deref(), Some("primvars:displayColor"));
+    assert_eq!(shot.scene.materials[per_face.material_ids[0] as usize].base_color, Vec4::ONE);
+    for (t, &m) in per_face.indices.iter().zip(&per_face.material_ids) {
+        let _ = m;
+        let cs: Vec<Vec4> = t.iter().map(|&i| per_face.colors[i as usize]).collect();
+        let centre = t.iter().map(|&i| per_face.positions[i as usize]).sum::<Vec3>() / 3.0;
+        let want = if centre.x < 1.0 { Vec4::new(0.5, 0.0, 0.0, 1.0) } else { Vec4::new(0.0, 0.25, 0.0, 1.0) };
+        assert!(cs.iter().all(|c| *c == want), "triangle at {centre}: {cs:?}");
+    }
+}
+
+/// A subdivided mesh's vertex colours are refined with it: a per-point displayColor that is
+/// the same everywhere stays that colour at every refined vertex, and one per face keeps each
+/// child face its parent's colour.
+#[test]
+fn colour_primvars_are_refined_with_a_subdivision_surface() {
+    let text = format!(
+        "#usda 1.0\ndef Mesh \"Flat\"\n{{\n {QUAD_2}\n uniform token subdivisionScheme = \"catmullClark\"\n color3f[] primvars:displayColor = [(0.2,0.4,0.6),(0.2,0.4,0.6),(0.2,0.4,0.6),(0.2,0.4,0.6),(0.2,0.4,0.6),(0.2,0.4,0.6)] (interpolation = \"vertex\")\n}}\ndef Mesh \"Faces\"\n{{\n {QUAD_2}\n uniform token subdivisionScheme = \"catmullClark\"\n color3f[] primvars:displayColor = [(1,0,0),(0,0,1)] (interpolation = \"uniform\")\n}}\n"
+    );
+    let p = write("colour_subdiv.usda", &text);
+    let shot = load(&p, None).unwrap();
+    let flat = &shot.scene.meshes[0];
+    assert_eq!(shot.info.meshes[0].subdivision_level, Some(2));
+    assert_eq!(flat.colors.len(), flat.positions.len());
+    assert!(flat.colors.iter().all(|c| c.distance(glam::Vec4::new(0.2, 0.4, 0.6, 1.0)) < 1e-6));
+    let faces = &shot.scene.meshes[1];
+    assert_eq!(faces.indices.len(), 2 * 16 * 2);
+    for t in &faces.indices {
+        let cs: Vec<glam::Vec4> = t.iter().map(|&i| faces.colors[i as usize]).collect();
+        assert!(cs.iter().all(|c| *c == cs[0]), "a triangle mixes colours: {cs:?}");
+        assert!(cs[0] == glam::Vec4::new(1.0, 0.0, 0.0, 1.0) || cs[0] == glam::Vec4::new(0.0, 0.0, 1.0, 1.0));
+    }
+}
