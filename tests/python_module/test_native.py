@@ -272,6 +272,20 @@ def test_instances_render_like_copies(petzval):
             "InvalidSceneError",
             ["Nan", "positions"],
         ),
+        (
+            lambda pz: pz.Scene().add_mesh(
+                np.zeros((3, 3)), np.array([[0, 1, 2]]), colors=np.ones((3, 2)), name="Painted"
+            ),
+            "InvalidSceneError",
+            ["Painted", "colors", "(3, 3) or (3, 4)"],
+        ),
+        (
+            lambda pz: pz.Scene().add_mesh(
+                np.zeros((3, 3)), np.array([[0, 1, 2]]), colors=np.full((3, 4), np.inf), name="Painted"
+            ),
+            "InvalidSceneError",
+            ["Painted", "colors", "non-finite"],
+        ),
         (lambda pz: pz.Scene().add_material("m", base_color=(1, 2)), "InvalidSceneError", ["'m'", "base_color"]),
         (
             lambda pz: pz.Scene().add_material("m", base_color_texture=3),
