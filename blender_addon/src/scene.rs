@@ -5,7 +5,9 @@ use glam::{DAffine3, DMat4, DVec4, Vec2, Vec3, Vec4};
 use numpy::{AllowTypeChange, PyArrayLike1, PyArrayLike2, PyArrayLike3};
 use petzval_renderer::scene::environment::EnvironmentMap;
 use petzval_renderer::scene::texture::Wrap;
-use petzval_renderer::scene::{AlphaMode, Environment, Light, Material, Mesh, SpotFalloff, Texture, TextureRef};
+use petzval_renderer::scene::{
+    AlphaMode, Environment, Light, Material, MaterialMix, Mesh, MetalFresnel, SpotFalloff, Texture, TextureRef,
+};
 use pyo3::prelude::*;
 use std::sync::Arc;
 
@@ -173,7 +175,7 @@ impl PyScene {
     }
 
     /// Adds a glTF metallic-roughness material; returns its index.
-    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true, light_emitter = false, visible_to_camera = true, transmission = 0.0, coat_weight = 0.0, coat_roughness = 0.03, coat_ior = 1.5, coat_tint = vec![1.0, 1.0, 1.0]))]
+    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true, light_emitter = false, visible_to_camera = true, transmission = 0.0, coat_weight = 0.0, coat_roughness = 0.03, coat_ior = 1.5, coat_tint = vec![1.0, 1.0, 1.0], scatter_tint = vec![1.0, 1.0, 1.0], metal_fresnel = "f82", edge_tint = vec![1.0, 1.0, 1.0], mix_material = None, mix_weight = 0.0))]
     #[allow(clippy::too_many_arguments)]
     fn add_material(
         &mut self,
@@ -199,6 +201,11 @@ impl PyScene {
         coat_roughness: f64,
         coat_ior: f64,
         coat_tint: Vec<f64>,
+        scatter_tint: Vec<f64>,
+        metal_fresnel: &str,
+        edge_tint: Vec<f64>,
+        mix_material: Option<usize>,
+        mix_weight: f64,
     ) -> PyResult<usize> {
         guard(|| {
             let bc = match base_color.as_slice() {
@@ -224,11 +231,47 @@ impl PyScene {
                 ("coat_weight", coat_weight, 0.0, 1.0),
                 ("coat_roughness", coat_roughness, 0.0, 1.0),
                 ("coat_ior", coat_ior, 1.0, 10.0),
+                ("mix_weight", mix_weight, 0.0, 1.0),
             ] {
                 if !(v.is_finite() && v >= lo && v <= hi) {
                     return Err(scene_err(name, field, format!("{v} is outside [{lo}, {hi}]")));
                 }
             }
+            let tint = non_negative_rgb(name, "edge_tint", &edge_tint)?;
+            if tint.max_element() > 1.0 {
+                return Err(scene_err(name, "edge_tint", format!("must be within [0, 1], got {edge_tint:?}")));
+            }
+            let metal_fresnel = match metal_fresnel {
+                "f82" => MetalFresnel::F82 { tint },
+                "constant" => MetalFresnel::Constant,
+                other => {
+                    return Err(scene_err(
+                        name,
+                        "metal_fresnel",
+                        format!("expected \"f82\" or \"constant\", got {other:?}"),
+                    ))
+                }
+            };
+            // the other material must exist already, so mixes never form a cycle
+            let mix = match mix_material {
+                Some(k) if k < self.scene.materials.len() => {
+                    Some(MaterialMix { material: k as u32, weight: mix_weight as f32 })
+                }
+                Some(k) => {
+                    return Err(scene_err(
+                        name,
+                        "mix_material",
+                        format!(
+                            "index {k} is not a material added before this one ({} materials)",
+                            self.scene.materials.len()
+                        ),
+                    ))
+                }
+                None if mix_weight != 0.0 => {
+                    return Err(scene_err(name, "mix_weight", "is set without a mix_material".to_string()))
+                }
+                None => None,
+            };
             let m = Material {
                 name: name.to_string(),
                 base_color: bc,
@@ -257,6 +300,9 @@ impl PyScene {
                 coat_roughness: coat_roughness as f32,
                 coat_ior: coat_ior as f32,
                 coat_tint: non_negative_rgb(name, "coat_tint", &coat_tint)?,
+                scatter_tint: non_negative_rgb(name, "scatter_tint", &scatter_tint)?,
+                metal_fresnel,
+                mix,
             };
             self.scene.materials.push(m);
             Ok(self.scene.materials.len() - 1)

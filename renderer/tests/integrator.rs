@@ -338,6 +338,68 @@ fn vertex_colours_multiply_the_base_colour_and_alpha() {
     assert_eq!(right.material_id, 0, "interpolated alpha 0.8: kept");
 }
 
+/// Blender's Mix Shader and the Glass/Glossy colour: a Lambert plane under a white sky whose
+/// material scatters as another one with probability 0.25 (tinted) and 0.15 further down the
+/// chain returns the weighted sum of their albedos; the components' emission does not count
+/// (the hit material's does); malformed chains are errors naming the material.
+#[test]
+fn mixed_materials_scatter_as_their_weighted_sum() {
+    use petzval_renderer::scene::MaterialMix;
+    let plane = quad(Vec3::new(-1.0, 0.0, 1.0), Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -2.0), 2);
+    let tint = Vec3::new(1.0, 0.5, 0.25);
+    let materials = vec![
+        // 0: a dark red component, its emission ignored
+        Material { emissive: Vec3::splat(5.0), ..diffuse(Vec3::new(0.4, 0.0, 0.0)) },
+        // 1: white, tinted, mixing 0 in with weight 0.2 (0.25 · 0.2 = 5 % overall)
+        Material {
+            scatter_tint: tint,
+            mix: Some(MaterialMix { material: 0, weight: 0.2 }),
+            ..diffuse(Vec3::splat(1.0))
+        },
+        // 2: the plane's, grey 0.8, emitting 0.1, mixing 1 in with weight 0.25
+        Material {
+            emissive: Vec3::splat(0.1),
+            mix: Some(MaterialMix { material: 1, weight: 0.25 }),
+            ..diffuse(Vec3::splat(0.8))
+        },
+    ];
+    let mut scene = scene_of(&[plane], materials);
+    scene.environment = Environment::Constant(Vec3::ONE);
+    let want = Vec3::splat(0.1) + 0.75 * Vec3::splat(0.8) + 0.25 * 0.8 * tint + 0.25 * 0.2 * Vec3::new(0.4, 0.0, 0.0);
+    let rs = RenderScene::new(scene.clone()).unwrap();
+    let eye = Vec3::new(0.1, 2.0, 0.2);
+    let (l, first) = mean_radiance(&PathTracer::default(), &rs, eye, Vec3::NEG_Y, 3, 4096);
+    for k in 0..3 {
+        assert!(rel(l[k], want[k]) < 0.02, "radiance {l}, expected {want}");
+    }
+    let albedo = 0.75 * Vec3::splat(0.8) + 0.2 * tint + 0.05 * Vec3::new(0.4, 0.0, 0.0);
+    assert!(first.albedo.distance(albedo) < 1e-5, "albedo {}, expected {albedo}", first.albedo);
+    // the lobe sample picks the component: shares 0.75, 0.2, 0.05, and the remapped sample
+    // stays uniform in [0, 1)
+    let n = 100_000;
+    let (mut counts, mut mean_u) = ([0u32; 3], 0.0f64);
+    for i in 0..n {
+        let (id, u) = petzval_renderer::integrator::scattering_material(&rs, 2, (i as f32 + 0.5) / n as f32);
+        assert!((0.0..1.0).contains(&u));
+        counts[id as usize] += 1;
+        mean_u += u as f64 / n as f64;
+    }
+    assert_eq!(counts, [5_000, 20_000, 75_000]);
+    assert!((mean_u - 0.5).abs() < 1e-3, "mean remapped sample {mean_u}");
+    // malformed chains
+    for (mix, expected) in [
+        (MaterialMix { material: 2, weight: 0.5 }, "cycle"),
+        (MaterialMix { material: 7, weight: 0.5 }, "out of range"),
+        (MaterialMix { material: 0, weight: 1.5 }, "outside [0, 1]"),
+    ] {
+        let mut bad = scene.clone();
+        bad.materials[1].mix = Some(mix);
+        let Err(e) = RenderScene::new(bad) else { panic!("{expected}: no error") };
+        let e = e.to_string();
+        assert!(e.contains("material 1") && e.contains(expected), "{e}");
+    }
+}
+
 #[test]
 fn alpha_blend_is_stochastic_coverage() {
     let rs = alpha_quads(AlphaMode::Blend, 0.3, false);

@@ -251,6 +251,110 @@ def _principled_lambert(name, base):
     return mat
 
 
+def _node_material(name, build):
+    """A material whose Surface is the shader `build(node_tree)` returns (the default
+    Principled BSDF removed)."""
+    b = bpy()
+    mat = b.data.materials.new(name)
+    if mat.node_tree is None:
+        mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.remove(nt.nodes.get("Principled BSDF"))
+    out = build(nt)
+    nt.links.new(out.outputs[0], nt.nodes.get("Material Output").inputs["Surface"])
+    return mat
+
+
+def _shader(nt, kind, **inputs):
+    """A shader node of `kind` (ShaderNode… without the prefix) with its inputs set."""
+    n = nt.nodes.new("ShaderNode" + kind)
+    for k, v in inputs.items():
+        n.inputs[k].default_value = v
+    return n
+
+
+def _combine(nt, kind, first, second, factor=None):
+    """A Mix Shader (`factor`) or Add Shader joining two shader nodes."""
+    n = nt.nodes.new("ShaderNode" + kind)
+    shaders = [s for s in n.inputs if s.type == "SHADER"]
+    if factor is not None:
+        n.inputs[0].default_value = factor
+    nt.links.new(first.outputs[0], shaders[0])
+    nt.links.new(second.outputs[0], shaders[1])
+    return n
+
+
+def _diffuse_glossy_group(nt):
+    """A group node whose node group mixes a Diffuse BSDF, coloured by the group's "Paint"
+    input, with a golden Glossy BSDF by its "Shine" input, through a reroute; the group node
+    sets Paint (0.7, 0.2, 0.15) and Shine 0.4."""
+    b = bpy()
+    group = b.data.node_groups.new("DiffuseGlossyGroup", "ShaderNodeTree")
+    group.interface.new_socket("Paint", in_out="INPUT", socket_type="NodeSocketColor")
+    group.interface.new_socket("Shine", in_out="INPUT", socket_type="NodeSocketFloat")
+    group.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
+    gin = group.nodes.new("NodeGroupInput")
+    gout = group.nodes.new("NodeGroupOutput")
+    diffuse = _shader(group, "BsdfDiffuse")
+    glossy = _shader(group, "BsdfGlossy", Color=(0.9, 0.75, 0.4, 1.0), Roughness=0.25)
+    mix = _combine(group, "MixShader", diffuse, glossy)
+    reroute = group.nodes.new("NodeReroute")
+    group.links.new(gin.outputs["Paint"], reroute.inputs[0])
+    group.links.new(reroute.outputs[0], diffuse.inputs["Color"])
+    group.links.new(gin.outputs["Shine"], mix.inputs[0])
+    group.links.new(mix.outputs[0], gout.inputs["Shader"])
+    node = nt.nodes.new("ShaderNodeGroup")
+    node.node_tree = group
+    node.inputs["Paint"].default_value = (0.7, 0.2, 0.15, 1.0)
+    node.inputs["Shine"].default_value = 0.4
+    return node
+
+
+def _add_shader_objects(b):
+    """The "shaders" variant's materials: a tinted rough Glass BSDF on the small sphere, a Mix
+    Shader of a red Diffuse and a golden Glossy BSDF inside a node group on the big one, a Metallic BSDF (F82, its
+    default Edge Tint) on a cube, a leaf card mixing a green Diffuse with a Transparent BSDF, and
+    a small ball adding an orange Emission to a grey Diffuse."""
+    spheres = [o for o in b.context.scene.objects if o.name.startswith("Sphere")]
+    small, big = sorted(spheres, key=lambda o: o.dimensions.x)
+    glass = _node_material(
+        "TintedGlass", lambda nt: _shader(nt, "BsdfGlass", Color=(0.75, 0.9, 0.8, 1.0), Roughness=0.15, IOR=1.5)
+    )
+    mixed = _node_material("DiffuseGlossy", _diffuse_glossy_group)
+    for obj, mat in ((small, glass), (big, mixed)):
+        obj.data.materials.clear()
+        obj.data.materials.append(mat)
+    b.ops.mesh.primitive_cube_add(size=0.5, location=(-1.35, 2.4, 0.25))
+    b.context.active_object.rotation_euler = (0.0, 0.0, math.radians(30.0))
+    b.context.active_object.data.materials.append(
+        _node_material("Copper", lambda nt: _shader(nt, "BsdfMetallic", **{"Base Color": (0.95, 0.64, 0.54, 1.0),
+                                                                           "Roughness": 0.3}))
+    )
+    b.ops.mesh.primitive_plane_add(size=0.6, location=(1.25, 1.1, 0.45), rotation=(math.radians(90.0), 0.0, 0.0))
+    b.context.active_object.data.materials.append(
+        _node_material(
+            "Leaf",
+            lambda nt: _combine(
+                nt, "MixShader", _shader(nt, "BsdfTransparent"), _shader(nt, "BsdfDiffuse", Color=(0.2, 0.6, 0.2, 1.0)),
+                factor=0.6,
+            ),
+        )
+    )
+    b.ops.mesh.primitive_uv_sphere_add(segments=24, ring_count=12, radius=0.15, location=(0.05, 1.0, 0.15))
+    b.ops.object.shade_smooth()
+    b.context.active_object.data.materials.append(
+        _node_material(
+            "GlowBall",
+            lambda nt: _combine(
+                nt,
+                "AddShader",
+                _shader(nt, "Emission", Color=(1.0, 0.6, 0.3, 1.0), Strength=2.0),
+                _shader(nt, "BsdfDiffuse", Color=(0.5, 0.5, 0.5, 1.0)),
+            ),
+        )
+    )
+
+
 def _checker_image():
     """An 8-bit sRGB 8 x 8 checker of dark red and light grey, saved as PNG and packed: a byte
     image, which Cycles filters in its encoded values and decodes afterwards."""
@@ -353,7 +457,8 @@ def build_lights_scene(variant: str):
     name (the default colour attribute, per corner, float), the big one's from an Attribute node
     naming a per-point byte colour attribute, over the same ground and light. "ortho" is "texture"
     seen through an orthographic camera (Orthographic Scale 3 m, VERTICAL fit, shifted, f/4 focused
-    at 2.5 m)."""
+    at 2.5 m). "shaders" has shader nodes other than the Principled BSDF over the same ground and
+    light (see ``_add_shader_objects``)."""
     b = bpy()
     reset_blender()
     scene = b.context.scene
@@ -362,7 +467,7 @@ def build_lights_scene(variant: str):
         world.use_nodes = True
     nt = world.node_tree
     bg = nt.nodes.get("Background")
-    bg.inputs["Strength"].default_value = 0.5 if variant in ("world", "glass", "coat", "paint") else 0.0
+    bg.inputs["Strength"].default_value = 0.5 if variant in ("world", "glass", "coat", "paint", "shaders") else 0.0
     env = nt.nodes.new("ShaderNodeTexEnvironment")
     env.image = _environment_image()
     mapping = nt.nodes.new("ShaderNodeMapping")
@@ -375,7 +480,7 @@ def build_lights_scene(variant: str):
 
     b.ops.mesh.primitive_plane_add(size=8.0, location=(0.0, 2.0, 0.0))
     ground = _principled_lambert("Ground", (0.5, 0.5, 0.5))
-    if variant in ("texture", "glass", "ortho", "coat", "paint"):
+    if variant in ("texture", "glass", "ortho", "coat", "paint", "shaders"):
         # the ground's colour from a coarse 8-bit checker with Linear interpolation
         tex = ground.node_tree.nodes.new("ShaderNodeTexImage")
         tex.image = _checker_image()
@@ -413,6 +518,8 @@ def build_lights_scene(variant: str):
         if variant == "paint":
             _paint_sphere(b, b.context.active_object, mat, small=r < 0.4)
         b.context.active_object.data.materials.append(mat)
+    if variant == "shaders":
+        _add_shader_objects(b)
 
     lights = (("Rect", "RECTANGLE", 1.0, 0.5, (0.8, 1.0, 2.6), 300.0, (1.0, 0.85, 0.7)),
               ("Disc", "DISK", 0.6, 0.6, (-1.2, 2.5, 2.4), 150.0, (0.7, 0.8, 1.0)))

@@ -286,7 +286,8 @@ SPP_LIGHTS = 128
 
 
 @pytest.mark.parametrize(
-    "variant", ["area", "world", "spots", "soft", "texture", "hidden", "terminator", "glass", "coat", "paint", "ortho"]
+    "variant",
+    ["area", "world", "spots", "soft", "texture", "hidden", "terminator", "glass", "coat", "paint", "shaders", "ortho"],
 )
 def test_area_lights_and_environment_match_cycles(addon, report, variant):
     """What tests/blender's glTF scene cannot carry, against Cycles (8x8 block z-test and image
@@ -306,7 +307,10 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
     checker, lit by the environment (Transmission Weight was ignored: opaque spheres); "coat": a
     coated dielectric and a coated, tinted metal sphere (the coat was ignored); "paint": base
     colours from the meshes' colour attributes through a Color Attribute and an Attribute node
-    (the viewport display colour was used); "ortho": the
+    (the viewport display colour was used); "shaders": a tinted Glass BSDF, a Mix Shader of a Diffuse
+    and a Glossy BSDF, a Metallic BSDF, a Diffuse mixed with a Transparent BSDF and an Emission
+    added to a Diffuse (all but the Principled, Diffuse and Emission shaders were rendered with the
+    viewport display colour); "ortho": the
     "texture" scene through an orthographic camera (VERTICAL fit, shifted, Cycles' depth of field;
     it was refused)."""
     H.build_lights_scene(variant)
@@ -331,6 +335,7 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
         "glass": "a clear and a rough tinted glass sphere over a checker",
         "coat": "a coated dielectric and a coated metal sphere (Coat Weight, Roughness, IOR, Tint) over a checker",
         "paint": "spheres coloured by colour attributes (Color Attribute node, Attribute node) over a checker",
+        "shaders": "Glass, Glossy, Metallic and Transparent BSDFs through Mix and Add Shaders over a checker",
         "ortho": "an orthographic camera (scale 3 m, VERTICAL fit, shifted, f/4 at 2.5 m) over a sun-lit checker",
     }[variant]
     report.line(f"{what} vs Cycles, {w}x{h} {SPP_LIGHTS} spp x seeds {SEEDS} ({secs:.1f} s per F12)")
@@ -730,14 +735,14 @@ def test_border_crop_and_depth_pass(addon, report):
 
 
 def test_unsupported_features_listed_once(addon, report):
-    """A Glass BSDF and a Principled BSDF with sheen on two objects each: one WARNING listing each
+    """A Toon BSDF and a Principled BSDF with sheen on two objects each: one WARNING listing each
     unsupported thing once, and the render still completes."""
     _depth_scene()
     H.configure_petzval(2, seed=0, camera="DepthCam")
-    glass = bpy.data.materials.new("GlassMat")
+    glass = bpy.data.materials.new("ToonMat")
     nt = glass.node_tree
     nt.nodes.remove(nt.nodes.get("Principled BSDF"))
-    g = nt.nodes.new("ShaderNodeBsdfGlass")
+    g = nt.nodes.new("ShaderNodeBsdfToon")
     nt.links.new(g.outputs[0], nt.nodes.get("Material Output").inputs["Surface"])
     sheen = bpy.data.materials.new("SheenMat")
     sheen.node_tree.nodes.get("Principled BSDF").inputs["Sheen Weight"].default_value = 0.5
@@ -748,7 +753,7 @@ def test_unsupported_features_listed_once(addon, report):
     unsupported = entry["notes"]["unsupported"]
     report.line(f"unsupported features reported once: {unsupported}")
     assert len(unsupported) == len(set(unsupported)) == 2, unsupported
-    assert any("GlassMat" in u and "Glass" in u for u in unsupported)
+    assert any("ToonMat" in u and "Toon" in u for u in unsupported)
     assert any("SheenMat" in u and "Sheen" in u for u in unsupported)
     assert entry.get("complete") is True
 

@@ -258,6 +258,13 @@ def test_instances_render_like_copies(petzval):
     assert inst.instance_count == 5, "a failed add_instances adds none"
 
 
+def _two_materials(pz):
+    scene = pz.Scene()
+    scene.add_material("a")
+    scene.add_material("b")
+    return scene
+
+
 @pytest.mark.parametrize(
     "call, exc, words",
     [
@@ -292,6 +299,16 @@ def test_instances_render_like_copies(petzval):
             "InvalidSceneError",
             ["base_color_texture", "3"],
         ),
+        (lambda pz: pz.Scene().add_material("m", mix_material=0), "InvalidSceneError", ["'m'", "mix_material", "0"]),
+        (lambda pz: pz.Scene().add_material("m", mix_weight=0.5), "InvalidSceneError", ["mix_weight", "without"]),
+        (
+            lambda pz: _two_materials(pz).add_material("m", mix_material=1, mix_weight=1.5),
+            "InvalidSceneError",
+            ["mix_weight", "1.5"],
+        ),
+        (lambda pz: pz.Scene().add_material("m", metal_fresnel="conductor"), "InvalidSceneError", ["metal_fresnel"]),
+        (lambda pz: pz.Scene().add_material("m", edge_tint=(1.2, 1, 1)), "InvalidSceneError", ["edge_tint"]),
+        (lambda pz: pz.Scene().add_material("m", scatter_tint=(1, -1, 1)), "InvalidSceneError", ["scatter_tint"]),
         (lambda pz: pz.render(pz.Scene(), pz.Camera(np.eye(4)), 0, 10), "InvalidSettingsError", ["resolution"]),
         (lambda pz: pz.Camera(np.eye(4), tilt_x_deg=80), "InvalidSettingsError", ["tilt_x_deg"]),
         (lambda pz: pz.Camera(np.eye(4), lens_model="fast"), "InvalidSettingsError", ["lens_model"]),

@@ -1,11 +1,14 @@
 """Blender materials as petzval materials.
 
 Materials: the Principled BSDF (base colour, metallic, roughness, IOR, Specular IOR Level,
-alpha, emission, normal map, Transmission Weight, Coat Weight, Roughness, IOR and Tint) with
-Image Texture nodes where glTF can take them, and a base colour from a Color Attribute node (or
-an Attribute node naming a geometry attribute): the mesh's colours, which the renderer
-multiplies into the base colour as glTF's ``COLOR_0``; Diffuse BSDF and
-Emission shaders. Anything else falls back to the material's viewport display colour and is
+Specular Tint of the metallic part, alpha, emission, normal map, Transmission Weight, Coat
+Weight, Roughness, IOR and Tint) with Image Texture nodes where glTF can take them, and a base
+colour from a Color Attribute node (or an Attribute node naming a geometry attribute): the
+mesh's colours, which the renderer multiplies into the base colour as glTF's ``COLOR_0``;
+Diffuse, Glossy, Metallic, Glass, Refraction (as Glass), Transparent BSDFs and Emission
+shaders, joined by Mix and Add Shaders (a weighted sum of closures: transparency becomes
+stochastic coverage, emission adds up, and each scattering event picks one BSDF by its weight,
+``ShaderMix``). Anything else falls back to the material's viewport display colour and is
 listed (once) in the render's warning report.
 """
 
@@ -14,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from .images import MISSING_TEXTURE, image_pixels, srgb_byte_image
-from .nodes import node_tree_of, source, surface_shader, value
+from .nodes import forget_groups, node_tree_of, socket_value, source, surface_shader, value
 
 DEFAULT_COLOUR = (0.8, 0.8, 0.8, 1.0)
 
@@ -22,10 +25,38 @@ INTERPOLATION = {"Closest": "closest", "Linear": "linear", "Cubic": "linear", "S
 EXTENSION = {"REPEAT": "repeat", "EXTEND": "clip", "CLIP": "clip", "MIRROR": "mirror"}
 
 
+def conductor_fresnel(cos: float, n: float, k: float) -> float:
+    """Unpolarised Fresnel reflectance of a conductor of complex index n + ik at `cos`."""
+    c2 = cos * cos
+    t = n * n + k * k
+    two_nc = 2.0 * n * cos
+    r_par = (t * c2 - two_nc + 1.0) / (t * c2 + two_nc + 1.0)
+    r_perp = (t - two_nc + c2) / (t + two_nc + c2)
+    return 0.5 * (r_par + r_perp)
+
+
+class ShaderMix:
+    """A material's closures as a weighted sum (Mix and Add Shaders flattened): BSDFs as
+    (weight, add_material arguments), emission, and the weight of transparency."""
+
+    def __init__(self):
+        self.bsdfs: list[tuple[float, dict]] = []
+        self.emission = (0.0, 0.0, 0.0)
+        self.emission_texture = None
+        self.transparency = 0.0
+
+    def add_emission(self, weight: float, emission, texture) -> None:
+        """Adds `weight` × `emission` (a texture multiplies the sum: the first one kept)."""
+        self.emission = tuple(a + weight * float(b) for a, b in zip(self.emission, emission[:3], strict=True))
+        if texture is not None and self.emission_texture is None:
+            self.emission_texture = texture
+
+
 class Materials:
     """Blender materials as petzval materials (each converted once)."""
 
     def __init__(self, pz_scene, notes):
+        forget_groups()
         self.scene = pz_scene
         self.notes = notes
         self.index_of: dict = {}
@@ -144,29 +175,217 @@ class Materials:
             # Cycles renders a material with nothing connected as black
             return self.scene.add_material(mat.name, base_color=(0.0, 0.0, 0.0, 1.0), specular=0.0)
         if node.type == "BSDF_PRINCIPLED":
-            return self._principled(mat, node)
+            return self.scene.add_material(mat.name, **self._principled(mat, node))
         if node.type == "BSDF_DIFFUSE":
-            kw = self._base_colour(mat, node, "Color")
-            if source(node.inputs.get("Normal")) is not None:
-                self.notes.warn(f"material '{mat.name}': Diffuse BSDF normal input ignored")
-            return self.scene.add_material(mat.name, roughness=1.0, specular=0.0, **kw)
+            return self.scene.add_material(mat.name, **self._diffuse(mat, node))
         if node.type == "EMISSION":
-            col = value(node, "Color", (1.0, 1.0, 1.0, 1.0))
-            strength = value(node, "Strength", 1.0)
-            kw = {}
-            src = source(node.inputs.get("Color"))
-            if src is not None:
-                if src[0].type == "TEX_IMAGE":
-                    kw["emission_texture"] = self.texture(src[0], f"material '{mat.name}' emission")
-                    col = (1.0, 1.0, 1.0)
-                else:
-                    self.notes.warn(
-                        f"material '{mat.name}': emission colour from a {src[0].bl_label} node "
-                        "(its unlinked value used)"
-                    )
+            col, strength, kw = self._emission(mat, node)
             return self.scene.add_material(mat.name, base_color=(0.0, 0.0, 0.0, 1.0), specular=0.0,
                                            emission=tuple(float(c) * strength for c in col[:3]), **kw)
-        return self._fallback(mat, f"{node.bl_label} shader is not supported")
+        mix = ShaderMix()
+        why = self._gather(mat, node, 1.0, mix, depth=0)
+        if why is not None:
+            return self._fallback(mat, why)
+        return self._add_mix(mat, mix)
+
+    # -- shaders other than a lone Principled, Diffuse or Emission: a weighted sum of closures
+
+    def _gather(self, mat, node, weight: float, mix: ShaderMix, depth: int) -> str | None:
+        """Adds shader `node`'s closures, scaled by `weight`, to `mix`; returns why the material
+        cannot be rendered (an unsupported shader), else None."""
+        name = mat.name
+        if depth > 32:
+            return "shader nodes nested more than 32 deep"
+        if weight <= 0.0:
+            return None
+        t = node.type
+        if t in ("MIX_SHADER", "ADD_SHADER"):
+            shaders = [s for s in node.inputs if s.type == "SHADER"]
+            if t == "MIX_SHADER":
+                fac_socket = node.inputs[0]  # "Factor" (Blender 5), "Fac" before
+                fac = min(max(float(socket_value(fac_socket, 0.5)), 0.0), 1.0)
+                fsrc = source(fac_socket)
+                if fsrc is not None:
+                    self.notes.warn(
+                        f"material '{name}': Mix Shader factor from a {fsrc[0].bl_label} node (its unlinked value "
+                        f"{fac:g} used)"
+                    )
+                weights = (weight * (1.0 - fac), weight * fac)
+            else:
+                weights = (weight, weight)
+            for sock, w in zip(shaders, weights, strict=False):
+                src = source(sock)
+                # an unconnected shader input adds nothing (black), as in Cycles
+                if src is not None:
+                    why = self._gather(mat, src[0], w, mix, depth + 1)
+                    if why is not None:
+                        return why
+            return None
+        if t == "BSDF_PRINCIPLED":
+            kw = self._principled(mat, node)
+            emission = kw.pop("emission", (0.0, 0.0, 0.0))
+            etex = kw.pop("emission_texture", None)
+            alpha = float(kw["base_color"][3]) if len(kw["base_color"]) > 3 else 1.0
+            if kw.get("alpha_mode") == "blend" and alpha >= 1.0:
+                self.notes.warn(f"material '{name}': an alpha texture inside a Mix or Add Shader (ignored)")
+            kw["base_color"] = (*kw["base_color"][:3], 1.0)
+            kw.pop("alpha_mode", None)
+            mix.add_emission(weight * alpha, emission, etex)
+            mix.transparency += weight * (1.0 - alpha)
+            mix.bsdfs.append((weight * alpha, kw))
+            return None
+        if t == "BSDF_DIFFUSE":
+            mix.bsdfs.append((weight, self._diffuse(mat, node)))
+            return None
+        if t in ("EMISSION", "BACKGROUND"):
+            col, strength, kw = self._emission(mat, node)
+            mix.add_emission(weight, tuple(float(c) * strength for c in col[:3]), kw.get("emission_texture"))
+            return None
+        if t == "BSDF_TRANSPARENT":
+            col = value(node, "Color", (1.0, 1.0, 1.0, 1.0))[:3]
+            if max(col) - min(col) > 1e-6 or source(node.inputs.get("Color")) is not None:
+                self.notes.warn(
+                    f"material '{name}': coloured Transparent BSDF (light passes untinted, in the share of its mean)"
+                )
+            mix.transparency += weight * sum(col) / 3.0
+            return None
+        if t in ("BSDF_GLASS", "BSDF_REFRACTION"):
+            if t == "BSDF_REFRACTION":
+                self.notes.warn(f"material '{name}': Refraction BSDF rendered as a Glass BSDF (with its reflection)")
+            kw = self._tinted(mat, node)
+            kw.update(metallic=0.0, transmission=1.0, specular=1.0, ior=float(value(node, "IOR", 1.5)))
+            mix.bsdfs.append((weight, kw))
+            return None
+        if t in ("BSDF_GLOSSY", "BSDF_ANISOTROPIC"):
+            # no Fresnel: its colour at every angle, its multiple scattering coloured by it
+            kw = self._base_colour(mat, node, "Color")
+            kw.update(metallic=1.0, metal_fresnel="constant", roughness=self._roughness(mat, node))
+            self._normal(mat, node, kw)
+            v = value(node, "Anisotropy", 0.0)
+            if (isinstance(v, float) and v != 0.0) or t == "BSDF_ANISOTROPIC":
+                self.notes.warn(f"material '{name}': Anisotropy")
+            mix.bsdfs.append((weight, kw))
+            return None
+        if t == "BSDF_METALLIC":
+            mix.bsdfs.append((weight, self._metallic(mat, node)))
+            return None
+        return f"{node.bl_label} shader is not supported"
+
+    def _roughness(self, mat, node) -> float:
+        """A BSDF node's constant Roughness (a linked one: its unlinked value, warned)."""
+        src = source(node.inputs.get("Roughness"))
+        if src is not None:
+            self.notes.warn(f"material '{mat.name}': roughness from a {src[0].bl_label} node (its unlinked value used)")
+        if getattr(node, "distribution", "MULTI_GGX") not in ("MULTI_GGX", "GGX"):
+            self.notes.note(f"{node.bl_label} distribution {node.distribution.title()} rendered as Multiscatter GGX")
+        return min(max(float(value(node, "Roughness", 0.5)), 0.0), 1.0)
+
+    def _tinted(self, mat, node) -> dict:
+        """Glass and Refraction BSDFs: white glass times the node's Color, which scales the
+        whole closure, reflection and refraction (a texture or colour attribute goes in as the
+        base colour instead, which tints the refracted light only, by its square root at each
+        crossing)."""
+        kw = self._base_colour(mat, node, "Color")
+        src = source(node.inputs.get("Color"))
+        if src is not None and src[0].type != "RGB":
+            self.notes.warn(
+                f"material '{mat.name}': {node.bl_label} colour from a node (rendered as the base colour: "
+                "tints the refracted light only)"
+            )
+        else:
+            kw = {"base_color": (1.0, 1.0, 1.0, 1.0), "scatter_tint": tuple(float(c) for c in kw["base_color"][:3])}
+        kw["roughness"] = self._roughness(mat, node)
+        self._normal(mat, node, kw)
+        return kw
+
+    def _metallic(self, mat, node) -> dict:
+        """The Metallic BSDF: F82 (Base Color, Edge Tint) or a Physical Conductor, rendered as
+        the F82 model through its exact reflectance head-on and at 82° (IOR and Extinction)."""
+        if getattr(node, "fresnel_type", "F82") == "PHYSICAL_CONDUCTOR":
+            n = value(node, "IOR", (2.757, 2.513, 2.231))[:3]
+            k = value(node, "Extinction", (3.867, 3.404, 3.009))[:3]
+            f0 = tuple(conductor_fresnel(1.0, a, b) for a, b in zip(n, k, strict=True))
+            mu = 1.0 / 7.0
+            schlick = tuple(f + (1.0 - f) * (1.0 - mu) ** 5 for f in f0)
+            f82 = tuple(conductor_fresnel(mu, a, b) for a, b in zip(n, k, strict=True))
+            kw = {"base_color": (*f0, 1.0), "edge_tint": tuple(min(max(a / s, 0.0), 1.0) for a, s in
+                                                                   zip(f82, schlick, strict=True))}
+            self.notes.note("Metallic BSDF Physical Conductor rendered as F82 through its reflectance at 0° and 82°")
+        else:
+            kw = self._base_colour(mat, node, "Base Color")
+            tint = value(node, "Edge Tint", (1.0, 1.0, 1.0, 1.0))
+            kw["edge_tint"] = tuple(min(max(float(c), 0.0), 1.0) for c in tint[:3])
+            if source(node.inputs.get("Edge Tint")) is not None:
+                self.notes.warn(f"material '{mat.name}': Edge Tint from a node (its unlinked value used)")
+        kw.update(metallic=1.0, roughness=self._roughness(mat, node))
+        v = value(node, "Anisotropy", 0.0)
+        if isinstance(v, float) and v != 0.0:
+            self.notes.warn(f"material '{mat.name}': Anisotropy")
+        self._normal(mat, node, kw)
+        return kw
+
+    def _add_mix(self, mat, mix: ShaderMix) -> int:
+        """The material for a weighted sum of closures: stochastic coverage of 1 − transparency;
+        where covered, emission ÷ coverage, and one BSDF chosen by its share of the total
+        weight W (a chain of mix materials), scaled by W ÷ coverage (its scatter tint)."""
+        name = mat.name
+        coverage = min(max(1.0 - mix.transparency, 0.0), 1.0)
+        bsdfs = [(w, kw) for w, kw in mix.bsdfs if w > 0.0]
+        total = sum(w for w, _ in bsdfs)
+        if coverage <= 1e-6:
+            return self.scene.add_material(name, base_color=(0.0, 0.0, 0.0, 0.0), specular=0.0, alpha_mode="blend")
+        if not bsdfs:
+            bsdfs, total = [(1.0, {"base_color": (0.0, 0.0, 0.0, 1.0), "specular": 0.0})], 0.0
+        normals = {kw.get("normal_texture") for _, kw in bsdfs}
+        if len(normals) > 1:
+            self.notes.warn(f"material '{name}': mixed shaders with different normal maps (the first one's used)")
+        scale = total / coverage
+
+        def scaled(kw):
+            tint = kw.get("scatter_tint", (1.0, 1.0, 1.0))
+            return {**kw, "scatter_tint": tuple(float(c) * scale for c in tint)}
+
+        # the chain, built from its end: each link scatters as the rest with the rest's share
+        index, rest = None, 0.0
+        for k in range(len(bsdfs) - 1, 0, -1):
+            w, kw = bsdfs[k]
+            args = scaled(kw)
+            if index is not None:
+                args.update(mix_material=index, mix_weight=rest / (rest + w))
+            index, rest = self.scene.add_material(f"{name} (mix {k})", **args), rest + w
+        w, kw = bsdfs[0]
+        args = scaled(kw)
+        if index is not None:
+            args.update(mix_material=index, mix_weight=rest / (rest + w))
+        args["emission"] = tuple(c / coverage for c in mix.emission)
+        if mix.emission_texture is not None:
+            args["emission_texture"] = mix.emission_texture
+        args["base_color"] = (*args["base_color"][:3], coverage)
+        args["alpha_mode"] = "blend" if coverage < 1.0 else "opaque"
+        return self.scene.add_material(name, **args)
+
+    def _diffuse(self, mat, node) -> dict:
+        """A Diffuse BSDF: Lambert in its colour."""
+        kw = self._base_colour(mat, node, "Color")
+        if source(node.inputs.get("Normal")) is not None:
+            self.notes.warn(f"material '{mat.name}': Diffuse BSDF normal input ignored")
+        return {"roughness": 1.0, "specular": 0.0, **kw}
+
+    def _emission(self, mat, node):
+        """(colour, strength, {emission_texture}) of an Emission shader."""
+        col = value(node, "Color", (1.0, 1.0, 1.0, 1.0))
+        strength = value(node, "Strength", 1.0)
+        kw = {}
+        src = source(node.inputs.get("Color"))
+        if src is not None:
+            if src[0].type == "TEX_IMAGE":
+                kw["emission_texture"] = self.texture(src[0], f"material '{mat.name}' emission")
+                col = (1.0, 1.0, 1.0)
+            else:
+                self.notes.warn(
+                    f"material '{mat.name}': emission colour from a {src[0].bl_label} node (its unlinked value used)"
+                )
+        return col, float(strength), kw
 
     def _base_colour(self, mat, node, name) -> dict:
         """base_color (+ texture) from a colour input."""
@@ -212,7 +431,8 @@ class Materials:
         self.notes.warn(f"material '{mat.name}': {what} from a {n.bl_label} node (its unlinked value used)")
         return float(value(node, name, 0.0)), None
 
-    def _principled(self, mat, node) -> int:
+    def _principled(self, mat, node) -> dict:
+        """add_material's arguments for a Principled BSDF."""
         name = mat.name
         kw = self._base_colour(mat, node, "Base Color")
         alpha = float(value(node, "Alpha", 1.0))
@@ -242,9 +462,15 @@ class Materials:
         kw["specular"] = 2.0 * float(value(node, "Specular IOR Level", 0.5))
         if source(node.inputs.get("Specular IOR Level")) is not None:
             self.notes.warn(f"material '{name}': Specular IOR Level from a node (its unlinked value used)")
+        # Specular Tint: a metal's F82 tint (Cycles); on the dielectric part it is not rendered
         tint = value(node, "Specular Tint", (1.0, 1.0, 1.0, 1.0))
         if isinstance(tint, tuple) and any(abs(t - 1.0) > 1e-6 for t in tint[:3]):
-            self.notes.warn(f"material '{name}': Specular Tint")
+            if kw["metallic"] > 0.0:
+                kw["edge_tint"] = tuple(min(max(float(c), 0.0), 1.0) for c in tint[:3])
+            if kw["metallic"] < 1.0 or metallic_img is not None:
+                self.notes.warn(f"material '{name}': Specular Tint (of the dielectric part)")
+        if source(node.inputs.get("Specular Tint")) is not None:
+            self.notes.warn(f"material '{name}': Specular Tint from a node (its unlinked value used)")
 
         # emission
         ecol = value(node, "Emission Color", (0.0, 0.0, 0.0, 1.0))
@@ -263,28 +489,7 @@ class Materials:
             self.notes.warn(f"material '{name}': Emission Strength from a node (its unlinked value used)")
         kw["emission"] = tuple(float(c) * estr for c in ecol[:3])
 
-        # normal map
-        nsrc = source(node.inputs.get("Normal"))
-        if nsrc is not None:
-            nn = nsrc[0]
-            if nn.type == "NORMAL_MAP" and nn.space == "TANGENT":
-                csrc = source(nn.inputs.get("Color"))
-                if csrc is not None and csrc[0].type == "TEX_IMAGE":
-                    tex = self.texture(csrc[0], f"material '{name}' normal map")
-                    if tex is not None:
-                        kw["normal_texture"] = tex
-                        kw["normal_scale"] = float(value(nn, "Strength", 1.0))
-                    if nn.uv_map:
-                        self.notes.warn(
-                            f"material '{name}': normal map on UV map '{nn.uv_map}' (the active render UV map used)"
-                        )
-                else:
-                    self.notes.warn(f"material '{name}': Normal Map node without an Image Texture")
-            else:
-                self.notes.warn(
-                    f"material '{name}': normal from a {nn.bl_label} "
-                    f"node{' (' + nn.space.lower() + ' space)' if nn.type == 'NORMAL_MAP' else ''}"
-                )
+        self._normal(mat, node, kw)
 
         # transmission: that share of the dielectric part is glass (refracting by IOR)
         kw["transmission"] = min(max(float(value(node, "Transmission Weight", 0.0)), 0.0), 1.0)
@@ -314,7 +519,33 @@ class Materials:
             v = value(node, inp, 0.0)
             if (isinstance(v, float) and v > 0.0) or source(node.inputs.get(inp)) is not None:
                 self.notes.warn(f"material '{name}': {label}")
-        return self.scene.add_material(name, **kw)
+        return kw
+
+    def _normal(self, mat, node, kw: dict) -> None:
+        """A tangent-space Normal Map node with an Image Texture on the shader's Normal input
+        (normal_texture, normal_scale in `kw`); anything else there is warned about."""
+        name = mat.name
+        nsrc = source(node.inputs.get("Normal"))
+        if nsrc is not None:
+            nn = nsrc[0]
+            if nn.type == "NORMAL_MAP" and nn.space == "TANGENT":
+                csrc = source(nn.inputs.get("Color"))
+                if csrc is not None and csrc[0].type == "TEX_IMAGE":
+                    tex = self.texture(csrc[0], f"material '{name}' normal map")
+                    if tex is not None:
+                        kw["normal_texture"] = tex
+                        kw["normal_scale"] = float(value(nn, "Strength", 1.0))
+                    if nn.uv_map:
+                        self.notes.warn(
+                            f"material '{name}': normal map on UV map '{nn.uv_map}' (the active render UV map used)"
+                        )
+                else:
+                    self.notes.warn(f"material '{name}': Normal Map node without an Image Texture")
+            else:
+                self.notes.warn(
+                    f"material '{name}': normal from a {nn.bl_label} "
+                    f"node{' (' + nn.space.lower() + ' space)' if nn.type == 'NORMAL_MAP' else ''}"
+                )
 
     def _metallic_roughness(self, mat, m_node, r_node, m_const, r_const):
         """glTF's metallicRoughness texture (G roughness, B metallic) from one or two greyscale

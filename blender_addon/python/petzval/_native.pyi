@@ -111,6 +111,11 @@ class Scene:
         coat_roughness: float = 0.03,
         coat_ior: float = 1.5,
         coat_tint: Sequence[float] = (1.0, 1.0, 1.0),
+        scatter_tint: Sequence[float] = (1.0, 1.0, 1.0),
+        metal_fresnel: str = "f82",
+        edge_tint: Sequence[float] = (1.0, 1.0, 1.0),
+        mix_material: int | None = None,
+        mix_weight: float = 0.0,
     ) -> int:
         """Adds a glTF metallic-roughness material and returns its index.
 
@@ -128,7 +133,17 @@ class Scene:
         ``coat_weight``, ``coat_roughness``, ``coat_ior`` and ``coat_tint`` are the Principled
         BSDF's Coat: a glossy layer over everything else, which dims what lies under it by its
         reflectance and tints it by ``coat_tint`` (linear RGB, head-on) along the refracted
-        view ray, as Cycles does. Texture indices come from :meth:`add_texture`."""
+        view ray, as Cycles does. ``scatter_tint`` (linear RGB) multiplies everything the
+        surface scatters, every lobe, reflected and refracted, but not its emission: the colour
+        of Blender's Glass and Refraction BSDFs. ``metal_fresnel`` is the metallic part's
+        Fresnel reflectance: ``"f82"`` (Schlick's from the base colour, less Cycles' F82 term
+        that makes it ``edge_tint`` (linear RGB in [0, 1]) times Schlick's near 82°: the
+        Specular Tint of a metallic Principled BSDF, the Metallic BSDF's Edge Tint) or
+        ``"constant"`` (the base colour at every angle: the Glossy BSDF). ``mix_material`` and ``mix_weight`` are
+        a Mix Shader: with probability ``mix_weight`` (in [0, 1]) a scattering event uses
+        material ``mix_material`` (added before this one, and it may mix further) instead of
+        this one, an unbiased estimate of the weighted sum of the two BSDFs; emission, alpha and
+        the normal map stay this material's. Texture indices come from :meth:`add_texture`."""
     def material_variant(self, material: int, visible_to_camera: bool = True, terminator_offset: float = 0.1) -> int:
         """Adds a copy of material ``material`` with an object's settings and returns its index:
         ``visible_to_camera`` (its Ray Visibility > Camera) and ``terminator_offset`` (its

@@ -8,6 +8,7 @@
 //! F_d = exact dielectric Fresnel of η′, the index whose F0 is specular·((ior−1)/(ior+1))²
 //!       (Cycles' Principled BSDF: Specular IOR Level × 2 = specular; η′ = ior at 1)
 //! F_m = Schlick(F0 = base colour, F90 = 1)                              (metal)
+//!       − b·μ(1 − μ)⁶ with Cycles' F82 tint, or F0 at every angle ([`MetalFresnel`])
 //! D = GGX / Trowbridge–Reitz, V = Smith height-correlated G2 / (4 μo μi), α = roughness² ≥ 1e-3
 //! M = (1 − E(μo))(1 − E(μi)) / (π (1 − Ē))        multiple scattering (Kulla & Conty 2017)
 //! F_ms,m = F̄² Ē / (1 − F̄ (1 − Ē)),  F̄ = F0 + (F90 − F0)/21 (Schlick's hemispherical average)
@@ -52,6 +53,8 @@ use std::f32::consts::{FRAC_1_PI, PI};
 use std::sync::OnceLock;
 
 use glam::{Vec2, Vec3};
+
+use crate::scene::MetalFresnel;
 
 /// Smallest GGX alpha (roughness² is clamped to this; keeps D finite).
 pub const MIN_ALPHA: f32 = 1e-3;
@@ -379,6 +382,40 @@ impl RoughnessRow {
     }
 }
 
+/// Cycles' F82-tint factor b (`fresnel_f82tint_B`): Schlick's reflectance of `f0` at μ = 1/7
+/// times (1 − tint), over μ(1 − μ)⁶ there, so that F(1/7) = tint × Schlick's.
+#[inline]
+fn f82_b(f0: Vec3, tint: Vec3) -> Vec3 {
+    const F: f32 = 6.0 / 7.0;
+    let f5 = F * F * F * F * F;
+    (f0 + (Vec3::ONE - f0) * f5) * (7.0 / (f5 * F)) * (Vec3::ONE - tint)
+}
+
+/// A metal's Fresnel reflectance at `cos` (`w` = Schlick's weight (1 − cos)⁵ there). Out of
+/// line, so that plain Schlick's (the common case) stays small where it is inlined.
+#[inline(never)]
+fn metal_fresnel(f: &MetalFresnel, f0: Vec3, cos: f32, w: f32) -> Vec3 {
+    match *f {
+        MetalFresnel::Constant => f0,
+        MetalFresnel::F82 { tint } => {
+            let s = (1.0 - cos).clamp(0.0, 1.0);
+            let schlick = f0 + (Vec3::ONE - f0) * w;
+            (schlick - f82_b(f0, tint) * (cos * w * s)).clamp(Vec3::ZERO, Vec3::ONE)
+        }
+    }
+}
+
+/// The hemispherical average 2∫F(μ)μ dμ of a metal's Fresnel (Cycles' `fresnel_f82_Fss`:
+/// F0 + (1 − F0)/21 − b/126).
+fn metal_fresnel_average(f: &MetalFresnel, f0: Vec3) -> Vec3 {
+    match *f {
+        MetalFresnel::Constant => f0,
+        MetalFresnel::F82 { tint } => {
+            (f0 + (Vec3::ONE - f0) / 21.0 - f82_b(f0, tint) / 126.0).clamp(Vec3::ZERO, Vec3::ONE)
+        }
+    }
+}
+
 /// The glTF metallic-roughness BSDF in its local frame (normal = +z).
 #[derive(Debug, Clone, Copy)]
 pub struct Bsdf<'a> {
@@ -408,6 +445,8 @@ pub struct Bsdf<'a> {
     /// A clear coat over everything above ([`Coat`]), where the material has one (built once
     /// per material, so the BSDF stays small).
     coat: Option<&'a Coat>,
+    /// The metal's Fresnel where it is not plain Schlick (the material's, borrowed).
+    metal_fresnel: Option<&'a MetalFresnel>,
 }
 
 impl<'a> Bsdf<'a> {
@@ -473,7 +512,29 @@ impl<'a> Bsdf<'a> {
             layered,
             glass: None,
             coat: None,
+            metal_fresnel: None,
         }
+    }
+
+    /// The same BSDF with a metal Fresnel other than plain Schlick ([`MetalFresnel`]: Cycles'
+    /// F82 tint, or the base colour at every angle); plain Schlick leaves it as it is.
+    /// (Out of line: most materials have plain Schlick and do not call it.)
+    #[inline(never)]
+    pub fn with_metal_fresnel(self, f: &'a MetalFresnel) -> Self {
+        if f.is_schlick() {
+            return self;
+        }
+        let mut out = Bsdf { metal_fresnel: Some(f), ..self };
+        // the multiple-scattering colour from this Fresnel's hemispherical average
+        let (a1, _) = out.row.avg();
+        if 1.0 - a1 > 1e-4 {
+            let f_avg = metal_fresnel_average(f, out.base);
+            let fms = |f: f32| f * f * a1 / (1.0 - f * (1.0 - a1));
+            out.ms_colour = Vec3::new(fms(f_avg.x), fms(f_avg.y), fms(f_avg.z)) * out.metallic;
+            out.ms_scale = out.ms_colour * (FRAC_1_PI / (1.0 - a1));
+            out.layered = out.diel.is_some() || out.ms_scale != Vec3::ZERO;
+        }
+        out
     }
 
     /// The same BSDF with glTF's `KHR_materials_transmission` (Blender's Transmission Weight):
@@ -551,12 +612,20 @@ impl<'a> Bsdf<'a> {
 
     /// [`Bsdf::fresnel`] with the dielectric part scaled for multiple scattering at a μo
     /// whose E(μo) is `e1o` (1: no scaling).
-    #[inline]
+    #[inline(always)]
     fn fresnel_boosted(&self, cos: f32, e1o: f32) -> Vec3 {
-        let w = schlick_weight(cos);
         let fd = if self.diel.is_some() { fresnel_dielectric(cos, self.eta_d) * self.ms_boost(e1o) } else { 0.0 };
-        let fm = self.base + (Vec3::ONE - self.base) * w;
-        Vec3::splat((1.0 - self.metallic) * fd) + fm * self.metallic
+        let dielectric = Vec3::splat((1.0 - self.metallic) * fd);
+        if self.metallic == 0.0 {
+            // (+ fm·0 = + 0: the same bits)
+            return dielectric;
+        }
+        let w = schlick_weight(cos);
+        let fm = match self.metal_fresnel {
+            None => self.base + (Vec3::ONE - self.base) * w,
+            Some(f) => metal_fresnel(f, self.base, cos, w),
+        };
+        dielectric + fm * self.metallic
     }
 
     /// Probability of choosing the specular lobe for `wo`.
@@ -1259,5 +1328,50 @@ impl<'a> SurfaceBsdf<'a> {
             return None;
         }
         Some(BsdfSample { wi, ..s })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Cycles' F82 tint: plain Schlick for a white tint (bit for bit), F0 head-on, 1 at grazing,
+    /// `tint` × Schlick's at μ = 1/7; its closed-form hemispherical average against quadrature;
+    /// the constant Fresnel is F0 everywhere.
+    #[test]
+    fn f82_tint_meets_its_definition() {
+        let mu_bar = 1.0f32 / 7.0;
+        for f0 in [Vec3::new(0.95, 0.64, 0.54), Vec3::splat(0.04), Vec3::new(0.617, 0.577, 0.540)] {
+            for tint in [Vec3::ONE, Vec3::new(0.695, 0.726, 0.770), Vec3::new(0.5, 0.9, 1.0)] {
+                let f = MetalFresnel::F82 { tint };
+                for cos in [0.0f32, 0.05, 0.3, 0.7, 1.0] {
+                    let w = schlick_weight(cos);
+                    let got = metal_fresnel(&f, f0, cos, w);
+                    if tint == Vec3::ONE {
+                        assert_eq!(got, f0 + (Vec3::ONE - f0) * w, "white tint is Schlick's");
+                    }
+                    if cos == 1.0 {
+                        assert!(got.distance(f0) < 1e-6, "head-on {got} vs F0 {f0}");
+                    }
+                    if cos == 0.0 {
+                        assert!(got.distance(Vec3::ONE) < 1e-6, "grazing {got}");
+                    }
+                }
+                let w = schlick_weight(mu_bar);
+                let want = tint * (f0 + (Vec3::ONE - f0) * w);
+                let got = metal_fresnel(&f, f0, mu_bar, w);
+                assert!(got.distance(want) < 2e-5, "F(1/7) = {got}, want tint × Schlick = {want}");
+                // 2∫F(μ)μ dμ by the midpoint rule
+                let n = 20_000;
+                let numeric = (0..n).fold(Vec3::ZERO, |acc, i| {
+                    let mu = (i as f32 + 0.5) / n as f32;
+                    acc + metal_fresnel(&f, f0, mu, schlick_weight(mu)) * (2.0 * mu / n as f32)
+                });
+                let avg = metal_fresnel_average(&f, f0);
+                assert!(avg.distance(numeric) < 1e-4, "average {avg} vs quadrature {numeric}");
+            }
+            assert_eq!(metal_fresnel(&MetalFresnel::Constant, f0, 0.2, schlick_weight(0.2)), f0);
+            assert_eq!(metal_fresnel_average(&MetalFresnel::Constant, f0), f0);
+        }
     }
 }

@@ -113,24 +113,73 @@ pub fn power_heuristic(a: f32, b: f32) -> f32 {
 
 /// Base colour (factor × texture × vertex colour, linear RGB) at a hit.
 pub fn base_color(scene: &RenderScene, hit: &SurfaceHit) -> Vec3 {
-    let mat = &scene.scene().materials[hit.material_id as usize];
+    base_color_of(scene, hit, hit.material_id)
+}
+
+/// Base colour of material `id` at a hit (a mix component's, or the hit's own material's).
+fn base_color_of(scene: &RenderScene, hit: &SurfaceHit, id: u32) -> Vec3 {
+    let mat = &scene.scene().materials[id as usize];
     let base_tex = scene.texture(mat.base_color_texture, hit.uv0, hit.uv1).map_or(Vec3::ONE, |t| t.truncate());
     let vertex = scene.vertex_color(hit.instance, hit.triangle, hit.barycentrics.x, hit.barycentrics.y);
     mat.base_color.truncate() * base_tex * vertex.truncate()
 }
 
+/// The albedo output's colour at a hit: the base colour times the scatter tint, averaged over
+/// a mix chain by its weights.
+fn albedo(scene: &RenderScene, hit: &SurfaceHit) -> Vec3 {
+    let mats = &scene.scene().materials;
+    let (mut id, mut share, mut sum) = (hit.material_id, 1.0f32, Vec3::ZERO);
+    loop {
+        let m = &mats[id as usize];
+        let own = share * m.mix.map_or(1.0, |x| 1.0 - x.weight);
+        sum += own * base_color_of(scene, hit, id) * m.scatter_tint;
+        match m.mix {
+            Some(x) if x.weight > 0.0 => {
+                share *= x.weight;
+                id = x.material;
+            }
+            _ => return sum,
+        }
+    }
+}
+
+/// The material that scatters at a hit of material `id`: `id` itself, or one along its mix
+/// chain ([`crate::scene::Material::mix`]) chosen by `u` in [0, 1); with `u` remapped to
+/// [0, 1) for the lobe choice, so no sample dimension is added.
+pub fn scattering_material(scene: &RenderScene, id: u32, u: f32) -> (u32, f32) {
+    let mats = &scene.scene().materials;
+    let (mut id, mut u) = (id, u);
+    while let Some(mix) = mats[id as usize].mix {
+        if u < mix.weight {
+            u /= mix.weight;
+            id = mix.material;
+        } else {
+            u = (u - mix.weight) / (1.0 - mix.weight);
+            break;
+        }
+    }
+    (id, u.clamp(0.0, 1.0 - f32::EPSILON / 2.0))
+}
+
 /// The BSDF of a hit's material (and its base colour).
 pub fn material_bsdf<'s>(scene: &'s RenderScene, hit: &SurfaceHit) -> (Bsdf<'s>, Vec3) {
-    let mat = &scene.scene().materials[hit.material_id as usize];
-    let base = base_color(scene, hit);
+    material_bsdf_of(scene, hit, hit.material_id)
+}
+
+/// The BSDF of material `id` at a hit (and its base colour).
+fn material_bsdf_of<'s>(scene: &'s RenderScene, hit: &SurfaceHit, id: u32) -> (Bsdf<'s>, Vec3) {
+    let mat = &scene.scene().materials[id as usize];
+    let base = base_color_of(scene, hit, id);
     let (mut metallic, mut roughness) = (mat.metallic, mat.roughness);
     if let Some(mr) = scene.texture(mat.metallic_roughness_texture, hit.uv0, hit.uv1) {
         metallic *= mr.z;
         roughness *= mr.y;
     }
-    let bsdf = Bsdf::new(base, metallic, roughness, mat.specular, mat.ior)
-        .with_transmission(mat.transmission, mat.ior)
-        .with_coat(scene.coat(hit.material_id));
+    let mut bsdf = Bsdf::new(base, metallic, roughness, mat.specular, mat.ior);
+    if metallic > 0.0 && !mat.metal_fresnel.is_schlick() {
+        bsdf = bsdf.with_metal_fresnel(&mat.metal_fresnel);
+    }
+    let bsdf = bsdf.with_transmission(mat.transmission, mat.ior).with_coat(scene.coat(id));
     (bsdf, base)
 }
 
@@ -265,9 +314,14 @@ impl PathTracer {
             if depth == 0 {
                 out.alpha = 1.0;
                 out.depth_m = hit.t + t_near;
-                let (bsdf, base) = material_bsdf(scene, &hit);
-                out.albedo = base;
-                first_bsdf = Some(bsdf);
+                let mat = &scene.scene().materials[hit.material_id as usize];
+                if mat.mix.is_none() && mat.scatter_tint == Vec3::ONE {
+                    let (bsdf, base) = material_bsdf(scene, &hit);
+                    out.albedo = base;
+                    first_bsdf = Some(bsdf);
+                } else {
+                    out.albedo = albedo(scene, &hit);
+                }
                 let n = hit.shading_normal;
                 out.normal = if n.dot(wo) >= 0.0 { n } else { -n };
             }
@@ -313,9 +367,16 @@ impl PathTracer {
                 beta /= q;
             }
 
+            // The material that scatters (one of a Mix Shader's, chosen by the lobe sample).
+            let (scatter_id, u_lobe) = if scene.scene().materials[hit.material_id as usize].mix.is_some() {
+                scattering_material(scene, hit.material_id, u_lobe)
+            } else {
+                (hit.material_id, u_lobe)
+            };
+            let tint = scene.scene().materials[scatter_id as usize].scatter_tint;
             let bsdf = match first_bsdf.take() {
-                Some(b) => b,
-                None => material_bsdf(scene, &hit).0,
+                Some(b) if scatter_id == hit.material_id => b,
+                _ => material_bsdf_of(scene, &hit, scatter_id).0,
             };
             let sb = SurfaceBsdf::new(bsdf, hit.geometric_normal, hit.shading_normal, wo);
 
@@ -328,7 +389,7 @@ impl PathTracer {
             let bumped = scene.scene().materials[hit.material_id as usize].normal_texture.is_some();
             if let Some(ls) = scene.sample_light_at(hit.position, select_n, u_pick, u_light) {
                 if ls.delta || nee {
-                    let f = if bumped { sb.eval(wo, ls.wi) } else { sb.eval_light(wo, ls.wi) };
+                    let f = tint * if bumped { sb.eval(wo, ls.wi) } else { sb.eval_light(wo, ls.wi) };
                     if f != Vec3::ZERO {
                         let origin = scene.shadow_origin(&hit, sb.n, sb.ng, ls.wi);
                         let visible = match ls.target {
@@ -356,7 +417,7 @@ impl PathTracer {
 
             // BSDF sample.
             let Some(bs) = sb.sample(wo, u_bsdf, u_lobe) else { break };
-            beta *= bs.weight;
+            beta *= bs.weight * tint;
             if !(beta.max_element() > 0.0) || !beta.is_finite() {
                 break;
             }

@@ -18,6 +18,9 @@
 //! | `Material.visible_to_camera` | bool: camera rays see the surface | — | true |
 //! | `Material.terminator_offset` | f32: Blender's Shadow Terminator Geometry Offset | cosine | 0.1 |
 //! | `Material.transmission` | f32 in [0, 1]: glass share of the dielectric part | — | 0 |
+//! | `Material.scatter_tint` | RGB multiplying all scattered light (Blender's Glass and Refraction colour) | — | white |
+//! | `Material.metal_fresnel` | [`MetalFresnel`]: F82 tint (Specular/Edge Tint) or constant (Glossy BSDF) | — | F82, white |
+//! | `Material.mix` | [`MaterialMix`]: another material scattering with a probability (Mix Shader) | — | none |
 //! | `Instance.mesh` | u32 | index into `Scene::meshes` | — |
 //! | `Instance.object_to_world` | [`Affine3A`] (any invertible affine map: rotation, non-uniform or negative scale, shear) | metres | — |
 //!
@@ -139,6 +142,56 @@ pub struct Material {
     pub coat_ior: f32,
     /// The coat's colour head-on (Coat Tint, linear RGB; white for glTF and USD).
     pub coat_tint: Vec3,
+    /// A colour multiplying everything the surface scatters (reflected and refracted, every
+    /// lobe), not its emission: the colour of Blender's Glass, Glossy and Refraction BSDFs,
+    /// which scale their whole closure. White (none) for glTF and USD.
+    pub scatter_tint: Vec3,
+    /// The metal's Fresnel reflectance (its F0 is the base colour): Schlick's with Cycles' F82
+    /// tint (Blender's Specular Tint on a metallic Principled BSDF, the Metallic BSDF's Edge
+    /// Tint; white = plain Schlick, glTF and USD), or the base colour at every angle (Blender's
+    /// Glossy BSDF).
+    pub metal_fresnel: MetalFresnel,
+    /// Blender's Mix Shader: with probability `weight` the surface scatters as another
+    /// material (chosen per scattering event, an unbiased estimate of the weighted sum of
+    /// the two). Emission, alpha and the shading normal stay this material's. None for glTF
+    /// and USD.
+    pub mix: Option<MaterialMix>,
+}
+
+/// A metal's Fresnel reflectance against the angle of incidence: see [`Material::metal_fresnel`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum MetalFresnel {
+    /// Schlick's from F0 (the base colour) to 1 at grazing, less Cycles' F82-tint term
+    /// b·μ·(1 − μ)⁶ that makes it `tint` × Schlick's at μ = 1/7 (about 82°; Kutz et al., "Novel
+    /// aspects of the Adobe Standard Material"). A white tint is plain Schlick.
+    F82 {
+        /// Linear RGB in [0, 1].
+        tint: Vec3,
+    },
+    /// The base colour at every angle (no Fresnel: Blender's Glossy BSDF).
+    Constant,
+}
+
+impl Default for MetalFresnel {
+    fn default() -> Self {
+        MetalFresnel::F82 { tint: Vec3::ONE }
+    }
+}
+
+impl MetalFresnel {
+    /// Whether it is plain Schlick (F82 with a white tint), the renderer's default path.
+    pub fn is_schlick(&self) -> bool {
+        matches!(self, MetalFresnel::F82 { tint } if *tint == Vec3::ONE)
+    }
+}
+
+/// The second half of a Mix Shader: see [`Material::mix`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MaterialMix {
+    /// Index of the other material in [`Scene::materials`] (it may mix further).
+    pub material: u32,
+    /// Probability of scattering as that material, in [0, 1].
+    pub weight: f32,
 }
 
 impl Default for Material {
@@ -166,6 +219,9 @@ impl Default for Material {
             coat_roughness: 0.03,
             coat_ior: 1.5,
             coat_tint: Vec3::ONE,
+            scatter_tint: Vec3::ONE,
+            metal_fresnel: MetalFresnel::default(),
+            mix: None,
         }
     }
 }
@@ -441,6 +497,14 @@ impl Scene {
         };
         for (k, m) in self.materials.iter().enumerate() {
             check(format!("material {k} '{}'", m.name), "emission (factor × strength)", m.emissive)?;
+            if !(m.scatter_tint.is_finite() && m.scatter_tint.min_element() >= 0.0) {
+                return Err(crate::Error::scene(
+                    file,
+                    format!("material {k} '{}'", m.name),
+                    format!("scatter_tint {} must be finite and non-negative", m.scatter_tint),
+                ));
+            }
+            self.check_mix(k).map_err(|e| crate::Error::scene(file, format!("material {k} '{}'", m.name), e))?;
         }
         for (k, l) in self.lights.iter().enumerate() {
             match l {
@@ -459,6 +523,26 @@ impl Scene {
                 "brightest texel × strength",
                 Vec3::splat(m.peak_radiance()),
             )?,
+        }
+        Ok(())
+    }
+
+    /// Checks material `k`'s mix chain: indices in range, weights in [0, 1], no cycle.
+    fn check_mix(&self, k: usize) -> std::result::Result<(), String> {
+        let (mut at, mut steps) = (k, 0usize);
+        while let Some(mix) = self.materials[at].mix {
+            if !(mix.weight.is_finite() && (0.0..=1.0).contains(&mix.weight)) {
+                return Err(format!("mix weight {} is outside [0, 1]", mix.weight));
+            }
+            let next = mix.material as usize;
+            if next >= self.materials.len() {
+                return Err(format!("mix material {next} is out of range ({} materials)", self.materials.len()));
+            }
+            steps += 1;
+            if next == k || steps > self.materials.len() {
+                return Err("its mix materials form a cycle".into());
+            }
+            at = next;
         }
         Ok(())
     }

@@ -245,6 +245,9 @@ impl Loader<'_> {
                 coat_roughness,
                 coat_ior: 1.5,
                 coat_tint: Vec3::ONE,
+                scatter_tint: Vec3::ONE,
+                metal_fresnel: Default::default(),
+                mix: None,
             });
         }
     }
