@@ -7,6 +7,7 @@ use petzval_renderer::scene::environment::EnvironmentMap;
 use petzval_renderer::scene::texture::Wrap;
 use petzval_renderer::scene::{
     AlphaMode, Environment, Light, Material, MaterialMix, Mesh, MetalFresnel, SpotFalloff, Texture, TextureRef,
+    UvTransform,
 };
 use pyo3::prelude::*;
 use std::sync::Arc;
@@ -175,7 +176,7 @@ impl PyScene {
     }
 
     /// Adds a glTF metallic-roughness material; returns its index.
-    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true, light_emitter = false, visible_to_camera = true, transmission = 0.0, coat_weight = 0.0, coat_roughness = 0.03, coat_ior = 1.5, coat_tint = vec![1.0, 1.0, 1.0], scatter_tint = vec![1.0, 1.0, 1.0], metal_fresnel = "f82", edge_tint = vec![1.0, 1.0, 1.0], mix_material = None, mix_weight = 0.0))]
+    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true, light_emitter = false, visible_to_camera = true, transmission = 0.0, coat_weight = 0.0, coat_roughness = 0.03, coat_ior = 1.5, coat_tint = vec![1.0, 1.0, 1.0], scatter_tint = vec![1.0, 1.0, 1.0], metal_fresnel = "f82", edge_tint = vec![1.0, 1.0, 1.0], mix_material = None, mix_weight = 0.0, uv_transforms = None))]
     #[allow(clippy::too_many_arguments)]
     fn add_material(
         &mut self,
@@ -206,6 +207,7 @@ impl PyScene {
         edge_tint: Vec<f64>,
         mix_material: Option<usize>,
         mix_weight: f64,
+        uv_transforms: Option<std::collections::BTreeMap<String, Vec<Vec<f64>>>>,
     ) -> PyResult<usize> {
         guard(|| {
             let bc = match base_color.as_slice() {
@@ -304,6 +306,38 @@ impl PyScene {
                 metal_fresnel,
                 mix,
             };
+            let mut m = m;
+            for (field, rows) in uv_transforms.unwrap_or_default() {
+                let slot = match field.as_str() {
+                    "base_color_texture" => &mut m.base_color_texture,
+                    "metallic_roughness_texture" => &mut m.metallic_roughness_texture,
+                    "normal_texture" => &mut m.normal_texture,
+                    "emission_texture" => &mut m.emissive_texture,
+                    other => {
+                        return Err(scene_err(
+                            name,
+                            "uv_transforms",
+                            format!("{other:?} is not a texture field (base_color_texture, metallic_roughness_texture, normal_texture, emission_texture)"),
+                        ))
+                    }
+                };
+                let Some(tex) = slot.as_mut() else {
+                    return Err(scene_err(name, "uv_transforms", format!("{field:?} has no texture")));
+                };
+                let ok = rows.len() == 2 && rows.iter().all(|r| r.len() == 3 && r.iter().all(|v| v.is_finite()));
+                if !ok {
+                    return Err(scene_err(
+                        name,
+                        "uv_transforms",
+                        format!("{field:?}: expected 2 rows of 3 finite numbers, got {rows:?}"),
+                    ));
+                }
+                let v = |i: usize, j: usize| rows[i][j] as f32;
+                tex.transform = Some(UvTransform {
+                    m: glam::Mat2::from_cols(Vec2::new(v(0, 0), v(1, 0)), Vec2::new(v(0, 1), v(1, 1))),
+                    offset: Vec2::new(v(0, 2), v(1, 2)),
+                });
+            }
             self.scene.materials.push(m);
             Ok(self.scene.materials.len() - 1)
         })

@@ -458,7 +458,8 @@ def build_lights_scene(variant: str):
     naming a per-point byte colour attribute, over the same ground and light. "ortho" is "texture"
     seen through an orthographic camera (Orthographic Scale 3 m, VERTICAL fit, shifted, f/4 focused
     at 2.5 m). "shaders" has shader nodes other than the Principled BSDF over the same ground and
-    light (see ``_add_shader_objects``)."""
+    light (see ``_add_shader_objects``), the ground's checker tiled, turned and shifted by a
+    Mapping node."""
     b = bpy()
     reset_blender()
     scene = b.context.scene
@@ -487,6 +488,15 @@ def build_lights_scene(variant: str):
         tex.interpolation = "Linear"
         bsdf = ground.node_tree.nodes.get("Principled BSDF")
         ground.node_tree.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+        if variant == "shaders":
+            # the checker tiled, turned and shifted by a Mapping node on the UV map
+            coords = ground.node_tree.nodes.new("ShaderNodeTexCoord")
+            mapping = ground.node_tree.nodes.new("ShaderNodeMapping")
+            mapping.inputs["Location"].default_value = (0.1, 0.25, 0.0)
+            mapping.inputs["Rotation"].default_value = (0.0, 0.0, math.radians(25.0))
+            mapping.inputs["Scale"].default_value = (2.0, 1.5, 1.0)
+            ground.node_tree.links.new(coords.outputs["UV"], mapping.inputs["Vector"])
+            ground.node_tree.links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
     if variant in ("texture", "ortho"):
         sun = b.data.lights.new("TexSun", "SUN")
         sun.energy = 2.0

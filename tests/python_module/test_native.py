@@ -258,6 +258,12 @@ def test_instances_render_like_copies(petzval):
     assert inst.instance_count == 5, "a failed add_instances adds none"
 
 
+def _textured(pz):
+    scene = pz.Scene()
+    scene.add_texture(np.ones((2, 2, 4), dtype=np.float32))
+    return scene
+
+
 def _two_materials(pz):
     scene = pz.Scene()
     scene.add_material("a")
@@ -305,6 +311,23 @@ def _two_materials(pz):
             lambda pz: _two_materials(pz).add_material("m", mix_material=1, mix_weight=1.5),
             "InvalidSceneError",
             ["mix_weight", "1.5"],
+        ),
+        (
+            lambda pz: _textured(pz).add_material("m", base_color_texture=0, uv_transforms={"base": [[1, 0, 0]]}),
+            "InvalidSceneError",
+            ["uv_transforms", "base", "not a texture field"],
+        ),
+        (
+            lambda pz: _textured(pz).add_material("m", uv_transforms={"normal_texture": [[1, 0, 0], [0, 1, 0]]}),
+            "InvalidSceneError",
+            ["uv_transforms", "normal_texture", "no texture"],
+        ),
+        (
+            lambda pz: _textured(pz).add_material(
+                "m", base_color_texture=0, uv_transforms={"base_color_texture": [[1, 0], [0, 1]]}
+            ),
+            "InvalidSceneError",
+            ["uv_transforms", "2 rows of 3"],
         ),
         (lambda pz: pz.Scene().add_material("m", metal_fresnel="conductor"), "InvalidSceneError", ["metal_fresnel"]),
         (lambda pz: pz.Scene().add_material("m", edge_tint=(1.2, 1, 1)), "InvalidSceneError", ["edge_tint"]),

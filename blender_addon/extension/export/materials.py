@@ -14,6 +14,8 @@ listed (once) in the render's warning report.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .images import MISSING_TEXTURE, image_pixels, srgb_byte_image
@@ -23,6 +25,42 @@ DEFAULT_COLOUR = (0.8, 0.8, 0.8, 1.0)
 
 INTERPOLATION = {"Closest": "closest", "Linear": "linear", "Cubic": "linear", "Smart": "linear"}
 EXTENSION = {"REPEAT": "repeat", "EXTEND": "clip", "CLIP": "clip", "MIRROR": "mirror"}
+
+
+def is_uv(src) -> bool:
+    """Whether (node, output) is the UV map: a UV Map node or a Texture Coordinate's UV."""
+    node, out = src
+    return node.type == "UVMAP" or (node.type == "TEX_COORD" and out.name == "UV")
+
+
+def mapping_uv_rows(vector_type: str, location, rotation, scale) -> list[list[float]]:
+    """A Mapping node (Cycles' ``svm_mapping``: Point R·(S·v) + L, Vector R·(S·v), Texture
+    R⁻¹·(v − L)/S; R from XYZ Euler angles) on UV coordinates (z = 0), as the 2 x 3 map of
+    ``add_mesh``'s coordinates (v flipped: v' = 1 − v) that ``add_material``'s
+    ``uv_transforms`` takes."""
+    cx, cy, cz = (math.cos(a) for a in rotation[:3])
+    sx, sy, sz = (math.sin(a) for a in rotation[:3])
+    r = np.array(
+        [
+            [cy * cz, sy * sx * cz - cx * sz, sy * cx * cz + sx * sz],
+            [cy * sz, sy * sx * sz + cx * cz, sy * cx * sz - sx * cz],
+            [-sy, cy * sx, cy * cx],
+        ]
+    )
+    s = np.array(scale[:3], dtype=float)
+    loc = np.array(location[:3], dtype=float)
+    if vector_type == "TEXTURE":
+        inv_s = np.divide(1.0, s, out=np.zeros(3), where=s != 0.0)
+        a = inv_s[:, None] * r.T
+        t = -a @ loc
+    else:
+        a = r * s[None, :]
+        t = loc if vector_type == "POINT" else np.zeros(3)
+    # Blender's coordinates b = (u, 1 − v); the lookup at (b'x, 1 − b'y)
+    return [
+        [float(a[0, 0]), float(-a[0, 1]), float(a[0, 1] + t[0])],
+        [float(-a[1, 0]), float(a[1, 1]), float(1.0 - a[1, 1] - t[1])],
+    ]
 
 
 def conductor_fresnel(cos: float, n: float, k: float) -> float:
@@ -43,13 +81,15 @@ class ShaderMix:
         self.bsdfs: list[tuple[float, dict]] = []
         self.emission = (0.0, 0.0, 0.0)
         self.emission_texture = None
+        self.emission_uv = None
         self.transparency = 0.0
 
-    def add_emission(self, weight: float, emission, texture) -> None:
-        """Adds `weight` × `emission` (a texture multiplies the sum: the first one kept)."""
+    def add_emission(self, weight: float, emission, texture, uv=None) -> None:
+        """Adds `weight` × `emission` (a texture, with its coordinates' map `uv`, multiplies the
+        sum: the first one kept)."""
         self.emission = tuple(a + weight * float(b) for a, b in zip(self.emission, emission[:3], strict=True))
         if texture is not None and self.emission_texture is None:
-            self.emission_texture = texture
+            self.emission_texture, self.emission_uv = texture, uv
 
 
 class Materials:
@@ -78,9 +118,6 @@ class Materials:
             return None
         if tex_node.projection != "FLAT":
             self.notes.warn(f"{what}: image projection {tex_node.projection} (UV used)")
-        vec = source(tex_node.inputs.get("Vector"))
-        if vec is not None and not (vec[0].type == "UVMAP" or (vec[0].type == "TEX_COORD" and vec[1].name == "UV")):
-            self.notes.warn(f"{what}: texture coordinates from a {vec[0].bl_label} node (the active UV map used)")
         if tex_node.interpolation in ("Cubic", "Smart"):
             self.notes.note(f"{tex_node.interpolation} texture interpolation rendered as Linear")
         if tex_node.extension == "CLIP":
@@ -108,6 +145,46 @@ class Materials:
                     srgb_encoded=encoded,
                 )
         return self.textures[key]
+
+    def uv_transform(self, tex_node, what: str):
+        """The affine map of texture coordinates (2 x 3 rows, ``add_material``'s
+        ``uv_transforms``) that a Mapping node between the UV map and `tex_node` makes, or
+        None (the UV map itself; other coordinates are listed and the UV map used)."""
+        vec = source(tex_node.inputs.get("Vector"))
+        if vec is None or is_uv(vec):
+            return None
+        node = vec[0]
+        if node.type != "MAPPING":
+            self.notes.warn(f"{what}: texture coordinates from a {node.bl_label} node (the active UV map used)")
+            return None
+        inner = source(node.inputs.get("Vector"))
+        if inner is not None and not is_uv(inner):
+            self.notes.warn(f"{what}: texture coordinates from a {inner[0].bl_label} node (the active UV map used)")
+        for name in ("Location", "Rotation", "Scale"):
+            src = source(node.inputs.get(name))
+            if src is not None:
+                self.notes.warn(f"{what}: Mapping {name} from a {src[0].bl_label} node (its unlinked value used)")
+        if node.vector_type == "NORMAL":
+            self.notes.warn(f"{what}: a Mapping node of type Normal (ignored)")
+            return None
+        return mapping_uv_rows(
+            node.vector_type,
+            value(node, "Location", (0.0, 0.0, 0.0)),
+            value(node, "Rotation", (0.0, 0.0, 0.0)),
+            value(node, "Scale", (1.0, 1.0, 1.0)),
+        )
+
+    def _set_texture(self, kw: dict, field: str, tex_node, what: str, **options) -> bool:
+        """Sets `kw[field]` to `tex_node`'s texture and its coordinates' map; False (nothing set)
+        when the image is missing."""
+        tex = self.texture(tex_node, what, **options)
+        if tex is None:
+            return False
+        kw[field] = tex
+        uv = self.uv_transform(tex_node, what)
+        if uv is not None:
+            kw.setdefault("uv_transforms", {})[field] = uv
+        return True
 
     def _data_texture(self, key, make):
         if key not in self.textures:
@@ -225,12 +302,13 @@ class Materials:
             kw = self._principled(mat, node)
             emission = kw.pop("emission", (0.0, 0.0, 0.0))
             etex = kw.pop("emission_texture", None)
+            euv = kw.get("uv_transforms", {}).pop("emission_texture", None)
             alpha = float(kw["base_color"][3]) if len(kw["base_color"]) > 3 else 1.0
             if kw.get("alpha_mode") == "blend" and alpha >= 1.0:
                 self.notes.warn(f"material '{name}': an alpha texture inside a Mix or Add Shader (ignored)")
             kw["base_color"] = (*kw["base_color"][:3], 1.0)
             kw.pop("alpha_mode", None)
-            mix.add_emission(weight * alpha, emission, etex)
+            mix.add_emission(weight * alpha, emission, etex, euv)
             mix.transparency += weight * (1.0 - alpha)
             mix.bsdfs.append((weight * alpha, kw))
             return None
@@ -239,7 +317,12 @@ class Materials:
             return None
         if t in ("EMISSION", "BACKGROUND"):
             col, strength, kw = self._emission(mat, node)
-            mix.add_emission(weight, tuple(float(c) * strength for c in col[:3]), kw.get("emission_texture"))
+            mix.add_emission(
+                weight,
+                tuple(float(c) * strength for c in col[:3]),
+                kw.get("emission_texture"),
+                kw.get("uv_transforms", {}).get("emission_texture"),
+            )
             return None
         if t == "BSDF_TRANSPARENT":
             col = value(node, "Color", (1.0, 1.0, 1.0, 1.0))[:3]
@@ -360,6 +443,8 @@ class Materials:
         args["emission"] = tuple(c / coverage for c in mix.emission)
         if mix.emission_texture is not None:
             args["emission_texture"] = mix.emission_texture
+            if mix.emission_uv is not None:
+                args["uv_transforms"] = {**args.get("uv_transforms", {}), "emission_texture": mix.emission_uv}
         args["base_color"] = (*args["base_color"][:3], coverage)
         args["alpha_mode"] = "blend" if coverage < 1.0 else "opaque"
         return self.scene.add_material(name, **args)
@@ -379,8 +464,8 @@ class Materials:
         src = source(node.inputs.get("Color"))
         if src is not None:
             if src[0].type == "TEX_IMAGE":
-                kw["emission_texture"] = self.texture(src[0], f"material '{mat.name}' emission")
-                col = (1.0, 1.0, 1.0)
+                if self._set_texture(kw, "emission_texture", src[0], f"material '{mat.name}' emission"):
+                    col = (1.0, 1.0, 1.0)
             else:
                 self.notes.warn(
                     f"material '{mat.name}': emission colour from a {src[0].bl_label} node (its unlinked value used)"
@@ -397,10 +482,11 @@ class Materials:
         if n.type == "TEX_IMAGE" and out.name == "Color":
             alpha_src = source(node.inputs.get("Alpha"))
             keep_alpha = alpha_src is not None and alpha_src[0] == n and alpha_src[1].name == "Alpha"
-            tex = self.texture(n, f"material '{mat.name}' base colour", keep_alpha=keep_alpha)
-            if tex is None:
+            kw = {"base_color": (1.0, 1.0, 1.0, 1.0)}
+            if not self._set_texture(kw, "base_color_texture", n, f"material '{mat.name}' base colour",
+                                     keep_alpha=keep_alpha):
                 return {"base_color": MISSING_TEXTURE}
-            return {"base_color": (1.0, 1.0, 1.0, 1.0), "base_color_texture": tex}
+            return kw
         if n.type == "RGB":
             return {"base_color": tuple(out.default_value)}
         geometry_attribute = n.type == "ATTRIBUTE" and n.attribute_type == "GEOMETRY"
@@ -454,6 +540,12 @@ class Materials:
             tex = self._metallic_roughness(mat, metallic_img, roughness_img, metallic, roughness)
             if tex is not None:
                 kw["metallic_roughness_texture"] = tex
+                what = f"material '{name}' metallic/roughness"
+                uvs = [self.uv_transform(n, what) for n in (metallic_img, roughness_img) if n is not None]
+                if len(uvs) == 2 and uvs[0] != uvs[1]:
+                    self.notes.warn(f"{what}: the two images mapped differently (the metallic one's mapping used)")
+                if uvs[0] is not None:
+                    kw.setdefault("uv_transforms", {})["metallic_roughness_texture"] = uvs[0]
             else:
                 kw["metallic"] = metallic if metallic is not None else 0.0
                 kw["roughness"] = roughness if roughness is not None else 0.5
@@ -477,9 +569,7 @@ class Materials:
         estr = float(value(node, "Emission Strength", 0.0))
         esrc = source(node.inputs.get("Emission Color"))
         if esrc is not None and esrc[0].type == "TEX_IMAGE":
-            tex = self.texture(esrc[0], f"material '{name}' emission")
-            if tex is not None:
-                kw["emission_texture"] = tex
+            if self._set_texture(kw, "emission_texture", esrc[0], f"material '{name}' emission"):
                 ecol = (1.0, 1.0, 1.0)
         elif esrc is not None:
             self.notes.warn(
@@ -531,9 +621,7 @@ class Materials:
             if nn.type == "NORMAL_MAP" and nn.space == "TANGENT":
                 csrc = source(nn.inputs.get("Color"))
                 if csrc is not None and csrc[0].type == "TEX_IMAGE":
-                    tex = self.texture(csrc[0], f"material '{name}' normal map")
-                    if tex is not None:
-                        kw["normal_texture"] = tex
+                    if self._set_texture(kw, "normal_texture", csrc[0], f"material '{name}' normal map"):
                         kw["normal_scale"] = float(value(nn, "Strength", 1.0))
                     if nn.uv_map:
                         self.notes.warn(
