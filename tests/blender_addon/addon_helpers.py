@@ -310,11 +310,53 @@ def _diffuse_glossy_group(nt):
     return node
 
 
+def _copper(nt):
+    """A Metallic BSDF whose roughness is the checker through a ColorRamp (0.15 to 0.6)."""
+    metal = _shader(nt, "BsdfMetallic", **{"Base Color": (0.95, 0.64, 0.54, 1.0)})
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = _checker_image()
+    ramp = nt.nodes.new("ShaderNodeValToRGB")
+    ramp.color_ramp.elements[0].color = (0.15, 0.15, 0.15, 1.0)
+    ramp.color_ramp.elements[1].color = (0.6, 0.6, 0.6, 1.0)
+    nt.links.new(tex.outputs["Color"], ramp.inputs["Fac"])
+    nt.links.new(ramp.outputs["Color"], metal.inputs["Roughness"])
+    return metal
+
+
+def _leaf_green(nt):
+    """A Diffuse BSDF whose colour is an RGB node through a Bright/Contrast node (a constant)."""
+    diffuse = _shader(nt, "BsdfDiffuse")
+    rgb = nt.nodes.new("ShaderNodeRGB")
+    rgb.outputs[0].default_value = (0.2, 0.6, 0.2, 1.0)
+    bc = _shader(nt, "BrightContrast", Bright=0.05, Contrast=0.2)
+    nt.links.new(rgb.outputs[0], bc.inputs["Color"])
+    nt.links.new(bc.outputs[0], diffuse.inputs["Color"])
+    return diffuse
+
+
+def _tinted_checker_diffuse(nt):
+    """A Diffuse BSDF whose colour is the checker multiplied by a pale blue (Mix Color,
+    Multiply, factor 0.7)."""
+    diffuse = _shader(nt, "BsdfDiffuse")
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = _checker_image()
+    mix = nt.nodes.new("ShaderNodeMix")
+    mix.data_type = "RGBA"
+    mix.blend_type = "MULTIPLY"
+    mix.inputs["Factor"].default_value = 0.7
+    nt.links.new(tex.outputs["Color"], mix.inputs[6])  # A (colour)
+    mix.inputs[7].default_value = (0.6, 0.8, 1.0, 1.0)  # B (colour)
+    nt.links.new(mix.outputs[2], diffuse.inputs["Color"])  # Result (colour)
+    return diffuse
+
+
 def _add_shader_objects(b):
     """The "shaders" variant's materials: a tinted rough Glass BSDF on the small sphere, a Mix
-    Shader of a red Diffuse and a golden Glossy BSDF inside a node group on the big one, a Metallic BSDF (F82, its
-    default Edge Tint) on a cube, a leaf card mixing a green Diffuse with a Transparent BSDF, and
-    a small ball adding an orange Emission to a grey Diffuse."""
+    Shader of a red Diffuse and a golden Glossy BSDF inside a node group on the big one, a Metallic
+    BSDF (F82, its default Edge Tint; roughness from the checker through a ColorRamp) on a cube, a
+    leaf card mixing a green Diffuse (an RGB node through Bright/Contrast) with a Transparent
+    BSDF, and a small ball adding an orange Emission to a Diffuse coloured by the checker times a
+    pale blue (Mix Color, Multiply)."""
     spheres = [o for o in b.context.scene.objects if o.name.startswith("Sphere")]
     small, big = sorted(spheres, key=lambda o: o.dimensions.x)
     glass = _node_material(
@@ -326,18 +368,12 @@ def _add_shader_objects(b):
         obj.data.materials.append(mat)
     b.ops.mesh.primitive_cube_add(size=0.5, location=(-1.35, 2.4, 0.25))
     b.context.active_object.rotation_euler = (0.0, 0.0, math.radians(30.0))
-    b.context.active_object.data.materials.append(
-        _node_material("Copper", lambda nt: _shader(nt, "BsdfMetallic", **{"Base Color": (0.95, 0.64, 0.54, 1.0),
-                                                                           "Roughness": 0.3}))
-    )
+    b.context.active_object.data.materials.append(_node_material("Copper", _copper))
     b.ops.mesh.primitive_plane_add(size=0.6, location=(1.25, 1.1, 0.45), rotation=(math.radians(90.0), 0.0, 0.0))
     b.context.active_object.data.materials.append(
         _node_material(
             "Leaf",
-            lambda nt: _combine(
-                nt, "MixShader", _shader(nt, "BsdfTransparent"), _shader(nt, "BsdfDiffuse", Color=(0.2, 0.6, 0.2, 1.0)),
-                factor=0.6,
-            ),
+            lambda nt: _combine(nt, "MixShader", _shader(nt, "BsdfTransparent"), _leaf_green(nt), factor=0.6),
         )
     )
     b.ops.mesh.primitive_uv_sphere_add(segments=24, ring_count=12, radius=0.15, location=(0.05, 1.0, 0.15))
@@ -349,7 +385,7 @@ def _add_shader_objects(b):
                 nt,
                 "AddShader",
                 _shader(nt, "Emission", Color=(1.0, 0.6, 0.3, 1.0), Strength=2.0),
-                _shader(nt, "BsdfDiffuse", Color=(0.5, 0.5, 0.5, 1.0)),
+                _tinted_checker_diffuse(nt),
             ),
         )
     )

@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 
+from .bake import Baked, Evaluator, Unsupported
 from .images import MISSING_TEXTURE, image_pixels, srgb_byte_image
 from .nodes import forget_groups, node_tree_of, socket_value, source, surface_shader, value
 
@@ -25,6 +26,11 @@ DEFAULT_COLOUR = (0.8, 0.8, 0.8, 1.0)
 
 INTERPOLATION = {"Closest": "closest", "Linear": "linear", "Cubic": "linear", "Smart": "linear"}
 EXTENSION = {"REPEAT": "repeat", "EXTEND": "clip", "CLIP": "clip", "MIRROR": "mirror"}
+
+
+def _tex_node(n):
+    """The Image Texture node of an image input: itself, or the one a baked chain read."""
+    return n.tex_node if isinstance(n, Baked) else n
 
 
 def is_uv(src) -> bool:
@@ -186,11 +192,38 @@ class Materials:
             kw.setdefault("uv_transforms", {})[field] = uv
         return True
 
-    def _data_texture(self, key, make):
-        if key not in self.textures:
-            px = make()
-            self.textures[key] = None if px is None else self.scene.add_texture(px, name=key[0])
-        return self.textures[key]
+    def _baked_emission(self, mat, socket, kw: dict, unlinked):
+        """The emission colour of a chain of colour nodes: a constant (returned), or a baked
+        texture (set in `kw`; white returned); unsupported: `unlinked`, listed."""
+        what = f"material '{mat.name}' emission"
+        try:
+            baked = Evaluator(self.notes, what).evaluate(socket, "color")
+        except Unsupported as e:
+            self.notes.warn(f"material '{mat.name}': emission colour from a {e} node (its unlinked value used)")
+            return unlinked
+        if self._set_baked(kw, "emission_texture", baked, what):
+            return (1.0, 1.0, 1.0)
+        return tuple(float(c) for c in baked.value[:3])
+
+    def _set_baked(self, kw: dict, field: str, baked: Baked, what: str) -> bool:
+        """Sets `kw[field]` to a texture of a baked colour (with its image's filtering, extension
+        and mapping); False for a constant (nothing set)."""
+        if baked.constant:
+            return False
+        tex_node = baked.tex_node
+        h, w = baked.value.shape[:2]
+        px = np.ones((h, w, 4), dtype=np.float32)
+        px[..., :3] = baked.value
+        kw[field] = self.scene.add_texture(
+            px,
+            name=f"{tex_node.image.name} ({what})",
+            interpolation=INTERPOLATION.get(tex_node.interpolation, "linear"),
+            extension=EXTENSION.get(tex_node.extension, "repeat"),
+        )
+        uv = self.uv_transform(tex_node, what)
+        if uv is not None:
+            kw.setdefault("uv_transforms", {})[field] = uv
+        return True
 
     # -- materials
 
@@ -342,7 +375,8 @@ class Materials:
         if t in ("BSDF_GLOSSY", "BSDF_ANISOTROPIC"):
             # no Fresnel: its colour at every angle, its multiple scattering coloured by it
             kw = self._base_colour(mat, node, "Color")
-            kw.update(metallic=1.0, metal_fresnel="constant", roughness=self._roughness(mat, node))
+            kw["metal_fresnel"] = "constant"
+            self._roughness_into(mat, node, kw, 1.0)
             self._normal(mat, node, kw)
             v = value(node, "Anisotropy", 0.0)
             if (isinstance(v, float) and v != 0.0) or t == "BSDF_ANISOTROPIC":
@@ -354,14 +388,25 @@ class Materials:
             return None
         return f"{node.bl_label} shader is not supported"
 
-    def _roughness(self, mat, node) -> float:
-        """A BSDF node's constant Roughness (a linked one: its unlinked value, warned)."""
-        src = source(node.inputs.get("Roughness"))
-        if src is not None:
-            self.notes.warn(f"material '{mat.name}': roughness from a {src[0].bl_label} node (its unlinked value used)")
+    def _roughness_into(self, mat, node, kw: dict, metallic: float) -> None:
+        """A BSDF node's Roughness (a constant, an image, or a chain of nodes over one) and a
+        constant `metallic` into `kw` (an image: glTF's metallicRoughness texture, B = metallic)."""
         if getattr(node, "distribution", "MULTI_GGX") not in ("MULTI_GGX", "GGX"):
             self.notes.note(f"{node.bl_label} distribution {node.distribution.title()} rendered as Multiscatter GGX")
-        return min(max(float(value(node, "Roughness", 0.5)), 0.0), 1.0)
+        r, r_img = self._scalar_image(mat, node, "Roughness", "roughness")
+        kw["metallic"] = metallic
+        kw["roughness"] = min(max(r, 0.0), 1.0) if r_img is None else 1.0
+        if r_img is None:
+            return
+        tex = self._metallic_roughness(mat, None, r_img, metallic, 0.5)
+        if tex is None:
+            kw["roughness"] = 0.5
+            return
+        kw["metallic"] = 1.0  # times the texture's B, which is `metallic`
+        kw["metallic_roughness_texture"] = tex
+        uv = self.uv_transform(_tex_node(r_img), f"material '{mat.name}' roughness")
+        if uv is not None:
+            kw.setdefault("uv_transforms", {})["metallic_roughness_texture"] = uv
 
     def _tinted(self, mat, node) -> dict:
         """Glass and Refraction BSDFs: white glass times the node's Color, which scales the
@@ -377,7 +422,7 @@ class Materials:
             )
         else:
             kw = {"base_color": (1.0, 1.0, 1.0, 1.0), "scatter_tint": tuple(float(c) for c in kw["base_color"][:3])}
-        kw["roughness"] = self._roughness(mat, node)
+        self._roughness_into(mat, node, kw, 0.0)
         self._normal(mat, node, kw)
         return kw
 
@@ -400,7 +445,7 @@ class Materials:
             kw["edge_tint"] = tuple(min(max(float(c), 0.0), 1.0) for c in tint[:3])
             if source(node.inputs.get("Edge Tint")) is not None:
                 self.notes.warn(f"material '{mat.name}': Edge Tint from a node (its unlinked value used)")
-        kw.update(metallic=1.0, roughness=self._roughness(mat, node))
+        self._roughness_into(mat, node, kw, 1.0)
         v = value(node, "Anisotropy", 0.0)
         if isinstance(v, float) and v != 0.0:
             self.notes.warn(f"material '{mat.name}': Anisotropy")
@@ -467,9 +512,7 @@ class Materials:
                 if self._set_texture(kw, "emission_texture", src[0], f"material '{mat.name}' emission"):
                     col = (1.0, 1.0, 1.0)
             else:
-                self.notes.warn(
-                    f"material '{mat.name}': emission colour from a {src[0].bl_label} node (its unlinked value used)"
-                )
+                col = self._baked_emission(mat, node.inputs.get("Color"), kw, col)
         return col, float(strength), kw
 
     def _base_colour(self, mat, node, name) -> dict:
@@ -494,8 +537,17 @@ class Materials:
             # the mesh's colours (added with the mesh) times white
             self._reading = n.layer_name if n.type == "VERTEX_COLOR" else n.attribute_name
             return {"base_color": (1.0, 1.0, 1.0, 1.0)}
-        self.notes.warn(f"material '{mat.name}': base colour from a {n.bl_label} node, viewport display colour used")
-        return {"base_color": tuple(mat.diffuse_color)}
+        # a chain of colour and value nodes: a constant, or baked over its image
+        what = f"material '{mat.name}' base colour"
+        try:
+            baked = Evaluator(self.notes, what).evaluate(node.inputs.get(name), "color")
+        except Unsupported as e:
+            self.notes.warn(f"material '{mat.name}': base colour from a {e} node, viewport display colour used")
+            return {"base_color": tuple(mat.diffuse_color)}
+        kw = {"base_color": (1.0, 1.0, 1.0, 1.0)}
+        if not self._set_baked(kw, "base_color_texture", baked, what):
+            kw["base_color"] = (*(float(c) for c in baked.value[:3]), 1.0)
+        return kw
 
     def _scalar_image(self, mat, node, name, what):
         """(constant or None, Image Texture node or None) of a scalar input."""
@@ -507,15 +559,15 @@ class Materials:
             return None, n
         if n.type == "VALUE":
             return float(out.default_value), None
-        if n.type in ("SEPARATE_COLOR", "SEPRGB", "SEPARATE_RGB"):
-            inner = source(n.inputs[0])
-            if inner is not None and inner[0].type == "TEX_IMAGE":
-                self.notes.warn(
-                    f"material '{mat.name}': {what} from a separated channel of an image (its red channel used)"
-                )
-                return None, inner[0]
-        self.notes.warn(f"material '{mat.name}': {what} from a {n.bl_label} node (its unlinked value used)")
-        return float(value(node, name, 0.0)), None
+        # a chain of colour and value nodes: a constant, or baked over its image
+        try:
+            baked = Evaluator(self.notes, f"material '{mat.name}' {what}").evaluate(node.inputs.get(name), "float")
+        except Unsupported as e:
+            self.notes.warn(f"material '{mat.name}': {what} from a {e} node (its unlinked value used)")
+            return float(value(node, name, 0.0)), None
+        if baked.constant:
+            return float(baked.value[0]), None
+        return None, baked
 
     def _principled(self, mat, node) -> dict:
         """add_material's arguments for a Principled BSDF."""
@@ -541,7 +593,7 @@ class Materials:
             if tex is not None:
                 kw["metallic_roughness_texture"] = tex
                 what = f"material '{name}' metallic/roughness"
-                uvs = [self.uv_transform(n, what) for n in (metallic_img, roughness_img) if n is not None]
+                uvs = [self.uv_transform(_tex_node(n), what) for n in (metallic_img, roughness_img) if n is not None]
                 if len(uvs) == 2 and uvs[0] != uvs[1]:
                     self.notes.warn(f"{what}: the two images mapped differently (the metallic one's mapping used)")
                 if uvs[0] is not None:
@@ -572,9 +624,7 @@ class Materials:
             if self._set_texture(kw, "emission_texture", esrc[0], f"material '{name}' emission"):
                 ecol = (1.0, 1.0, 1.0)
         elif esrc is not None:
-            self.notes.warn(
-                f"material '{name}': emission colour from a {esrc[0].bl_label} node (its unlinked value used)"
-            )
+            ecol = self._baked_emission(mat, node.inputs.get("Emission Color"), kw, ecol)
         if source(node.inputs.get("Emission Strength")) is not None:
             self.notes.warn(f"material '{name}': Emission Strength from a node (its unlinked value used)")
         kw["emission"] = tuple(float(c) * estr for c in ecol[:3])
@@ -639,12 +689,13 @@ class Materials:
         """glTF's metallicRoughness texture (G roughness, B metallic) from one or two greyscale
         images (red channel), constants filling the other."""
         what = f"material '{mat.name}' metallic/roughness"
-        key = (f"{mat.name_full}:metallic_roughness", None)
 
         def make():
             imgs = {}
             for role, n in (("m", m_node), ("r", r_node)):
-                if n is not None:
+                if isinstance(n, Baked):
+                    imgs[role] = n.value
+                elif n is not None:
                     if n.image is None:
                         self.notes.warn(f"{what}: Image Texture node without an image")
                         return None
@@ -652,15 +703,17 @@ class Materials:
                     if px is None:
                         return None
                     imgs[role] = px
-            shapes = {p.shape for p in imgs.values()}
+            shapes = {p.shape[:2] for p in imgs.values()}
             if len(shapes) > 1:
                 self.notes.warn(f"{what}: metallic and roughness images of different sizes (constants used)")
                 return None
-            h, w = next(iter(shapes))[:2]
+            h, w = next(iter(shapes))
             out = np.ones((h, w, 4), dtype=np.float32)
             out[..., 0] = 0.0
             out[..., 1] = imgs["r"][..., 0] if "r" in imgs else r_const
             out[..., 2] = imgs["m"][..., 0] if "m" in imgs else m_const
             return out
 
-        return self._data_texture(key, make)
+        # not shared: each BSDF of a material has its own (a material is converted once)
+        px = make()
+        return None if px is None else self.scene.add_texture(px, name=f"{mat.name} metallic/roughness")
