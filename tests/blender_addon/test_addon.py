@@ -758,6 +758,71 @@ def test_unsupported_features_listed_once(addon, report):
     assert entry.get("complete") is True
 
 
+def test_odd_shader_trees_render(addon, report):
+    """Shader trees a user may well leave behind render without an error, each as Cycles would
+    or with a listed fallback: a Mix Color subtracting to below zero (black), a Math node
+    dividing by zero (0), a Mix Shader with an unconnected input (black there), an Add Shader of
+    two Transparent BSDFs (not there at all), a node group without a Group Output (black) and a
+    Noise Texture (listed; the viewport colour)."""
+    _depth_scene()
+    H.configure_petzval(2, seed=0, camera="DepthCam")
+
+    def material(name, build):
+        mat = bpy.data.materials.new(name)
+        nt = mat.node_tree
+        bsdf = nt.nodes.get("Principled BSDF")
+        out = build(nt, bsdf)
+        if out is not None:
+            nt.links.new(out.outputs[0], nt.nodes.get("Material Output").inputs["Surface"])
+        return mat
+
+    def subtract(nt, bsdf):
+        mix = nt.nodes.new("ShaderNodeMix")
+        mix.data_type, mix.blend_type, mix.clamp_result = "RGBA", "SUBTRACT", False
+        mix.inputs["Factor"].default_value = 1.0
+        mix.inputs[6].default_value = (0.2, 0.2, 0.2, 1.0)
+        mix.inputs[7].default_value = (0.8, 0.8, 0.8, 1.0)
+        nt.links.new(mix.outputs[2], bsdf.inputs["Base Color"])
+        div = nt.nodes.new("ShaderNodeMath")
+        div.operation = "DIVIDE"
+        div.inputs[1].default_value = 0.0
+        nt.links.new(div.outputs[0], bsdf.inputs["Roughness"])
+
+    def half_mix(nt, bsdf):
+        mix = nt.nodes.new("ShaderNodeMixShader")
+        glass = nt.nodes.new("ShaderNodeBsdfGlass")
+        nt.links.new(glass.outputs[0], mix.inputs[2])
+        return mix
+
+    def transparent_twice(nt, bsdf):
+        add = nt.nodes.new("ShaderNodeAddShader")
+        for k in (0, 1):
+            nt.links.new(nt.nodes.new("ShaderNodeBsdfTransparent").outputs[0], add.inputs[k])
+        return add
+
+    def empty_group(nt, bsdf):
+        group = bpy.data.node_groups.new("Empty", "ShaderNodeTree")
+        group.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
+        node = nt.nodes.new("ShaderNodeGroup")
+        node.node_tree = group
+        return node
+
+    def noise(nt, bsdf):
+        tex = nt.nodes.new("ShaderNodeTexNoise")
+        nt.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+
+    builds = (subtract, half_mix, transparent_twice, empty_group, noise)
+    for i, build in enumerate(builds):
+        bpy.ops.mesh.primitive_cube_add(size=0.3, location=(-1.0 + 0.5 * i, 2.5, 0.0))
+        bpy.context.active_object.data.materials.append(material(build.__name__, build))
+    _, entry = H.render_still(OUT / "odd_trees.exr")
+    unsupported = entry["notes"]["unsupported"]
+    report.line(f"odd shader trees: rendered, listed {unsupported}")
+    assert entry.get("complete") is True
+    assert np.isfinite(B.read_rgb(OUT / "odd_trees.exr")).all()
+    assert unsupported == ["material 'noise': base colour from a Noise Texture node, viewport display colour used"]
+
+
 def test_render_visibility_and_light_settings_are_listed(addon, report):
     """What the add-on does not render as Blender would is listed, not ignored in silence: a
     holdout object, a holdout and an indirect-only collection and a light with Cast Shadow off.

@@ -50,8 +50,11 @@ class Evaluator:
         self._pixels: dict = {}
 
     def evaluate(self, socket, kind: str) -> Baked:
-        """`socket`'s value as a colour (`kind` "color", 3 channels) or a scalar ("float")."""
+        """`socket`'s value as a colour (`kind` "color", 3 channels) or a scalar ("float"),
+        non-negative and finite (what a material input takes; Cycles clamps colours it
+        shades with to the same)."""
         v = self._socket(socket, kind)
+        v = np.nan_to_num(np.maximum(v, 0.0), nan=0.0, posinf=0.0).astype(np.float32)
         return Baked(v, self.tex_node if v.ndim > 1 else None)
 
     # -- sockets and conversions

@@ -238,7 +238,11 @@ class Materials:
         key = mat.name_full
         if key not in self.index_of:
             self._reading = None
-            index = self._convert(mat)
+            try:
+                index = self._convert(mat)
+            except Exception as e:  # a material the add-on cannot read must not stop the render
+                self._reading = None
+                index = self._fallback(mat, f"could not be converted ({type(e).__name__}: {e})")
             self.index_of[key] = index
             if self._reading is not None:
                 self.colour_attribute[index] = self._reading
