@@ -484,3 +484,31 @@ fn gltf_vertex_colours() {
     }
     assert!(s.warnings.is_empty(), "{:?}", s.warnings);
 }
+
+/// `EXT_texture_webp`: a texture's WebP image is used in place of its PNG fallback (a lossless
+/// WebP of the same checker gives the PNG's texels exactly), and Blender's export with WebP
+/// images (a texture with no `source` at all, the extension required) loads, its lossy WebP
+/// decoded as libwebp decodes it (Pillow's decoding, saved as a PNG), to the 8-bit level.
+#[test]
+fn gltf_webp_textures() {
+    let png = load("webp/png.gltf");
+    let webp = load("webp/fallback_webp.gltf");
+    let (a, b) = (&png.textures[0], &webp.textures[0]);
+    assert_eq!((a.width, a.height), (16, 16));
+    assert_eq!((b.width, b.height), (16, 16));
+    assert_eq!(a.texels, b.texels, "lossless WebP decodes to the PNG's texels");
+    assert!(webp.textures[0].name.contains("chk_lossless"), "{}", webp.textures[0].name);
+    let blender = load("webp/blender_webp.gltf");
+    assert!(blender.warnings.is_empty(), "{:?}", blender.warnings);
+    let c = &blender.textures[0];
+    assert_eq!((c.width, c.height), (16, 16));
+    let libwebp = load("webp/libwebp_decoded.gltf");
+    let encode = |v: f32| if v <= 0.0031308 { v * 12.92 } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
+    let worst = c
+        .texels
+        .iter()
+        .zip(&libwebp.textures[0].texels)
+        .flat_map(|(x, y)| (0..3).map(move |k| (encode(x[k]) - encode(y[k])).abs() * 255.0))
+        .fold(0.0f32, f32::max);
+    assert!(worst <= 0.5, "lossy WebP differs from libwebp's decoding by {worst} levels");
+}

@@ -27,7 +27,7 @@ impl Loader<'_> {
             return Err("image has neither uri nor bufferView".into());
         };
         let format = image::guess_format(&bytes)
-            .map_err(|_| "cannot decode image: format not recognised (PNG and JPEG are supported)".to_string())?;
+            .map_err(|_| "cannot decode image: format not recognised (PNG, JPEG and WebP are supported)".to_string())?;
         // The image crate's default limits (512 MiB per allocation) guard against image bombs.
         let reader = image::ImageReader::with_format(std::io::Cursor::new(&bytes), format);
         let img = reader.decode().map_err(|e| format!("cannot decode image: {e}"))?;

@@ -23,6 +23,7 @@
 //! | `KHR_materials_specular` `specularFactor` | `Material::specular` | specular colour and textures ignored (warning) |
 //! | `KHR_materials_ior` | `Material::ior` | |
 //! | `KHR_materials_transmission` `transmissionFactor` | `Material::transmission` (solid glass refracting by `ior`, as Cycles renders Blender's Transmission) | transmission texture ignored (warning); no `KHR_materials_volume` thin-walled case |
+//! | `EXT_texture_webp` | the texture's WebP image, in place of its PNG/JPEG fallback or of the `source` it lacks | |
 //! | `KHR_texture_transform` | offset, rotation, scale and texCoord on base colour, metallic-roughness and emissive textures (a normal map's tangent frame is not rotated) | |
 //! | no material | [`Material::default`] (white, metallic 1, roughness 1) | |
 //! | image (PNG, JPEG; file, data URI or bufferView) | [`Texture`], sampler wrap modes, `magFilter` nearest → nearest | missing or undecodable: warning and a 1×1 fallback: magenta for base colour, flat for normal maps, white for metallic-roughness, black for emission |
@@ -188,7 +189,8 @@ impl<'a> Loader<'a> {
         // KHR_mesh_quantization only widens the accessor types allowed for attributes, which
         // the accessor reader below handles; the gltf crate does not know the name.
         let mut json = document.into_json();
-        json.extensions_required.retain(|e| e != "KHR_mesh_quantization");
+        json.extensions_required.retain(|e| e != "KHR_mesh_quantization" && e != "EXT_texture_webp");
+        use_webp_sources(&mut json);
         // POSITION accessors must state min and max, which this loader does not use; many
         // writers omit them, so fill them in rather than reject the file.
         // (The gltf crate's validation also indexes the accessor list with this index.)
@@ -271,12 +273,31 @@ impl<'a> Loader<'a> {
             "KHR_materials_transmission",
             "KHR_mesh_quantization",
             "KHR_texture_transform",
+            "EXT_texture_webp",
         ];
         let used: Vec<String> = self.doc.extensions_used().map(|s| s.to_string()).collect();
         for ext in used {
             if !HANDLED.contains(&ext.as_str()) {
                 self.warn("", format!("extension {ext} is not supported and is ignored"));
             }
+        }
+    }
+}
+
+/// `EXT_texture_webp`: a texture's WebP image (the extension's `source`) replaces its PNG or
+/// JPEG fallback, or stands in for the `source` it may lack (Blender writes none without a
+/// fallback). An index out of range is left for validation to report.
+fn use_webp_sources(json: &mut gltf::json::Root) {
+    let n_images = json.images.len();
+    for tex in &mut json.textures {
+        let webp = tex
+            .extensions
+            .as_ref()
+            .and_then(|e| e.others.get("EXT_texture_webp"))
+            .and_then(|w| w.get("source"))
+            .and_then(|s| s.as_u64());
+        if let Some(i) = webp.filter(|&i| (i as usize) < n_images) {
+            tex.source = gltf::json::Index::new(i as u32);
         }
     }
 }
