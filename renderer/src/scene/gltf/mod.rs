@@ -23,6 +23,7 @@
 //! | `KHR_materials_specular` `specularFactor` | `Material::specular` | specular colour and textures ignored (warning) |
 //! | `KHR_materials_ior` | `Material::ior` | |
 //! | `KHR_materials_transmission` `transmissionFactor` | `Material::transmission` (solid glass refracting by `ior`, as Cycles renders Blender's Transmission) | transmission texture ignored (warning); no `KHR_materials_volume` thin-walled case |
+//! | `KHR_draco_mesh_compression` | Draco-compressed primitives decoded (`draco-core`, pure Rust): attributes and indices from the decoded mesh, integer attributes normalized where their accessor says so | |
 //! | `EXT_texture_webp` | the texture's WebP image, in place of its PNG/JPEG fallback or of the `source` it lacks | |
 //! | `KHR_texture_transform` | offset, rotation, scale and texCoord on base colour, metallic-roughness and emissive textures (a normal map's tangent frame is not rotated) | |
 //! | no material | [`Material::default`] (white, metallic 1, roughness 1) | |
@@ -189,8 +190,10 @@ impl<'a> Loader<'a> {
         // KHR_mesh_quantization only widens the accessor types allowed for attributes, which
         // the accessor reader below handles; the gltf crate does not know the name.
         let mut json = document.into_json();
-        json.extensions_required.retain(|e| e != "KHR_mesh_quantization" && e != "EXT_texture_webp");
+        json.extensions_required
+            .retain(|e| e != "KHR_mesh_quantization" && e != "EXT_texture_webp" && e != "KHR_draco_mesh_compression");
         use_webp_sources(&mut json);
+        point_draco_accessors_at_their_data(&mut json);
         // POSITION accessors must state min and max, which this loader does not use; many
         // writers omit them, so fill them in rather than reject the file.
         // (The gltf crate's validation also indexes the accessor list with this index.)
@@ -274,6 +277,7 @@ impl<'a> Loader<'a> {
             "KHR_mesh_quantization",
             "KHR_texture_transform",
             "EXT_texture_webp",
+            "KHR_draco_mesh_compression",
         ];
         let used: Vec<String> = self.doc.extensions_used().map(|s| s.to_string()).collect();
         for ext in used {
@@ -300,6 +304,34 @@ fn use_webp_sources(json: &mut gltf::json::Root) {
             tex.source = gltf::json::Index::new(i as u32);
         }
     }
+}
+
+/// `KHR_draco_mesh_compression`: a compressed primitive's accessors have no bufferView (the
+/// data is in the extension's); they are pointed at the extension's bufferView so that the
+/// document validates, and read from the decoded mesh instead ([`Loader::read_primitive`]).
+fn point_draco_accessors_at_their_data(json: &mut gltf::json::Root) {
+    let mut fix: Vec<(usize, u32)> = Vec::new();
+    for m in &json.meshes {
+        for p in &m.primitives {
+            let Some(view) = draco_extension(p).and_then(|d| d.get("bufferView")).and_then(|v| v.as_u64()) else {
+                continue;
+            };
+            let accessors = p.attributes.values().map(|a| a.value()).chain(p.indices.map(|i| i.value()));
+            fix.extend(accessors.map(|a| (a, view as u32)));
+        }
+    }
+    for (a, view) in fix {
+        if let Some(acc) = json.accessors.get_mut(a) {
+            if acc.buffer_view.is_none() && acc.sparse.is_none() && (view as usize) < json.buffer_views.len() {
+                acc.buffer_view = Some(gltf::json::Index::new(view));
+            }
+        }
+    }
+}
+
+/// A primitive's `KHR_draco_mesh_compression` object, if it has one.
+pub(super) fn draco_extension(p: &gltf::json::mesh::Primitive) -> Option<&gltf::json::Value> {
+    p.extensions.as_ref()?.others.get("KHR_draco_mesh_compression")
 }
 
 fn describe_gltf_error(e: &gltf::Error) -> String {

@@ -304,9 +304,13 @@ impl Loader<'_> {
         Ok(out)
     }
 
-    pub(super) fn attribute_f32(
+    /// A primitive's attribute as floats (`count` elements if given), read from its decoded
+    /// Draco mesh where it has one and the attribute is compressed.
+    #[allow(clippy::too_many_arguments)]
+    fn attribute_f32(
         &self,
         prim: &gltf::Primitive,
+        draco: Option<&Draco>,
         semantic: Semantic,
         dims: Dimensions,
         count: Option<usize>,
@@ -322,12 +326,56 @@ impl Loader<'_> {
                 return Err(self.error(loc, format!("{what} has {} elements but POSITION has {n}", acc.count())));
             }
         }
+        if let Some(d) = draco {
+            if let Some(v) = d.values(&semantic.to_string(), &acc, dims.multiplicity()) {
+                return v.map(Some).map_err(|m| self.error(loc, format!("{what}: {m}")));
+            }
+        }
         read_accessor(self, &acc).map(Some).map_err(|m| self.error(loc, format!("{what}: {m}")))
+    }
+
+    /// The primitive's `KHR_draco_mesh_compression` data, decoded; None without the extension.
+    fn decode_draco(&self, prim: &gltf::Primitive, loc: &str) -> Result<Option<Draco>> {
+        let Some(ext) = prim.extension_value("KHR_draco_mesh_compression") else { return Ok(None) };
+        let err = |m: String| self.error(loc, format!("KHR_draco_mesh_compression: {m}"));
+        let view = ext
+            .get("bufferView")
+            .and_then(|v| v.as_u64())
+            .and_then(|v| self.doc.views().nth(v as usize))
+            .ok_or_else(|| err("no valid bufferView".into()))?;
+        let mut ids = std::collections::HashMap::new();
+        if let Some(map) = ext.get("attributes").and_then(|a| a.as_object()) {
+            for (name, id) in map {
+                let id = id.as_u64().filter(|&i| i <= u32::MAX as u64);
+                ids.insert(
+                    name.clone(),
+                    id.ok_or_else(|| err(format!("attribute {name}: not a Draco attribute id")))? as u32,
+                );
+            }
+        }
+        let bytes = self.view_bytes(&view).map_err(err)?;
+        // at most 64 M points and 1 GiB of decoded attributes (a corrupt stream may claim more)
+        let limits = draco_core::DecodeLimits::default()
+            .with_max_points(1 << 26)
+            .with_max_faces(1 << 27)
+            .with_max_decoded_bytes(1 << 30);
+        let mut buffer = draco_core::DecoderBuffer::new(bytes).with_limits(limits);
+        let mut mesh = draco_core::Mesh::new();
+        draco_core::MeshDecoder::new()
+            .decode(&mut buffer, &mut mesh)
+            .map_err(|e| err(format!("cannot decode the compressed mesh: {e}")))?;
+        Ok(Some(Draco { mesh, ids }))
     }
 
     /// `COLOR_0` (VEC3 or VEC4; floats or normalized integers) as linear RGBA, each channel
     /// clamped to [0, 1] as the spec bounds it; a non-finite colour is white.
-    fn vertex_colors(&self, prim: &gltf::Primitive, n: usize, loc: &str) -> Result<Option<Vec<Vec4>>> {
+    fn vertex_colors(
+        &self,
+        prim: &gltf::Primitive,
+        d: Option<&Draco>,
+        n: usize,
+        loc: &str,
+    ) -> Result<Option<Vec<Vec4>>> {
         let Some(acc) = prim.get(&Semantic::Colors(0)) else { return Ok(None) };
         let dims = acc.dimensions();
         let k = match dims {
@@ -340,7 +388,7 @@ impl Loader<'_> {
                 ))
             }
         };
-        let v = self.attribute_f32(prim, Semantic::Colors(0), dims, Some(n), loc)?.unwrap_or_default();
+        let v = self.attribute_f32(prim, d, Semantic::Colors(0), dims, Some(n), loc)?.unwrap_or_default();
         let rgba = |c: &[f32]| Vec4::new(c[0], c[1], c[2], if k == 4 { c[3] } else { 1.0 });
         let colors =
             v.chunks_exact(k).map(rgba).map(|c| if c.is_finite() { c.clamp(Vec4::ZERO, Vec4::ONE) } else { Vec4::ONE });
@@ -354,20 +402,32 @@ impl Loader<'_> {
         material: u32,
         loc: &str,
     ) -> Result<Mesh> {
-        let Some(positions) = self.attribute_f32(prim, Semantic::Positions, Dimensions::Vec3, None, loc)? else {
+        let draco = self.decode_draco(prim, loc)?;
+        let d = draco.as_ref();
+        let Some(positions) = self.attribute_f32(prim, d, Semantic::Positions, Dimensions::Vec3, None, loc)? else {
             self.warn(loc, "has no POSITION attribute; skipped");
             return Ok(Mesh::default());
         };
         let n = positions.len() / 3;
-        let normals = self.attribute_f32(prim, Semantic::Normals, Dimensions::Vec3, Some(n), loc)?;
-        let tangents = self.attribute_f32(prim, Semantic::Tangents, Dimensions::Vec4, Some(n), loc)?;
-        let uv0 = self.attribute_f32(prim, Semantic::TexCoords(0), Dimensions::Vec2, Some(n), loc)?;
-        let uv1 = self.attribute_f32(prim, Semantic::TexCoords(1), Dimensions::Vec2, Some(n), loc)?;
-        let colors = self.vertex_colors(prim, n, loc)?;
+        let normals = self.attribute_f32(prim, d, Semantic::Normals, Dimensions::Vec3, Some(n), loc)?;
+        let tangents = self.attribute_f32(prim, d, Semantic::Tangents, Dimensions::Vec4, Some(n), loc)?;
+        let uv0 = self.attribute_f32(prim, d, Semantic::TexCoords(0), Dimensions::Vec2, Some(n), loc)?;
+        let uv1 = self.attribute_f32(prim, d, Semantic::TexCoords(1), Dimensions::Vec2, Some(n), loc)?;
+        let colors = self.vertex_colors(prim, d, n, loc)?;
 
-        // Indices.
-        let mut flat: Vec<u32> = match prim.indices() {
-            Some(acc) => {
+        // Indices (a Draco mesh's faces).
+        let mut flat: Vec<u32> = match (draco.as_ref(), prim.indices()) {
+            (Some(d), _) => {
+                let faces = d.faces();
+                if let Some(k) = faces.iter().position(|&i| i as usize >= n) {
+                    return Err(self.error(
+                        loc,
+                        format!("KHR_draco_mesh_compression: index {k} is {}, out of range for {n} vertices", faces[k]),
+                    ));
+                }
+                faces
+            }
+            (None, Some(acc)) => {
                 let what = format!("indices (accessor {})", acc.index());
                 if acc.dimensions() != Dimensions::Scalar
                     || !matches!(acc.data_type(), DataType::U8 | DataType::U16 | DataType::U32)
@@ -384,7 +444,7 @@ impl Loader<'_> {
                 }
                 out
             }
-            None => {
+            (None, None) => {
                 if n > u32::MAX as usize {
                     return Err(self.error(loc, "too many vertices"));
                 }
@@ -536,5 +596,55 @@ impl Loader<'_> {
         }
         out.material_ids = vec![material; out.indices.len()];
         Ok(out)
+    }
+}
+
+/// A primitive's decoded `KHR_draco_mesh_compression` mesh and the extension's map from
+/// attribute semantics to Draco attribute ids.
+struct Draco {
+    mesh: draco_core::Mesh,
+    ids: std::collections::HashMap<String, u32>,
+}
+
+impl Draco {
+    /// Attribute `name`'s values (`components` per point, as floats; integers normalized where
+    /// the accessor says so), or None when the attribute is not compressed.
+    fn values(
+        &self,
+        name: &str,
+        acc: &gltf::Accessor,
+        components: usize,
+    ) -> Option<std::result::Result<Vec<f32>, String>> {
+        let id = *self.ids.get(name)?;
+        let Some(att) = self.mesh.attribute_by_unique_id(id) else {
+            return Some(Err(format!("Draco attribute {id} is not in the compressed mesh")));
+        };
+        let n = self.mesh.num_points();
+        if acc.count() != n {
+            return Some(Err(format!("accessor count {} but the compressed mesh has {n} points", acc.count())));
+        }
+        let mut v = att.read_f32s(n, components);
+        if acc.normalized() {
+            use draco_core::DataType as T;
+            let (scale, signed) = match att.data_type() {
+                T::Uint8 => (255.0, false),
+                T::Uint16 => (65_535.0, false),
+                T::Int8 => (127.0, true),
+                T::Int16 => (32_767.0, true),
+                _ => (1.0, false),
+            };
+            for x in &mut v {
+                *x /= scale;
+                if signed {
+                    *x = x.max(-1.0);
+                }
+            }
+        }
+        Some(Ok(v))
+    }
+
+    /// The triangles' point indices, three per face.
+    fn faces(&self) -> Vec<u32> {
+        (0..self.mesh.num_faces() as u32).flat_map(|f| self.mesh.face(draco_core::FaceIndex(f)).map(|p| p.0)).collect()
     }
 }
