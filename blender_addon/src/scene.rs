@@ -176,7 +176,7 @@ impl PyScene {
     }
 
     /// Adds a glTF metallic-roughness material; returns its index.
-    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true, light_emitter = false, visible_to_camera = true, transmission = 0.0, coat_weight = 0.0, coat_roughness = 0.03, coat_ior = 1.5, coat_tint = vec![1.0, 1.0, 1.0], scatter_tint = vec![1.0, 1.0, 1.0], metal_fresnel = "f82", edge_tint = vec![1.0, 1.0, 1.0], mix_material = None, mix_weight = 0.0, uv_transforms = None))]
+    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true, light_emitter = false, visible_to_camera = true, transmission = 0.0, coat_weight = 0.0, coat_roughness = 0.03, coat_ior = 1.5, coat_tint = vec![1.0, 1.0, 1.0], scatter_tint = vec![1.0, 1.0, 1.0], metal_fresnel = "f82", edge_tint = vec![1.0, 1.0, 1.0], mix_material = None, mix_weight = 0.0, mix_weight_texture = None, uv_transforms = None))]
     #[allow(clippy::too_many_arguments)]
     fn add_material(
         &mut self,
@@ -207,6 +207,7 @@ impl PyScene {
         edge_tint: Vec<f64>,
         mix_material: Option<usize>,
         mix_weight: f64,
+        mix_weight_texture: Option<usize>,
         uv_transforms: Option<std::collections::BTreeMap<String, Vec<Vec<f64>>>>,
     ) -> PyResult<usize> {
         guard(|| {
@@ -256,9 +257,11 @@ impl PyScene {
             };
             // the other material must exist already, so mixes never form a cycle
             let mix = match mix_material {
-                Some(k) if k < self.scene.materials.len() => {
-                    Some(MaterialMix { material: k as u32, weight: mix_weight as f32 })
-                }
+                Some(k) if k < self.scene.materials.len() => Some(MaterialMix {
+                    material: k as u32,
+                    weight: mix_weight as f32,
+                    weight_texture: self.texture_ref(name, "mix_weight_texture", mix_weight_texture)?,
+                }),
                 Some(k) => {
                     return Err(scene_err(
                         name,
@@ -269,7 +272,7 @@ impl PyScene {
                         ),
                     ))
                 }
-                None if mix_weight != 0.0 => {
+                None if mix_weight != 0.0 || mix_weight_texture.is_some() => {
                     return Err(scene_err(name, "mix_weight", "is set without a mix_material".to_string()))
                 }
                 None => None,
@@ -313,11 +316,17 @@ impl PyScene {
                     "metallic_roughness_texture" => &mut m.metallic_roughness_texture,
                     "normal_texture" => &mut m.normal_texture,
                     "emission_texture" => &mut m.emissive_texture,
+                    "mix_weight_texture" => match m.mix.as_mut() {
+                        Some(mix) => &mut mix.weight_texture,
+                        None => {
+                            return Err(scene_err(name, "uv_transforms", "\"mix_weight_texture\" has no texture".into()))
+                        }
+                    },
                     other => {
                         return Err(scene_err(
                             name,
                             "uv_transforms",
-                            format!("{other:?} is not a texture field (base_color_texture, metallic_roughness_texture, normal_texture, emission_texture)"),
+                            format!("{other:?} is not a texture field (base_color_texture, metallic_roughness_texture, normal_texture, emission_texture, mix_weight_texture)"),
                         ))
                     }
                 };

@@ -341,7 +341,8 @@ fn vertex_colours_multiply_the_base_colour_and_alpha() {
 /// Blender's Mix Shader and the Glass/Glossy colour: a Lambert plane under a white sky whose
 /// material scatters as another one with probability 0.25 (tinted) and 0.15 further down the
 /// chain returns the weighted sum of their albedos; the components' emission does not count
-/// (the hit material's does); malformed chains are errors naming the material.
+/// (the hit material's does); a mix masked by a texture follows the mask; malformed chains are
+/// errors naming the material.
 #[test]
 fn mixed_materials_scatter_as_their_weighted_sum() {
     use petzval_renderer::scene::MaterialMix;
@@ -353,13 +354,13 @@ fn mixed_materials_scatter_as_their_weighted_sum() {
         // 1: white, tinted, mixing 0 in with weight 0.2 (0.25 · 0.2 = 5 % overall)
         Material {
             scatter_tint: tint,
-            mix: Some(MaterialMix { material: 0, weight: 0.2 }),
+            mix: Some(MaterialMix { material: 0, weight: 0.2, weight_texture: None }),
             ..diffuse(Vec3::splat(1.0))
         },
         // 2: the plane's, grey 0.8, emitting 0.1, mixing 1 in with weight 0.25
         Material {
             emissive: Vec3::splat(0.1),
-            mix: Some(MaterialMix { material: 1, weight: 0.25 }),
+            mix: Some(MaterialMix { material: 1, weight: 0.25, weight_texture: None }),
             ..diffuse(Vec3::splat(0.8))
         },
     ];
@@ -378,19 +379,50 @@ fn mixed_materials_scatter_as_their_weighted_sum() {
     // stays uniform in [0, 1)
     let n = 100_000;
     let (mut counts, mut mean_u) = ([0u32; 3], 0.0f64);
+    let hit = rs.intersect(eye, Vec3::NEG_Y, f32::INFINITY).unwrap();
     for i in 0..n {
-        let (id, u) = petzval_renderer::integrator::scattering_material(&rs, 2, (i as f32 + 0.5) / n as f32);
+        let (id, u) = petzval_renderer::integrator::scattering_material(&rs, &hit, 2, (i as f32 + 0.5) / n as f32);
         assert!((0.0..1.0).contains(&u));
         counts[id as usize] += 1;
         mean_u += u as f64 / n as f64;
     }
     assert_eq!(counts, [5_000, 20_000, 75_000]);
     assert!((mean_u - 0.5).abs() < 1e-3, "mean remapped sample {mean_u}");
+    // a mix masked by a texture (a Mix Shader factor from an image): its red channel, 0 on the
+    // plane's left half (u < 0.5: all grey), 0.5 on the right (half grey, half tinted white)
+    let mut masked = scene.clone();
+    masked.materials[1].mix = None;
+    masked.textures.push(Arc::new(Texture {
+        name: "mask".into(),
+        width: 2,
+        height: 1,
+        texels: vec![Vec4::new(0.0, 1.0, 1.0, 1.0), Vec4::new(0.5, 0.0, 0.0, 1.0)],
+        wrap_s: Wrap::ClampToEdge,
+        wrap_t: Wrap::ClampToEdge,
+        bilinear: false,
+        srgb_encoded: false,
+    }));
+    masked.materials[2].mix = Some(MaterialMix {
+        material: 1,
+        weight: 1.0,
+        weight_texture: Some(TextureRef { index: 0, uv_set: 0, transform: None }),
+    });
+    let rs = RenderScene::new(masked).unwrap();
+    for (x, share) in [(-0.5f32, 0.0f32), (0.5, 0.5)] {
+        let eye = Vec3::new(x, 2.0, 0.2);
+        let want = Vec3::splat(0.1) + (1.0 - share) * Vec3::splat(0.8) + share * tint;
+        let (l, first) = mean_radiance(&PathTracer::default(), &rs, eye, Vec3::NEG_Y, 5, 4096);
+        for k in 0..3 {
+            assert!(rel(l[k], want[k]) < 0.02, "x = {x}: radiance {l}, expected {want}");
+        }
+        let albedo = (1.0 - share) * Vec3::splat(0.8) + share * tint;
+        assert!(first.albedo.distance(albedo) < 1e-5, "x = {x}: albedo {}, expected {albedo}", first.albedo);
+    }
     // malformed chains
     for (mix, expected) in [
-        (MaterialMix { material: 2, weight: 0.5 }, "cycle"),
-        (MaterialMix { material: 7, weight: 0.5 }, "out of range"),
-        (MaterialMix { material: 0, weight: 1.5 }, "outside [0, 1]"),
+        (MaterialMix { material: 2, weight: 0.5, weight_texture: None }, "cycle"),
+        (MaterialMix { material: 7, weight: 0.5, weight_texture: None }, "out of range"),
+        (MaterialMix { material: 0, weight: 1.5, weight_texture: None }, "outside [0, 1]"),
     ] {
         let mut bad = scene.clone();
         bad.materials[1].mix = Some(mix);

@@ -311,7 +311,8 @@ def _diffuse_glossy_group(nt):
 
 
 def _copper(nt):
-    """A Metallic BSDF whose roughness is the checker through a ColorRamp (0.15 to 0.6)."""
+    """A Metallic BSDF whose roughness is the checker through a ColorRamp (0.15 to 0.6) and a
+    Map Range (to 0.1 … 0.7)."""
     metal = _shader(nt, "BsdfMetallic", **{"Base Color": (0.95, 0.64, 0.54, 1.0)})
     tex = nt.nodes.new("ShaderNodeTexImage")
     tex.image = _checker_image()
@@ -319,24 +320,36 @@ def _copper(nt):
     ramp.color_ramp.elements[0].color = (0.15, 0.15, 0.15, 1.0)
     ramp.color_ramp.elements[1].color = (0.6, 0.6, 0.6, 1.0)
     nt.links.new(tex.outputs["Color"], ramp.inputs["Fac"])
-    nt.links.new(ramp.outputs["Color"], metal.inputs["Roughness"])
+    # and a Map Range from [0, 1] to [0.1, 0.7] (clamped)
+    remap = nt.nodes.new("ShaderNodeMapRange")
+    remap.inputs["To Min"].default_value = 0.1
+    remap.inputs["To Max"].default_value = 0.7
+    nt.links.new(ramp.outputs["Color"], remap.inputs["Value"])
+    nt.links.new(remap.outputs["Result"], metal.inputs["Roughness"])
     return metal
 
 
 def _leaf_green(nt):
-    """A Diffuse BSDF whose colour is an RGB node through a Bright/Contrast node (a constant)."""
+    """A Diffuse BSDF whose colour is an RGB node through a Bright/Contrast and an RGB Curves
+    node (a constant)."""
     diffuse = _shader(nt, "BsdfDiffuse")
     rgb = nt.nodes.new("ShaderNodeRGB")
     rgb.outputs[0].default_value = (0.2, 0.6, 0.2, 1.0)
     bc = _shader(nt, "BrightContrast", Bright=0.05, Contrast=0.2)
     nt.links.new(rgb.outputs[0], bc.inputs["Color"])
-    nt.links.new(bc.outputs[0], diffuse.inputs["Color"])
+    # then RGB Curves lifting the combined curve's middle and lowering the red one's
+    curves = nt.nodes.new("ShaderNodeRGBCurve")
+    curves.mapping.curves[3].points.new(0.5, 0.65)
+    curves.mapping.curves[0].points.new(0.5, 0.35)
+    curves.mapping.update()
+    nt.links.new(bc.outputs[0], curves.inputs["Color"])
+    nt.links.new(curves.outputs[0], diffuse.inputs["Color"])
     return diffuse
 
 
 def _tinted_checker_diffuse(nt):
     """A Diffuse BSDF whose colour is the checker multiplied by a pale blue (Mix Color,
-    Multiply, factor 0.7)."""
+    Multiply, factor 0.7), its hue turned, saturation raised and value lowered (Hue/Saturation/Value)."""
     diffuse = _shader(nt, "BsdfDiffuse")
     tex = nt.nodes.new("ShaderNodeTexImage")
     tex.image = _checker_image()
@@ -346,8 +359,27 @@ def _tinted_checker_diffuse(nt):
     mix.inputs["Factor"].default_value = 0.7
     nt.links.new(tex.outputs["Color"], mix.inputs[6])  # A (colour)
     mix.inputs[7].default_value = (0.6, 0.8, 1.0, 1.0)  # B (colour)
-    nt.links.new(mix.outputs[2], diffuse.inputs["Color"])  # Result (colour)
+    hsv = _shader(nt, "HueSaturation", Hue=0.6, Saturation=1.3, Value=0.9)
+    nt.links.new(mix.outputs[2], hsv.inputs["Color"])  # Result (colour)
+    nt.links.new(hsv.outputs[0], diffuse.inputs["Color"])
     return diffuse
+
+
+def _masked_tiles(nt):
+    """A Mix Shader of a white Diffuse and a grey, fairly smooth Glossy BSDF whose factor is the
+    checker through RGB to BW (a mask: mostly glossy on its light squares)."""
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = _checker_image()
+    bw = nt.nodes.new("ShaderNodeRGBToBW")
+    nt.links.new(tex.outputs["Color"], bw.inputs["Color"])
+    mix = _combine(
+        nt,
+        "MixShader",
+        _shader(nt, "BsdfDiffuse", Color=(0.9, 0.9, 0.9, 1.0)),
+        _shader(nt, "BsdfGlossy", Color=(0.8, 0.8, 0.8, 1.0), Roughness=0.2),
+    )
+    nt.links.new(bw.outputs[0], mix.inputs[0])
+    return mix
 
 
 def _add_shader_objects(b):
@@ -355,8 +387,9 @@ def _add_shader_objects(b):
     Shader of a red Diffuse and a golden Glossy BSDF inside a node group on the big one, a Metallic
     BSDF (F82, its default Edge Tint; roughness from the checker through a ColorRamp) on a cube, a
     leaf card mixing a green Diffuse (an RGB node through Bright/Contrast) with a Transparent
-    BSDF, and a small ball adding an orange Emission to a Diffuse coloured by the checker times a
-    pale blue (Mix Color, Multiply)."""
+    BSDF, a small ball adding an orange Emission to a Diffuse coloured by the checker times a
+    pale blue (Mix Color, Multiply), and a card mixing a Diffuse and a Glossy BSDF by the checker
+    (a mask through RGB to BW)."""
     spheres = [o for o in b.context.scene.objects if o.name.startswith("Sphere")]
     small, big = sorted(spheres, key=lambda o: o.dimensions.x)
     glass = _node_material(
@@ -376,6 +409,8 @@ def _add_shader_objects(b):
             lambda nt: _combine(nt, "MixShader", _shader(nt, "BsdfTransparent"), _leaf_green(nt), factor=0.6),
         )
     )
+    b.ops.mesh.primitive_plane_add(size=0.8, location=(-0.9, 3.2, 1.0), rotation=(math.radians(90.0), 0.0, 0.0))
+    b.context.active_object.data.materials.append(_node_material("Tiles", _masked_tiles))
     b.ops.mesh.primitive_uv_sphere_add(segments=24, ring_count=12, radius=0.15, location=(0.05, 1.0, 0.15))
     b.ops.object.shade_smooth()
     b.context.active_object.data.materials.append(

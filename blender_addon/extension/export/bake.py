@@ -1,16 +1,19 @@
 """Colour and value node chains evaluated here, as Cycles' SVM nodes compute them: constants
 (a Mix Color of two colours, a Math node of two values) become a constant, and chains over one
-image (an Image Texture through a ColorRamp, Invert, Bright/Contrast, Gamma, Mix Color, Math,
-RGB to BW, Separate Color) become a new texture of that image's size, mapping and filtering,
-whose texels are the chain applied to Cycles' lookups of the image at several points per texel
-(Cycles filters the image first, in its stored values, and applies the chain after; the baked
-texture, filtered again, follows that within its finer texels).
+image (an Image Texture through a ColorRamp, RGB Curves, Hue/Saturation/Value, Invert,
+Bright/Contrast, Gamma, Mix Color, Math, Map Range, Clamp, RGB to BW, Separate Color) become a
+new texture of that image's size, mapping and filtering, whose texels are the chain applied to
+Cycles' lookups of the image at several points per texel (Cycles filters the image first, in
+its stored values, and applies the chain after; the baked texture, filtered again, follows that
+within its finer texels).
 
 ``evaluate(socket, kind)`` returns a ``Baked`` value or raises ``Unsupported`` naming the node
 it cannot evaluate (procedural textures, coordinates, anything spatial).
 """
 
 from __future__ import annotations
+
+import contextlib
 
 import numpy as np
 
@@ -131,7 +134,64 @@ class Evaluator:
             return c[..., k : k + 1]
         if t == "MATH":
             return self._math(node)
+        if t == "HUE_SAT":
+            return self._hue_saturation(node)
+        if t == "CURVE_RGB":
+            return self._rgb_curves(node)
+        if t == "MAP_RANGE" and node.data_type == "FLOAT" and node.interpolation_type == "LINEAR":
+            v = self._input(node, "Value", "float")
+            f0, f1 = self._input(node, "From Min", "float"), self._input(node, "From Max", "float")
+            t0, t1 = self._input(node, "To Min", "float"), self._input(node, "To Max", "float")
+            with np.errstate(divide="ignore", invalid="ignore"):
+                r = np.where(f1 != f0, t0 + (v - f0) / np.where(f1 != f0, f1 - f0, 1.0) * (t1 - t0), 0.0)
+            return np.clip(r, np.minimum(t0, t1), np.maximum(t0, t1)) if node.clamp else r
+        if t == "CLAMP":
+            v = self._input(node, "Value", "float")
+            lo, hi = self._input(node, "Min", "float"), self._input(node, "Max", "float")
+            if node.clamp_type == "RANGE":
+                lo, hi = np.minimum(lo, hi), np.maximum(lo, hi)
+            return np.minimum(np.maximum(v, lo), hi)
         raise Unsupported(node.bl_label)
+
+    def _hue_saturation(self, node) -> np.ndarray:
+        """Cycles' `svm_node_hsv`: hue turned (+ 0.5 is no turn), saturation scaled and
+        clamped, value scaled, mixed with the input by the factor, negatives clipped."""
+        c = self._input(node, "Color", "color")
+        hue = self._input(node, "Hue", "float")[..., 0]
+        sat = self._input(node, "Saturation", "float")[..., 0]
+        val = self._input(node, "Value", "float")[..., 0]
+        fac = self._input(node, "Fac", "float")
+        h, s, v = rgb_to_hsv(c)
+        h = np.mod(h + hue + 0.5, 1.0)
+        s = np.clip(s * sat, 0.0, 1.0)
+        out = hsv_to_rgb(h, s, v * val)
+        return np.maximum(fac * out + (1.0 - fac) * c, 0.0)
+
+    def _rgb_curves(self, node) -> np.ndarray:
+        """RGB Curves as Cycles bakes them: per channel its curve after the combined one, in a
+        256-entry table over the curves' x range, looked up linearly (extrapolated beyond)."""
+        mapping = node.mapping
+        with contextlib.suppress(AttributeError, RuntimeError):
+            mapping.initialize()
+        curves = list(mapping.curves)
+        lo = min([0.0, *(c.points[0].location[0] for c in curves if len(c.points))])
+        hi = max([1.0, *(c.points[-1].location[0] for c in curves if len(c.points))])
+        xs = lo + np.arange(RAMP_TABLE) / (RAMP_TABLE - 1) * (hi - lo)
+        table = np.array(
+            [[mapping.evaluate(curves[k], mapping.evaluate(curves[3], float(x))) for k in range(3)] for x in xs],
+            np.float32,
+        )
+        c = self._input(node, "Color", "color")
+        fac = self._input(node, "Fac", "float")
+        f = (c - lo) / (hi - lo) * (RAMP_TABLE - 1)
+        out = np.empty_like(c)
+        for k in range(3):
+            col = table[:, k]
+            fk = f[..., k]
+            i = np.clip(np.floor(fk).astype(np.int64), 0, RAMP_TABLE - 2)
+            t = fk - i  # beyond the ends: the end segments extended
+            out[..., k] = col[i] + (col[i + 1] - col[i]) * t
+        return (1.0 - fac) * c + fac * out
 
     def _image(self, node) -> np.ndarray:
         """(…, 4) linear values of an Image Texture node (one image size per evaluation): its
@@ -201,6 +261,37 @@ class Evaluator:
                 raise Unsupported(f"Math ({op.replace('_', ' ').title()})")
         r = r.astype(np.float32)
         return np.clip(r, 0.0, 1.0) if node.use_clamp else r
+
+
+def rgb_to_hsv(c: np.ndarray):
+    """Cycles' `rgb_to_hsv` per texel: (h, s, v), h in [0, 1)."""
+    r, g, b = c[..., 0], c[..., 1], c[..., 2]
+    cmax = np.maximum(np.maximum(r, g), b)
+    cmin = np.minimum(np.minimum(r, g), b)
+    delta = cmax - cmin
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(cmax != 0.0, delta / np.where(cmax != 0.0, cmax, 1.0), 0.0)
+        d = np.where(delta != 0.0, delta, 1.0)
+        cr, cg, cb = (cmax - r) / d, (cmax - g) / d, (cmax - b) / d
+    h = np.where(r == cmax, cb - cg, np.where(g == cmax, 2.0 + cr - cb, 4.0 + cg - cr)) / 6.0
+    h = np.where(h < 0.0, h + 1.0, h)
+    h = np.where(s != 0.0, h, 0.0)
+    return h, s, cmax
+
+
+def hsv_to_rgb(h, s, v) -> np.ndarray:
+    """Cycles' `hsv_to_rgb` per texel."""
+    h = np.where(h == 1.0, 0.0, h) * 6.0
+    i = np.floor(h)
+    f = h - i
+    p, q, t = v * (1.0 - s), v * (1.0 - s * f), v * (1.0 - s * (1.0 - f))
+    i = i.astype(np.int64)
+    r = np.choose(np.clip(i, 0, 5), [v, q, p, p, t, v])
+    g = np.choose(np.clip(i, 0, 5), [t, v, v, q, p, p])
+    b = np.choose(np.clip(i, 0, 5), [p, p, t, v, v, q])
+    grey = s == 0.0
+    out = np.stack([np.where(grey, v, r), np.where(grey, v, g), np.where(grey, v, b)], axis=-1)
+    return out.astype(np.float32)
 
 
 def upsampling(h: int, w: int) -> int:

@@ -192,6 +192,21 @@ class Materials:
             kw.setdefault("uv_transforms", {})[field] = uv
         return True
 
+    def _scalar(self, mat, socket, what: str, default: float) -> float:
+        """A scalar input that must be constant: its value, or that of a chain of value nodes
+        (a spatially varying one: its unlinked value, listed)."""
+        if source(socket) is None:
+            return float(socket_value(socket, default))
+        try:
+            baked = Evaluator(self.notes, f"material '{mat.name}' {what}").evaluate(socket, "float")
+            if baked.constant:
+                return float(baked.value[0])
+            label = f"an image through {source(socket)[0].bl_label}"
+        except Unsupported as e:
+            label = f"a {e} node"
+        self.notes.warn(f"material '{mat.name}': {what} from {label} (its unlinked value used)")
+        return float(socket_value(socket, default)) if socket is not None else default
+
     def _baked_emission(self, mat, socket, kw: dict, unlinked):
         """The emission colour of a chain of colour nodes: a constant (returned), or a baked
         texture (set in `kw`; white returned); unsupported: `unlinked`, listed."""
@@ -296,6 +311,10 @@ class Materials:
             col, strength, kw = self._emission(mat, node)
             return self.scene.add_material(mat.name, base_color=(0.0, 0.0, 0.0, 1.0), specular=0.0,
                                            emission=tuple(float(c) * strength for c in col[:3]), **kw)
+        if node.type == "MIX_SHADER":
+            masked = self._masked_mix(mat, node)
+            if masked is not None:
+                return masked
         mix = ShaderMix()
         why = self._gather(mat, node, 1.0, mix, depth=0)
         if why is not None:
@@ -316,14 +335,8 @@ class Materials:
         if t in ("MIX_SHADER", "ADD_SHADER"):
             shaders = [s for s in node.inputs if s.type == "SHADER"]
             if t == "MIX_SHADER":
-                fac_socket = node.inputs[0]  # "Factor" (Blender 5), "Fac" before
-                fac = min(max(float(socket_value(fac_socket, 0.5)), 0.0), 1.0)
-                fsrc = source(fac_socket)
-                if fsrc is not None:
-                    self.notes.warn(
-                        f"material '{name}': Mix Shader factor from a {fsrc[0].bl_label} node (its unlinked value "
-                        f"{fac:g} used)"
-                    )
+                # "Factor" (Blender 5), "Fac" before
+                fac = min(max(self._scalar(mat, node.inputs[0], "Mix Shader factor", 0.5), 0.0), 1.0)
                 weights = (weight * (1.0 - fac), weight * fac)
             else:
                 weights = (weight, weight)
@@ -456,11 +469,51 @@ class Materials:
         self._normal(mat, node, kw)
         return kw
 
-    def _add_mix(self, mat, mix: ShaderMix) -> int:
+    def _masked_mix(self, mat, node):
+        """A Mix Shader whose factor is an image (a mask, possibly through colour and value
+        nodes) between two shaders without emission or transparency, one of them a single BSDF:
+        that BSDF's material, scattering as the other shader's with the mask's probability
+        (``mix_weight_texture``). None where this does not apply (the factor is then read as a
+        constant, or its unlinked value used and listed)."""
+        fac = node.inputs[0]
+        if source(fac) is None:
+            return None
+        what = f"material '{mat.name}' Mix Shader factor"
+        try:
+            baked = Evaluator(self.notes, what).evaluate(fac, "float")
+        except Unsupported:
+            return None
+        if baked.constant:
+            return None
+        parts = []
+        for sock in [s for s in node.inputs if s.type == "SHADER"][:2]:
+            part, src = ShaderMix(), source(sock)
+            if src is not None and self._gather(mat, src[0], 1.0, part, depth=1) is not None:
+                return None
+            if part.transparency > 0.0 or any(part.emission) or part.emission_texture is not None:
+                return None
+            parts.append(part)
+        first, second = parts
+        if len(first.bsdfs) != 1:
+            if len(second.bsdfs) != 1:
+                return None
+            first, second = second, first
+            baked = Baked(1.0 - baked.value, baked.tex_node)
+        mask: dict = {}
+        self._set_baked(mask, "mix_weight_texture", baked, what)
+        other = self._add_mix(mat, second, name=f"{mat.name} (masked mix)")
+        w, args = first.bsdfs[0]
+        args = {**args, "scatter_tint": tuple(float(c) * w for c in args.get("scatter_tint", (1.0, 1.0, 1.0)))}
+        args.update(mix_material=other, mix_weight=1.0, mix_weight_texture=mask["mix_weight_texture"])
+        if "uv_transforms" in mask:
+            args["uv_transforms"] = {**args.get("uv_transforms", {}), **mask["uv_transforms"]}
+        return self.scene.add_material(mat.name, **args)
+
+    def _add_mix(self, mat, mix: ShaderMix, name: str | None = None) -> int:
         """The material for a weighted sum of closures: stochastic coverage of 1 − transparency;
         where covered, emission ÷ coverage, and one BSDF chosen by its share of the total
         weight W (a chain of mix materials), scaled by W ÷ coverage (its scatter tint)."""
-        name = mat.name
+        name = mat.name if name is None else name
         coverage = min(max(1.0 - mix.transparency, 0.0), 1.0)
         bsdfs = [(w, kw) for w, kw in mix.bsdfs if w > 0.0]
         total = sum(w for w, _ in bsdfs)
@@ -508,7 +561,7 @@ class Materials:
     def _emission(self, mat, node):
         """(colour, strength, {emission_texture}) of an Emission shader."""
         col = value(node, "Color", (1.0, 1.0, 1.0, 1.0))
-        strength = value(node, "Strength", 1.0)
+        strength = self._scalar(mat, node.inputs.get("Strength"), "emission strength", 1.0)
         kw = {}
         src = source(node.inputs.get("Color"))
         if src is not None:
@@ -622,15 +675,13 @@ class Materials:
 
         # emission
         ecol = value(node, "Emission Color", (0.0, 0.0, 0.0, 1.0))
-        estr = float(value(node, "Emission Strength", 0.0))
+        estr = self._scalar(mat, node.inputs.get("Emission Strength"), "Emission Strength", 0.0)
         esrc = source(node.inputs.get("Emission Color"))
         if esrc is not None and esrc[0].type == "TEX_IMAGE":
             if self._set_texture(kw, "emission_texture", esrc[0], f"material '{name}' emission"):
                 ecol = (1.0, 1.0, 1.0)
         elif esrc is not None:
             ecol = self._baked_emission(mat, node.inputs.get("Emission Color"), kw, ecol)
-        if source(node.inputs.get("Emission Strength")) is not None:
-            self.notes.warn(f"material '{name}': Emission Strength from a node (its unlinked value used)")
         kw["emission"] = tuple(float(c) * estr for c in ecol[:3])
 
         self._normal(mat, node, kw)

@@ -116,6 +116,7 @@ class Scene:
         edge_tint: Sequence[float] = (1.0, 1.0, 1.0),
         mix_material: int | None = None,
         mix_weight: float = 0.0,
+        mix_weight_texture: int | None = None,
         uv_transforms: dict[str, Sequence[Sequence[float]]] | None = None,
     ) -> int:
         """Adds a glTF metallic-roughness material and returns its index.
@@ -144,9 +145,11 @@ class Scene:
         a Mix Shader: with probability ``mix_weight`` (in [0, 1]) a scattering event uses
         material ``mix_material`` (added before this one, and it may mix further) instead of
         this one, an unbiased estimate of the weighted sum of the two BSDFs; emission, alpha and
-        the normal map stay this material's. ``uv_transforms`` maps a texture field
-        (``"base_color_texture"``, ``"metallic_roughness_texture"``, ``"normal_texture"``,
-        ``"emission_texture"``) to a 2 x 3 affine map of the texture coordinates, rows
+        the normal map stay this material's. ``mix_weight_texture`` masks the weight: where the
+        surface is hit, the probability is ``mix_weight`` times the texture's red channel
+        (clamped to [0, 1]; a Mix Shader factor from an image). ``uv_transforms`` maps a texture
+        field (``"base_color_texture"``, ``"metallic_roughness_texture"``, ``"normal_texture"``,
+        ``"emission_texture"``, ``"mix_weight_texture"``) to a 2 x 3 affine map of the texture coordinates, rows
         ``[[a, b, c], [d, e, f]]``: the lookup is at ``(a u + b v + c, d u + e v + f)``, in the
         coordinates ``add_mesh`` takes (v down; Blender's Mapping node, with v flipped). Texture
         indices come from :meth:`add_texture`."""

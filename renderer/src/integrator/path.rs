@@ -31,6 +31,7 @@ use super::accel::{RenderScene, SurfaceHit};
 use super::bsdf::{Bsdf, SurfaceBsdf};
 use super::lights::env_radiance;
 use crate::sampler::PixelSampler;
+use crate::scene::MaterialMix;
 
 /// Which estimators reach emissive triangles and the environment (for tests and comparisons;
 /// punctual lights always use light sampling).
@@ -124,6 +125,15 @@ fn base_color_of(scene: &RenderScene, hit: &SurfaceHit, id: u32) -> Vec3 {
     mat.base_color.truncate() * base_tex * vertex.truncate()
 }
 
+/// A mix's probability at a hit: its weight, times its mask's red channel where it has one.
+fn mix_weight(scene: &RenderScene, hit: &SurfaceHit, mix: &MaterialMix) -> f32 {
+    match scene.texture(mix.weight_texture, hit.uv0, hit.uv1) {
+        Some(t) if t.x.is_finite() => mix.weight * t.x.clamp(0.0, 1.0),
+        Some(_) => 0.0,
+        None => mix.weight,
+    }
+}
+
 /// The albedo output's colour at a hit: the base colour times the scatter tint, averaged over
 /// a mix chain by its weights.
 fn albedo(scene: &RenderScene, hit: &SurfaceHit) -> Vec3 {
@@ -131,11 +141,11 @@ fn albedo(scene: &RenderScene, hit: &SurfaceHit) -> Vec3 {
     let (mut id, mut share, mut sum) = (hit.material_id, 1.0f32, Vec3::ZERO);
     loop {
         let m = &mats[id as usize];
-        let own = share * m.mix.map_or(1.0, |x| 1.0 - x.weight);
-        sum += own * base_color_of(scene, hit, id) * m.scatter_tint;
+        let w = m.mix.as_ref().map_or(0.0, |x| mix_weight(scene, hit, x));
+        sum += share * (1.0 - w) * base_color_of(scene, hit, id) * m.scatter_tint;
         match m.mix {
-            Some(x) if x.weight > 0.0 => {
-                share *= x.weight;
+            Some(x) if w > 0.0 => {
+                share *= w;
                 id = x.material;
             }
             _ => return sum,
@@ -146,15 +156,16 @@ fn albedo(scene: &RenderScene, hit: &SurfaceHit) -> Vec3 {
 /// The material that scatters at a hit of material `id`: `id` itself, or one along its mix
 /// chain ([`crate::scene::Material::mix`]) chosen by `u` in [0, 1); with `u` remapped to
 /// [0, 1) for the lobe choice, so no sample dimension is added.
-pub fn scattering_material(scene: &RenderScene, id: u32, u: f32) -> (u32, f32) {
+pub fn scattering_material(scene: &RenderScene, hit: &SurfaceHit, id: u32, u: f32) -> (u32, f32) {
     let mats = &scene.scene().materials;
     let (mut id, mut u) = (id, u);
-    while let Some(mix) = mats[id as usize].mix {
-        if u < mix.weight {
-            u /= mix.weight;
+    while let Some(mix) = &mats[id as usize].mix {
+        let w = mix_weight(scene, hit, mix);
+        if u < w {
+            u /= w;
             id = mix.material;
         } else {
-            u = (u - mix.weight) / (1.0 - mix.weight);
+            u = (u - w) / (1.0 - w);
             break;
         }
     }
@@ -369,7 +380,7 @@ impl PathTracer {
 
             // The material that scatters (one of a Mix Shader's, chosen by the lobe sample).
             let (scatter_id, u_lobe) = if scene.scene().materials[hit.material_id as usize].mix.is_some() {
-                scattering_material(scene, hit.material_id, u_lobe)
+                scattering_material(scene, &hit, hit.material_id, u_lobe)
             } else {
                 (hit.material_id, u_lobe)
             };

@@ -192,6 +192,9 @@ pub struct MaterialMix {
     pub material: u32,
     /// Probability of scattering as that material, in [0, 1].
     pub weight: f32,
+    /// A mask multiplying `weight` where the surface is hit: its red channel, clamped to
+    /// [0, 1] (a Mix Shader factor from an image).
+    pub weight_texture: Option<TextureRef>,
 }
 
 impl Default for Material {
