@@ -6,8 +6,8 @@ use numpy::{AllowTypeChange, PyArrayLike1, PyArrayLike2, PyArrayLike3};
 use petzval_renderer::scene::environment::EnvironmentMap;
 use petzval_renderer::scene::texture::Wrap;
 use petzval_renderer::scene::{
-    AlphaMode, Environment, Light, Material, MaterialMix, Mesh, MetalFresnel, SpotFalloff, Texture, TextureRef,
-    UvTransform,
+    AlphaMode, AngleWeight, Environment, Light, Material, MaterialMix, Mesh, MetalFresnel, SpotFalloff, Texture,
+    TextureRef, UvTransform,
 };
 use pyo3::prelude::*;
 use std::sync::Arc;
@@ -176,7 +176,7 @@ impl PyScene {
     }
 
     /// Adds a glTF metallic-roughness material; returns its index.
-    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true, light_emitter = false, visible_to_camera = true, transmission = 0.0, coat_weight = 0.0, coat_roughness = 0.03, coat_ior = 1.5, coat_tint = vec![1.0, 1.0, 1.0], scatter_tint = vec![1.0, 1.0, 1.0], metal_fresnel = "f82", edge_tint = vec![1.0, 1.0, 1.0], mix_material = None, mix_weight = 0.0, mix_weight_texture = None, uv_transforms = None))]
+    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true, light_emitter = false, visible_to_camera = true, transmission = 0.0, coat_weight = 0.0, coat_roughness = 0.03, coat_ior = 1.5, coat_tint = vec![1.0, 1.0, 1.0], scatter_tint = vec![1.0, 1.0, 1.0], metal_fresnel = "f82", edge_tint = vec![1.0, 1.0, 1.0], mix_material = None, mix_weight = 0.0, mix_weight_texture = None, mix_weight_angle = None, uv_transforms = None))]
     #[allow(clippy::too_many_arguments)]
     fn add_material(
         &mut self,
@@ -208,6 +208,7 @@ impl PyScene {
         mix_material: Option<usize>,
         mix_weight: f64,
         mix_weight_texture: Option<usize>,
+        mix_weight_angle: Option<(String, f64)>,
         uv_transforms: Option<std::collections::BTreeMap<String, Vec<Vec<f64>>>>,
     ) -> PyResult<usize> {
         guard(|| {
@@ -255,12 +256,32 @@ impl PyScene {
                     ))
                 }
             };
+            let angle = match &mix_weight_angle {
+                None => None,
+                Some((kind, v)) if v.is_finite() => match kind.as_str() {
+                    "fresnel" if *v > 0.0 => Some(AngleWeight::Fresnel { ior: *v as f32 }),
+                    "layer_fresnel" if (0.0..=1.0).contains(v) => Some(AngleWeight::LayerFresnel { blend: *v as f32 }),
+                    "layer_facing" if (0.0..=1.0).contains(v) => Some(AngleWeight::LayerFacing { blend: *v as f32 }),
+                    _ => None,
+                },
+                Some(_) => None,
+            };
+            if mix_weight_angle.is_some() && angle.is_none() {
+                return Err(scene_err(
+                    name,
+                    "mix_weight_angle",
+                    format!(
+                        "expected (\"fresnel\", ior > 0), (\"layer_fresnel\", blend in [0, 1]) or (\"layer_facing\", blend in [0, 1]), got {mix_weight_angle:?}"
+                    ),
+                ));
+            }
             // the other material must exist already, so mixes never form a cycle
             let mix = match mix_material {
                 Some(k) if k < self.scene.materials.len() => Some(MaterialMix {
                     material: k as u32,
                     weight: mix_weight as f32,
                     weight_texture: self.texture_ref(name, "mix_weight_texture", mix_weight_texture)?,
+                    weight_angle: angle,
                 }),
                 Some(k) => {
                     return Err(scene_err(
@@ -272,7 +293,7 @@ impl PyScene {
                         ),
                     ))
                 }
-                None if mix_weight != 0.0 || mix_weight_texture.is_some() => {
+                None if mix_weight != 0.0 || mix_weight_texture.is_some() || angle.is_some() => {
                     return Err(scene_err(name, "mix_weight", "is set without a mix_material".to_string()))
                 }
                 None => None,

@@ -13,7 +13,9 @@ use petzval_renderer::integrator::{
 };
 use petzval_renderer::sampler::PixelSampler;
 use petzval_renderer::scene::texture::Wrap;
-use petzval_renderer::scene::{AlphaMode, Environment, Light, Material, Mesh, Scene, SpotFalloff, Texture, TextureRef};
+use petzval_renderer::scene::{
+    AlphaMode, AngleWeight, Environment, Light, Material, Mesh, Scene, SpotFalloff, Texture, TextureRef,
+};
 
 // ------------------------------------------------------------------------------------------
 // Scene helpers.
@@ -338,11 +340,32 @@ fn vertex_colours_multiply_the_base_colour_and_alpha() {
     assert_eq!(right.material_id, 0, "interpolated alpha 0.8: kept");
 }
 
+/// Cycles' Fresnel and Layer Weight factors: the dielectric reflectance head-on ((n − 1)/(n + 1))²
+/// (Fresnel IOR 1.5: 0.04; Layer Weight Fresnel, blend 0.5: index 2, 1/9), total internal
+/// reflection seen from behind at grazing angles, and Facing 1 − μ^k with k = 2·blend below one
+/// half, 0.5/(1 − blend) above (1 at one half).
+#[test]
+fn mix_angle_factors_follow_cycles() {
+    use petzval_renderer::integrator::angle_factor;
+    let close = |a: f32, b: f32| (a - b).abs() < 1e-6;
+    assert!(close(angle_factor(&AngleWeight::Fresnel { ior: 1.5 }, 1.0, false), 0.04));
+    assert!(close(angle_factor(&AngleWeight::LayerFresnel { blend: 0.5 }, 1.0, false), 1.0 / 9.0));
+    assert!(close(angle_factor(&AngleWeight::LayerFresnel { blend: 0.5 }, 1.0, true), 1.0 / 9.0));
+    assert_eq!(angle_factor(&AngleWeight::Fresnel { ior: 1.5 }, 0.1, true), 1.0);
+    assert!(angle_factor(&AngleWeight::Fresnel { ior: 1.5 }, 0.1, false) < 1.0);
+    for (blend, k) in [(0.25f32, 0.5f32), (0.5, 1.0), (0.75, 2.0)] {
+        for mu in [0.1f32, 0.5, 0.9] {
+            let got = angle_factor(&AngleWeight::LayerFacing { blend }, mu, false);
+            assert!(close(got, 1.0 - mu.powf(k)), "blend {blend}, μ {mu}: {got}");
+        }
+    }
+}
+
 /// Blender's Mix Shader and the Glass/Glossy colour: a Lambert plane under a white sky whose
 /// material scatters as another one with probability 0.25 (tinted) and 0.15 further down the
 /// chain returns the weighted sum of their albedos; the components' emission does not count
-/// (the hit material's does); a mix masked by a texture follows the mask; malformed chains are
-/// errors naming the material.
+/// (the hit material's does); a mix masked by a texture follows the mask, one by a Fresnel node
+/// the reflectance at the view's angle; malformed chains are errors naming the material.
 #[test]
 fn mixed_materials_scatter_as_their_weighted_sum() {
     use petzval_renderer::scene::MaterialMix;
@@ -354,13 +377,13 @@ fn mixed_materials_scatter_as_their_weighted_sum() {
         // 1: white, tinted, mixing 0 in with weight 0.2 (0.25 · 0.2 = 5 % overall)
         Material {
             scatter_tint: tint,
-            mix: Some(MaterialMix { material: 0, weight: 0.2, weight_texture: None }),
+            mix: Some(MaterialMix { material: 0, weight: 0.2, weight_texture: None, weight_angle: None }),
             ..diffuse(Vec3::splat(1.0))
         },
         // 2: the plane's, grey 0.8, emitting 0.1, mixing 1 in with weight 0.25
         Material {
             emissive: Vec3::splat(0.1),
-            mix: Some(MaterialMix { material: 1, weight: 0.25, weight_texture: None }),
+            mix: Some(MaterialMix { material: 1, weight: 0.25, weight_texture: None, weight_angle: None }),
             ..diffuse(Vec3::splat(0.8))
         },
     ];
@@ -381,7 +404,8 @@ fn mixed_materials_scatter_as_their_weighted_sum() {
     let (mut counts, mut mean_u) = ([0u32; 3], 0.0f64);
     let hit = rs.intersect(eye, Vec3::NEG_Y, f32::INFINITY).unwrap();
     for i in 0..n {
-        let (id, u) = petzval_renderer::integrator::scattering_material(&rs, &hit, 2, (i as f32 + 0.5) / n as f32);
+        let (id, u) =
+            petzval_renderer::integrator::scattering_material(&rs, &hit, Vec3::Y, 2, (i as f32 + 0.5) / n as f32);
         assert!((0.0..1.0).contains(&u));
         counts[id as usize] += 1;
         mean_u += u as f64 / n as f64;
@@ -406,6 +430,7 @@ fn mixed_materials_scatter_as_their_weighted_sum() {
         material: 1,
         weight: 1.0,
         weight_texture: Some(TextureRef { index: 0, uv_set: 0, transform: None }),
+        weight_angle: None,
     });
     let rs = RenderScene::new(masked).unwrap();
     for (x, share) in [(-0.5f32, 0.0f32), (0.5, 0.5)] {
@@ -418,11 +443,32 @@ fn mixed_materials_scatter_as_their_weighted_sum() {
         let albedo = (1.0 - share) * Vec3::splat(0.8) + share * tint;
         assert!(first.albedo.distance(albedo) < 1e-5, "x = {x}: albedo {}, expected {albedo}", first.albedo);
     }
+    // a mix by the viewing angle (a Fresnel node, IOR 1.5): grey 0.8 mixed with the tinted white
+    // by the dielectric reflectance at the view's angle, head-on and 60° off
+    let mut fresnel = scene.clone();
+    fresnel.materials[1].mix = None;
+    fresnel.materials[2].mix = Some(MaterialMix {
+        material: 1,
+        weight: 1.0,
+        weight_texture: None,
+        weight_angle: Some(AngleWeight::Fresnel { ior: 1.5 }),
+    });
+    let rs = RenderScene::new(fresnel).unwrap();
+    for theta in [0.0f32, 60f32.to_radians()] {
+        let dir = Vec3::new(theta.sin(), -theta.cos(), 0.0);
+        let eye = Vec3::new(0.0, 0.0, 0.2) - 2.0 * dir;
+        let f = petzval_renderer::integrator::bsdf::fresnel_dielectric(theta.cos(), 1.5);
+        let want = Vec3::splat(0.1) + (1.0 - f) * Vec3::splat(0.8) + f * tint;
+        let (l, _) = mean_radiance(&PathTracer::default(), &rs, eye, dir, 6, 4096);
+        for k in 0..3 {
+            assert!(rel(l[k], want[k]) < 0.02, "θ = {theta}: radiance {l}, expected {want} (F = {f})");
+        }
+    }
     // malformed chains
     for (mix, expected) in [
-        (MaterialMix { material: 2, weight: 0.5, weight_texture: None }, "cycle"),
-        (MaterialMix { material: 7, weight: 0.5, weight_texture: None }, "out of range"),
-        (MaterialMix { material: 0, weight: 1.5, weight_texture: None }, "outside [0, 1]"),
+        (MaterialMix { material: 2, weight: 0.5, weight_texture: None, weight_angle: None }, "cycle"),
+        (MaterialMix { material: 7, weight: 0.5, weight_texture: None, weight_angle: None }, "out of range"),
+        (MaterialMix { material: 0, weight: 1.5, weight_texture: None, weight_angle: None }, "outside [0, 1]"),
     ] {
         let mut bad = scene.clone();
         bad.materials[1].mix = Some(mix);

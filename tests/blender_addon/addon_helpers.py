@@ -382,14 +382,28 @@ def _masked_tiles(nt):
     return mix
 
 
+def _varnish(nt):
+    """The classic varnish: a blue Diffuse and a white, smooth Glossy BSDF mixed by a Layer
+    Weight's Fresnel output (blend 0.3)."""
+    layer = _shader(nt, "LayerWeight", Blend=0.3)
+    mix = _combine(
+        nt,
+        "MixShader",
+        _shader(nt, "BsdfDiffuse", Color=(0.3, 0.5, 0.8, 1.0)),
+        _shader(nt, "BsdfGlossy", Color=(1.0, 1.0, 1.0, 1.0), Roughness=0.1),
+    )
+    nt.links.new(layer.outputs["Fresnel"], mix.inputs[0])
+    return mix
+
+
 def _add_shader_objects(b):
     """The "shaders" variant's materials: a tinted rough Glass BSDF on the small sphere, a Mix
     Shader of a red Diffuse and a golden Glossy BSDF inside a node group on the big one, a Metallic
     BSDF (F82, its default Edge Tint; roughness from the checker through a ColorRamp) on a cube, a
     leaf card mixing a green Diffuse (an RGB node through Bright/Contrast) with a Transparent
     BSDF, a small ball adding an orange Emission to a Diffuse coloured by the checker times a
-    pale blue (Mix Color, Multiply), and a card mixing a Diffuse and a Glossy BSDF by the checker
-    (a mask through RGB to BW)."""
+    pale blue (Mix Color, Multiply), a card mixing a Diffuse and a Glossy BSDF by the checker
+    (a mask through RGB to BW), and a sphere mixing them by a Layer Weight's Fresnel."""
     spheres = [o for o in b.context.scene.objects if o.name.startswith("Sphere")]
     small, big = sorted(spheres, key=lambda o: o.dimensions.x)
     glass = _node_material(
@@ -411,6 +425,9 @@ def _add_shader_objects(b):
     )
     b.ops.mesh.primitive_plane_add(size=0.8, location=(-0.9, 3.2, 1.0), rotation=(math.radians(90.0), 0.0, 0.0))
     b.context.active_object.data.materials.append(_node_material("Tiles", _masked_tiles))
+    b.ops.mesh.primitive_uv_sphere_add(segments=32, ring_count=16, radius=0.35, location=(1.55, 2.9, 0.35))
+    b.ops.object.shade_smooth()
+    b.context.active_object.data.materials.append(_node_material("Varnish", _varnish))
     b.ops.mesh.primitive_uv_sphere_add(segments=24, ring_count=12, radius=0.15, location=(0.05, 1.0, 0.15))
     b.ops.object.shade_smooth()
     b.context.active_object.data.materials.append(

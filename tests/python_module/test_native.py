@@ -335,6 +335,16 @@ def _two_materials(pz):
             ["mix_weight_texture", "5"],
         ),
         (lambda pz: _textured(pz).add_material("m", mix_weight_texture=0), "InvalidSceneError", ["without"]),
+        (
+            lambda pz: _two_materials(pz).add_material("m", mix_material=0, mix_weight_angle=("facing", 0.5)),
+            "InvalidSceneError",
+            ["mix_weight_angle", "layer_facing"],
+        ),
+        (
+            lambda pz: _two_materials(pz).add_material("m", mix_material=0, mix_weight_angle=("layer_fresnel", 2.0)),
+            "InvalidSceneError",
+            ["mix_weight_angle", "2.0"],
+        ),
         (lambda pz: pz.Scene().add_material("m", metal_fresnel="conductor"), "InvalidSceneError", ["metal_fresnel"]),
         (lambda pz: pz.Scene().add_material("m", edge_tint=(1.2, 1, 1)), "InvalidSceneError", ["edge_tint"]),
         (lambda pz: pz.Scene().add_material("m", scatter_tint=(1, -1, 1)), "InvalidSceneError", ["scatter_tint"]),

@@ -470,21 +470,27 @@ class Materials:
         return kw
 
     def _masked_mix(self, mat, node):
-        """A Mix Shader whose factor is an image (a mask, possibly through colour and value
-        nodes) between two shaders without emission or transparency, one of them a single BSDF:
-        that BSDF's material, scattering as the other shader's with the mask's probability
-        (``mix_weight_texture``). None where this does not apply (the factor is then read as a
-        constant, or its unlinked value used and listed)."""
+        """A Mix Shader whose factor varies over the surface, between two shaders without
+        emission or transparency, one of them a single BSDF: that BSDF's material, scattering
+        as the other shader's with the factor's probability. The factor is an image (a mask,
+        possibly through colour and value nodes: ``mix_weight_texture``) or a Fresnel node or
+        Layer Weight output (``mix_weight_angle``, the first shader then a single BSDF). None
+        where this does not apply (the factor is then read as a constant, or its unlinked value
+        used and listed)."""
         fac = node.inputs[0]
-        if source(fac) is None:
+        src = source(fac)
+        if src is None:
             return None
         what = f"material '{mat.name}' Mix Shader factor"
-        try:
-            baked = Evaluator(self.notes, what).evaluate(fac, "float")
-        except Unsupported:
-            return None
-        if baked.constant:
-            return None
+        angle = self._angle_factor(mat, *src)
+        baked = None
+        if angle is None:
+            try:
+                baked = Evaluator(self.notes, what).evaluate(fac, "float")
+            except Unsupported:
+                return None
+            if baked.constant:
+                return None
         parts = []
         for sock in [s for s in node.inputs if s.type == "SHADER"][:2]:
             part, src = ShaderMix(), source(sock)
@@ -495,19 +501,35 @@ class Materials:
             parts.append(part)
         first, second = parts
         if len(first.bsdfs) != 1:
-            if len(second.bsdfs) != 1:
+            if len(second.bsdfs) != 1 or angle is not None:
                 return None
             first, second = second, first
             baked = Baked(1.0 - baked.value, baked.tex_node)
-        mask: dict = {}
-        self._set_baked(mask, "mix_weight_texture", baked, what)
-        other = self._add_mix(mat, second, name=f"{mat.name} (masked mix)")
+        other = self._add_mix(mat, second, name=f"{mat.name} (varying mix)")
         w, args = first.bsdfs[0]
         args = {**args, "scatter_tint": tuple(float(c) * w for c in args.get("scatter_tint", (1.0, 1.0, 1.0)))}
-        args.update(mix_material=other, mix_weight=1.0, mix_weight_texture=mask["mix_weight_texture"])
-        if "uv_transforms" in mask:
-            args["uv_transforms"] = {**args.get("uv_transforms", {}), **mask["uv_transforms"]}
+        args.update(mix_material=other, mix_weight=1.0)
+        if angle is not None:
+            args["mix_weight_angle"] = angle
+        else:
+            mask: dict = {}
+            self._set_baked(mask, "mix_weight_texture", baked, what)
+            args["mix_weight_texture"] = mask["mix_weight_texture"]
+            if "uv_transforms" in mask:
+                args["uv_transforms"] = {**args.get("uv_transforms", {}), **mask["uv_transforms"]}
         return self.scene.add_material(mat.name, **args)
+
+    def _angle_factor(self, mat, node, out):
+        """A Fresnel node or a Layer Weight output (with their own normal) as ``add_material``'s
+        ``mix_weight_angle``; None for anything else."""
+        if source(node.inputs.get("Normal")) is not None:
+            return None
+        if node.type == "FRESNEL":
+            return ("fresnel", max(self._scalar(mat, node.inputs.get("IOR"), "Fresnel IOR", 1.5), 1e-5))
+        if node.type == "LAYER_WEIGHT" and out.name in ("Fresnel", "Facing"):
+            blend = min(max(self._scalar(mat, node.inputs.get("Blend"), "Layer Weight blend", 0.5), 0.0), 1.0)
+            return ("layer_fresnel" if out.name == "Fresnel" else "layer_facing", blend)
+        return None
 
     def _add_mix(self, mat, mix: ShaderMix, name: str | None = None) -> int:
         """The material for a weighted sum of closures: stochastic coverage of 1 − transparency;

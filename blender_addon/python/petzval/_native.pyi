@@ -117,6 +117,7 @@ class Scene:
         mix_material: int | None = None,
         mix_weight: float = 0.0,
         mix_weight_texture: int | None = None,
+        mix_weight_angle: tuple[str, float] | None = None,
         uv_transforms: dict[str, Sequence[Sequence[float]]] | None = None,
     ) -> int:
         """Adds a glTF metallic-roughness material and returns its index.
@@ -147,7 +148,10 @@ class Scene:
         this one, an unbiased estimate of the weighted sum of the two BSDFs; emission, alpha and
         the normal map stay this material's. ``mix_weight_texture`` masks the weight: where the
         surface is hit, the probability is ``mix_weight`` times the texture's red channel
-        (clamped to [0, 1]; a Mix Shader factor from an image). ``uv_transforms`` maps a texture
+        (clamped to [0, 1]; a Mix Shader factor from an image). ``mix_weight_angle`` multiplies
+        it by a factor of the viewing angle, as Cycles' nodes compute it: ``("fresnel", ior)``
+        (the Fresnel node), ``("layer_fresnel", blend)`` or ``("layer_facing", blend)`` (the
+        Layer Weight node's outputs). ``uv_transforms`` maps a texture
         field (``"base_color_texture"``, ``"metallic_roughness_texture"``, ``"normal_texture"``,
         ``"emission_texture"``, ``"mix_weight_texture"``) to a 2 x 3 affine map of the texture coordinates, rows
         ``[[a, b, c], [d, e, f]]``: the lookup is at ``(a u + b v + c, d u + e v + f)``, in the

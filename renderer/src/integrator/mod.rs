@@ -17,7 +17,7 @@ pub use bsdf::{Bsdf, BsdfSample, Coat, SurfaceBsdf};
 pub use light_sampling::spot_attenuation;
 pub use lights::{LightSample, LightSelection};
 pub use packet::PACKET;
-pub use path::{scattering_material, LightStrategy, PathSample, PathTracer};
+pub use path::{angle_factor, scattering_material, LightStrategy, PathSample, PathTracer};
 
 use glam::Vec3;
 use std::time::Instant;

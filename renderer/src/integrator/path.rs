@@ -28,10 +28,10 @@
 use glam::Vec3;
 
 use super::accel::{RenderScene, SurfaceHit};
-use super::bsdf::{Bsdf, SurfaceBsdf};
+use super::bsdf::{fresnel_dielectric, Bsdf, SurfaceBsdf};
 use super::lights::env_radiance;
 use crate::sampler::PixelSampler;
-use crate::scene::MaterialMix;
+use crate::scene::{AngleWeight, MaterialMix};
 
 /// Which estimators reach emissive triangles and the environment (for tests and comparisons;
 /// punctual lights always use light sampling).
@@ -125,23 +125,46 @@ fn base_color_of(scene: &RenderScene, hit: &SurfaceHit, id: u32) -> Vec3 {
     mat.base_color.truncate() * base_tex * vertex.truncate()
 }
 
-/// A mix's probability at a hit: its weight, times its mask's red channel where it has one.
-fn mix_weight(scene: &RenderScene, hit: &SurfaceHit, mix: &MaterialMix) -> f32 {
-    match scene.texture(mix.weight_texture, hit.uv0, hit.uv1) {
+/// A mix's probability at a hit seen from direction `wo` (unit, away from the surface): its
+/// weight, times its mask's red channel and its angle factor where it has them.
+fn mix_weight(scene: &RenderScene, hit: &SurfaceHit, wo: Vec3, mix: &MaterialMix) -> f32 {
+    let mut w = match scene.texture(mix.weight_texture, hit.uv0, hit.uv1) {
         Some(t) if t.x.is_finite() => mix.weight * t.x.clamp(0.0, 1.0),
         Some(_) => 0.0,
         None => mix.weight,
+    };
+    if let Some(angle) = mix.weight_angle {
+        let backfacing = hit.geometric_normal.dot(wo) < 0.0;
+        let f = angle_factor(&angle, hit.shading_normal.dot(wo).abs(), backfacing);
+        w *= if f.is_finite() { f.clamp(0.0, 1.0) } else { 0.0 };
+    }
+    w
+}
+
+/// A Fresnel or Layer Weight node's factor at μ = |cos θ| (see [`AngleWeight`]), as Cycles'
+/// nodes compute it; `backfacing` when the view is behind the surface.
+pub fn angle_factor(a: &AngleWeight, mu: f32, backfacing: bool) -> f32 {
+    let mu = mu.clamp(0.0, 1.0);
+    let fresnel = |eta: f32| fresnel_dielectric(mu, if backfacing { 1.0 / eta } else { eta });
+    match *a {
+        AngleWeight::Fresnel { ior } => fresnel(ior.max(1e-5)),
+        AngleWeight::LayerFresnel { blend } => fresnel(1.0 / (1.0 - blend.clamp(0.0, 1.0)).max(1e-5)),
+        AngleWeight::LayerFacing { blend } => {
+            let b = blend.clamp(0.0, 1.0 - 1e-5);
+            let k = if b < 0.5 { 2.0 * b } else { 0.5 / (1.0 - b) };
+            1.0 - mu.powf(k)
+        }
     }
 }
 
-/// The albedo output's colour at a hit: the base colour times the scatter tint, averaged over
-/// a mix chain by its weights.
-fn albedo(scene: &RenderScene, hit: &SurfaceHit) -> Vec3 {
+/// The albedo output's colour at a hit seen from `wo`: the base colour times the scatter tint,
+/// averaged over a mix chain by its weights.
+fn albedo(scene: &RenderScene, hit: &SurfaceHit, wo: Vec3) -> Vec3 {
     let mats = &scene.scene().materials;
     let (mut id, mut share, mut sum) = (hit.material_id, 1.0f32, Vec3::ZERO);
     loop {
         let m = &mats[id as usize];
-        let w = m.mix.as_ref().map_or(0.0, |x| mix_weight(scene, hit, x));
+        let w = m.mix.as_ref().map_or(0.0, |x| mix_weight(scene, hit, wo, x));
         sum += share * (1.0 - w) * base_color_of(scene, hit, id) * m.scatter_tint;
         match m.mix {
             Some(x) if w > 0.0 => {
@@ -153,14 +176,15 @@ fn albedo(scene: &RenderScene, hit: &SurfaceHit) -> Vec3 {
     }
 }
 
-/// The material that scatters at a hit of material `id`: `id` itself, or one along its mix
-/// chain ([`crate::scene::Material::mix`]) chosen by `u` in [0, 1); with `u` remapped to
-/// [0, 1) for the lobe choice, so no sample dimension is added.
-pub fn scattering_material(scene: &RenderScene, hit: &SurfaceHit, id: u32, u: f32) -> (u32, f32) {
+/// The material that scatters at a hit of material `id` seen from `wo` (unit, away from the
+/// surface): `id` itself, or one along its mix chain ([`crate::scene::Material::mix`]) chosen
+/// by `u` in [0, 1); with `u` remapped to [0, 1) for the lobe choice, so no sample dimension is
+/// added.
+pub fn scattering_material(scene: &RenderScene, hit: &SurfaceHit, wo: Vec3, id: u32, u: f32) -> (u32, f32) {
     let mats = &scene.scene().materials;
     let (mut id, mut u) = (id, u);
     while let Some(mix) = &mats[id as usize].mix {
-        let w = mix_weight(scene, hit, mix);
+        let w = mix_weight(scene, hit, wo, mix);
         if u < w {
             u /= w;
             id = mix.material;
@@ -331,7 +355,7 @@ impl PathTracer {
                     out.albedo = base;
                     first_bsdf = Some(bsdf);
                 } else {
-                    out.albedo = albedo(scene, &hit);
+                    out.albedo = albedo(scene, &hit, wo);
                 }
                 let n = hit.shading_normal;
                 out.normal = if n.dot(wo) >= 0.0 { n } else { -n };
@@ -380,7 +404,7 @@ impl PathTracer {
 
             // The material that scatters (one of a Mix Shader's, chosen by the lobe sample).
             let (scatter_id, u_lobe) = if scene.scene().materials[hit.material_id as usize].mix.is_some() {
-                scattering_material(scene, &hit, hit.material_id, u_lobe)
+                scattering_material(scene, &hit, wo, hit.material_id, u_lobe)
             } else {
                 (hit.material_id, u_lobe)
             };

@@ -195,6 +195,30 @@ pub struct MaterialMix {
     /// A mask multiplying `weight` where the surface is hit: its red channel, clamped to
     /// [0, 1] (a Mix Shader factor from an image).
     pub weight_texture: Option<TextureRef>,
+    /// A factor of the viewing angle multiplying `weight` (a Mix Shader factor from a Fresnel or
+    /// Layer Weight node).
+    pub weight_angle: Option<AngleWeight>,
+}
+
+/// A Mix Shader factor that depends on the angle between the view and the shading normal, as
+/// Cycles' nodes compute it (μ = |cos| of that angle; front or back as the geometric normal says).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum AngleWeight {
+    /// The Fresnel node: the dielectric reflectance of `ior` at μ (1/ior seen from behind).
+    Fresnel {
+        /// Index of refraction.
+        ior: f32,
+    },
+    /// Layer Weight's Fresnel output: the reflectance of 1/(1 − blend) (its inverse from behind).
+    LayerFresnel {
+        /// Blend in [0, 1].
+        blend: f32,
+    },
+    /// Layer Weight's Facing output: 1 − μ^k, k = 2·blend up to 0.5, 0.5/(1 − blend) above.
+    LayerFacing {
+        /// Blend in [0, 1].
+        blend: f32,
+    },
 }
 
 impl Default for Material {
