@@ -176,7 +176,7 @@ impl PyScene {
     }
 
     /// Adds a glTF metallic-roughness material; returns its index.
-    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true, light_emitter = false, visible_to_camera = true, transmission = 0.0, coat_weight = 0.0, coat_roughness = 0.03, coat_ior = 1.5, coat_tint = vec![1.0, 1.0, 1.0], scatter_tint = vec![1.0, 1.0, 1.0], metal_fresnel = "f82", edge_tint = vec![1.0, 1.0, 1.0], mix_material = None, mix_weight = 0.0, mix_weight_texture = None, mix_weight_angle = None, uv_transforms = None))]
+    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true, light_emitter = false, visible_to_camera = true, transmission = 0.0, coat_weight = 0.0, coat_roughness = 0.03, coat_ior = 1.5, coat_tint = vec![1.0, 1.0, 1.0], scatter_tint = vec![1.0, 1.0, 1.0], metal_fresnel = "f82", edge_tint = vec![1.0, 1.0, 1.0], translucent = false, mix_material = None, mix_weight = 0.0, mix_weight_texture = None, mix_weight_angle = None, uv_transforms = None))]
     #[allow(clippy::too_many_arguments)]
     fn add_material(
         &mut self,
@@ -205,6 +205,7 @@ impl PyScene {
         scatter_tint: Vec<f64>,
         metal_fresnel: &str,
         edge_tint: Vec<f64>,
+        translucent: bool,
         mix_material: Option<usize>,
         mix_weight: f64,
         mix_weight_texture: Option<usize>,
@@ -328,6 +329,7 @@ impl PyScene {
                 coat_tint: non_negative_rgb(name, "coat_tint", &coat_tint)?,
                 scatter_tint: non_negative_rgb(name, "scatter_tint", &scatter_tint)?,
                 metal_fresnel,
+                translucent,
                 mix,
             };
             let mut m = m;

@@ -340,6 +340,25 @@ fn vertex_colours_multiply_the_base_colour_and_alpha() {
     assert_eq!(right.material_id, 0, "interpolated alpha 0.8: kept");
 }
 
+/// Blender's Translucent BSDF: a Lambertian plane that scatters through itself, over a large
+/// emitter facing up (radiance 1, the sky black), shows base × 1 from above (within the 0.1 %
+/// of the lower hemisphere the emitter misses, and 2 % noise); the same plane reflecting
+/// (not translucent) shows nothing there.
+#[test]
+fn translucent_surfaces_scatter_through() {
+    let plane = quad(Vec3::new(-1.0, 0.0, 1.0), Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -2.0), 0);
+    let lamp = quad(Vec3::new(-20.0, -0.5, 20.0), Vec3::new(40.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -40.0), 1);
+    let leaf = Material { translucent: true, ..diffuse(Vec3::splat(0.7)) };
+    for (material, want) in [(leaf, 0.7f32), (diffuse(Vec3::splat(0.7)), 0.0)] {
+        let rs = RenderScene::new(scene_of(&[plane.clone(), lamp.clone()], vec![material, emitter(Vec3::ONE, false)]))
+            .unwrap();
+        let (l, _) = mean_radiance(&PathTracer::default(), &rs, Vec3::new(0.1, 2.0, 0.2), Vec3::NEG_Y, 7, 4096);
+        for k in 0..3 {
+            assert!((l[k] - want).abs() <= 0.02 * 0.7, "translucent {}: radiance {l}, expected {want}", want > 0.0);
+        }
+    }
+}
+
 /// Cycles' Fresnel and Layer Weight factors: the dielectric reflectance head-on ((n − 1)/(n + 1))²
 /// (Fresnel IOR 1.5: 0.04; Layer Weight Fresnel, blend 0.5: index 2, 1/9), total internal
 /// reflection seen from behind at grazing angles, and Facing 1 − μ^k with k = 2·blend below one

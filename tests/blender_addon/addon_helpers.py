@@ -399,10 +399,11 @@ def _varnish(nt):
 def _add_shader_objects(b):
     """The "shaders" variant's materials: a tinted rough Glass BSDF on the small sphere, a Mix
     Shader of a red Diffuse and a golden Glossy BSDF inside a node group on the big one, a Metallic
-    BSDF (F82, its default Edge Tint; roughness from the checker through a ColorRamp) on a cube, a
-    leaf card mixing a green Diffuse (an RGB node through Bright/Contrast) with a Transparent
-    BSDF, a small ball adding an orange Emission to a Diffuse coloured by the checker times a
-    pale blue (Mix Color, Multiply), a card mixing a Diffuse and a Glossy BSDF by the checker
+    BSDF (F82, its default Edge Tint; roughness from the checker through a ColorRamp and a Map
+    Range) on a cube, a leaf card mixing a green Diffuse (an RGB node through Bright/Contrast and
+    RGB Curves) and a yellow-green Translucent BSDF with a Transparent BSDF, a small ball adding
+    an orange Emission to a Diffuse coloured by the checker times a pale blue (Mix Color,
+    Multiply, then Hue/Saturation/Value), a card mixing a Diffuse and a Glossy BSDF by the checker
     (a mask through RGB to BW), and a sphere mixing them by a Layer Weight's Fresnel."""
     spheres = [o for o in b.context.scene.objects if o.name.startswith("Sphere")]
     small, big = sorted(spheres, key=lambda o: o.dimensions.x)
@@ -420,7 +421,13 @@ def _add_shader_objects(b):
     b.context.active_object.data.materials.append(
         _node_material(
             "Leaf",
-            lambda nt: _combine(nt, "MixShader", _shader(nt, "BsdfTransparent"), _leaf_green(nt), factor=0.6),
+            lambda nt: _combine(
+                nt,
+                "MixShader",
+                _shader(nt, "BsdfTransparent"),
+                _combine(nt, "MixShader", _leaf_green(nt), _shader(nt, "BsdfTranslucent", Color=(0.5, 0.8, 0.2, 1.0))),
+                factor=0.6,
+            ),
         )
     )
     b.ops.mesh.primitive_plane_add(size=0.8, location=(-0.9, 3.2, 1.0), rotation=(math.radians(90.0), 0.0, 0.0))

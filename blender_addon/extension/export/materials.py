@@ -5,7 +5,7 @@ Specular Tint of the metallic part, alpha, emission, normal map, Transmission We
 Weight, Roughness, IOR and Tint) with Image Texture nodes where glTF can take them, and a base
 colour from a Color Attribute node (or an Attribute node naming a geometry attribute): the
 mesh's colours, which the renderer multiplies into the base colour as glTF's ``COLOR_0``;
-Diffuse, Glossy, Metallic, Glass, Refraction (as Glass), Transparent BSDFs and Emission
+Diffuse, Translucent, Glossy, Metallic, Glass, Refraction (as Glass), Transparent BSDFs and Emission
 shaders, joined by Mix and Add Shaders (a weighted sum of closures: transparency becomes
 stochastic coverage, emission adds up, and each scattering event picks one BSDF by its weight,
 ``ShaderMix``). Anything else falls back to the material's viewport display colour and is
@@ -398,6 +398,11 @@ class Materials:
             v = value(node, "Anisotropy", 0.0)
             if (isinstance(v, float) and v != 0.0) or t == "BSDF_ANISOTROPIC":
                 self.notes.warn(f"material '{name}': Anisotropy")
+            mix.bsdfs.append((weight, kw))
+            return None
+        if t == "BSDF_TRANSLUCENT":
+            kw = self._diffuse(mat, node)
+            kw["translucent"] = True
             mix.bsdfs.append((weight, kw))
             return None
         if t == "BSDF_METALLIC":

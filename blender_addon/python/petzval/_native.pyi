@@ -114,6 +114,7 @@ class Scene:
         scatter_tint: Sequence[float] = (1.0, 1.0, 1.0),
         metal_fresnel: str = "f82",
         edge_tint: Sequence[float] = (1.0, 1.0, 1.0),
+        translucent: bool = False,
         mix_material: int | None = None,
         mix_weight: float = 0.0,
         mix_weight_texture: int | None = None,
@@ -142,21 +143,23 @@ class Scene:
         Fresnel reflectance: ``"f82"`` (Schlick's from the base colour, less Cycles' F82 term
         that makes it ``edge_tint`` (linear RGB in [0, 1]) times Schlick's near 82°: the
         Specular Tint of a metallic Principled BSDF, the Metallic BSDF's Edge Tint) or
-        ``"constant"`` (the base colour at every angle: the Glossy BSDF). ``mix_material`` and ``mix_weight`` are
-        a Mix Shader: with probability ``mix_weight`` (in [0, 1]) a scattering event uses
-        material ``mix_material`` (added before this one, and it may mix further) instead of
-        this one, an unbiased estimate of the weighted sum of the two BSDFs; emission, alpha and
-        the normal map stay this material's. ``mix_weight_texture`` masks the weight: where the
-        surface is hit, the probability is ``mix_weight`` times the texture's red channel
-        (clamped to [0, 1]; a Mix Shader factor from an image). ``mix_weight_angle`` multiplies
-        it by a factor of the viewing angle, as Cycles' nodes compute it: ``("fresnel", ior)``
-        (the Fresnel node), ``("layer_fresnel", blend)`` or ``("layer_facing", blend)`` (the
-        Layer Weight node's outputs). ``uv_transforms`` maps a texture
-        field (``"base_color_texture"``, ``"metallic_roughness_texture"``, ``"normal_texture"``,
-        ``"emission_texture"``, ``"mix_weight_texture"``) to a 2 x 3 affine map of the texture coordinates, rows
-        ``[[a, b, c], [d, e, f]]``: the lookup is at ``(a u + b v + c, d u + e v + f)``, in the
-        coordinates ``add_mesh`` takes (v down; Blender's Mapping node, with v flipped). Texture
-        indices come from :meth:`add_texture`."""
+        ``"constant"`` (the base colour at every angle: the Glossy BSDF). ``translucent`` makes
+        the surface scatter through itself instead of back (every direction mirrored to the far
+        side: with roughness 1 and specular 0, Blender's Translucent BSDF). ``mix_material`` and
+        ``mix_weight`` are a Mix Shader: with probability ``mix_weight`` (in [0, 1]) a
+        scattering event uses material ``mix_material`` (added before this one, and it may mix
+        further) instead of this one, an unbiased estimate of the weighted sum of the two BSDFs;
+        emission, alpha and the normal map stay this material's. ``mix_weight_texture`` masks
+        the weight: where the surface is hit, the probability is ``mix_weight`` times the
+        texture's red channel (clamped to [0, 1]; a Mix Shader factor from an image).
+        ``mix_weight_angle`` multiplies it by a factor of the viewing angle, as Cycles' nodes
+        compute it: ``("fresnel", ior)`` (the Fresnel node), ``("layer_fresnel", blend)`` or
+        ``("layer_facing", blend)`` (the Layer Weight node's outputs). ``uv_transforms`` maps a
+        texture field (``"base_color_texture"``, ``"metallic_roughness_texture"``,
+        ``"normal_texture"``, ``"emission_texture"``, ``"mix_weight_texture"``) to a 2 x 3
+        affine map of the texture coordinates, rows ``[[a, b, c], [d, e, f]]``: the lookup is at
+        ``(a u + b v + c, d u + e v + f)``, in the coordinates ``add_mesh`` takes (v down;
+        Blender's Mapping node, with v flipped). Texture indices come from :meth:`add_texture`."""
     def material_variant(self, material: int, visible_to_camera: bool = True, terminator_offset: float = 0.1) -> int:
         """Adds a copy of material ``material`` with an object's settings and returns its index:
         ``visible_to_camera`` (its Ray Visibility > Camera) and ``terminator_offset`` (its

@@ -408,23 +408,28 @@ impl PathTracer {
             } else {
                 (hit.material_id, u_lobe)
             };
-            let tint = scene.scene().materials[scatter_id as usize].scatter_tint;
+            let scatter_mat = &scene.scene().materials[scatter_id as usize];
+            let (tint, translucent) = (scatter_mat.scatter_tint, scatter_mat.translucent);
             let bsdf = match first_bsdf.take() {
                 Some(b) if scatter_id == hit.material_id => b,
                 _ => material_bsdf_of(scene, &hit, scatter_id).0,
             };
-            let sb = SurfaceBsdf::new(bsdf, hit.geometric_normal, hit.shading_normal, wo);
+            // A translucent surface (Blender's Translucent BSDF) scatters through itself: its
+            // Lambertian BSDF placed as if seen from the far side (wo mirrored through the
+            // surface), so that it scatters there.
+            let wo_s = if translucent { wo - 2.0 * wo.dot(hit.geometric_normal) * hit.geometric_normal } else { wo };
+            let sb = SurfaceBsdf::new(bsdf, hit.geometric_normal, hit.shading_normal, wo_s);
 
             // Next-event estimation (lights chosen by the shading normal, as Cycles does, from
             // both sides where the BSDF transmits; the shadow ray leaves from the smooth surface
             // near a terminator).
-            let select_n = if sb.bsdf.transmits() { Vec3::ZERO } else { sb.n };
+            let select_n = if translucent || sb.bsdf.transmits() { Vec3::ZERO } else { sb.n };
             // A normal-mapped surface keeps the geometric normal's test: Cycles' bump shadowing
             // term is zero for light below the geometric surface.
             let bumped = scene.scene().materials[hit.material_id as usize].normal_texture.is_some();
             if let Some(ls) = scene.sample_light_at(hit.position, select_n, u_pick, u_light) {
                 if ls.delta || nee {
-                    let f = tint * if bumped { sb.eval(wo, ls.wi) } else { sb.eval_light(wo, ls.wi) };
+                    let f = tint * if bumped { sb.eval(wo_s, ls.wi) } else { sb.eval_light(wo_s, ls.wi) };
                     if f != Vec3::ZERO {
                         let origin = scene.shadow_origin(&hit, sb.n, sb.ng, ls.wi);
                         let visible = match ls.target {
@@ -439,7 +444,7 @@ impl PathTracer {
                             let w = if ls.delta || self.strategy != LightStrategy::Mis {
                                 1.0
                             } else {
-                                let bsdf_pdf = if bumped { sb.pdf(wo, ls.wi) } else { sb.pdf_light(wo, ls.wi) };
+                                let bsdf_pdf = if bumped { sb.pdf(wo_s, ls.wi) } else { sb.pdf_light(wo_s, ls.wi) };
                                 power_heuristic(ls.pdf, bsdf_pdf)
                             };
                             if ls.pdf > 0.0 {
@@ -451,7 +456,7 @@ impl PathTracer {
             }
 
             // BSDF sample.
-            let Some(bs) = sb.sample(wo, u_bsdf, u_lobe) else { break };
+            let Some(bs) = sb.sample(wo_s, u_bsdf, u_lobe) else { break };
             beta *= bs.weight * tint;
             if !(beta.max_element() > 0.0) || !beta.is_finite() {
                 break;

@@ -20,6 +20,7 @@
 //! | `Material.transmission` | f32 in [0, 1]: glass share of the dielectric part | — | 0 |
 //! | `Material.scatter_tint` | RGB multiplying all scattered light (Blender's Glass and Refraction colour) | — | white |
 //! | `Material.metal_fresnel` | [`MetalFresnel`]: F82 tint (Specular/Edge Tint) or constant (Glossy BSDF) | — | F82, white |
+//! | `Material.translucent` | bool: scatters through the surface (Translucent BSDF) | — | false |
 //! | `Material.mix` | [`MaterialMix`]: another material scattering with a probability (Mix Shader) | — | none |
 //! | `Instance.mesh` | u32 | index into `Scene::meshes` | — |
 //! | `Instance.object_to_world` | [`Affine3A`] (any invertible affine map: rotation, non-uniform or negative scale, shear) | metres | — |
@@ -151,6 +152,10 @@ pub struct Material {
     /// Tint; white = plain Schlick, glTF and USD), or the base colour at every angle (Blender's
     /// Glossy BSDF).
     pub metal_fresnel: MetalFresnel,
+    /// The surface scatters through itself instead of back (every direction mirrored to the
+    /// far side: a Lambertian material becomes Blender's Translucent BSDF). False for glTF and
+    /// USD.
+    pub translucent: bool,
     /// Blender's Mix Shader: with probability `weight` the surface scatters as another
     /// material (chosen per scattering event, an unbiased estimate of the weighted sum of
     /// the two). Emission, alpha and the shading normal stay this material's. None for glTF
@@ -248,6 +253,7 @@ impl Default for Material {
             coat_tint: Vec3::ONE,
             scatter_tint: Vec3::ONE,
             metal_fresnel: MetalFresnel::default(),
+            translucent: false,
             mix: None,
         }
     }

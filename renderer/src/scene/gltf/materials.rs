@@ -247,6 +247,7 @@ impl Loader<'_> {
                 coat_tint: Vec3::ONE,
                 scatter_tint: Vec3::ONE,
                 metal_fresnel: Default::default(),
+                translucent: false,
                 mix: None,
             });
         }
