@@ -553,4 +553,25 @@ fn gltf_draco_meshes() {
     for (k, what) in ["position", "normal", "uv", "colour"].iter().enumerate() {
         assert!(worst[k] <= limits[k], "{what}: worst difference {} > {}", worst[k], limits[k]);
     }
+    // an attribute the compressed mesh does not hold and with no data of its own is an error
+    // naming its accessor (not a read of the compressed bytes)
+    let bytes = std::fs::read(data("draco/draco.glb")).unwrap();
+    let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+    let mut json: serde_json::Value = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
+    let ext = &mut json["meshes"][0]["primitives"][0]["extensions"]["KHR_draco_mesh_compression"];
+    let colour = ext["attributes"].as_object_mut().unwrap().remove("COLOR_0").unwrap();
+    assert_eq!(colour, 3, "COLOR_0 is Draco attribute 3 (and accessor 3) in this file");
+    let mut chunk = serde_json::to_vec(&json).unwrap();
+    chunk.resize(chunk.len().div_ceil(4) * 4, b' ');
+    let rest = &bytes[20 + json_len..];
+    let mut glb = Vec::new();
+    glb.extend_from_slice(&bytes[..8]);
+    glb.extend_from_slice(&((20 + chunk.len() + rest.len()) as u32).to_le_bytes());
+    glb.extend_from_slice(&(chunk.len() as u32).to_le_bytes());
+    glb.extend_from_slice(b"JSON");
+    glb.extend_from_slice(&chunk);
+    glb.extend_from_slice(rest);
+    let Err(err) = load_gltf_slice(&glb, None, "draco-without-colour.glb") else { panic!("loaded") };
+    let err = err.to_string();
+    assert!(err.contains("accessors[3].bufferView"), "{err}");
 }

@@ -431,13 +431,16 @@ class Materials:
             kw.setdefault("uv_transforms", {})["metallic_roughness_texture"] = uv
 
     def _tinted(self, mat, node) -> dict:
-        """Glass and Refraction BSDFs: white glass times the node's Color, which scales the
-        whole closure, reflection and refraction (a texture or colour attribute goes in as the
-        base colour instead, which tints the refracted light only, by its square root at each
-        crossing)."""
+        """Glass and Refraction BSDFs: white glass times the node's Color (a constant, or a chain
+        of nodes evaluating to one), which scales the whole closure, reflection and refraction;
+        a texture or colour attribute goes in as the base colour instead, which tints the
+        refracted light only, by its square root at each crossing."""
         kw = self._base_colour(mat, node, "Color")
         src = source(node.inputs.get("Color"))
-        if src is not None and src[0].type != "RGB":
+        # a colour that varies (a texture, a colour attribute) cannot be a tint; a constant one
+        # (an RGB node, a chain of them) can
+        varies = "base_color_texture" in kw or (src is not None and src[0].type in ("VERTEX_COLOR", "ATTRIBUTE"))
+        if varies:
             self.notes.warn(
                 f"material '{mat.name}': {node.bl_label} colour from a node (rendered as the base colour: "
                 "tints the refracted light only)"

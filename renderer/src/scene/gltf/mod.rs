@@ -306,18 +306,24 @@ fn use_webp_sources(json: &mut gltf::json::Root) {
     }
 }
 
-/// `KHR_draco_mesh_compression`: a compressed primitive's accessors have no bufferView (the
-/// data is in the extension's); they are pointed at the extension's bufferView so that the
-/// document validates, and read from the decoded mesh instead ([`Loader::read_primitive`]).
+/// `KHR_draco_mesh_compression`: a compressed primitive's accessors (its indices and the
+/// attributes the extension lists) have no bufferView (the data is in the extension's); they
+/// are pointed at the extension's bufferView so that the document validates, and read from the
+/// decoded mesh instead ([`Loader::read_primitive`]).
 fn point_draco_accessors_at_their_data(json: &mut gltf::json::Root) {
     let mut fix: Vec<(usize, u32)> = Vec::new();
     for m in &json.meshes {
         for p in &m.primitives {
-            let Some(view) = draco_extension(p).and_then(|d| d.get("bufferView")).and_then(|v| v.as_u64()) else {
-                continue;
-            };
-            let accessors = p.attributes.values().map(|a| a.value()).chain(p.indices.map(|i| i.value()));
-            fix.extend(accessors.map(|a| (a, view as u32)));
+            let Some(ext) = draco_extension(p) else { continue };
+            let Some(view) = ext.get("bufferView").and_then(|v| v.as_u64()) else { continue };
+            // only what the compressed mesh holds: an attribute it lacks keeps its own data
+            // (or, without any, fails validation rather than reading compressed bytes)
+            let compressed = |name: &str| ext.get("attributes").and_then(|a| a.get(name)).is_some();
+            let attributes = p.attributes.iter().filter_map(|(semantic, a)| match semantic {
+                gltf::json::validation::Checked::Valid(s) if compressed(&s.to_string()) => Some(a.value()),
+                _ => None,
+            });
+            fix.extend(attributes.chain(p.indices.map(|i| i.value())).map(|a| (a, view as u32)));
         }
     }
     for (a, view) in fix {
