@@ -176,7 +176,7 @@ impl PyScene {
     }
 
     /// Adds a glTF metallic-roughness material; returns its index.
-    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true, light_emitter = false, visible_to_camera = true, transmission = 0.0, coat_weight = 0.0, coat_roughness = 0.03, coat_ior = 1.5, coat_tint = vec![1.0, 1.0, 1.0], scatter_tint = vec![1.0, 1.0, 1.0], metal_fresnel = "f82", edge_tint = vec![1.0, 1.0, 1.0], translucent = false, mix_material = None, mix_weight = 0.0, mix_weight_texture = None, mix_weight_angle = None, uv_transforms = None))]
+    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true, light_emitter = false, visible_to_camera = true, transmission = 0.0, coat_weight = 0.0, coat_roughness = 0.03, coat_ior = 1.5, coat_tint = vec![1.0, 1.0, 1.0], scatter_tint = vec![1.0, 1.0, 1.0], metal_fresnel = "f82", edge_tint = vec![1.0, 1.0, 1.0], translucent = false, mix_material = None, mix_weight = 0.0, mix_weight_texture = None, mix_weight_angle = None, uv_transforms = None, specular_tint = vec![1.0, 1.0, 1.0]))]
     #[allow(clippy::too_many_arguments)]
     fn add_material(
         &mut self,
@@ -211,6 +211,7 @@ impl PyScene {
         mix_weight_texture: Option<usize>,
         mix_weight_angle: Option<(String, f64)>,
         uv_transforms: Option<std::collections::BTreeMap<String, Vec<Vec<f64>>>>,
+        specular_tint: Vec<f64>,
     ) -> PyResult<usize> {
         guard(|| {
             let bc = match base_color.as_slice() {
@@ -329,6 +330,7 @@ impl PyScene {
                 coat_tint: non_negative_rgb(name, "coat_tint", &coat_tint)?,
                 scatter_tint: non_negative_rgb(name, "scatter_tint", &scatter_tint)?,
                 metal_fresnel,
+                specular_tint: non_negative_rgb(name, "specular_tint", &specular_tint)?,
                 translucent,
                 mix,
             };

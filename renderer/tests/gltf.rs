@@ -460,6 +460,42 @@ fn gltf_transmission_factor() {
     assert!(!w.contains("KHR_materials_transmission is not supported"), "{w}");
 }
 
+/// `KHR_materials_specular` as Blender 5.0.1's exporter writes Specular IOR Level and Specular
+/// Tint (specularColorFactor = tint × max(1, level × 2), specularFactor = min(1, level × 2);
+/// written by its exporter for these four materials): the level and the tint come back, and F0
+/// = F0(ior)·specularFactor·specularColorFactor for any values. A texture is named in a warning.
+#[test]
+fn gltf_specular_level_and_tint() {
+    let doc = r#"{"asset": {"version": "2.0"}, "extensionsUsed": ["KHR_materials_specular"],
+        "materials": [
+            {"name": "OrangeTint", "extensions": {"KHR_materials_specular": {"specularColorFactor": [1.0, 0.3, 0.1]}}},
+            {"name": "Level1BlueTint", "extensions": {"KHR_materials_specular": {"specularColorFactor": [0.4, 1.2, 2.0]}}},
+            {"name": "GreyTint", "extensions": {"KHR_materials_specular": {"specularColorFactor": [0.5, 0.5, 0.5]}}},
+            {"name": "Level025", "extensions": {"KHR_materials_specular": {"specularFactor": 0.5,
+                                                 "specularColorFactor": [0.4, 0.2, 0.1]}}},
+            {"name": "Textured", "extensions": {"KHR_materials_specular": {"specularFactor": 0.8,
+                                                 "specularColorTexture": {"index": 0}}}},
+            {"name": "Plain"}],
+        "textures": [{"source": 0}], "images": [{"uri": "missing.png"}],
+        "scenes": [{"nodes": []}]}"#;
+    let s = load_gltf_slice(doc.as_bytes(), None, "specular.gltf").unwrap();
+    let got: Vec<(f32, Vec3)> = s.materials.iter().map(|m| (m.specular, m.specular_tint)).collect();
+    let want = [
+        (1.0, Vec3::new(1.0, 0.3, 0.1)),
+        (2.0, Vec3::new(0.2, 0.6, 1.0)),
+        (1.0, Vec3::splat(0.5)),
+        (0.5, Vec3::new(0.4, 0.2, 0.1)),
+        (0.8, Vec3::ONE),
+        (1.0, Vec3::ONE),
+    ];
+    for ((spec, tint), (want_spec, want_tint)) in got.iter().zip(want) {
+        assert!((spec - want_spec).abs() < 1e-6 && tint.distance(want_tint) < 1e-6, "{got:?}");
+    }
+    let w = s.warnings.join("\n");
+    assert!(w.contains("specularColorTexture"), "{w}");
+    assert!(!w.contains("KHR_materials_specular is not supported"), "{w}");
+}
+
 /// `COLOR_0` as normalized bytes (VEC4) and as floats (VEC3, clamped to [0, 1], alpha 1), and a
 /// primitive without it (white), merged into one mesh.
 #[test]

@@ -528,6 +528,9 @@ fn coat(weight: f32, roughness: f32, ior: f32, tint: Vec3) -> Option<&'static Co
     Coat::new(weight, roughness, ior, tint).map(|c| &*Box::leak(Box::new(c)))
 }
 
+/// A Specular Tint for the BSDF cases.
+static SPEC_TINT: Vec3 = Vec3::new(0.9, 0.4, 1.0);
+
 fn bsdf_cases() -> Vec<(&'static str, Bsdf<'static>)> {
     vec![
         ("white diffuse", Bsdf::new(Vec3::ONE, 0.0, 1.0, 0.0, 1.5)),
@@ -552,6 +555,16 @@ fn bsdf_cases() -> Vec<(&'static str, Bsdf<'static>)> {
                 0.4,
                 1.6,
                 Vec3::new(0.9, 0.6, 0.3),
+            )),
+        ),
+        ("tinted plastic", Bsdf::new(Vec3::new(0.1, 0.3, 0.2), 0.0, 0.35, 1.0, 1.5).with_specular_tint(&SPEC_TINT)),
+        (
+            "tinted level-2 white, coated",
+            Bsdf::new(Vec3::ONE, 0.0, 0.6, 2.0, 1.5).with_specular_tint(&SPEC_TINT).with_coat(coat(
+                0.5,
+                0.2,
+                1.5,
+                Vec3::ONE,
             )),
         ),
         (
@@ -618,6 +631,52 @@ fn bsdf_energy_at_most_one() {
         assert!((e - 1.0).abs() < 0.01, "white dielectric albedo at {theta}° = {e}");
     }
     eprintln!("{report}");
+}
+
+/// Specular Tint on the dielectric layer, as Cycles' Principled BSDF has it: over a black base a
+/// nearly smooth layer reflects F0·tint head-on (per channel) and approaches the untinted
+/// reflectance at grazing; a grey tint over a white base loses no energy (the base takes exactly
+/// what the tinted layer does not reflect), and a coloured one dims the base by its brightest
+/// channel (Cycles' `closure_layering_weight`), so the channels with less tint lose energy; a
+/// white tint changes nothing.
+#[test]
+fn specular_tint_on_the_dielectric_layer() {
+    static TINT: Vec3 = Vec3::new(1.0, 0.5, 0.1);
+    static GREY: Vec3 = Vec3::splat(0.5);
+    static WHITE: Vec3 = Vec3::ONE;
+    let mut rng = Rng(41);
+    // 1. Black base, roughness 0.05: head-on F0·tint, F0 = 0.04.
+    let black = Bsdf::new(Vec3::ZERO, 0.0, 0.05, 1.0, 1.5);
+    let e = sampled_albedo(&black.with_specular_tint(&TINT), wo_at(0.0), 200_000, &mut rng);
+    let want = TINT * 0.04;
+    assert!(e.distance(want) < 0.0015, "head-on albedo {e}, expected F0·tint {want}");
+    // ... and toward grazing every channel climbs toward the untinted layer's reflectance
+    let (tinted, plain) = (
+        sampled_albedo(&black.with_specular_tint(&TINT), wo_at(85.0), 200_000, &mut rng),
+        sampled_albedo(&black, wo_at(85.0), 200_000, &mut rng),
+    );
+    assert!(
+        tinted.z > 0.5 * plain.x && tinted.z < plain.x && tinted.x <= plain.x * 1.01,
+        "at 85°: {tinted} vs {plain}"
+    );
+    // 2. White base under a grey tint: 1 at every angle (and the tint dims the layer itself).
+    for theta in [0.0f32, 45.0, 80.0] {
+        let wo = wo_at(theta);
+        let b = Bsdf::new(Vec3::ONE, 0.0, 0.3, 1.0, 1.5).with_specular_tint(&GREY);
+        let e = sampled_albedo(&b, wo, 400_000, &mut rng);
+        assert!(
+            (e.x - 1.0).abs() < 0.01 && e.distance(Vec3::splat(e.x)) < 1e-6,
+            "grey tint over white at {theta}°: {e}"
+        );
+        // 3. A coloured tint: red (tint 1) keeps 1, the others lose what the red layer takes.
+        let b = Bsdf::new(Vec3::ONE, 0.0, 0.3, 1.0, 1.5).with_specular_tint(&TINT);
+        let e = sampled_albedo(&b, wo, 400_000, &mut rng);
+        assert!((e.x - 1.0).abs() < 0.01 && e.z < e.y && e.y < e.x, "coloured tint over white at {theta}°: {e}");
+    }
+    // 4. White: the same BSDF.
+    let b = Bsdf::new(Vec3::new(0.3, 0.5, 0.7), 0.0, 0.4, 1.0, 1.5);
+    let (wo, wi) = (wo_at(30.0), wo_at(-50.0));
+    assert_eq!(b.with_specular_tint(&WHITE).eval(wo, wi), b.eval(wo, wi));
 }
 
 /// ∫ f cos dωi at `wo`, estimated from `n` BSDF samples.

@@ -546,11 +546,12 @@ def build_lights_scene(variant: str):
     Blender's default Shadow Terminator Geometry Offset (0.1) and a 12 x 6 UV sphere with 0.
     "glass" makes the two spheres glass (Transmission Weight 1: clear IOR 1.45, and a tinted one
     of roughness 0.3) over the checker ground, lit by the environment texture. "coat" coats the
-    two spheres (a red dielectric under a smooth coat of weight 1; a metal under a rougher,
-    tinted coat of weight 0.6 and IOR 1.8) over the same ground and light. "paint" colours the
-    two spheres from the meshes: the small one's Base Color from a Color Attribute node with no
-    name (the default colour attribute, per corner, float), the big one's from an Attribute node
-    naming a per-point byte colour attribute, over the same ground and light. "ortho" is "texture"
+    two spheres (a red dielectric with an orange Specular Tint and Specular IOR Level 0.75 under
+    a smooth coat of weight 1; a metal under a rougher, tinted coat of weight 0.6 and IOR 1.8)
+    over the same ground and light. "paint" colours the two spheres from the meshes: the small
+    one's Base Color from a Color Attribute node with no name (the default colour attribute, per
+    corner, float), the big one's from an Attribute node naming a per-point byte colour
+    attribute, over the same ground and light. "ortho" is "texture"
     seen through an orthographic camera (Orthographic Scale 3 m, VERTICAL fit, shifted, f/4 focused
     at 2.5 m). "shaders" has shader nodes other than the Principled BSDF over the same ground and
     light (see ``_add_shader_objects``), the ground's checker tiled, turned and shifted by a
@@ -620,6 +621,10 @@ def build_lights_scene(variant: str):
             p.inputs["Coat Tint"].default_value = (1.0, 1.0, 1.0, 1.0) if small else (0.9, 0.6, 0.3, 1.0)
             p.inputs["Roughness"].default_value = 0.5 if small else 0.35
             p.inputs["Metallic"].default_value = 0.0 if small else 1.0
+            if small:
+                # a coloured Specular Tint on the dielectric layer under the coat
+                p.inputs["Specular Tint"].default_value = (1.0, 0.55, 0.25, 1.0)
+                p.inputs["Specular IOR Level"].default_value = 0.75
         if variant == "paint":
             _paint_sphere(b, b.context.active_object, mat, small=r < 0.4)
         b.context.active_object.data.materials.append(mat)

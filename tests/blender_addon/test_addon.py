@@ -333,7 +333,8 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
         "hidden": "an area light in view and a cube hidden from camera rays",
         "terminator": "smooth low-poly meshes lit from the side (geometry offsets 0.1 and 0)",
         "glass": "a clear and a rough tinted glass sphere over a checker",
-        "coat": "a coated dielectric and a coated metal sphere (Coat Weight, Roughness, IOR, Tint) over a checker",
+        "coat": "a coated, specular-tinted dielectric and a coated metal sphere (Coat Weight, Roughness, IOR, Tint) "
+        "over a checker",
         "paint": "spheres coloured by colour attributes (Color Attribute node, Attribute node) over a checker",
         "shaders": "Glass, Glossy, Metallic and Transparent BSDFs through Mix and Add Shaders over a checker",
         "ortho": "an orthographic camera (scale 3 m, VERTICAL fit, shifted, f/4 at 2.5 m) over a sun-lit checker",

@@ -348,6 +348,8 @@ def _two_materials(pz):
         (lambda pz: pz.Scene().add_material("m", metal_fresnel="conductor"), "InvalidSceneError", ["metal_fresnel"]),
         (lambda pz: pz.Scene().add_material("m", edge_tint=(1.2, 1, 1)), "InvalidSceneError", ["edge_tint"]),
         (lambda pz: pz.Scene().add_material("m", scatter_tint=(1, -1, 1)), "InvalidSceneError", ["scatter_tint"]),
+        (lambda pz: pz.Scene().add_material("m", specular_tint=(1, 0.5, -0.1)), "InvalidSceneError", ["specular_tint"]),
+        (lambda pz: pz.Scene().add_material("m", specular_tint=(1, 0.5)), "InvalidSceneError", ["specular_tint"]),
         (lambda pz: pz.render(pz.Scene(), pz.Camera(np.eye(4)), 0, 10), "InvalidSettingsError", ["resolution"]),
         (lambda pz: pz.Camera(np.eye(4), tilt_x_deg=80), "InvalidSettingsError", ["tilt_x_deg"]),
         (lambda pz: pz.Camera(np.eye(4), lens_model="fast"), "InvalidSettingsError", ["lens_model"]),

@@ -693,13 +693,16 @@ class Materials:
         kw["specular"] = 2.0 * float(value(node, "Specular IOR Level", 0.5))
         if source(node.inputs.get("Specular IOR Level")) is not None:
             self.notes.warn(f"material '{name}': Specular IOR Level from a node (its unlinked value used)")
-        # Specular Tint: a metal's F82 tint (Cycles); on the dielectric part it is not rendered
+        # Specular Tint, as Cycles uses it: the metal's F82 tint, and F0 x tint on the dielectric
+        # specular layer (and not on the glass part's reflection, which keeps its own)
         tint = value(node, "Specular Tint", (1.0, 1.0, 1.0, 1.0))
         if isinstance(tint, tuple) and any(abs(t - 1.0) > 1e-6 for t in tint[:3]):
             if kw["metallic"] > 0.0:
                 kw["edge_tint"] = tuple(min(max(float(c), 0.0), 1.0) for c in tint[:3])
             if kw["metallic"] < 1.0 or metallic_img is not None:
-                self.notes.warn(f"material '{name}': Specular Tint (of the dielectric part)")
+                kw["specular_tint"] = tuple(max(float(c), 0.0) for c in tint[:3])
+                if float(value(node, "Transmission Weight", 0.0)) > 0.0:
+                    self.notes.warn(f"material '{name}': Specular Tint on the transmissive part's reflection")
         if source(node.inputs.get("Specular Tint")) is not None:
             self.notes.warn(f"material '{name}': Specular Tint from a node (its unlinked value used)")
 

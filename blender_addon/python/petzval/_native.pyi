@@ -120,6 +120,7 @@ class Scene:
         mix_weight_texture: int | None = None,
         mix_weight_angle: tuple[str, float] | None = None,
         uv_transforms: dict[str, Sequence[Sequence[float]]] | None = None,
+        specular_tint: Sequence[float] = (1.0, 1.0, 1.0),
     ) -> int:
         """Adds a glTF metallic-roughness material and returns its index.
 
@@ -159,7 +160,11 @@ class Scene:
         ``"normal_texture"``, ``"emission_texture"``, ``"mix_weight_texture"``) to a 2 x 3
         affine map of the texture coordinates, rows ``[[a, b, c], [d, e, f]]``: the lookup is at
         ``(a u + b v + c, d u + e v + f)``, in the coordinates ``add_mesh`` takes (v down;
-        Blender's Mapping node, with v flipped). Texture indices come from :meth:`add_texture`."""
+        Blender's Mapping node, with v flipped). ``specular_tint`` (linear RGB, non-negative) is
+        the Principled BSDF's Specular Tint on its dielectric part, as Cycles renders it: the
+        specular layer reflects F0 x tint head-on and still 1 at grazing, and the base under
+        it is dimmed by the layer's brightest channel. Texture indices come from
+        :meth:`add_texture`."""
     def material_variant(self, material: int, visible_to_camera: bool = True, terminator_offset: float = 0.1) -> int:
         """Adds a copy of material ``material`` with an object's settings and returns its index:
         ``visible_to_camera`` (its Ray Visibility > Camera) and ``terminator_offset`` (its

@@ -447,6 +447,9 @@ pub struct Bsdf<'a> {
     coat: Option<&'a Coat>,
     /// The metal's Fresnel where it is not plain Schlick (the material's, borrowed).
     metal_fresnel: Option<&'a MetalFresnel>,
+    /// The dielectric layer's Specular Tint where it is not white (the material's, borrowed;
+    /// [`Bsdf::with_specular_tint`]).
+    spec_tint: Option<&'a Vec3>,
 }
 
 impl<'a> Bsdf<'a> {
@@ -513,6 +516,7 @@ impl<'a> Bsdf<'a> {
             glass: None,
             coat: None,
             metal_fresnel: None,
+            spec_tint: None,
         }
     }
 
@@ -535,6 +539,71 @@ impl<'a> Bsdf<'a> {
             out.layered = out.diel.is_some() || out.ms_scale != Vec3::ZERO;
         }
         out
+    }
+
+    /// The same BSDF with a coloured Specular Tint on its dielectric layer (Blender's Principled
+    /// BSDF, a coloured `KHR_materials_specular` specularColorFactor). Cycles gives the layer
+    /// F0·tint head-on and 1 at grazing, between them the exact Fresnel F of η′ remapped:
+    /// `F_t = F0·t + (1 − F0·t)·s`, `s = (F − F0)/(1 − F0)`, i.e. `t·F + (1 − t)·s`, with the
+    /// multiple-scattering colour of its average, and the base under the layer weighed by the
+    /// largest channel of the layer's albedo (`closure_layering_weight`). A white tint, or no
+    /// dielectric layer, leaves the BSDF as it is. (Out of line: most materials have none.)
+    #[inline(never)]
+    pub fn with_specular_tint(self, tint: &'a Vec3) -> Self {
+        if *tint == Vec3::ONE || self.diel.is_none() || self.metallic >= 1.0 {
+            return self;
+        }
+        Bsdf { spec_tint: Some(tint), ..self }
+    }
+
+    /// The dielectric layer's F0 (that of η′).
+    #[inline]
+    fn f0_d(&self) -> f32 {
+        let r = (self.eta_d - 1.0) / (self.eta_d + 1.0);
+        r * r
+    }
+
+    /// The tinted layer's Fresnel at `cos` with its multiple-scattering scale at a μo whose
+    /// E(μo) is `e1o` (per channel; [`Bsdf::with_specular_tint`]).
+    #[inline]
+    fn tinted_fresnel(&self, tint: Vec3, cos: f32, e1o: f32) -> Vec3 {
+        let f0 = self.f0_d();
+        // F0·tint is a reflectance: at most 1 (Cycles saturates it)
+        let tint = tint.min(Vec3::splat(1.0 / f0));
+        let f = fresnel_dielectric(cos, self.eta_d);
+        let s = ((f - f0) / (1.0 - f0)).clamp(0.0, 1.0);
+        (tint * (f - s) + Vec3::splat(s)) * self.tinted_boost(tint, e1o)
+    }
+
+    /// Cycles' multiple-scattering scale of the tinted layer at E(μo) = `e1o`, per channel:
+    /// 1 + F_ms·(1 − E)/E with F_ms from the remapped average F̄_t = F0·t + (1 − F0·t)·s̄,
+    /// s̄ = (F̄ − F0)/(1 − F0).
+    fn tinted_boost(&self, tint: Vec3, e1o: f32) -> Vec3 {
+        if self.fms_d == 0.0 {
+            return Vec3::ONE;
+        }
+        // F̄ back from F_ms,d = F̄·Ē/(1 − F̄·(1 − Ē))
+        let (a1, _) = self.row.avg();
+        let f_avg = self.fms_d / (a1 + self.fms_d * (1.0 - a1));
+        let f0 = self.f0_d();
+        let s_avg = ((f_avg - f0) / (1.0 - f0)).clamp(0.0, 1.0);
+        let f0t = (tint * f0).min(Vec3::ONE);
+        let fss = f0t + (Vec3::ONE - f0t) * s_avg;
+        let fms = fss * a1 / (Vec3::ONE - fss * (1.0 - a1));
+        Vec3::ONE + fms * ((1.0 - e1o).max(0.0) / e1o.max(1e-3))
+    }
+
+    /// The tinted layer's albedo, from the untinted one `e_f` (`e1` = E(μ) with F = 1), in its
+    /// brightest channel, which weighs the base under it as Cycles' `closure_layering_weight`
+    /// does.
+    #[inline(never)]
+    fn tinted_e_d(&self, tint: Vec3, e_f: f32, e1: f32) -> f32 {
+        let f0 = self.f0_d();
+        let t = tint.max_element().min(1.0 / f0);
+        // ∫ s·D·V·μi = (E_F − F0·E1)/(1 − F0): the remap is linear in F
+        let e_s = ((e_f - f0 * e1) / (1.0 - f0)).max(0.0);
+        let boost = self.tinted_boost(Vec3::splat(t), e1).x;
+        ((e_s + t * (e_f - e_s)) * boost).clamp(0.0, 1.0)
     }
 
     /// The same BSDF with glTF's `KHR_materials_transmission` (Blender's Transmission Weight):
@@ -588,6 +657,9 @@ impl<'a> Bsdf<'a> {
     fn e_d(&self, mu: f32, e1: f32) -> f32 {
         let Some((lo, hi)) = self.diel else { return 0.0 };
         let (a, b) = (lo.at(mu), hi.at(mu));
+        if let Some(t) = self.spec_tint {
+            return self.tinted_e_d(*t, a + (b - a) * self.row.f, e1);
+        }
         ((a + (b - a) * self.row.f) * self.ms_boost(e1)).clamp(0.0, 1.0)
     }
 
@@ -614,18 +686,40 @@ impl<'a> Bsdf<'a> {
     /// whose E(μo) is `e1o` (1: no scaling).
     #[inline(always)]
     fn fresnel_boosted(&self, cos: f32, e1o: f32) -> Vec3 {
-        let fd = if self.diel.is_some() { fresnel_dielectric(cos, self.eta_d) * self.ms_boost(e1o) } else { 0.0 };
+        let fd = if self.diel.is_some() {
+            if let Some(t) = self.spec_tint {
+                return self.tinted_fresnel_mix(*t, cos, e1o);
+            }
+            fresnel_dielectric(cos, self.eta_d) * self.ms_boost(e1o)
+        } else {
+            0.0
+        };
         let dielectric = Vec3::splat((1.0 - self.metallic) * fd);
         if self.metallic == 0.0 {
             // (+ fm·0 = + 0: the same bits)
             return dielectric;
         }
+        dielectric + self.metal_fresnel_at(cos) * self.metallic
+    }
+
+    /// The metal's Fresnel reflectance at `cos`.
+    #[inline(always)]
+    fn metal_fresnel_at(&self, cos: f32) -> Vec3 {
         let w = schlick_weight(cos);
-        let fm = match self.metal_fresnel {
+        match self.metal_fresnel {
             None => self.base + (Vec3::ONE - self.base) * w,
             Some(f) => metal_fresnel(f, self.base, cos, w),
-        };
-        dielectric + fm * self.metallic
+        }
+    }
+
+    /// [`Bsdf::fresnel_boosted`] with a tinted dielectric layer.
+    #[inline(never)]
+    fn tinted_fresnel_mix(&self, tint: Vec3, cos: f32, e1o: f32) -> Vec3 {
+        let dielectric = self.tinted_fresnel(tint, cos, e1o) * (1.0 - self.metallic);
+        if self.metallic == 0.0 {
+            return dielectric;
+        }
+        dielectric + self.metal_fresnel_at(cos) * self.metallic
     }
 
     /// Probability of choosing the specular lobe for `wo`.
@@ -781,7 +875,8 @@ impl<'a> Bsdf<'a> {
                 f += self.ms_scale * ((1.0 - e1o).max(0.0) * (1.0 - self.row.e(wi.z).0).max(0.0));
             }
         }
-        let h = (wo + wi).normalize_or_zero();
+        // the specular lobe, where there is one (a pure Lambertian base has none)
+        let h = if self.diel.is_some() || self.metallic > 0.0 { (wo + wi).normalize_or_zero() } else { Vec3::ZERO };
         if h.z > 0.0 {
             let voh = wo.dot(h).max(0.0);
             let d = ggx_d(h.z, self.a2);

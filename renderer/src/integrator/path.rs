@@ -214,6 +214,9 @@ fn material_bsdf_of<'s>(scene: &'s RenderScene, hit: &SurfaceHit, id: u32) -> (B
     if metallic > 0.0 && !mat.metal_fresnel.is_schlick() {
         bsdf = bsdf.with_metal_fresnel(&mat.metal_fresnel);
     }
+    if mat.specular_tint != Vec3::ONE {
+        bsdf = bsdf.with_specular_tint(&mat.specular_tint);
+    }
     let bsdf = bsdf.with_transmission(mat.transmission, mat.ior).with_coat(scene.coat(id));
     (bsdf, base)
 }

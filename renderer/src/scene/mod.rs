@@ -20,6 +20,7 @@
 //! | `Material.transmission` | f32 in [0, 1]: glass share of the dielectric part | — | 0 |
 //! | `Material.scatter_tint` | RGB multiplying all scattered light (Blender's Glass and Refraction colour) | — | white |
 //! | `Material.metal_fresnel` | [`MetalFresnel`]: F82 tint (Specular/Edge Tint) or constant (Glossy BSDF) | — | F82, white |
+//! | `Material.specular_tint` | RGB multiplying the dielectric layer's F0 (Principled Specular Tint) | — | white |
 //! | `Material.translucent` | bool: scatters through the surface (Translucent BSDF) | — | false |
 //! | `Material.mix` | [`MaterialMix`]: another material scattering with a probability (Mix Shader) | — | none |
 //! | `Instance.mesh` | u32 | index into `Scene::meshes` | — |
@@ -152,6 +153,10 @@ pub struct Material {
     /// Tint; white = plain Schlick, glTF and USD), or the base colour at every angle (Blender's
     /// Glossy BSDF).
     pub metal_fresnel: MetalFresnel,
+    /// The dielectric layer's Specular Tint (Blender's Principled Specular Tint on the
+    /// non-metallic part, a coloured `KHR_materials_specular` specularColorFactor; linear RGB,
+    /// non-negative): F0 × tint head-on, still 1 at grazing, as Cycles has it. White = none.
+    pub specular_tint: Vec3,
     /// The surface scatters through itself instead of back (every direction mirrored to the
     /// far side: a Lambertian material becomes Blender's Translucent BSDF). False for glTF and
     /// USD.
@@ -253,6 +258,7 @@ impl Default for Material {
             coat_tint: Vec3::ONE,
             scatter_tint: Vec3::ONE,
             metal_fresnel: MetalFresnel::default(),
+            specular_tint: Vec3::ONE,
             translucent: false,
             mix: None,
         }
@@ -535,6 +541,13 @@ impl Scene {
                     file,
                     format!("material {k} '{}'", m.name),
                     format!("scatter_tint {} must be finite and non-negative", m.scatter_tint),
+                ));
+            }
+            if !(m.specular_tint.is_finite() && m.specular_tint.min_element() >= 0.0) {
+                return Err(crate::Error::scene(
+                    file,
+                    format!("material {k} '{}'", m.name),
+                    format!("specular_tint {} must be finite and non-negative", m.specular_tint),
                 ));
             }
             self.check_mix(k).map_err(|e| crate::Error::scene(file, format!("material {k} '{}'", m.name), e))?;

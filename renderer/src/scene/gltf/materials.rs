@@ -173,27 +173,29 @@ impl Loader<'_> {
             let emissive_texture =
                 self.info_ref(m.emissive_texture(), TexKind::Emissive, &format!("{loc} emissiveTexture"));
             // KHR_materials_specular: F0 = F0(ior)·specularColorFactor·specularFactor. Blender's
-            // exporter writes Specular IOR Level × 2 as specularFactor up to 1 and as a grey
-            // specularColorFactor above it (its F90 is 1 either way, as here).
-            let specular = match m.specular() {
+            // exporter writes Specular IOR Level × 2 as specularFactor up to 1, and above 1 as a
+            // scale of specularColorFactor, which also carries Specular Tint (its F90 is 1 either
+            // way, as here): specularColorFactor = tint × max(1, level × 2). So the part of the
+            // colour above 1 is the level, the rest the tint; F0 is the spec's for any values.
+            let (specular, specular_tint) = match m.specular() {
                 Some(s) => {
-                    let c = s.specular_color_factor();
-                    let grey = c[0] == c[1] && c[1] == c[2];
-                    if s.specular_texture().is_some() || s.specular_color_texture().is_some() || !grey {
+                    let c = Vec3::from_array(s.specular_color_factor());
+                    if s.specular_texture().is_some() || s.specular_color_texture().is_some() {
                         self.warn(
                             &loc,
-                            "KHR_materials_specular: a coloured specularColorFactor and the textures are not supported (the factor times the colour's mean is used)",
+                            "KHR_materials_specular: specularTexture and specularColorTexture are not supported (the factors are used)",
                         );
                     }
-                    let f = s.specular_factor() * (c[0] + c[1] + c[2]) / 3.0;
-                    if f.is_finite() && f >= 0.0 {
-                        f
+                    let f = s.specular_factor();
+                    if f.is_finite() && f >= 0.0 && c.is_finite() && c.min_element() >= 0.0 {
+                        let level = c.max_element().max(1.0);
+                        (f * level, c / level)
                     } else {
                         self.warn(&loc, "invalid specularFactor or specularColorFactor; using 1");
-                        1.0
+                        (1.0, Vec3::ONE)
                     }
                 }
-                None => 1.0,
+                None => (1.0, Vec3::ONE),
             };
             let ior = match m.ior() {
                 Some(i) if i.is_finite() && i >= 1.0 => i,
@@ -247,6 +249,7 @@ impl Loader<'_> {
                 coat_tint: Vec3::ONE,
                 scatter_tint: Vec3::ONE,
                 metal_fresnel: Default::default(),
+                specular_tint,
                 translucent: false,
                 mix: None,
             });
