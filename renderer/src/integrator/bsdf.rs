@@ -488,7 +488,8 @@ impl<'a> Bsdf<'a> {
             Some(t) if has_ms => t.f_avg * a1 / (1.0 - t.f_avg * (1.0 - a1)),
             _ => 0.0,
         };
-        let fms_m = if has_ms {
+        // (a dielectric's metal part is multiplied by 0 below: skipped, the same bits)
+        let fms_m = if has_ms && metallic > 0.0 {
             let f_avg = base + (Vec3::ONE - base) / 21.0;
             Vec3::new(fms(f_avg.x), fms(f_avg.y), fms(f_avg.z))
         } else {
