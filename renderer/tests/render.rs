@@ -277,6 +277,27 @@ fn render_furnace_smooth_sphere_loses_almost_nothing() {
     assert!(mean <= 1.0 + 1e-5 && mean > 1.0 - 5e-4, "image mean {mean}");
 }
 
+/// The environment is a light only where it varies with direction, as Cycles samples its world
+/// (a uniform world, also when Blender's USD export writes it as an image of one colour, is found
+/// by BSDF samples alone).
+#[test]
+fn only_a_varying_environment_is_a_light() {
+    use petzval_renderer::scene::environment::EnvironmentMap;
+    let sphere = icosphere(Vec3::new(0.0, 0.0, -4.0), 1.0, 2, 0);
+    let map = |texels: Vec<Vec3>| Environment::Map(EnvironmentMap::new("sky", 2, 2, texels, 1.0, 0.0).unwrap());
+    let cases = [
+        (Environment::Black, 0),
+        (Environment::Constant(Vec3::splat(0.3)), 0),
+        (map(vec![Vec3::new(0.3, 0.4, 0.5); 4]), 0),
+        (map(vec![Vec3::splat(0.3), Vec3::splat(0.3), Vec3::splat(0.3), Vec3::splat(0.31)]), 1),
+    ];
+    for (env, lights) in cases {
+        assert!(env.is_uniform() == (lights == 0), "{env:?}");
+        let rs = scene_of(std::slice::from_ref(&sphere), vec![diffuse(Vec3::ONE)], env);
+        assert_eq!(rs.light_count(), lights);
+    }
+}
+
 /// The same furnace through a thin lens at f/2 with natural vignetting off: no falloff at all,
 /// so every pixel reads 1 (the exposure normalisation must match the weights actually used).
 #[test]
@@ -1431,8 +1452,8 @@ fn adaptive_sampling_stops_noiseless_pixels_at_the_first_test() {
     assert!(r.image.rgba.iter().all(|p| (p[0] - 0.7).abs() < 1e-6), "sky value");
 }
 
-/// A ground lit by a small lamp (noisy) under a uniform sky map (noiseless; a map, so next-event
-/// estimation shares its samples between the sky and the lamp): adaptive sampling
+/// A ground lit by a small lamp (noisy) under a sky map (noiseless; a map that varies, so
+/// next-event estimation shares its samples between the sky and the lamp): adaptive sampling
 /// spends its samples on the ground, stays deterministic across thread counts, and reaches a
 /// lower error against a converged reference than fixed sampling with the same number of camera
 /// rays. The error is the relative RMSE over the frame, pooled over 6 seeds: one seed's is
@@ -1468,11 +1489,18 @@ fn adaptive_sampling_beats_fixed_sampling_at_equal_camera_rays() {
     let rs = scene_of(
         &[ground, lamp],
         vec![diffuse(Vec3::splat(0.5)), emitter(400.0)],
-        // a uniform sky given as a map, so that it is a light (a constant environment is found
-        // by BSDF samples only, and the ground would be nearly noiseless too)
+        // a sky map (0.2 above the horizon, 0.1 below), so that it is a light (a uniform
+        // environment is found by BSDF samples only, and the ground would be nearly noiseless too)
         Environment::Map(
-            petzval_renderer::scene::environment::EnvironmentMap::new("sky", 4, 2, vec![Vec3::splat(0.2); 8], 1.0, 0.0)
-                .unwrap(),
+            petzval_renderer::scene::environment::EnvironmentMap::new(
+                "sky",
+                4,
+                2,
+                [[Vec3::splat(0.2); 4], [Vec3::splat(0.1); 4]].concat(),
+                1.0,
+                0.0,
+            )
+            .unwrap(),
         ),
     );
     let cam = PinholeCamera::new(Sensor::default(), 50.0).unwrap().with_natural_vignetting(false);

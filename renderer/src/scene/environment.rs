@@ -88,6 +88,15 @@ impl Environment {
         }
     }
 
+    /// Whether its radiance is the same in every direction: a constant, or a map whose texels
+    /// are all equal.
+    pub fn is_uniform(&self) -> bool {
+        match self {
+            Environment::Black | Environment::Constant(_) => true,
+            Environment::Map(m) => m.uniform,
+        }
+    }
+
     /// Whether the environment emits nothing.
     pub fn is_black(&self) -> bool {
         match self {
@@ -207,6 +216,9 @@ pub struct EnvironmentMap {
     distribution: Arc<Distribution2D>,
     /// Largest texel component × strength.
     peak: f32,
+    /// Every texel is the same (a constant colour stored as an image, as Blender's USD export
+    /// writes a uniform world).
+    uniform: bool,
 }
 
 impl std::fmt::Debug for EnvironmentMap {
@@ -267,6 +279,7 @@ impl EnvironmentMap {
         }
         let distribution = Arc::new(Distribution2D::new(&weights, width, height));
         let peak = texels.iter().fold(0.0f32, |m, t| m.max(t.max_element())) * strength;
+        let uniform = texels.iter().all(|t| *t == texels[0]);
         Ok(EnvironmentMap {
             name: name.to_string(),
             width,
@@ -277,6 +290,7 @@ impl EnvironmentMap {
             rot: (rotation_rad.cos(), rotation_rad.sin()),
             distribution,
             peak,
+            uniform,
         })
     }
 

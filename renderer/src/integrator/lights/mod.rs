@@ -1,7 +1,11 @@
 //! Light sampling: which light a shading point samples, and the point on it.
 //!
-//! Lights are punctual lights, emissive triangles and the environment. Next-event estimation
-//! picks one light per shading point (position `p`, normal `n`):
+//! Lights are punctual lights, emissive triangles and the environment where it varies with
+//! direction. A uniform environment (a constant, or a map of one colour) is not a light: BSDF
+//! samples alone find it, as Cycles finds a world
+//! without spatial variation with its Sampling on Auto (background MIS off), so next-event
+//! estimation keeps its samples for the other lights. Next-event estimation picks one light per
+//! shading point (position `p`, normal `n`):
 //!
 //! * [`LightSelection::Tree`] (default): a light BVH ("light tree", Conty Estevez & Kulla 2018,
 //!   as pbrt-v4's `BVHLightSampler`) over the bounded lights (point, spot, emissive triangles).
@@ -33,7 +37,7 @@
 //! | spot | Power: 2π·(1 − (cos inner + cos outer)/2)·lum(I) (pbrt's spot power); Tree: 4π·lum(I) (the cone is in the bounds, as pbrt-v4) |
 //! | directional | π·r²·lum(E), r = scene bounding-sphere radius |
 //! | emissive triangle | π·area·lum(emissive factor) (×2 double sided); the emissive texture is ignored for selection but used for radiance |
-//! | environment | 4π²·r²·lum(mean radiance) (mean estimated with the environment's own importance sampling) |
+//! | environment (a map that varies) | 4π²·r²·lum(mean radiance) (mean estimated with the environment's own importance sampling) |
 //!
 //! The Power pmf is the difference of consecutive entries of the f32 CDF that is actually
 //! searched, so selection probabilities and the pmf used in estimators and MIS weights agree

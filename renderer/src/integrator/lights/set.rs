@@ -7,7 +7,7 @@ use glam::{Vec2, Vec3};
 use super::tree::{LightBounds, LightTree};
 use super::{env_sample, LightKind, LightSelection};
 use crate::integrator::bsdf::luminance;
-use crate::scene::{Environment, Light, Scene};
+use crate::scene::{Light, Scene};
 
 // ------------------------------------------------------------------------------------------
 // The light set.
@@ -161,13 +161,13 @@ impl LightSet {
                 }
             }
         }
-        // The environment is a light only where it varies with direction (a map). A uniform one
-        // is found by BSDF samples alone, as Cycles does with its world's Sampling on Auto
-        // (`LightManager::test_enabled_lights`: background MIS off for a background shader
-        // without spatial variation): cosine or glossy samples already follow what it lights,
-        // and next-event estimation keeps its samples for the other lights.
+        // The environment is a light only where it varies with direction. A uniform one (a
+        // constant, or a map of one colour) is found by BSDF samples alone, as Cycles does with
+        // its world's Sampling on Auto (`LightManager::test_enabled_lights`: background MIS off
+        // for a background shader without spatial variation): cosine or glossy samples already
+        // follow what it lights, and next-event estimation keeps its samples for the other lights.
         let mut env_light = None;
-        if matches!(scene.environment, Environment::Map(_)) && !scene.environment.is_black() {
+        if !scene.environment.is_uniform() && !scene.environment.is_black() {
             // Mean luminance over the sphere, (1/4π)∫L dω, estimated with the environment's own
             // importance sampling (stratified) so that small bright suns are not missed.
             const N: u32 = 32;
