@@ -261,15 +261,20 @@ fn render_furnace_white_sphere_pinhole() {
     assert!(worst < 6.0 * sigma + 1e-3, "worst pixel deviates by {worst}, noise σ = {sigma}");
 }
 
+/// A white Lambertian icosphere with smooth normals in a uniform radiance-1 environment.
+fn smooth_furnace() -> RenderScene {
+    scene_of(
+        &[icosphere(Vec3::new(0.0, 0.0, -4.0), 1.0, 4, 0)],
+        vec![diffuse(Vec3::ONE)],
+        Environment::Constant(Vec3::ONE),
+    )
+}
+
 /// The furnace's sphere with smooth normals: samples below a facet are discarded (see above), a
 /// loss bounded here by 0.05 % of the image mean (measured 2026-12-06: 0.005 %).
 #[test]
 fn render_furnace_smooth_sphere_loses_almost_nothing() {
-    let rs = scene_of(
-        &[icosphere(Vec3::new(0.0, 0.0, -4.0), 1.0, 4, 0)],
-        vec![diffuse(Vec3::ONE)],
-        Environment::Constant(Vec3::ONE),
-    );
+    let rs = smooth_furnace();
     let cam = PinholeCamera::new(Sensor::default(), 50.0).unwrap().with_natural_vignetting(false);
     let img = shoot_img(&rs, Camera::Pinhole(cam), &settings(72, 48, 64, 1, PixelFilter::default()));
     let mean = img.rgba.iter().map(|p| p[0] as f64).sum::<f64>() / img.rgba.len() as f64;
@@ -302,11 +307,7 @@ fn only_a_varying_environment_is_a_light() {
 /// so every pixel reads 1 (the exposure normalisation must match the weights actually used).
 #[test]
 fn render_furnace_thin_lens_without_natural_vignetting() {
-    let rs = scene_of(
-        &[icosphere(Vec3::new(0.0, 0.0, -4.0), 1.0, 4, 0)],
-        vec![diffuse(Vec3::ONE)],
-        Environment::Constant(Vec3::ONE),
-    );
+    let rs = smooth_furnace();
     let cam = thin(Sensor::default(), 50.0, 2.0, 4.0, Aperture::default(), false);
     let img = shoot_img(&rs, cam, &settings(48, 32, 64, 1, PixelFilter::default()));
     let n = img.rgba.len();

@@ -679,6 +679,20 @@ def assert_spheres_match(cyc, pz, windows, names, label: str, report, max_mean_z
     assert mean_z2 <= max_mean_z2 and max_z <= max_abs_z, f"blocks: mean z² {mean_z2:.3f}, max |z| {max_z:.2f}"
 
 
+def sphere_scene_renders(
+    blender_run, name: str, key_files, build, camera: CameraSpec, world_rgb, resolution, spp: int, seeds, xs, radius
+):
+    """For a module fixture (`yield from`): a scene of spheres of `radius` centred at (x, 0, 0)
+    for x in `xs`, built by `build` and rendered by `glb_pairs`, as (glb, Cycles images, petzval
+    images, the spheres' windows); afterwards rebuilds the main scene, which the other modules'
+    tests read from Blender."""
+    try:
+        glb, cyc, pz = glb_pairs(blender_run, name, key_files, build, camera, world_rgb, resolution, spp, seeds)
+        yield glb, cyc, pz, sphere_windows(camera.name, resolution, [(x, 0.0, 0.0) for x in xs], radius)
+    finally:
+        build_scene(blender_run.workdir)
+
+
 def glb_pairs(blender_run, name: str, key_files, build, camera: CameraSpec, world_rgb, resolution, spp: int, seeds):
     """Builds a scene with `build(workdir)`, exports it as GLB and renders it with Cycles (cached
     by `key_files`' text) and `petzval render` (pinhole args), once per seed: (glb, Cycles

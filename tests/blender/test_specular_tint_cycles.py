@@ -68,41 +68,23 @@ def build_scene(tmpdir: Path) -> None:
 
 @pytest.fixture(scope="module")
 def tint_run(blender_run):
-    """The tinted scene's renders and the spheres' windows; afterwards rebuilds the main scene,
-    which the other modules' tests read from Blender."""
-    try:
-        _, cyc, pz = S.glb_pairs(
-            blender_run, "specular_tint", ("test_specular_tint_cycles.py", "blender_scenes.py"), build_scene, CAMERA,
-            WORLD_RGB, RESOLUTION, SPP, SEEDS,
-        )  # fmt: skip
-        windows = S.sphere_windows(CAMERA.name, RESOLUTION, [(x, 0.0, 0.0) for *_, x in SPHERES], SPHERE_RADIUS)
-        yield cyc, pz, windows
-    finally:
-        S.build_scene(blender_run.workdir)
+    """The tinted scene's renders and the spheres' windows."""
+    yield from S.sphere_scene_renders(
+        blender_run, "specular_tint", ("test_specular_tint_cycles.py", "blender_scenes.py"), build_scene, CAMERA,
+        WORLD_RGB, RESOLUTION, SPP, SEEDS, [x for *_, x in SPHERES], SPHERE_RADIUS,
+    )  # fmt: skip
 
 
-def test_specular_tint_matches_cycles_on_average(tint_run, report):
-    """The image means per channel within 1 %, and each sphere's mean over the middle of its
-    disc within 1 % or four standard errors."""
-    cyc, pz, windows = tint_run
+def test_specular_tint_matches_cycles(tint_run, report):
+    """The image means per channel within 1 %; each sphere's mean over the middle of its disc
+    within 1 % or four standard errors, and the 8×8-block z-test."""
+    _, cyc, pz, windows = tint_run
     ratio = B.mean_ratio((pz[0] + pz[1]) / 2, (cyc[0] + cyc[1]) / 2)
-    spheres = [(name, r, se) for (name, *_), (r, se) in zip(SPHERES, S.window_means(cyc, pz, windows), strict=True)]
     report.line(
-        f"specular tint (glTF path), 3 tinted glossy spheres vs Cycles, {RESOLUTION[0]}x{RESOLUTION[1]} {SPP} spp "
-        f"x seeds {SEEDS}: image mean petzval/Cycles R,G,B {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f}; spheres "
-        + "; ".join(f"{n} " + " ".join(f"{x:.4f}" for x in r) for n, r, _ in spheres)
+        f"specular tint (glTF path), {SPP} spp: image mean petzval/Cycles R,G,B "
+        f"{ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f}"
     )
     assert np.all(np.abs(ratio - 1.0) <= MEAN_TOL), f"image mean ratio {ratio}"
-    for name, r, se in spheres:
-        assert np.all(np.abs(r - 1.0) <= np.maximum(MEAN_TOL, 4 * se)), f"{name}: sphere mean ratio {r} ± {se}"
-
-
-def test_specular_tint_matches_cycles_block_for_block(tint_run, report):
-    cyc, pz, _ = tint_run
-    z = B.compare_blocks(cyc[0], cyc[1], pz[0], pz[1]).z
-    mean_z2, max_abs_z = float(np.mean(z**2)), float(np.max(np.abs(z)))
-    report.line(
-        f"specular tint (glTF path), blocks: mean z² {mean_z2:.3f} (≤ {MAX_MEAN_Z2}), max |z| {max_abs_z:.2f} "
-        f"(≤ {MAX_ABS_Z})"
-    )
-    assert mean_z2 <= MAX_MEAN_Z2 and max_abs_z <= MAX_ABS_Z, f"blocks: mean z² {mean_z2:.3f}, max |z| {max_abs_z:.2f}"
+    label = "specular tint (glTF path), 3 tinted glossy spheres vs Cycles"
+    names = [name for name, *_ in SPHERES]
+    S.assert_spheres_match(cyc, pz, windows, names, label, report, MAX_MEAN_Z2, MAX_ABS_Z, MEAN_TOL)
