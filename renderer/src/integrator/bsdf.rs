@@ -6,7 +6,9 @@
 //! f = (1 − m)·[ F_d(v·h)·(1 + F_ms,d·(1 − E(μo))/E(μo))·D·V  +  base/π·(1 − E_d(μo)) ]
 //!   + m·[ F_m(v·h)·D·V + F_ms,m·M ]
 //! F_d = exact dielectric Fresnel of η′, the index whose F0 is specular·((ior−1)/(ior+1))²
-//!       (Cycles' Principled BSDF: Specular IOR Level × 2 = specular; η′ = ior at 1)
+//!       (Cycles' Principled BSDF: Specular IOR Level × 2 = specular; η′ = ior at 1);
+//!       with a Specular Tint t: t·F_d + (1 − t)·(F_d − F0)/(1 − F0) per channel
+//!       ([`Bsdf::with_specular_tint`]; the base then under the layer's brightest channel)
 //! F_m = Schlick(F0 = base colour, F90 = 1)                              (metal)
 //!       − b·μ(1 − μ)⁶ with Cycles' F82 tint, or F0 at every angle ([`MetalFresnel`])
 //! D = GGX / Trowbridge–Reitz, V = Smith height-correlated G2 / (4 μo μi), α = roughness² ≥ 1e-3
