@@ -724,7 +724,7 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
         bar.set_position((f * 1000.0) as u64);
         !crate::signals::interrupted()
     };
-    let result = dof::render_method(method, &render_scene, &rig, &settings, &preview, &progress, &|_, _| {})?;
+    let result = dof::render_method(method, &render_scene, &rig, &settings, &preview, &progress, None)?;
     bar.finish_and_clear();
     crate::signals::enter(crate::signals::Phase::Writing);
     let pixels =

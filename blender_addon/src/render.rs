@@ -151,8 +151,15 @@ pub(crate) fn render(
                             *l = Some((img.clone(), spp_done));
                         }
                     };
-                    let result =
-                        dof::render_method(method, &render_scene, &rig, &settings, &preview, &on_progress, &on_pass)?;
+                    let result = dof::render_method(
+                        method,
+                        &render_scene,
+                        &rig,
+                        &settings,
+                        &preview,
+                        &on_progress,
+                        Some(&on_pass),
+                    )?;
                     Ok((result, built.choice.model.to_string(), built.choice.reason, warnings))
                 };
                 match &pool {

@@ -287,8 +287,10 @@ pub struct RenderResult {
 /// Progress: fraction done in [0, 1]; return false to cancel.
 pub type Progress<'a> = &'a (dyn Fn(f32) -> bool + Sync);
 
-/// Called after every finished pass with the image so far and the samples per pixel done.
-pub type PassObserver<'a> = &'a (dyn Fn(&Image, u32) + Sync);
+/// Called after every finished pass with the image so far and the samples per pixel done
+/// (progressive display). None: nobody watches, and no image is made between passes (with
+/// adaptive sampling's many short passes, that conversion took up to a tenth of the render).
+pub type PassObserver<'a> = Option<&'a (dyn Fn(&Image, u32) + Sync)>;
 
 /// Renders `scene` through `rig`.
 pub fn render(
@@ -297,7 +299,7 @@ pub fn render(
     settings: &RenderSettings,
     progress: Progress,
 ) -> Result<RenderResult> {
-    render_observed(scene, rig, settings, progress, &|_, _| {})
+    render_observed(scene, rig, settings, progress, None)
 }
 
 /// Renders `scene` through `rig`, showing every finished pass to `on_pass` (progressive display).
@@ -591,7 +593,9 @@ pub(crate) fn render_samples(
             }
             done += n;
             film.splat_scale = 1.0 / done as f32;
-            on_pass(&film.image(), done);
+            if let Some(show) = on_pass {
+                show(&film.image(), done);
+            }
         }
         pass_spp = (pass_spp * 2).min(16);
         // 5. Adaptive sampling: stop the pixels whose 3×3 neighbourhood has converged.

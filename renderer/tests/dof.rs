@@ -198,11 +198,11 @@ fn multiview_refuses_bad_settings() {
     let ok = RenderSettings { width: 8, height: 8, spp: 1, ..RenderSettings::default() };
     let preview = PreviewSettings::default();
     for bad in [RenderSettings { spp: 0, ..ok.clone() }, RenderSettings { width: 0, ..ok.clone() }] {
-        assert!(render_method(Method::Multiview, &scene, &rig, &bad, &preview, &|_| true, &|_, _| {}).is_err());
+        assert!(render_method(Method::Multiview, &scene, &rig, &bad, &preview, &|_| true, None).is_err());
     }
     let no_layers = PreviewSettings { layers: LayerSettings { count: 0, ..LayerSettings::default() } };
-    assert!(render_multiview(&scene, &rig, &ok, &no_layers, &|_| true, &|_, _| {}).is_err());
-    assert!(render_multiview(&scene, &rig, &ok, &preview, &|_| true, &|_, _| {}).is_ok());
+    assert!(render_multiview(&scene, &rig, &ok, &no_layers, &|_| true, None).is_err());
+    assert!(render_multiview(&scene, &rig, &ok, &preview, &|_| true, None).is_ok());
 }
 
 /// Bad pupil points are refused, not a panic or a NaN matrix.
@@ -364,11 +364,11 @@ fn multiview_matches_mc_on_a_tilted_thin_lens_scene() {
     let preview = PreviewSettings { layers: LayerSettings { spp: 64, ..LayerSettings::default() } };
     let reference = render(&scene, &rig, &RenderSettings { spp: 1024, seed: 11, ..base.clone() }, &|_| true).unwrap();
     let mc = render(&scene, &rig, &base, &|_| true).unwrap();
-    let (mv, stats) = render_multiview(&scene, &rig, &base, &preview, &|_| true, &|_, _| {}).unwrap();
+    let (mv, stats) = render_multiview(&scene, &rig, &base, &preview, &|_| true, None).unwrap();
     assert!(mv.complete && mv.spp_done == 64);
     assert_eq!(stats.samples, 64 * 48 * 64, "every camera sample is shaded once");
     // the dispatch of render_method gives the same image
-    let via_method = render_method(Method::Multiview, &scene, &rig, &base, &preview, &|_| true, &|_, _| {}).unwrap();
+    let via_method = render_method(Method::Multiview, &scene, &rig, &base, &preview, &|_| true, None).unwrap();
     assert!(via_method.image.rgba == mv.image.rgba, "render_method(Multiview) differs from render_multiview");
     let r1 = blocks(&reference.image, 1);
     let r4 = blocks(&reference.image, 4);
@@ -408,7 +408,7 @@ fn multiview_matches_mc_on_a_tilted_thin_lens_scene() {
         ),
         ..rig.clone()
     };
-    let (wrong, _) = render_multiview(&scene, &untilted, &base, &preview, &|_| true, &|_, _| {}).unwrap();
+    let (wrong, _) = render_multiview(&scene, &untilted, &base, &preview, &|_| true, None).unwrap();
     let (_, wrong_rmse) = compare(&blocks(&wrong.image, 1), &soft);
     eprintln!("control, untilted sensor: relative RMSE {wrong_rmse:.4} against the reference (bound {bound:.4})");
     assert!(wrong_rmse > 1.3 * bound, "an untilted sensor passes for a tilted one: {wrong_rmse} vs bound {bound}");
@@ -433,7 +433,7 @@ fn multiview_through_a_traced_lens_matches_mc() {
     let preview = PreviewSettings { layers: LayerSettings { spp: 64, ..LayerSettings::default() } };
     let reference = render(&scene, &rig, &RenderSettings { spp: 512, seed: 11, ..base.clone() }, &|_| true).unwrap();
     let mc = render(&scene, &rig, &base, &|_| true).unwrap();
-    let (mv, stats) = render_multiview(&scene, &rig, &base, &preview, &|_| true, &|_, _| {}).unwrap();
+    let (mv, stats) = render_multiview(&scene, &rig, &base, &preview, &|_| true, None).unwrap();
     let soft = blocks(&reference.image, 1);
     let (mv_mean, mv_rmse_soft) = compare(&blocks(&mv.image, 1), &soft);
     let (mc_mean, mc_rmse_soft) = compare(&blocks(&mc.image, 1), &soft);
@@ -467,7 +467,7 @@ fn multiview_falls_back_where_the_layers_run_out() {
     let mut fallbacks = Vec::new();
     for count in [1, 4] {
         let preview = PreviewSettings { layers: LayerSettings { count, spp: 64, ..LayerSettings::default() } };
-        let (mv, stats) = render_multiview(&scene, &rig, &base, &preview, &|_| true, &|_, _| {}).unwrap();
+        let (mv, stats) = render_multiview(&scene, &rig, &base, &preview, &|_| true, None).unwrap();
         let (mean, rmse) = compare(&blocks(&mv.image, 1), &soft);
         eprintln!(
             "disocclusion, {count} layer(s): fallbacks {:.4} ({} of {} hits), mean rel. error {mean:.4}, rel. RMSE \
@@ -492,7 +492,7 @@ fn multiview_is_deterministic_across_thread_counts() {
     let preview = PreviewSettings { layers: LayerSettings { spp: 2, count: 2, ..LayerSettings::default() } };
     let run = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-        pool.install(|| render_multiview(&scene, &rig, &st, &preview, &|_| true, &|_, _| {}).unwrap())
+        pool.install(|| render_multiview(&scene, &rig, &st, &preview, &|_| true, None).unwrap())
     };
     let (one, s1) = run(1);
     let (two, s2) = run(2);
@@ -1079,9 +1079,17 @@ mod spread_method {
         let rig = CameraRig { camera: cam.clone(), to_world: DAffine3::IDENTITY };
         let preview = PreviewSettings { layers: LayerSettings { spp: 4, ..LayerSettings::default() } };
         let passes = std::sync::atomic::AtomicU32::new(0);
-        let r = dof::render_method(dof::Method::Spread, &scene, &rig, &st, &preview, &|_| true, &|_, _| {
-            passes.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        })
+        let r = dof::render_method(
+            dof::Method::Spread,
+            &scene,
+            &rig,
+            &st,
+            &preview,
+            &|_| true,
+            Some(&|_, _| {
+                passes.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            }),
+        )
         .unwrap();
         assert!(r.complete && r.spp_done == st.spp);
         assert_eq!(passes.load(std::sync::atomic::Ordering::Relaxed), 1);
@@ -1091,7 +1099,7 @@ mod spread_method {
             r.image.rgba.iter().any(|p| p[0] > 0.1) && r.image.rgba.iter().all(|p| p.iter().all(|v| v.is_finite()))
         );
         // Cancelled through the progress callback: incomplete, not an error.
-        let c = dof::render_method(dof::Method::Spread, &scene, &rig, &st, &preview, &|_| false, &|_, _| {}).unwrap();
+        let c = dof::render_method(dof::Method::Spread, &scene, &rig, &st, &preview, &|_| false, None).unwrap();
         assert!(!c.complete);
     }
 
@@ -1124,15 +1132,8 @@ mod spread_method {
         assert!(spread::check_camera(&exact).is_err());
         assert!(spread::check_camera(&thin(tilted, 2.0, 2.0, Aperture::default(), true)).is_ok());
         let rig = CameraRig { camera: exact, to_world: DAffine3::IDENTITY };
-        let r = dof::render_method(
-            dof::Method::Spread,
-            &scene,
-            &rig,
-            &st,
-            &PreviewSettings::default(),
-            &|_| true,
-            &|_, _| {},
-        );
+        let r =
+            dof::render_method(dof::Method::Spread, &scene, &rig, &st, &PreviewSettings::default(), &|_| true, None);
         assert!(r.is_err());
         let _ = PixelFilter::default();
     }

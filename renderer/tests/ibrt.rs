@@ -72,7 +72,7 @@ fn settings(spp: u32, seed: u32) -> RenderSettings {
 
 fn ibrt(rs: &RenderScene, rig: &CameraRig, st: &RenderSettings, layers: usize) -> Image {
     let preview = PreviewSettings { layers: LayerSettings { count: layers, spp: 4, ..LayerSettings::default() } };
-    dof::render_method(Method::Ibrt, rs, rig, st, &preview, &|_| true, &|_, _| {}).unwrap().image
+    dof::render_method(Method::Ibrt, rs, rig, st, &preview, &|_| true, None).unwrap().image
 }
 
 /// A striped wall slightly out of focus (0.8 px blur; one surface, nothing hidden): IBRT's error

@@ -1547,6 +1547,31 @@ fn adaptive_sampling_beats_fixed_sampling_at_equal_camera_rays() {
     assert!(e_adaptive < 0.9 * e_fixed, "adaptive {e_adaptive:.4} should beat fixed {e_fixed:.4}");
 }
 
+/// A pass observer (progressive display) sees every pass, with the samples done so far, and the
+/// last image it sees is the render's; without one (None: no image is made between passes) the
+/// render is the same, bit for bit.
+#[test]
+fn pass_observer_sees_every_pass_and_changes_nothing() {
+    let (rs, rig) = furnace_for_interrupts();
+    let s = settings(16, 12, 20, 3, BOX1);
+    let seen = std::sync::Mutex::new(Vec::new());
+    let watched = petzval_renderer::render::render_observed(
+        &rs,
+        &rig,
+        &s,
+        &|_| true,
+        Some(&|img: &Image, done: u32| seen.lock().unwrap().push((done, img.rgba.clone()))),
+    )
+    .unwrap();
+    let unwatched = petzval_renderer::render::render_observed(&rs, &rig, &s, &|_| true, None).unwrap();
+    let seen = seen.into_inner().unwrap();
+    // passes of 1, 2, 4, 8 and the remaining 5 samples
+    assert_eq!(seen.iter().map(|p| p.0).collect::<Vec<_>>(), [1, 3, 7, 15, 20]);
+    assert_eq!(seen.last().unwrap().1, watched.image.rgba);
+    assert_eq!(watched.image.rgba, unwatched.image.rgba);
+    assert_eq!(watched.image.depth, unwatched.image.depth);
+}
+
 /// Bad adaptive settings are refused naming the field, and the preview methods refuse
 /// adaptive sampling instead of ignoring it.
 #[test]
@@ -1565,7 +1590,7 @@ fn adaptive_settings_are_checked() {
         &s,
         &petzval_renderer::dof::PreviewSettings::default(),
         &|_| true,
-        &|_, _| {},
+        None,
     )
     .unwrap_err()
     .to_string();

@@ -301,7 +301,7 @@ fn render_one(
     preview: Option<&PreviewSettings>,
 ) -> Result<(Image, f64), Error> {
     let preview = preview.copied().unwrap_or_default();
-    let r = dof::render_method(method, &s.scene, &s.rig, settings, &preview, &|_| true, &|_, _| {})?;
+    let r = dof::render_method(method, &s.scene, &s.rig, settings, &preview, &|_| true, None)?;
     Ok((r.image, r.seconds))
 }
 

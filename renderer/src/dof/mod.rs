@@ -121,8 +121,8 @@ pub fn render_method(
             };
             let spread_settings = spread::SpreadSettings::default();
             let r = spread::render_spread(&layers, Some(scene), &camera, settings, &spread_settings, progress)?;
-            if r.complete {
-                on_pass(&r.image, r.spp_done);
+            if let (true, Some(show)) = (r.complete, on_pass) {
+                show(&r.image, r.spp_done);
             }
             r
         }
