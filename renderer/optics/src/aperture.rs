@@ -270,6 +270,12 @@ const MAX_TABLED_BLADES: u32 = 32;
 /// blades): both compute the same edge distance to within ~10⁻¹⁵, so outside the band they agree.
 const BLADE_EDGE_BAND: f64 = 1e-9;
 
+/// How far inside its triangle's outer edge (a fraction of the apothem, which is at least 1/2)
+/// a straight-blade sample must be for [`PreparedAperture::sample_scaled`] to skip the
+/// transmission test: 500 × [`BLADE_EDGE_BAND`] and ~10⁹ × the rounding of the point, so the
+/// test would give exactly 1. About one sample in 10⁶ is nearer and is tested.
+const CLEAR_OF_EDGE: f64 = 1e-6;
+
 /// An [`Aperture`] with its per-blade constants computed once (edge normals, triangle vertices,
 /// polygon area, a mask's rotation), for the cameras' and the lens's per-ray tests. Its
 /// [`PreparedAperture::transmission`] and [`PreparedAperture::sample_unit`] return the same
@@ -389,6 +395,31 @@ impl PreparedAperture {
     /// [`Aperture::sample_unit`], with the straight-blade triangles precomputed.
     #[inline]
     pub fn sample_unit(&self, u: glam::DVec2) -> (glam::DVec2, f64) {
+        let (p, pdf, _) = self.sample_unit_clear(u);
+        (p, pdf)
+    }
+
+    /// [`PreparedAperture::sample_unit`] scaled to circumradius `radius_mm`: the point (mm),
+    /// its density per unit area of the unit aperture, and the transmission there
+    /// ([`PreparedAperture::transmission`]). A straight-bladed polygon's point clear of its edge
+    /// passes without the test (the test would give exactly 1 there).
+    #[inline]
+    pub fn sample_scaled(&self, u: glam::DVec2, radius_mm: f64) -> (glam::DVec2, f64, f64) {
+        let (q, pdf_unit, clear) = self.sample_unit_clear(u);
+        let p = glam::DVec2::new(q.x * radius_mm, q.y * radius_mm);
+        let transmission = if clear && radius_mm > 0.0 && radius_mm.is_finite() {
+            1.0
+        } else {
+            self.transmission(p.x, p.y, radius_mm)
+        };
+        (p, pdf_unit, transmission)
+    }
+
+    /// [`PreparedAperture::sample_unit`], and whether the point is certainly inside a straight
+    /// blade polygon: its triangle's outer edge is at least [`CLEAR_OF_EDGE`] of the apothem
+    /// away, far beyond rounding and [`BLADE_EDGE_BAND`], so the transmission test returns 1.
+    #[inline]
+    fn sample_unit_clear(&self, u: glam::DVec2) -> (glam::DVec2, f64, bool) {
         match (&self.aperture.shape, &self.blades) {
             (ApertureShape::Blades { count, curvature }, Some(t)) if *curvature == 0.0 => {
                 // 1. Choose a triangle, then a point in it, as `Aperture::sample_unit` does.
@@ -400,9 +431,14 @@ impl PreparedAperture {
                 let p = v0 * (su * (1.0 - u.y)) + v1 * (su * u.y);
                 // 2. The anamorphic squeeze.
                 let ratio = self.aperture.anamorphic_ratio;
-                (glam::DVec2::new(p.x / ratio, p.y), (1.0 / t.area) * ratio)
+                // (the point lies at su × the apothem along its edge's normal)
+                let clear = su <= 1.0 - CLEAR_OF_EDGE && u.y >= 0.0 && u.y <= 1.0;
+                (glam::DVec2::new(p.x / ratio, p.y), (1.0 / t.area) * ratio, clear)
             }
-            _ => self.aperture.sample_unit(u),
+            _ => {
+                let (p, pdf) = self.aperture.sample_unit(u);
+                (p, pdf, false)
+            }
         }
     }
 

@@ -180,6 +180,29 @@ fn prepared_apertures_match_the_plain_ones_bit_for_bit() {
                 "{aperture:?} sample at {u:?}"
             );
         }
+        // 4. `sample_scaled`: the scaled point, its density and the transmission test's own
+        //    result, bit for bit, where it skips the test (inside a straight-blade polygon) and
+        //    where it does not (u.x at a triangle's outer edge, to 10⁻¹⁶, and u.y at 0 and 1).
+        let mut us: Vec<DVec2> = (0..2000).map(|_| DVec2::new(next(), next())).collect();
+        for i in 0..200 {
+            let k = (i % 40) as f64;
+            for eps in [0.0, 1e-16, 1e-12, 1e-9, 1e-7, 1e-6, 3e-6] {
+                us.push(DVec2::new(((k + 1.0) / 40.0 - eps).max(0.0), next()));
+                us.push(DVec2::new(next(), if i % 2 == 0 { eps } else { 1.0 - eps }));
+            }
+        }
+        for u in us {
+            let (q, pdf) = prepared.sample_unit(u);
+            let p = DVec2::new(q.x * radius_mm, q.y * radius_mm);
+            let want =
+                (p.x.to_bits(), p.y.to_bits(), pdf.to_bits(), prepared.transmission(p.x, p.y, radius_mm).to_bits());
+            let (sp, spdf, st) = prepared.sample_scaled(u, radius_mm);
+            assert_eq!(
+                want,
+                (sp.x.to_bits(), sp.y.to_bits(), spdf.to_bits(), st.to_bits()),
+                "{aperture:?} sample_scaled at {u:?}"
+            );
+        }
     }
     assert!(tested >= 540_000 && inside > 100_000 && outside > 100_000, "{tested} {inside} {outside}");
 }

@@ -61,9 +61,9 @@ impl IdealLens<'_> {
     pub(super) fn sample_density(&self, film: DVec2, lens_u: DVec2) -> Option<f64> {
         // 1. The camera's film and lens points, as its rays are made.
         let p = self.sensor.film_point(film, self.film_z_mm) - DVec3::new(0.0, 0.0, self.rear_z_mm);
-        let (q, _) = self.aperture.sample_unit(lens_u);
-        let l = DVec3::new(q.x * self.radius_mm, q.y * self.radius_mm, 0.0);
-        if self.aperture.transmission(l.x, l.y, self.radius_mm) <= 0.0 {
+        let (q, _, transmission) = self.aperture.sample_scaled(lens_u, self.radius_mm);
+        let l = DVec3::new(q.x, q.y, 0.0);
+        if transmission <= 0.0 {
             return None;
         }
         // 2. Film-side density pdf / g, times the étendue factor of its slopes.

@@ -126,9 +126,8 @@ impl OrthoAperture {
     /// (transmission / pdf); None where the stop blocks it.
     fn lens_point(&self, u: DVec2) -> Option<(DVec3, f64)> {
         let r = self.radius_m;
-        let (q, pdf_unit) = self.shape.sample_unit(u);
-        let l = DVec3::new(q.x * r, q.y * r, 0.0);
-        let transmission = self.shape.transmission(l.x, l.y, r);
+        let (q, pdf_unit, transmission) = self.shape.sample_scaled(u, r);
+        let l = DVec3::new(q.x, q.y, 0.0);
         (transmission > 0.0).then(|| (l, transmission * r * r / pdf_unit))
     }
 }

@@ -134,9 +134,8 @@ impl ThinCamera {
     fn raw_ray(&self, film: DVec2, lens_u: DVec2) -> Option<CameraRay> {
         let p = self.sensor.film_point(film, self.film_z_mm);
         let r = self.aperture_radius_mm();
-        let (q, pdf_unit) = self.aperture.sample_unit(lens_u);
-        let l = DVec3::new(q.x * r, q.y * r, 0.0);
-        let transmission = self.aperture.transmission(l.x, l.y, r);
+        let (q, pdf_unit, transmission) = self.aperture.sample_scaled(lens_u, r);
+        let l = DVec3::new(q.x, q.y, 0.0);
         if transmission <= 0.0 {
             return None;
         }
