@@ -528,6 +528,42 @@ fn coat(weight: f32, roughness: f32, ior: f32, tint: Vec3) -> Option<&'static Co
     Coat::new(weight, roughness, ior, tint).map(|c| &*Box::leak(Box::new(c)))
 }
 
+/// A metallic-0 BSDF built once and given another base colour (`Bsdf::with_base`, what a
+/// scene does per hit) is the BSDF `Bsdf::new` builds with that colour, field for field, for
+/// any roughness, specular level, ior and base (out of range and non-finite included).
+#[test]
+fn bsdf_with_base_is_bsdf_new_bit_for_bit() {
+    let mut state = 0x9e37_79b9u32;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        (state >> 8) as f32 / (1u32 << 24) as f32
+    };
+    let odd = [0.0, -0.0, 1.0, -0.3, 1.7, f32::NAN, f32::INFINITY];
+    let mut cases = 0;
+    for i in 0..3000 {
+        let pick = |i: usize, v: f32| if i % 7 == 3 { odd[i % odd.len()] } else { v };
+        let base = Vec3::new(pick(i, next() * 1.2), next(), pick(i / 3, next()));
+        let template_base = Vec3::new(next(), next(), next());
+        // (a few layer indices: each new one integrates its albedo tables)
+        let specular = [0.0, 0.5, 1.0, 1.3, f32::NAN][i % 5];
+        let ior = [1.0, 1.33, 1.5, 2.2, 0.5, f32::INFINITY][(i / 5) % 6];
+        let roughness = pick(i / 5, next());
+        for metallic in [0.0, -0.0] {
+            let want = Bsdf::new(base, metallic, roughness, specular, ior);
+            let got = Bsdf::new(template_base, metallic, roughness, specular, ior).with_base(base);
+            assert_eq!(
+                format!("{want:?}"),
+                format!("{got:?}"),
+                "base {base} roughness {roughness} specular {specular} ior {ior}"
+            );
+            cases += 1;
+        }
+    }
+    assert_eq!(cases, 6000);
+}
+
 /// A Specular Tint for the BSDF cases.
 static SPEC_TINT: Vec3 = Vec3::new(0.9, 0.4, 1.0);
 

@@ -53,7 +53,7 @@ use obvhs::{
     BvhBuildParams,
 };
 
-use super::bsdf::Coat;
+use super::bsdf::{Bsdf, Coat};
 use super::lights::{EmitterGroup, LightSet};
 use super::packet::{self, PACKET};
 use super::traverse;
@@ -586,6 +586,9 @@ pub struct RenderScene {
     pub(crate) alpha_tests: Vec<AlphaTest>,
     /// Per material: its clear coat, built once.
     coats: Vec<Option<Coat>>,
+    /// Per material with metallic 0 and no metallic-roughness texture: its BSDF with the base
+    /// colour left out ([`Bsdf::with_base`] completes it per hit), built once.
+    bsdf_templates: Vec<Option<Bsdf<'static>>>,
     any_stochastic: bool,
     /// Some material is hidden from camera rays.
     any_hidden_from_camera: bool,
@@ -725,6 +728,14 @@ impl RenderScene {
         let any_hidden_from_camera = scene.materials.iter().any(|m| !m.visible_to_camera);
         let coats: Vec<Option<Coat>> =
             scene.materials.iter().map(|m| Coat::new(m.coat, m.coat_roughness, m.coat_ior, m.coat_tint)).collect();
+        let bsdf_templates = scene
+            .materials
+            .iter()
+            .map(|m| {
+                (m.metallic == 0.0 && m.metallic_roughness_texture.is_none())
+                    .then(|| Bsdf::new(Vec3::ZERO, m.metallic, m.roughness, m.specular, m.ior))
+            })
+            .collect();
         let alpha_flag = |mesh: &Mesh, t: u32| {
             if alpha_tests[mesh.material_ids[t as usize] as usize] != AlphaTest::None {
                 ALPHA_BIT
@@ -968,6 +979,7 @@ impl RenderScene {
             any_stochastic,
             any_hidden_from_camera,
             coats,
+            bsdf_templates,
             lights,
             bounds_min,
             bounds_max,
@@ -1100,6 +1112,13 @@ impl RenderScene {
     #[inline]
     pub fn coat(&self, material_id: u32) -> Option<&Coat> {
         self.coats.get(material_id as usize).and_then(Option::as_ref)
+    }
+
+    /// Material `material_id`'s BSDF without its base colour, where it has metallic 0 and no
+    /// metallic-roughness texture (see [`Bsdf::with_base`]); None elsewhere.
+    #[inline]
+    pub fn bsdf_template(&self, material_id: u32) -> Option<&Bsdf<'static>> {
+        self.bsdf_templates.get(material_id as usize).and_then(Option::as_ref)
     }
 
     /// Material id of triangle `tri` of instance `inst`.

@@ -523,6 +523,19 @@ impl<'a> Bsdf<'a> {
         }
     }
 
+    /// [`Bsdf::new`] with another base colour, from a BSDF built with metallic 0 (whatever its
+    /// base colour): the same bits. With metallic 0 the base colour enters only the base and
+    /// the diffuse lobe's scale; every other field (the roughness row, the dielectric layer's
+    /// tables, multiple scattering) is the material's own, so it is built once per material.
+    #[inline]
+    pub fn with_base(self, base_color: Vec3) -> Self {
+        debug_assert!(self.metallic == 0.0, "with_base needs a BSDF with metallic 0");
+        // Bsdf::new's expressions for these two fields
+        let base = base_color.clamp(Vec3::ZERO, Vec3::ONE);
+        let diffuse_scale = if self.metallic < 1.0 { base * ((1.0 - self.metallic) * FRAC_1_PI) } else { Vec3::ZERO };
+        Bsdf { base, diffuse_scale, ..self }
+    }
+
     /// The same BSDF with a metal Fresnel other than plain Schlick ([`MetalFresnel`]: Cycles'
     /// F82 tint, or the base colour at every angle); plain Schlick leaves it as it is.
     /// (Out of line: most materials have plain Schlick and do not call it.)

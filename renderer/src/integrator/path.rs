@@ -205,15 +205,24 @@ pub fn material_bsdf<'s>(scene: &'s RenderScene, hit: &SurfaceHit) -> (Bsdf<'s>,
 fn material_bsdf_of<'s>(scene: &'s RenderScene, hit: &SurfaceHit, id: u32) -> (Bsdf<'s>, Vec3) {
     let mat = &scene.scene().materials[id as usize];
     let base = base_color_of(scene, hit, id);
-    let (mut metallic, mut roughness) = (mat.metallic, mat.roughness);
-    if let Some(mr) = scene.texture(mat.metallic_roughness_texture, hit.uv0, hit.uv1) {
-        metallic *= mr.z;
-        roughness *= mr.y;
-    }
-    let mut bsdf = Bsdf::new(base, metallic, roughness, mat.specular, mat.ior);
-    if metallic > 0.0 && !mat.metal_fresnel.is_schlick() {
-        bsdf = bsdf.with_metal_fresnel(&mat.metal_fresnel);
-    }
+    let mut bsdf = match scene.bsdf_template(id) {
+        // 1. Metallic 0, no texture for it: the material's BSDF, built once, with this base.
+        Some(template) => template.with_base(base),
+        // 2. Otherwise built here.
+        None => {
+            let (mut metallic, mut roughness) = (mat.metallic, mat.roughness);
+            if let Some(mr) = scene.texture(mat.metallic_roughness_texture, hit.uv0, hit.uv1) {
+                metallic *= mr.z;
+                roughness *= mr.y;
+            }
+            let bsdf = Bsdf::new(base, metallic, roughness, mat.specular, mat.ior);
+            if metallic > 0.0 && !mat.metal_fresnel.is_schlick() {
+                bsdf.with_metal_fresnel(&mat.metal_fresnel)
+            } else {
+                bsdf
+            }
+        }
+    };
     if mat.specular_tint != Vec3::ONE {
         bsdf = bsdf.with_specular_tint(&mat.specular_tint);
     }
