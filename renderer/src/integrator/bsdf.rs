@@ -741,6 +741,10 @@ impl<'a> Bsdf<'a> {
     /// Probability of choosing the specular lobe for `wo`.
     #[inline]
     fn spec_probability(&self, wo: Vec3) -> f32 {
+        if self.diel.is_none() && self.metallic == 0.0 {
+            // No specular lobe (a pure Lambertian base): its albedo below is exactly 0.
+            return 0.0;
+        }
         let (ws, wd) = self.lobe_albedos(wo);
         let sum = ws + wd;
         if sum > 0.0 {
