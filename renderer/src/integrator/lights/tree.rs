@@ -155,6 +155,8 @@ struct Node4 {
     /// Bounding-sphere radius (slightly padded) and its square.
     radius: Vec4,
     radius2: Vec4,
+    /// The importance inside the bounding sphere: phi / r² (phi · 10³⁰ where r = 0).
+    phi_inside: Vec4,
     /// Axis of the cone of emission normals.
     wx: Vec4,
     wy: Vec4,
@@ -187,6 +189,7 @@ impl Node4 {
         self.cz[k] = center.z;
         self.radius[k] = r;
         self.radius2[k] = r * r;
+        self.phi_inside[k] = if r * r > 0.0 { b.phi / (r * r) } else { b.phi * 1e30 };
         self.wx[k] = w.x;
         self.wy[k] = w.y;
         self.wz[k] = w.z;
@@ -239,8 +242,7 @@ impl Node4 {
         };
         let culled = cos_p.cmple(self.cos_e) | cos_pi.cmple(zero);
         let outside = Vec4::select(culled, zero, self.phi * cos_p * cos_pi / dist2);
-        let inner = Vec4::select(self.radius2.cmpgt(zero), self.phi / self.radius2, self.phi * 1e30);
-        let imp = Vec4::select(inside, inner, outside);
+        let imp = Vec4::select(inside, self.phi_inside, outside);
         // NaN-free, finite, ≥ 0.
         Vec4::select(imp.cmpgt(zero), imp.min(Vec4::splat(1e30)), zero)
     }
