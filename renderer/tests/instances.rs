@@ -335,3 +335,46 @@ fn gltf_shared_mesh_is_one_mesh_and_several_instances() {
     assert!((hit.t - 1.0).abs() < 1e-5);
     assert!(hit.front_face, "the mirrored node keeps its front side (+z)");
 }
+
+/// A mesh placed once by a transform is shaded from world-space positions and normals computed
+/// once: every hit record is the one computed at the hit, as for the same mesh placed twice
+/// (which is not baked), bit for bit, for translated, rotated and scaled, mirrored and sheared
+/// placements; the scene counts those attributes' bytes.
+#[test]
+fn baked_world_attributes_give_the_same_hit_records() {
+    let placements = [
+        Affine3A::from_translation(Vec3::new(0.3, -1.2, 4.0)),
+        Affine3A::from_scale_rotation_translation(
+            Vec3::new(1.6, 0.7, 1.1),
+            Quat::from_euler(glam::EulerRot::XYZ, 0.3, 0.9, -0.4),
+            Vec3::new(0.0, 0.45, 0.2),
+        ),
+        Affine3A::from_scale_rotation_translation(Vec3::new(-1.0, 1.0, 1.0), Quat::IDENTITY, Vec3::new(1.5, 0.5, 0.0)),
+        Affine3A::from_mat3_translation(
+            Mat3::from_cols(Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.6, 1.0, 0.0), Vec3::new(0.0, -0.3, 0.8)),
+            Vec3::new(-2.0, 0.1, 0.7),
+        ),
+    ];
+    for (p, &xf) in placements.iter().enumerate() {
+        let scene_with = |copies: usize| {
+            let mut s = Scene { materials: vec![diffuse(Vec3::splat(0.5))], ..Scene::default() };
+            let sphere = s.add_mesh(icosphere(Vec3::ZERO, 0.5, 2, 0));
+            for c in 0..copies {
+                s.add_instance(sphere, Affine3A::from_translation(Vec3::X * 10.0 * c as f32) * xf);
+            }
+            RenderScene::new(s).unwrap()
+        };
+        let (once, twice) = (scene_with(1), scene_with(2));
+        let (m1, m2) = (once.memory(), twice.memory());
+        let vertices = once.scene().meshes[0].positions.len();
+        assert_eq!(m1.world_attribute_bytes, vertices * 2 * std::mem::size_of::<Vec3>(), "placement {p}");
+        assert_eq!(m2.world_attribute_bytes, 0, "placement {p}");
+        let dir = Vec3::new(0.3, -0.5, -0.8).normalize();
+        for tri in 0..once.scene().meshes[0].indices.len() as u32 {
+            for (b1, b2) in [(0.2, 0.3), (0.0, 0.0), (1.0 / 3.0, 1.0 / 3.0), (0.7, 0.29), (0.0, 1.0)] {
+                let (a, b) = (once.surface_hit(0, tri, b1, b2, 1.5, dir), twice.surface_hit(0, tri, b1, b2, 1.5, dir));
+                assert_eq!(format!("{a:?}"), format!("{b:?}"), "placement {p}, triangle {tri} at ({b1}, {b2})");
+            }
+        }
+    }
+}

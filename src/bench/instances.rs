@@ -146,6 +146,10 @@ pub(super) fn bench_instances(
     );
     println!("| mesh BVHs (BLAS, each mesh once) | {:.3} |", mb(m.blas_bytes));
     println!("| world BVH (meshes placed once: the ground) | {:.3} |", mb(m.world_bvh_bytes));
+    println!(
+        "| world-space positions and normals (meshes placed once by a transform) | {:.3} |",
+        mb(m.world_attribute_bytes)
+    );
     println!("| top level (TLAS nodes, leaves, per-instance transforms) | {:.3} |", mb(m.tlas_bytes));
     println!("| **total** | **{:.3}** |", mb(m.total()));
     println!("| one copy of the mesh (data + BVH) | {:.3} |", mb(one_copy));

@@ -511,6 +511,33 @@ struct InstanceXf {
     identity: bool,
 }
 
+/// A baked mesh's vertex positions and normals in world space, where its one instance places it
+/// by a transform other than the identity: what every hit and light sample would otherwise
+/// transform again, computed once with the same operations (so the same bits).
+#[derive(Debug, Clone, Default)]
+struct WorldAttributes {
+    positions: Vec<Vec3>,
+    /// Empty when the mesh has no usable normals.
+    normals: Vec<Vec3>,
+}
+
+impl WorldAttributes {
+    /// `mesh`'s attributes placed by `xf` (not the identity).
+    fn new(mesh: &Mesh, info: MeshInfo, xf: &InstanceXf) -> Self {
+        let positions = mesh.positions.iter().map(|&p| xf.object_to_world.transform_point3(p)).collect();
+        let normals = if info.has_normals {
+            mesh.normals.iter().map(|&n| (xf.normal * n).normalize_or_zero()).collect()
+        } else {
+            Vec::new()
+        };
+        WorldAttributes { positions, normals }
+    }
+
+    fn memory_bytes(&self) -> usize {
+        (self.positions.len() + self.normals.len()) * std::mem::size_of::<Vec3>()
+    }
+}
+
 /// A leaf of the top-level BVH.
 #[derive(Debug, Clone, Copy)]
 struct TlasLeaf {
@@ -553,6 +580,9 @@ pub struct SceneMemory {
     pub instance_bytes: usize,
     /// The world BVH of baked (singly-placed) meshes: nodes and leaf-order triangles.
     pub world_bvh_bytes: usize,
+    /// World-space positions and normals of baked meshes placed by a transform (read by
+    /// shading instead of transforming at every hit).
+    pub world_attribute_bytes: usize,
     /// The per-mesh BVHs of instanced meshes (each once).
     pub blas_bytes: usize,
     /// The top level: nodes, leaves and the per-instance transforms.
@@ -562,7 +592,12 @@ pub struct SceneMemory {
 impl SceneMemory {
     /// Everything.
     pub fn total(&self) -> usize {
-        self.mesh_bytes + self.instance_bytes + self.world_bvh_bytes + self.blas_bytes + self.tlas_bytes
+        self.mesh_bytes
+            + self.instance_bytes
+            + self.world_bvh_bytes
+            + self.world_attribute_bytes
+            + self.blas_bytes
+            + self.tlas_bytes
     }
 }
 
@@ -583,6 +618,8 @@ pub struct RenderScene {
     xforms: Vec<InstanceXf>,
     /// Per mesh.
     mesh_info: Vec<MeshInfo>,
+    /// Per mesh: a baked mesh's world-space attributes, where its instance transforms it.
+    world_attributes: Vec<Option<WorldAttributes>>,
     pub(crate) alpha_tests: Vec<AlphaTest>,
     /// Per material: its clear coat, built once.
     coats: Vec<Option<Coat>>,
@@ -855,6 +892,13 @@ impl RenderScene {
         let mut triangle_count = baked.len();
         let world = Blas::build(&baked, quality);
         drop(baked);
+        let mut world_attributes: Vec<Option<WorldAttributes>> = vec![None; scene.meshes.len()];
+        for &i in &baked_instances {
+            let (xf, k) = (&xforms[i as usize], scene.instances[i as usize].mesh as usize);
+            if !xf.identity {
+                world_attributes[k] = Some(WorldAttributes::new(&scene.meshes[k], mesh_info[k], xf));
+            }
+        }
 
         // Per-mesh BVHs and the top level over their instances.
         let mut blas_of_mesh = vec![u32::MAX; scene.meshes.len()];
@@ -962,7 +1006,7 @@ impl RenderScene {
                 }
             }
         }
-        let world_tri = |inst: u32, tri: u32| world_triangle(&scene, &xforms, inst, tri);
+        let world_tri = |inst: u32, tri: u32| world_triangle(&scene, &xforms, &world_attributes, inst, tri);
         let lights = LightSet::build(&scene, &emitters, &world_tri, bounds_min, bounds_max);
 
         Ok(RenderScene {
@@ -975,6 +1019,7 @@ impl RenderScene {
             tlas_leaves,
             xforms,
             mesh_info,
+            world_attributes,
             alpha_tests,
             any_stochastic,
             any_hidden_from_camera,
@@ -1029,6 +1074,7 @@ impl RenderScene {
             instance_bytes: self.scene.instances.len() * size_of::<crate::scene::Instance>(),
             world_bvh_bytes: self.world.memory_bytes()
                 + (self.baked_offsets.len() + self.baked_instances.len()) * size_of::<u32>(),
+            world_attribute_bytes: self.world_attributes.iter().flatten().map(WorldAttributes::memory_bytes).sum(),
             blas_bytes: self.blases.iter().map(Blas::memory_bytes).sum(),
             tlas_bytes: self.tlas.nodes.len() * size_of::<CwBvhNode>()
                 + self.tlas_leaves.len() * size_of::<TlasLeaf>()
@@ -1091,7 +1137,7 @@ impl RenderScene {
     /// World-space vertices of triangle `tri` of instance `inst`.
     #[inline]
     pub(crate) fn world_triangle(&self, inst: u32, tri: u32) -> [Vec3; 3] {
-        world_triangle(&self.scene, &self.xforms, inst, tri)
+        world_triangle(&self.scene, &self.xforms, &self.world_attributes, inst, tri)
     }
 
     /// UV sets at barycentrics (b1, b2) of triangle `tri` of instance `inst`.
@@ -1439,16 +1485,21 @@ impl RenderScene {
     pub fn surface_hit(&self, inst: u32, tri: u32, b1: f32, b2: f32, t: f32, dir: Vec3) -> SurfaceHit {
         let xf = self.xforms[inst as usize];
         let (mesh, info) = self.mesh_of(inst);
+        let world_normals =
+            self.world_attributes[self.scene.instances[inst as usize].mesh as usize].as_ref().map(|w| &w.normals[..]);
         let idx = mesh.indices[tri as usize].map(|i| i as usize);
         let p = self.world_triangle(inst, tri);
         let b0 = 1.0 - b1 - b2;
         let position = p[0] * b0 + p[1] * b1 + p[2] * b2;
         let ng = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or(Vec3::Z) * xf.sign;
-        let world_n = |n: Vec3| if xf.identity { n } else { (xf.normal * n).normalize_or_zero() };
+        // a vertex normal in world space (precomputed for a baked, transformed mesh)
+        let world_n = |i: usize| match world_normals {
+            Some(w) => w[i],
+            None if xf.identity => mesh.normals[i],
+            None => (xf.normal * mesh.normals[i]).normalize_or_zero(),
+        };
         let mut ns = if info.has_normals {
-            let n = world_n(mesh.normals[idx[0]]) * b0
-                + world_n(mesh.normals[idx[1]]) * b1
-                + world_n(mesh.normals[idx[2]]) * b2;
+            let n = world_n(idx[0]) * b0 + world_n(idx[1]) * b1 + world_n(idx[2]) * b2;
             let n = n.normalize_or_zero();
             if n == Vec3::ZERO || !n.is_finite() {
                 ng
@@ -1631,11 +1682,22 @@ impl RenderScene {
     }
 }
 
-/// World-space vertices of triangle `tri` of instance `inst`.
+/// World-space vertices of triangle `tri` of instance `inst` (a baked mesh's, read from its
+/// world-space attributes where it has them).
 #[inline]
-fn world_triangle(scene: &Scene, xforms: &[InstanceXf], inst: u32, tri: u32) -> [Vec3; 3] {
+fn world_triangle(
+    scene: &Scene,
+    xforms: &[InstanceXf],
+    world_attributes: &[Option<WorldAttributes>],
+    inst: u32,
+    tri: u32,
+) -> [Vec3; 3] {
     let xf = &xforms[inst as usize];
-    let m = &scene.meshes[scene.instances[inst as usize].mesh as usize];
+    let mesh = scene.instances[inst as usize].mesh as usize;
+    let m = &scene.meshes[mesh];
+    if let Some(w) = &world_attributes[mesh] {
+        return m.indices[tri as usize].map(|k| w.positions[k as usize]);
+    }
     m.indices[tri as usize].map(|k| {
         let p = m.positions[k as usize];
         if xf.identity {
