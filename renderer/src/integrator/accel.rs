@@ -13,7 +13,9 @@
 //! * Attributes of a hit are brought to world space per hit: positions by the transform,
 //!   normals by the inverse transpose, tangents by the linear part (`w` × sign(det)); for a
 //!   negative determinant the geometric normal is negated (glTF: mirroring flips the winding),
-//!   so the front side stays the side the normals point to. Identity instances skip all this.
+//!   so the front side stays the side the normals point to. Identity instances skip all this,
+//!   and a baked mesh placed by a transform keeps its positions and normals in world space,
+//!   computed once by the same operations (the same bits), so its hits read them.
 //! * Triangles are copied into leaf order (the builder's `primitive_indices`), so the
 //!   traversal closure reads them sequentially; each keeps its index: in the world BVH a
 //!   running index over the baked instances' triangles, in an instanced mesh's BVH the mesh
@@ -36,6 +38,7 @@
 //! | leaf-order triangle | 40 per triangle, once per mesh (or per baked instance) |
 //! | BVH node | 80 per node (obvhs `CwBvhNode`) |
 //! | instance transforms | 112 per instance (object-to-world, normal matrix, flags) |
+//! | world-space attributes | 24 per vertex (position, normal) of a baked mesh placed by a transform |
 //! | top-level leaf | 80 per instance of an instanced mesh (world-to-object, indices), plus top-level nodes |
 
 use std::time::{Duration, Instant};
