@@ -533,13 +533,8 @@ fn coat(weight: f32, roughness: f32, ior: f32, tint: Vec3) -> Option<&'static Co
 /// any roughness, specular level, ior and base (out of range and non-finite included).
 #[test]
 fn bsdf_with_base_is_bsdf_new_bit_for_bit() {
-    let mut state = 0x9e37_79b9u32;
-    let mut next = || {
-        state ^= state << 13;
-        state ^= state >> 17;
-        state ^= state << 5;
-        (state >> 8) as f32 / (1u32 << 24) as f32
-    };
+    let mut rng = Rng(0x9e37_79b9);
+    let mut next = || rng.next();
     let odd = [0.0, -0.0, 1.0, -0.3, 1.7, f32::NAN, f32::INFINITY];
     let mut cases = 0;
     for i in 0..3000 {
