@@ -56,6 +56,18 @@ const BATCH: u64 = 64;
 /// The sampler row of light paths (camera samples use rows below the image height).
 const LIGHT_ROW: u32 = 0xB0CE_0000;
 
+/// Where a camera sample came from: what its density against light paths is computed from, only
+/// for the samples that hit an emitter light paths serve ([`BokehTracer::camera_weight`]).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct FilmSample {
+    /// Film position (image fractions).
+    pub film: DVec2,
+    /// Lens sample in [0, 1)².
+    pub lens_u: DVec2,
+    /// Filter offset from the pixel centre (px).
+    pub offset: glam::Vec2,
+}
+
 /// What the light tracer takes from the render's settings.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct LightPathSettings {
@@ -365,15 +377,20 @@ impl<'a> BokehTracer<'a> {
 
     /// The camera strategy's density (mm⁻², ray measure) for the camera sample at image
     /// position `film` with lens sample `lens_u`, whose filter offset was `off` (px).
-    pub(crate) fn camera_density(&self, film: DVec2, lens_u: DVec2, off: Vec2) -> f64 {
+    fn camera_density(&self, film: DVec2, lens_u: DVec2, off: Vec2) -> f64 {
         let f = self.filter.pdf(off) as f64 / self.px_area_mm2;
         self.camera.sample_density(film, lens_u).map_or(0.0, |d| f * d)
     }
 
     /// The camera path's weight for the emission it hits directly at `hit`, along the world ray
-    /// `origin` + t·`dir` (unit), with its own density `camera_density`.
-    pub(crate) fn camera_weight(&self, camera_density: f64, origin: Vec3, dir: Vec3, hit: &SurfaceHit) -> f32 {
+    /// `origin` + t·`dir` (unit), for the camera sample `film`. Its density is found only where
+    /// light paths could have made the path (elsewhere the weight is 1).
+    pub(crate) fn camera_weight(&self, film: &FilmSample, origin: Vec3, dir: Vec3, hit: &SurfaceHit) -> f32 {
         let light = self.light_density(origin, dir, hit);
+        if light == 0.0 {
+            return 1.0;
+        }
+        let camera_density = self.camera_density(film.film, film.lens_u, film.offset);
         if camera_density + light > 0.0 {
             (camera_density / (camera_density + light)) as f32
         } else {
@@ -488,10 +505,27 @@ impl<'a> BokehTracer<'a> {
         let iy0 = ((fy - r - 0.5).ceil().max(y0 as f64)) as i64;
         let iy1 = ((fy + r - 0.5).floor().min(y1 as f64 - 1.0)) as i64;
         let cw = (x1 - x0) as i64;
+        // The filter is separable: its density along each axis, once per column and row (per
+        // pixel for filters wider than MAX_SPAN px).
+        const MAX_SPAN: usize = 8;
+        let narrow = ix1 - ix0 < MAX_SPAN as i64 && iy1 - iy0 < MAX_SPAN as i64;
+        let (mut f_cols, mut f_rows) = ([0f32; MAX_SPAN], [0f32; MAX_SPAN]);
+        if narrow {
+            for (k, ix) in (ix0..=ix1).enumerate() {
+                f_cols[k] = self.filter.pdf_1d((fx - (ix as f64 + 0.5)) as f32);
+            }
+            for (k, iy) in (iy0..=iy1).enumerate() {
+                f_rows[k] = self.filter.pdf_1d((fy - (iy as f64 + 0.5)) as f32);
+            }
+        }
         for iy in iy0..=iy1 {
             for ix in ix0..=ix1 {
-                let off = Vec2::new((fx - (ix as f64 + 0.5)) as f32, (fy - (iy as f64 + 0.5)) as f32);
-                let f = self.filter.pdf(off) as f64 / self.px_area_mm2;
+                let f = if narrow {
+                    f_cols[(ix - ix0) as usize] * f_rows[(iy - iy0) as usize]
+                } else {
+                    self.filter.pdf(Vec2::new((fx - (ix as f64 + 0.5)) as f32, (fy - (iy as f64 + 0.5)) as f32))
+                } as f64
+                    / self.px_area_mm2;
                 if !(f > 0.0) {
                     continue;
                 }

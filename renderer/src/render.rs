@@ -17,7 +17,7 @@
 //! | `adaptive_min_samples` | u32: samples every pixel takes before adaptive sampling may stop it | — | 0 (auto, as Cycles: max(4, ⌈16 / threshold^0.3⌉)) |
 //! | `bokeh_paths` | f32: light paths from emitters through the lens per pixel per sample, combined with camera paths by MIS (see [`crate::bokeh`]); any model with a lens (thin, thick, exact, LRTF), not the pinhole | — | 0 (off; the CLI's and the Python module's auto gives 1 where it applies) |
 
-use crate::bokeh::{BokehTracer, LightPathSettings};
+use crate::bokeh::{BokehTracer, FilmSample, LightPathSettings};
 use crate::camera::{Camera, CameraRay, CAMERA_BATCH};
 use crate::error::{Error, Result};
 use crate::film::{Film, FilterSampler, Image, PixelFilter};
@@ -340,15 +340,16 @@ pub(crate) trait SampleShader: Sync {
     }
 
     /// The radiance (and first-hit AOVs) along camera ray `ray` (camera space), whose world ray
-    /// is `origin` + t·`dir` seen between `clip.0` and `clip.1`; `camera_density` is the
-    /// sample's density for weighting it against light paths (0 without them).
+    /// is `origin` + t·`dir` seen between `clip.0` and `clip.1`; `film` is the sample's film
+    /// position, lens sample and filter offset, from which its density is found for weighting
+    /// it against light paths where a light path could have made it.
     fn shade(
         &self,
         ray: &CameraRay,
         origin: Vec3,
         dir: Vec3,
         clip: (f32, f32),
-        camera_density: f64,
+        film: &FilmSample,
         sampler: &mut PixelSampler,
     ) -> PathSample;
 
@@ -367,11 +368,11 @@ pub(crate) trait SampleShader: Sync {
         origin: Vec3,
         dir: Vec3,
         clip: (f32, f32),
-        camera_density: f64,
+        film: &FilmSample,
         sampler: &mut PixelSampler,
         _first_hit: Option<SurfaceHit>,
     ) -> PathSample {
-        self.shade(ray, origin, dir, clip, camera_density, sampler)
+        self.shade(ray, origin, dir, clip, film, sampler)
     }
 }
 
@@ -396,13 +397,13 @@ impl SampleShader for PathShader<'_> {
         origin: Vec3,
         dir: Vec3,
         clip: (f32, f32),
-        camera_density: f64,
+        film: &FilmSample,
         sampler: &mut PixelSampler,
     ) -> PathSample {
         match &self.bokeh {
             None => self.tracer.trace_clipped(self.scene, origin, dir, clip, sampler),
             Some(b) => {
-                let weight = |hit: &SurfaceHit, d: Vec3| b.camera_weight(camera_density, origin, d, hit);
+                let weight = |hit: &SurfaceHit, d: Vec3| b.camera_weight(film, origin, d, hit);
                 self.tracer.trace_weighted(self.scene, origin, dir, clip, sampler, Some(&weight))
             }
         }
@@ -418,14 +419,12 @@ impl SampleShader for PathShader<'_> {
         origin: Vec3,
         dir: Vec3,
         clip: (f32, f32),
-        camera_density: f64,
+        film: &FilmSample,
         sampler: &mut PixelSampler,
         first_hit: Option<SurfaceHit>,
     ) -> PathSample {
-        let weight = self
-            .bokeh
-            .as_ref()
-            .map(|b| move |hit: &SurfaceHit, d: Vec3| b.camera_weight(camera_density, origin, d, hit));
+        let weight =
+            self.bokeh.as_ref().map(|b| move |hit: &SurfaceHit, d: Vec3| b.camera_weight(film, origin, d, hit));
         let direct = weight.as_ref().map(|w| w as &dyn Fn(&SurfaceHit, Vec3) -> f32);
         self.tracer.trace_weighted_from_hit(self.scene, origin, dir, clip, sampler, direct, first_hit)
     }
@@ -549,10 +548,10 @@ pub(crate) fn render_samples(
                         continue;
                     };
                     // 4. The path.
-                    let camera_density = bokeh.map_or(0.0, |b| b.camera_density(film_uv[i], lens_u[i], offsets[i]));
+                    let film_sample = FilmSample { film: film_uv[i], lens_u: lens_u[i], offset: offsets[i] };
                     let sample = match &first_hits {
-                        Some(hits) => shader.shade_from_hit(&ray, o, d, clip, camera_density, &mut sampler, hits[i]),
-                        None => shader.shade(&ray, o, d, clip, camera_density, &mut sampler),
+                        Some(hits) => shader.shade_from_hit(&ray, o, d, clip, &film_sample, &mut sampler, hits[i]),
+                        None => shader.shade(&ray, o, d, clip, &film_sample, &mut sampler),
                     };
                     let value = sample.radiance * lambda_weight * ray.weight as f32;
                     if !value.is_finite() || sample.dropped {

@@ -228,7 +228,7 @@ impl SampleShader for IbrtShader<'_> {
         _o: Vec3,
         _d: Vec3,
         clip: (f32, f32),
-        _c: f64,
+        _film: &crate::bokeh::FilmSample,
         _s: &mut PixelSampler,
     ) -> PathSample {
         self.tracer.shade(self.scene, ray, clip)

@@ -232,7 +232,7 @@ impl SampleShader for MultiviewShader<'_> {
         origin: Vec3,
         dir: Vec3,
         clip: (f32, f32),
-        _camera_density: f64,
+        _film: &crate::bokeh::FilmSample,
         sampler: &mut PixelSampler,
     ) -> PathSample {
         let d = dir.normalize_or_zero();

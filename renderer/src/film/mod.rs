@@ -90,9 +90,9 @@ impl FilterSampler {
         (v - 0.5) * self.width_px
     }
 
-    /// Offset from the pixel centre (pixels) for a sample `u` in [0,1)².
-    /// Density (per px) of [`FilterSampler::sample_1d`] at offset `x` (px from the centre).
-    fn pdf_1d(&self, x: f32) -> f32 {
+    /// Density (per px) of [`FilterSampler::sample_1d`] at offset `x` (px from the centre); the
+    /// filter is separable, so [`FilterSampler::pdf`] is the product of two.
+    pub fn pdf_1d(&self, x: f32) -> f32 {
         let v = x / self.width_px + 0.5;
         let inv = &self.inverse_cdf;
         if !(v >= inv[0] && v <= inv[inv.len() - 1]) {
@@ -119,6 +119,7 @@ impl FilterSampler {
         0.5 * self.width_px
     }
 
+    /// Offset from the pixel centre (pixels) for a sample `u` in [0,1)².
     pub fn sample(&self, u: Vec2) -> Vec2 {
         Vec2::new(self.sample_1d(u.x), self.sample_1d(u.y))
     }
