@@ -6,8 +6,9 @@
 //! its bokeh disc.
 //!
 //! One light path, scene → film:
-//! 1. a point p on a disc about the camera origin (the entrance pupil, camera plane z = 0;
-//!    radius 1.25 × the paraxial entrance pupil's, plus 0.5 mm),
+//! 1. a point p on a disc about the axis through which every ray that reaches the film passes
+//!    ([`Camera::light_path_disc`]: the thin and thick lenses' opening at their principal plane;
+//!    for real lenses 1.25 × the paraxial entrance pupil plus 0.5 mm, at the camera origin),
 //! 2. an emitter point y chosen from p by the light tree, as next-event estimation chooses one
 //!    (selection × solid-angle pdf at p),
 //! 3. the object-space ray y → p traced through the lens ([`Camera::connect`]) onto the
@@ -97,8 +98,11 @@ pub(crate) struct BokehTracer<'a> {
     to_camera: DAffine3,
     /// The camera's viewing direction and origin (world).
     forward: Vec3,
-    /// Radius of the disc light paths aim at (m) and its area density (mm⁻²).
+    /// The disc light paths aim at: its plane (camera z, m), radius (m) and area density (mm⁻²).
+    disc_z_m: f64,
     radius_m: f64,
+    /// The disc's centre (world).
+    disc_centre: Vec3,
     disc_pdf_mm2: f64,
     /// Light paths per sample per pixel over the whole window (K).
     paths_per_spp: u64,
@@ -121,7 +125,8 @@ pub(crate) struct BokehTracer<'a> {
 /// the window grown by half their blur), in proportion to the flux they send into the lens
 /// (power over squared distance: a tiny near lamp blurs as visibly as a large far one) times
 /// the share α light paths take of them (no budget for emitters left mostly to camera paths,
-/// such as the night street's lit windows next to its lamps). The
+/// such as the night street's lit windows next to its lamps) and the share of them the lens
+/// sees ([`visible_share`]: none for the far side of a lamp's sphere). The
 /// light tree that next-event estimation uses picks by power and distance from the lens alone,
 /// so in a scene whose brightest emitters are out of view most light paths would land off the
 /// film. Each triangle also carries the radius of its emitter ([`component_radii`]): the
@@ -183,10 +188,12 @@ fn component_radii(tris: &[[Vec3; 3]]) -> Vec<f32> {
 
 impl EmitterChoice {
     /// The choice for this render; None when no emitter qualifies.
+    #[allow(clippy::too_many_arguments)]
     fn new(
         scene: &RenderScene,
         camera: &Camera,
         to_camera: &DAffine3,
+        disc_world: &[Vec3; DISC_PROBES],
         defocus: &Defocus,
         settings: &LightPathSettings,
         wavelength_nm: f64,
@@ -224,11 +231,20 @@ impl EmitterChoice {
                 }
                 let m = 0.5 * blur + 2.0;
                 let outside = hi.x + m < x0 || lo.x - m > x1 || hi.y + m < y0 || lo.y - m > y1;
-                // 3. Weighted by the flux it sends into the lens (power over squared distance)
-                //    times the share light paths take of it (α, at the vertices on average).
+                if outside {
+                    return None;
+                }
+                // 3. Seen from the lens at all ([`visible_share`]).
+                let seen = visible_share(scene, i, disc_world);
+                if seen == 0.0 {
+                    return None;
+                }
+                // 4. Weighted by the flux it sends into the lens (power over squared distance)
+                //    times the share light paths take of it (α, at the vertices on average) and
+                //    the share of it the lens sees.
                 let d2 = ((y[0] + y[1] + y[2]) / 3.0).length_squared().max(1e-12);
                 let share = (alpha[0] + alpha[1] + alpha[2]) / 3.0;
-                (!outside).then_some((i, (power as f64 / d2 * share) as f32))
+                Some((i, (power as f64 / d2 * share * seen) as f32))
             })
             .collect();
         let total: f64 = kept.iter().map(|&(_, p)| p as f64).sum();
@@ -253,6 +269,34 @@ impl EmitterChoice {
         let p = self.pmf[i];
         (p > 0.0).then_some((i, p))
     }
+}
+
+/// Points of the light-path disc from which [`visible_share`] looks at an emitter: its centre
+/// and three points at 0.7 of its radius, 120° apart.
+const DISC_PROBES: usize = 4;
+/// Points of an emitter triangle [`visible_share`] tests (barycentric samples for
+/// [`RenderScene::sample_chosen_light`]: near the centroid and towards each vertex).
+const TRIANGLE_PROBES: [(f32, f32); 4] = [(0.44, 0.5), (0.9, 0.1), (0.9, 0.9), (0.05, 0.5)];
+
+/// The share of the segments between emissive triangle `light` and the light-path disc
+/// (`disc_world`, its probe points) that are unoccluded, each made as a light path makes it
+/// (the emitter point as light sampling places it, facing the disc point; a one-sided emitter
+/// seen from behind counts as hidden). An emitter hidden from every probe (the far side of a
+/// lamp's sphere, a lamp behind a wall) gets no light paths: the camera paths that find it
+/// then weigh 1, so the image stays unbiased; partly hidden ones get fewer.
+fn visible_share(scene: &RenderScene, light: usize, disc_world: &[Vec3; DISC_PROBES]) -> f64 {
+    let mut seen = 0;
+    for &(u0, u1) in &TRIANGLE_PROBES {
+        for &p in disc_world {
+            let Some(y) = scene.sample_chosen_light(p, light, 1.0, Vec2::new(u0, u1)).and_then(|ls| ls.target) else {
+                continue;
+            };
+            if !scene.occluded(y, p - y, 1.0 - 1e-4) {
+                seen += 1;
+            }
+        }
+    }
+    seen as f64 / (TRIANGLE_PROBES.len() * DISC_PROBES) as f64
 }
 
 /// Ratios ρ = (blur + 1 px) / (the emitter's sharp image size) below which light paths take no
@@ -321,7 +365,9 @@ impl<'a> BokehTracer<'a> {
         if settings.paths <= 0.0 {
             return Ok(None);
         }
-        let Some(ep_radius_m) = camera.entrance_pupil_radius_m().filter(|_| camera.can_connect()) else {
+        let (Some(ep_radius_m), Some((disc_z_m, radius_m))) =
+            (camera.entrance_pupil_radius_m(), camera.light_path_disc().filter(|_| camera.can_connect()))
+        else {
             return Err(Error::settings(
                 "bokeh_paths",
                 format!(
@@ -336,7 +382,6 @@ impl<'a> BokehTracer<'a> {
         let (w, h) = (settings.width, settings.height);
         let crop = settings.crop;
         let window_px = (crop[2] - crop[0]) as f64 * (crop[3] - crop[1]) as f64;
-        let radius_m = 1.25 * ep_radius_m + 0.5e-3;
         let radius_mm = radius_m * 1e3;
         let sensor = camera.sensor();
         let to_camera = to_world.inverse();
@@ -347,7 +392,12 @@ impl<'a> BokehTracer<'a> {
         };
         let primary_nm =
             camera.real_lens().map_or(crate::optics::glass::WAVELENGTH_D_NM, |l| l.primary_wavelength_nm());
-        let Some(emitters) = EmitterChoice::new(scene, camera, &to_camera, &defocus, settings, primary_nm) else {
+        let disc_world: [Vec3; DISC_PROBES] = std::array::from_fn(|k| {
+            let (r, a) = if k == 0 { (0.0, 0.0) } else { (0.7 * radius_m, (k as f64) * std::f64::consts::TAU / 3.0) };
+            to_world.transform_point3(DVec3::new(r * a.cos(), r * a.sin(), disc_z_m)).as_vec3()
+        });
+        let Some(emitters) = EmitterChoice::new(scene, camera, &to_camera, &disc_world, &defocus, settings, primary_nm)
+        else {
             // No emitter blurred enough to share, or none in view: camera paths alone (the
             // camera's weight is then 1 everywhere, as without light paths).
             return Ok(None);
@@ -358,7 +408,9 @@ impl<'a> BokehTracer<'a> {
             to_world,
             to_camera,
             forward: to_world.transform_vector3(DVec3::NEG_Z).normalize().as_vec3(),
+            disc_z_m,
             radius_m,
+            disc_centre: to_world.transform_point3(DVec3::new(0.0, 0.0, disc_z_m)).as_vec3(),
             disc_pdf_mm2: 1.0 / (std::f64::consts::PI * radius_mm * radius_mm),
             paths_per_spp: (settings.paths as f64 * window_px).ceil().max(1.0) as u64,
             px_area_mm2: sensor.width_mm / w as f64 * (sensor.height_mm / h as f64),
@@ -412,9 +464,9 @@ impl<'a> BokehTracer<'a> {
         if alpha == 0.0 {
             return 0.0;
         }
-        // 1. Where the ray's line crosses the camera plane (it may be behind the ray's origin,
+        // 1. Where the ray's line crosses the disc's plane (it may be behind the ray's origin,
         //    inside the lens).
-        let centre = self.to_world.translation.as_vec3();
+        let centre = self.disc_centre;
         let cos_p = dir.dot(self.forward);
         if cos_p.abs() < 1e-6 {
             return 0.0;
@@ -465,7 +517,7 @@ impl<'a> BokehTracer<'a> {
         let u_light = sampler.next_2d();
         let u_lambda = sampler.next_1d();
         let disc = concentric_disk(u_disc.as_dvec2()) * self.radius_m;
-        let p_cam = DVec3::new(disc.x, disc.y, 0.0);
+        let p_cam = DVec3::new(disc.x, disc.y, self.disc_z_m);
         let p_world = self.to_world.transform_point3(p_cam).as_vec3();
         // 2. An emitter point seen from p (punctual lights and the sky are not seen directly).
         let Some((light, pmf)) = self.emitters.pick(u_pick) else { return };

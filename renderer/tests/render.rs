@@ -838,6 +838,54 @@ fn bokeh_light_paths_leave_sharp_emitters_to_camera_paths() {
     assert_eq!(with.rgba, without.rgba);
 }
 
+/// Light paths go only to emitters the lens can see. A bright emitter in the frame but hidden
+/// from the whole lens behind a wall takes none of them: the image is the one without it, bit
+/// for bit. (Chosen by its flux, it would take most light paths, all of them blocked, and the
+/// visible emitter's bokeh would be noisier.)
+#[test]
+fn bokeh_light_paths_skip_emitters_the_lens_cannot_see() {
+    let cam = thin(square_sensor(4.0), 50.0, 2.8, 1.0, Aperture::default(), true);
+    // A black wall over the left of the view at 1.5 m, from x = −2 mm outwards.
+    let wall = Mesh {
+        positions: vec![
+            Vec3::new(-1.0, -1.0, -1.5),
+            Vec3::new(-0.002, -1.0, -1.5),
+            Vec3::new(-0.002, 1.0, -1.5),
+            Vec3::new(-1.0, 1.0, -1.5),
+        ],
+        indices: vec![[0, 1, 2], [0, 2, 3]],
+        material_ids: vec![1, 1],
+        normals: vec![Vec3::Z; 4],
+        tangents: vec![Vec4::ZERO; 4],
+        uv0: vec![Vec2::ZERO; 4],
+        ..Mesh::default()
+    };
+    // Both emitters blurred about as much as their size (ρ ≈ 1): light paths serve them.
+    let visible = icosphere(Vec3::new(0.04, 0.0, -2.0), 0.01, 2, 0);
+    let hidden = icosphere(Vec3::new(-0.06, 0.0, -3.0), 0.02, 2, 2);
+    let materials = vec![emitter(1.0), diffuse(Vec3::ZERO), emitter(50.0)];
+    let st = RenderSettings {
+        width: 64,
+        height: 64,
+        spp: 8,
+        seed: 5,
+        max_depth: 1,
+        bokeh_paths: 1.0,
+        ..RenderSettings::default()
+    };
+    let image = |meshes: &[Mesh]| {
+        let rs = scene_of(meshes, materials.clone(), Environment::Black);
+        shoot(&rs, cam.clone(), DAffine3::IDENTITY, &st).image
+    };
+    let without = image(&[visible.clone(), wall.clone()]);
+    let with = image(&[visible.clone(), wall.clone(), hidden.clone()]);
+    let unwalled = image(&[visible.clone(), hidden]);
+    let sum = |img: &Image| red(img).iter().sum::<f64>();
+    assert!(sum(&without) > 1.0, "the visible emitter is not in view");
+    assert!(sum(&unwalled) > 10.0 * sum(&without), "the hidden emitter is not in the frame behind the wall");
+    assert_eq!(with.rgba, without.rgba);
+}
+
 /// Light paths need a camera that can trace light onto its film: asked of a pinhole, the
 /// render says so.
 #[test]

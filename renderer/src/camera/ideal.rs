@@ -74,6 +74,13 @@ impl IdealLens<'_> {
         (g > 0.0 && d.z != 0.0 && p.z != 0.0).then(|| self.lens_pdf_mm2() / g * etendue_factor(s_object, s_film))
     }
 
+    /// The disc light paths aim at (see [`super::Camera::light_path_disc`]): the stop at the
+    /// object-side principal plane, every point it transmits inside the opening's bounding
+    /// circle.
+    pub(super) fn light_path_disc(&self) -> (f64, f64) {
+        (self.front_z_m, 1e-3 * self.radius_mm * self.aperture.aperture().bounding_radius_factor())
+    }
+
     /// Light tracing: where the ray from `from_m` towards `to_m` (camera space, metres) lands on
     /// the film. None when it travels away from the lens, the stop blocks it or it misses the
     /// sensor plane.

@@ -232,6 +232,21 @@ impl Camera {
         }
     }
 
+    /// Where bokeh light paths aim (camera space, metres): the plane z = `.0` and the radius
+    /// `.1` of a disc about the axis through which every ray that reaches the film passes, for
+    /// models that can connect. The thin and thick lenses: the opening's bounding circle at the
+    /// (object-side) principal plane, exactly. Real lenses (exact, LRTF): 1.25 × the paraxial
+    /// entrance pupil plus 0.5 mm at the camera origin, since the pupil moves and grows with the
+    /// field; a ray outside the disc is left to camera paths, so the radius biases nothing.
+    pub fn light_path_disc(&self) -> Option<(f64, f64)> {
+        match self {
+            Camera::Pinhole(_) | Camera::Orthographic(_) => None,
+            Camera::Thin(c) => Some(c.light_path_disc()),
+            Camera::Thick(c) => Some(c.light_path_disc()),
+            Camera::Exact(_) | Camera::Lrtf(_) => self.entrance_pupil_radius_m().map(|r| (0.0, 1.25 * r + 0.5e-3)),
+        }
+    }
+
     /// Radius of the entrance pupil (metres, paraxial, about the camera origin), for models
     /// that can connect: the aperture's circumradius for the thin and thick lenses.
     pub fn entrance_pupil_radius_m(&self) -> Option<f64> {

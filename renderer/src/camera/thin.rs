@@ -174,6 +174,11 @@ impl ThinCamera {
         self.ideal().sample_density(film, lens_u)
     }
 
+    /// The disc light paths aim at (see [`super::Camera::light_path_disc`]).
+    pub(super) fn light_path_disc(&self) -> (f64, f64) {
+        self.ideal().light_path_disc()
+    }
+
     /// Light tracing onto the film (see [`super::Camera::connect`]).
     pub(super) fn connect(&self, from_m: DVec3, to_m: DVec3) -> Option<FilmConnection> {
         self.ideal().connect(from_m, to_m)
