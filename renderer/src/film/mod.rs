@@ -41,7 +41,15 @@ impl Default for PixelFilter {
 pub struct FilterSampler {
     inverse_cdf: Vec<f32>,
     width_px: f32,
+    /// Per bin b of [0, 1] (`PDF_BINS` bins): how many knots of `inverse_cdf` are ≤ b / PDF_BINS,
+    /// where [`FilterSampler::pdf_1d`]'s count of knots ≤ v starts for v in the bin.
+    knots_below: Vec<u32>,
+    /// Density (per px) of each segment between knots, as `pdf_1d` gives it.
+    segment_pdf: Vec<f32>,
 }
+
+/// Bins of the lookup that finds a filter offset's segment without a binary search.
+const PDF_BINS: usize = 1024;
 
 impl FilterSampler {
     /// Tabulates the filter.
@@ -78,7 +86,21 @@ impl FilterSampler {
             let frac = ((p - cdf[j]) / seg).clamp(0.0, 1.0);
             inverse_cdf.push(((j as f64 + frac) / n as f64) as f32);
         }
-        FilterSampler { inverse_cdf, width_px: width }
+        // 3. The density lookup: knots below each bin's start, and each segment's density.
+        let knots_below =
+            (0..PDF_BINS).map(|b| inverse_cdf.partition_point(|&a| a <= b as f32 / PDF_BINS as f32) as u32).collect();
+        let segment_pdf = inverse_cdf
+            .windows(2)
+            .map(|k| {
+                let dv = k[1] - k[0];
+                if dv > 0.0 {
+                    1.0 / ((inverse_cdf.len() - 1) as f32 * dv * width)
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        FilterSampler { inverse_cdf, width_px: width, knots_below, segment_pdf }
     }
 
     fn sample_1d(&self, u: f32) -> f32 {
@@ -98,14 +120,15 @@ impl FilterSampler {
         if !(v >= inv[0] && v <= inv[inv.len() - 1]) {
             return 0.0;
         }
-        // the segment i with inv[i] <= v < inv[i+1]: each holds probability 1/m
-        let i = inv.partition_point(|&a| a <= v).clamp(1, inv.len() - 1) - 1;
-        let dv = inv[i + 1] - inv[i];
-        if dv > 0.0 {
-            1.0 / ((inv.len() - 1) as f32 * dv * self.width_px)
-        } else {
-            0.0
+        // the segment i with inv[i] <= v < inv[i+1] (each holds probability 1/m): the count of
+        // knots ≤ v, from the count at v's bin start on
+        let bin = ((v * PDF_BINS as f32) as usize).min(PDF_BINS - 1);
+        let mut below = self.knots_below[bin] as usize;
+        while below < inv.len() && inv[below] <= v {
+            below += 1;
         }
+        let i = below.clamp(1, inv.len() - 1) - 1;
+        self.segment_pdf[i]
     }
 
     /// Density (per px²) with which [`FilterSampler::sample`] draws offset `off` (px from the
@@ -245,5 +268,41 @@ mod tests {
         // ∫ of the Blackman–Harris window over the central third is ≈ 0.722 of the total
         let frac = inside_half as f32 / n as f32;
         assert!(frac > 0.6 && frac < 0.8, "{frac}");
+    }
+
+    /// The binned lookup finds the segment a binary search finds, so the density is the same
+    /// bit for bit: at offsets across and beyond the filter, and at every knot and its
+    /// neighbours (where the segment changes).
+    #[test]
+    fn pdf_lookup_is_the_binary_search() {
+        for filter in [
+            PixelFilter::BlackmanHarris { width_px: 3.0 },
+            PixelFilter::Box { width_px: 1.0 },
+            PixelFilter::BlackmanHarris { width_px: 0.7 },
+        ] {
+            let fs = FilterSampler::new(filter);
+            let searched = |x: f32| {
+                let inv = &fs.inverse_cdf;
+                let v = x / fs.width_px + 0.5;
+                if !(v >= inv[0] && v <= inv[inv.len() - 1]) {
+                    return 0.0;
+                }
+                let i = inv.partition_point(|&a| a <= v).clamp(1, inv.len() - 1) - 1;
+                let dv = inv[i + 1] - inv[i];
+                if dv > 0.0 {
+                    1.0 / ((inv.len() - 1) as f32 * dv * fs.width_px)
+                } else {
+                    0.0
+                }
+            };
+            let mut xs: Vec<f32> = (-4000..=4000).map(|k| k as f32 * 1e-3 * fs.width_px).collect();
+            for &k in &fs.inverse_cdf {
+                let x = (k - 0.5) * fs.width_px;
+                xs.extend([x, f32::from_bits(x.to_bits() + 1), f32::from_bits(x.to_bits().wrapping_sub(1))]);
+            }
+            for x in xs {
+                assert_eq!(fs.pdf_1d(x).to_bits(), searched(x).to_bits(), "{filter:?} at {x}");
+            }
+        }
     }
 }
