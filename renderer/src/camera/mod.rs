@@ -235,15 +235,17 @@ impl Camera {
     /// Where bokeh light paths aim (camera space, metres): the plane z = `.0` and the radius
     /// `.1` of a disc about the axis through which every ray that reaches the film passes, for
     /// models that can connect. The thin and thick lenses: the opening's bounding circle at the
-    /// (object-side) principal plane, exactly. Real lenses (exact, LRTF): 1.25 × the paraxial
-    /// entrance pupil plus 0.5 mm at the camera origin, since the pupil moves and grows with the
-    /// field; a ray outside the disc is left to camera paths, so the radius biases nothing.
+    /// (object-side) principal plane, exactly. Real lenses (exact, LRTF): at the camera origin,
+    /// the pupil moves and changes with the field, so the radius is measured
+    /// ([`real_lens_disc_m`]); a ray outside the disc is left to camera paths, so the radius
+    /// biases nothing.
     pub fn light_path_disc(&self) -> Option<(f64, f64)> {
         match self {
             Camera::Pinhole(_) | Camera::Orthographic(_) => None,
             Camera::Thin(c) => Some(c.light_path_disc()),
             Camera::Thick(c) => Some(c.light_path_disc()),
-            Camera::Exact(_) | Camera::Lrtf(_) => self.entrance_pupil_radius_m().map(|r| (0.0, 1.25 * r + 0.5e-3)),
+            Camera::Exact(c) => self.entrance_pupil_radius_m().map(|r| (0.0, real_lens_disc_m(c, r))),
+            Camera::Lrtf(c) => self.entrance_pupil_radius_m().map(|r| (0.0, real_lens_disc_m(c.exact(), r))),
         }
     }
 
@@ -307,5 +309,38 @@ impl Camera {
     /// approximation for real lenses). For an untilted sensor it is perpendicular to the axis.
     pub fn focus_plane(&self) -> Option<FocusPlane> {
         focus_plane::focus_plane(self)
+    }
+}
+
+/// Radius (m) of the light-path disc of a real lens whose paraxial entrance pupil has radius
+/// `ep_radius_m`: where camera rays through the lens cross the plane z = 0, the largest radius
+/// over a 17 × 17 grid of film points × 64 lens samples each (a Hammersley set), grown by 5 %
+/// and 0.2 mm for the rays between the samples; at most 1.25 × the pupil plus 0.5 mm (the
+/// fixed radius used before, which a fisheye's far-field rays would exceed).
+fn real_lens_disc_m(camera: &exact::ExactCamera, ep_radius_m: f64) -> f64 {
+    let bound_m = 1.25 * ep_radius_m + 0.5e-3;
+    let wavelength_nm = camera.lens().primary_wavelength_nm();
+    let mut widest_m = 0.0f64;
+    for fy in 0..=16 {
+        for fx in 0..=16 {
+            let film = DVec2::new(fx as f64 / 16.0, fy as f64 / 16.0);
+            for k in 0..64u32 {
+                let lens_u = DVec2::new((k as f64 + 0.5) / 64.0, k.reverse_bits() as f64 / 2f64.powi(32));
+                let Some(ray) = camera.generate_ray(film, lens_u, wavelength_nm) else { continue };
+                if ray.direction.z.abs() < 1e-9 {
+                    continue;
+                }
+                let p = ray.origin - ray.direction * (ray.origin.z / ray.direction.z);
+                let r = DVec2::new(p.x, p.y).length();
+                if r.is_finite() {
+                    widest_m = widest_m.max(r);
+                }
+            }
+        }
+    }
+    if widest_m > 0.0 {
+        (1.05 * widest_m + 0.2e-3).min(bound_m)
+    } else {
+        bound_m
     }
 }
