@@ -145,8 +145,8 @@ pub struct RenderArgs {
     /// Bokeh light paths: light traced from emissive surfaces through the lens onto the film,
     /// this many per pixel per sample, combined with camera paths by MIS so that small bright
     /// defocused emitters converge (any lens model, not the pinhole; --method mc; 0 = off).
-    /// They serve only emitters small against their blur and seen from the lens; large, nearly
-    /// sharp emitters and hidden ones are left to camera paths. auto: 1 where the camera has a lens and the scene has emissive
+    /// They serve emitters small against their blur, by the share the lens sees; large, nearly
+    /// sharp emitters are left to camera paths. auto: 1 where the camera has a lens and the scene has emissive
     /// surfaces, else 0.
     #[arg(long, default_value = "auto")]
     pub bokeh_paths: String,
