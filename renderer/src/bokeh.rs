@@ -8,8 +8,9 @@
 //! One light path, scene → film:
 //! 1. a point p on a disc about the axis through which every ray that reaches the film passes
 //!    ([`Camera::light_path_disc`]: the thin and thick lenses' opening at their principal plane;
-//!    for real lenses 1.25 × the paraxial entrance pupil plus 0.5 mm, at the camera origin),
-//! 2. an emitter point y chosen from p by the light tree, as next-event estimation chooses one
+//!    for real lenses the widest crossing of the camera plane by camera rays, measured),
+//! 2. an emitter triangle chosen by `EmitterChoice` (flux into the lens, defocus share, the
+//!    share the lens sees) and a point y on it as light sampling places it from p
 //!    (selection × solid-angle pdf at p),
 //! 3. the object-space ray y → p traced through the lens ([`Camera::connect`]) onto the
 //!    sensor, the segment from y to where the ray enters the lens tested for occlusion,
@@ -368,9 +369,7 @@ impl<'a> BokehTracer<'a> {
         if settings.paths <= 0.0 {
             return Ok(None);
         }
-        let (Some(ep_radius_m), Some((disc_z_m, radius_m))) =
-            (camera.entrance_pupil_radius_m(), camera.light_path_disc().filter(|_| camera.can_connect()))
-        else {
+        let Some(ep_radius_m) = camera.entrance_pupil_radius_m().filter(|_| camera.can_connect()) else {
             return Err(Error::settings(
                 "bokeh_paths",
                 format!(
@@ -379,9 +378,10 @@ impl<'a> BokehTracer<'a> {
                 ),
             ));
         };
-        if !scene.has_emissive_triangles() {
+        // (a real lens's disc is measured by tracing: only where there is light to trace)
+        let Some((disc_z_m, radius_m)) = camera.light_path_disc().filter(|_| scene.has_emissive_triangles()) else {
             return Ok(None);
-        }
+        };
         let (w, h) = (settings.width, settings.height);
         let crop = settings.crop;
         let window_px = (crop[2] - crop[0]) as f64 * (crop[3] - crop[1]) as f64;

@@ -112,8 +112,9 @@ impl FilterSampler {
         (v - 0.5) * self.width_px
     }
 
-    /// Density (per px) of [`FilterSampler::sample_1d`] at offset `x` (px from the centre); the
-    /// filter is separable, so [`FilterSampler::pdf`] is the product of two.
+    /// Density (per px) of the offsets [`FilterSampler::sample`] draws along one axis, at `x`
+    /// (px from the centre); the filter is separable, so [`FilterSampler::pdf`] is the product
+    /// of two.
     pub fn pdf_1d(&self, x: f32) -> f32 {
         let v = x / self.width_px + 0.5;
         let inv = &self.inverse_cdf;
