@@ -746,6 +746,13 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
         result.camera_rays as f64 / result.seconds / 1e6,
         if result.complete { "" } else { " — stopped early" }
     );
+    if result.light_paths > 0 {
+        eprintln!(
+            "bokeh light paths traced: {} ({:.2} per camera ray)",
+            result.light_paths,
+            result.light_paths as f64 / result.camera_rays.max(1) as f64
+        );
+    }
     if result.dropped_samples > 0 {
         eprintln!("warning: {} non-finite samples were dropped", result.dropped_samples);
     }

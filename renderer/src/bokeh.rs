@@ -25,6 +25,13 @@
 //! directly is shared between the strategies; a path the disc cannot produce (p outside it) is
 //! left wholly to the camera, so the combination is unbiased whatever the disc's radius.
 //!
+//! Under adaptive sampling a pass traces only the first ⌈share · K⌉ of each sample's K light
+//! paths, where share is the part of the splats so far that lies in pixels still sampled, and
+//! the splats are divided by the light paths traced (in samples' worth) rather than by the
+//! samples: each light path estimates the whole window on its own, and the MIS weights keep
+//! the nominal K, so the image stays unbiased while the light paths' cost follows the pixels
+//! that still need them instead of the slowest pixel.
+//!
 //! | name | type | unit | default |
 //! |---|---|---|---|
 //! | `bokeh_paths` | f32: light paths per pixel per sample (0 = off); every model with a lens (thin, thick, exact, LRTF), not the pinhole | — | 0 |
@@ -485,9 +492,18 @@ impl<'a> BokehTracer<'a> {
     }
 
     /// Traces the light paths of samples `spp` and adds their splats to `splat` (the window's
-    /// pixels, row-major).
-    pub(crate) fn trace_pass(&self, spp: std::ops::Range<u32>, splat: &mut [Vec3]) {
-        let k = self.paths_per_spp;
+    /// pixels, row-major). `share` in (0, 1] is the part of each sample's light paths traced
+    /// (its first ⌈share · K⌉ of K; 1: all): adaptive sampling traces fewer once the pixels
+    /// they land in have stopped. Returns m, the light paths traced per sample; each sample
+    /// adds m / K to the splats' sample count (their scale in the image is one over the sum):
+    /// every light path is an estimate of the whole window on its own, so any number of them is
+    /// unbiased, and the MIS weights, made with the nominal K, still sum to one on every path.
+    pub(crate) fn trace_pass(&self, spp: std::ops::Range<u32>, splat: &mut [Vec3], share: f64) -> u64 {
+        let k = if share >= 1.0 {
+            self.paths_per_spp
+        } else {
+            ((share.max(0.0) * self.paths_per_spp as f64).ceil() as u64).clamp(1, self.paths_per_spp)
+        };
         for s in spp {
             let mut start = 0;
             while start < k {
@@ -509,6 +525,12 @@ impl<'a> BokehTracer<'a> {
                 start = end;
             }
         }
+        k
+    }
+
+    /// K: the light paths of one sample over the whole window.
+    pub(crate) fn paths_per_sample(&self) -> u64 {
+        self.paths_per_spp
     }
 
     /// Light path `i` of sample `s`: its splats (window pixel index, radiance) into `out`.

@@ -15,7 +15,7 @@
 //! | `crop` | optional `[x0, y0, x1, y1)` window of the frame to render (row 0 = top) | px | whole frame |
 //! | `adaptive_threshold` | f32: adaptive sampling's noise threshold, as Cycles' "Noise Threshold" (a pixel stops once its error estimate, over its 3×3 neighbourhood, is below it; see [`adaptive_converged`]); path tracing (`mc`) only | — | 0 (off: every pixel takes `spp`) |
 //! | `adaptive_min_samples` | u32: samples every pixel takes before adaptive sampling may stop it | — | 0 (auto, as Cycles: max(4, ⌈16 / threshold^0.3⌉)) |
-//! | `bokeh_paths` | f32: light paths from emitters through the lens per pixel per sample, combined with camera paths by MIS (see [`crate::bokeh`]); any model with a lens (thin, thick, exact, LRTF), not the pinhole | — | 0 (off; the CLI's and the Python module's auto gives 1 where it applies) |
+//! | `bokeh_paths` | f32: light paths from emitters through the lens per pixel per sample, combined with camera paths by MIS (see [`crate::bokeh`]; under adaptive sampling a pass traces only the share of them whose light lands in pixels still sampled); any model with a lens (thin, thick, exact, LRTF), not the pinhole | — | 0 (off; the CLI's and the Python module's auto gives 1 where it applies) |
 
 use crate::bokeh::{BokehTracer, FilmSample, LightPathSettings};
 use crate::camera::{Camera, CameraRay, CAMERA_BATCH};
@@ -265,6 +265,20 @@ fn adaptive_step(film: &Film, converged: &[bool], threshold: f32) -> Vec<bool> {
         .collect()
 }
 
+/// The share of the light-path splats so far (r + g + b) that lies in pixels not yet
+/// `converged`; where nothing has landed yet, the share of those pixels.
+fn light_share_open(splat: &[Vec3], converged: &[bool]) -> f64 {
+    let (open, all) = splat.iter().zip(converged).fold((0f64, 0f64), |(open, all), (v, &c)| {
+        let e = (v.x + v.y + v.z).max(0.0) as f64;
+        (if c { open } else { open + e }, all + e)
+    });
+    if all > 0.0 {
+        open / all
+    } else {
+        converged.iter().filter(|&&c| !c).count() as f64 / converged.len().max(1) as f64
+    }
+}
+
 /// What a render produced.
 #[derive(Debug, Clone)]
 pub struct RenderResult {
@@ -280,6 +294,8 @@ pub struct RenderResult {
     pub seconds: f64,
     /// Camera rays generated (including blocked ones).
     pub camera_rays: u64,
+    /// Bokeh light paths started (0 without them).
+    pub light_paths: u64,
     /// Samples dropped as non-finite.
     pub dropped_samples: u64,
 }
@@ -460,6 +476,9 @@ pub(crate) fn render_samples(
     let adaptive_min = settings.adaptive_min_spp();
     let mut converged = vec![false; if adaptive_min.is_some() { film.pixels.len() } else { 0 }];
     let mut all_converged = false;
+    // The light paths' sample count: a sample adds the part of its light paths traced (1 without
+    // adaptive sampling, so then the count is `done`).
+    let (mut light_samples, mut light_paths) = (0f64, 0u64);
     // 1. Progressive passes: 1, 2, 4, ... samples, at most 16 spp per pass (with adaptive
     //    sampling, passes end where the tests are made: see `adaptive_next_check`).
     let mut done = 0u32;
@@ -588,10 +607,17 @@ pub(crate) fn render_samples(
         if !cancelled.load(Ordering::Relaxed) {
             // 4. The pass's light paths, splatted (the camera samples above weighted against them).
             if let Some(b) = bokeh {
-                b.trace_pass(range.clone(), &mut film.splat);
+                // With adaptive sampling, only part of each sample's light paths: the share of
+                // the light on the film (the splats so far) that lands in pixels still sampled.
+                // Light paths serve the whole window; once the pixels they reach have stopped,
+                // tracing them all would make the render's cost follow its slowest pixel.
+                let share = if converged.is_empty() { 1.0 } else { light_share_open(&film.splat, &converged) };
+                let traced = b.trace_pass(range.clone(), &mut film.splat, share);
+                light_samples += traced as f64 / b.paths_per_sample() as f64 * n as f64;
+                light_paths += traced * n as u64;
             }
             done += n;
-            film.splat_scale = 1.0 / done as f32;
+            film.splat_scale = 1.0 / light_samples as f32;
             if let Some(show) = on_pass {
                 show(&film.image(), done);
             }
@@ -623,6 +649,7 @@ pub(crate) fn render_samples(
         complete: done == settings.spp || all_converged,
         seconds: start.elapsed().as_secs_f64(),
         camera_rays: camera_rays.load(Ordering::Relaxed),
+        light_paths,
         dropped_samples: dropped.load(Ordering::Relaxed),
     })
 }

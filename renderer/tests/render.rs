@@ -898,6 +898,41 @@ fn bokeh_light_paths_skip_emitters_the_lens_cannot_see() {
     assert!(n_with < 2.0 * n_without, "noise with the hidden emitter {n_with:.4}, without {n_without:.4}");
 }
 
+/// Adaptive sampling with bokeh light paths: once the pixels a sample's light paths land in
+/// have stopped, fewer light paths are traced (the share of the splats in pixels still
+/// sampled), and the splats are scaled by the light paths actually traced, so the bokeh keeps
+/// its flux. A defocused emitter on black: the black pixels stop at the first test, the
+/// bokeh's rim before its middle.
+#[test]
+fn bokeh_light_paths_follow_adaptive_sampling() {
+    let cam = thin(square_sensor(4.0), 50.0, 2.8, 1.0, Aperture::default(), true);
+    let rs = scene_of(&[icosphere(Vec3::new(0.0, 0.0, -2.0), 0.01, 2, 0)], vec![emitter(1.0)], Environment::Black);
+    let base =
+        RenderSettings { width: 64, height: 64, max_depth: 1, bokeh_paths: 1.0, spp: 512, ..RenderSettings::default() };
+    let rig = CameraRig { camera: cam, to_world: DAffine3::IDENTITY };
+    let run = |s: &RenderSettings| render(&rs, &rig, s, &|_| true).unwrap();
+    let flux = |r: &RenderResult| red(&r.image).iter().sum::<f64>();
+    let reference = flux(&run(&RenderSettings { spp: 1024, seed: 99, ..base.clone() }));
+    let k = 64 * 64;
+    for seed in [1, 2] {
+        let adaptive = run(&RenderSettings { adaptive_threshold: 0.002, seed, ..base.clone() });
+        let (paths, max_spp) = (adaptive.light_paths, adaptive.spp_done as u64);
+        let ratio = flux(&adaptive) / reference;
+        eprintln!(
+            "seed {seed}: {max_spp} spp at most, {:.1} on average; light paths {paths} = {:.3} of K × {max_spp}; flux / reference {ratio:.4}",
+            adaptive.camera_rays as f64 / k as f64,
+            paths as f64 / (k * max_spp) as f64
+        );
+        assert!(max_spp > 64 && paths < k * max_spp * 85 / 100, "light paths {paths}, at most {max_spp} spp");
+        assert!((ratio - 1.0).abs() < 0.01, "flux {ratio:.4} of the reference's");
+        if seed == 1 {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+            let one = pool.install(|| run(&RenderSettings { adaptive_threshold: 0.002, seed, ..base.clone() }));
+            assert!(bits(&one.image) == bits(&adaptive.image), "1 thread and the pool's differ");
+        }
+    }
+}
+
 /// Light paths need a camera that can trace light onto its film: asked of a pinhole, the
 /// render says so.
 #[test]

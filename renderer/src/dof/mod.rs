@@ -140,6 +140,7 @@ pub(crate) fn cancelled(settings: &RenderSettings, start: Instant) -> RenderResu
         complete: false,
         seconds: start.elapsed().as_secs_f64(),
         camera_rays: 0,
+        light_paths: 0,
         dropped_samples: 0,
     }
 }

@@ -396,6 +396,7 @@ pub fn render_spread(
         complete,
         seconds: start.elapsed().as_secs_f64(),
         camera_rays: optics.rays_traced() + weights.rays,
+        light_paths: 0,
         dropped_samples: 0,
     })
 }
