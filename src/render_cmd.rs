@@ -748,9 +748,10 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
     );
     if result.light_paths > 0 {
         eprintln!(
-            "bokeh light paths traced: {} ({:.2} per camera ray)",
+            "bokeh light paths traced: {} ({:.2} per camera ray), {:.1} % of them reached the film",
             result.light_paths,
-            result.light_paths as f64 / result.camera_rays.max(1) as f64
+            result.light_paths as f64 / result.camera_rays.max(1) as f64,
+            100.0 * result.light_paths_landed as f64 / result.light_paths as f64
         );
     }
     if result.dropped_samples > 0 {

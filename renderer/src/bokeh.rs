@@ -6,12 +6,14 @@
 //! its bokeh disc.
 //!
 //! One light path, scene → film:
-//! 1. a point p on a disc about the axis through which every ray that reaches the film passes
+//! 1. an emitter triangle chosen by `EmitterChoice` (flux into the lens, defocus share, the
+//!    share the lens sees),
+//! 2. a point p on a disc about the axis through which every ray that reaches the film passes
 //!    ([`Camera::light_path_disc`]: the thin and thick lenses' opening at their principal plane;
-//!    for real lenses the widest crossing of the camera plane by camera rays, measured),
-//! 2. an emitter triangle chosen by `EmitterChoice` (flux into the lens, defocus share, the
-//!    share the lens sees) and a point y on it as light sampling places it from p
-//!    (selection × solid-angle pdf at p),
+//!    for real lenses the widest crossing of the camera plane by camera rays, measured), or,
+//!    through a real lens, on the cells of that disc through which the chosen emitter's light
+//!    reaches the film (`emitter_cells`: a corner emitter's cat's eye), and a point y on the
+//!    emitter as light sampling places it from p (selection × solid-angle pdf at p),
 //! 3. the object-space ray y → p traced through the lens ([`Camera::connect`]) onto the
 //!    sensor, the segment from y to where the ray enters the lens tested for occlusion,
 //! 4. a splat into every pixel whose filter covers the film point, weighted by that pixel's
@@ -22,8 +24,9 @@
 //! light path's pdf(p on the disc) · pdf_ω(y from p) / cosθ_p. The balance heuristic weights
 //! each strategy by its density times its sample count (K light paths per sample per pixel of
 //! the whole image against one camera sample per pixel). Only emission that the camera ray hits
-//! directly is shared between the strategies; a path the disc cannot produce (p outside it) is
-//! left wholly to the camera, so the combination is unbiased whatever the disc's radius.
+//! directly is shared between the strategies; a path the disc cannot produce (p outside it, or
+//! off the emitter's cells) is left wholly to the camera, so the combination is unbiased
+//! whatever the disc's radius.
 //!
 //! Under adaptive sampling a pass traces only the first ⌈share · K⌉ of each sample's K light
 //! paths, where share is the part of the splats so far that lies in pixels still sampled, and
@@ -34,6 +37,8 @@
 //!
 //! | name | type | unit | default |
 //! |---|---|---|---|
+//! | `MAX_EMITTER_CELLS` | constant: emitters given cells of their own through a real lens (the rest aim at the disc) | — | 256 |
+//! | `DISC_GRID` | constant: cells across the disc's diameter | — | 20 |
 //! | `bokeh_paths` | f32: light paths per pixel per sample (0 = off); every model with a lens (thin, thick, exact, LRTF), not the pinhole | — | 0 |
 
 use crate::camera::Camera;
@@ -106,12 +111,13 @@ pub(crate) struct BokehTracer<'a> {
     to_camera: DAffine3,
     /// The camera's viewing direction and origin (world).
     forward: Vec3,
-    /// The disc light paths aim at: its plane (camera z, m), radius (m) and area density (mm⁻²).
+    /// The plane of the discs light paths aim at (camera z, m).
     disc_z_m: f64,
-    radius_m: f64,
-    /// The disc's centre (world).
-    disc_centre: Vec3,
-    disc_pdf_mm2: f64,
+    /// The disc every ray that reaches the film passes through.
+    disc: Disc,
+    /// Through a real lens, the part of it each emitter's light passes ([`emitter_cells`], per
+    /// `EmitterChoice::emitters` entry; None: the whole disc).
+    cells: Vec<Option<Cells>>,
     /// Light paths per sample per pixel over the whole window (K).
     paths_per_spp: u64,
     /// Area of one pixel on the sensor (mm²).
@@ -126,6 +132,138 @@ pub(crate) struct BokehTracer<'a> {
     clip_m: (f64, f64),
     defocus: Defocus,
     emitters: EmitterChoice,
+}
+
+/// The disc light paths aim at, about the axis in the plane z = `BokehTracer::disc_z_m`
+/// (camera space).
+#[derive(Debug, Clone, Copy)]
+struct Disc {
+    /// Radius (m).
+    radius_m: f64,
+    /// Centre (world).
+    centre_world: Vec3,
+    /// Area density of a uniform point on it (mm⁻²).
+    pdf_mm2: f64,
+}
+
+impl Disc {
+    /// The disc of radius `radius_m` about the axis in the plane z = `disc_z_m`.
+    fn new(radius_m: f64, disc_z_m: f64, to_world: &DAffine3) -> Disc {
+        let radius_mm = radius_m * 1e3;
+        Disc {
+            radius_m,
+            centre_world: to_world.transform_point3(DVec3::new(0.0, 0.0, disc_z_m)).as_vec3(),
+            pdf_mm2: 1.0 / (std::f64::consts::PI * radius_mm * radius_mm),
+        }
+    }
+}
+
+/// Most emitters a real lens measures a domain of its own for; the rest aim at the shared disc.
+const MAX_EMITTER_CELLS: usize = 256;
+/// Grid cells across the shared disc's diameter, of which an emitter's domain is made.
+const DISC_GRID: usize = 20;
+
+/// Where the light paths of one emitter aim through a real lens: the cells of a grid over the
+/// shared disc (plane z = `BokehTracer::disc_z_m`) through which its light reaches the film,
+/// and their neighbours; uniform over them.
+#[derive(Debug, Clone)]
+struct Cells {
+    /// Cell side (m); the grid's corner is (−R, −R) for the shared disc's radius R.
+    step_m: f64,
+    /// The shared disc's radius R (m).
+    big_m: f64,
+    /// The cells (row-major index iy · DISC_GRID + ix), in order.
+    list: Vec<u32>,
+    /// Whether each cell of the grid is one of them.
+    mask: Vec<bool>,
+    /// Area density of a uniform point on them (mm⁻²).
+    pdf_mm2: f64,
+}
+
+impl Cells {
+    /// The point (camera x, y; m) of sample `u` in [0, 1)²: a cell by u.x, the point in it by
+    /// the rest of u.x and by u.y.
+    fn sample(&self, u: DVec2) -> DVec2 {
+        let n = self.list.len();
+        let x = u.x * n as f64;
+        let k = (x as usize).min(n - 1);
+        let c = self.list[k] as usize;
+        let (ix, iy) = (c % DISC_GRID, c / DISC_GRID);
+        DVec2::new(
+            (ix as f64 + (x - k as f64)) * self.step_m - self.big_m,
+            (iy as f64 + u.y) * self.step_m - self.big_m,
+        )
+    }
+
+    /// The density (mm⁻²) at point `q` (camera x, y; m): 0 off the cells.
+    fn pdf_mm2(&self, q: DVec2) -> f64 {
+        let g = (q + DVec2::splat(self.big_m)) / self.step_m;
+        if !(g.x >= 0.0 && g.y >= 0.0 && g.x < DISC_GRID as f64 && g.y < DISC_GRID as f64) {
+            return 0.0;
+        }
+        if self.mask[g.y as usize * DISC_GRID + g.x as usize] {
+            self.pdf_mm2
+        } else {
+            0.0
+        }
+    }
+}
+
+/// The cells of the shared disc (radius `big_m`, plane z = `disc_z_m`) through which light
+/// from an emitter (bounds centre `centre_world`, radius `radius_m`) reaches the film of a
+/// real lens: those whose centre a ray from the emitter's centre or from one of six points at
+/// its radius along the camera axes passes through the lens to, with their eight neighbours.
+/// None when no cell passes or they do not cover clearly less (under 0.8 of the cells of the
+/// disc). Off the axis a real lens vignettes: light from a corner emitter passes only a cat's
+/// eye of the pupil, and aiming at the whole disc loses most of its light paths. Any domain
+/// keeps the combination unbiased (a path through a point off it is left wholly to the
+/// camera); the neighbours only keep it from being a worse split near the outline.
+fn emitter_cells(
+    camera: &Camera,
+    to_camera: &DAffine3,
+    centre_world: Vec3,
+    radius_m: f32,
+    big_m: f64,
+    disc_z_m: f64,
+    wavelength_nm: f64,
+) -> Option<Cells> {
+    // 1. The emitter's centre and six points at its radius.
+    let c = to_camera.transform_point3(centre_world.as_dvec3());
+    let r = radius_m as f64;
+    let points =
+        [c, c + DVec3::X * r, c - DVec3::X * r, c + DVec3::Y * r, c - DVec3::Y * r, c + DVec3::Z * r, c - DVec3::Z * r];
+    // 2. The cells (of those inside the disc) whose centre a ray from one of them passes to.
+    let step = 2.0 * big_m / DISC_GRID as f64;
+    let g = DISC_GRID as i64;
+    let mut passes = vec![false; DISC_GRID * DISC_GRID];
+    let mut in_disc = 0usize;
+    for iy in 0..g {
+        for ix in 0..g {
+            let q = DVec2::new((ix as f64 + 0.5) * step - big_m, (iy as f64 + 0.5) * step - big_m);
+            if q.length() > big_m {
+                continue;
+            }
+            in_disc += 1;
+            let p = q.extend(disc_z_m);
+            passes[(iy * g + ix) as usize] =
+                points.iter().any(|&y| y.z < 0.0 && camera.connect(y, p, wavelength_nm).is_some());
+        }
+    }
+    // 3. With their neighbours, where they are clearly fewer.
+    let mask: Vec<bool> = (0..g * g)
+        .map(|i| {
+            let (ix, iy) = (i % g, i / g);
+            (iy - 1..=iy + 1)
+                .any(|y| (ix - 1..=ix + 1).any(|x| x >= 0 && y >= 0 && x < g && y < g && passes[(y * g + x) as usize]))
+        })
+        .collect();
+    let list: Vec<u32> = (0..mask.len() as u32).filter(|&i| mask[i as usize]).collect();
+    if list.is_empty() || list.len() as f64 >= 0.8 * in_disc as f64 {
+        return None;
+    }
+    let step_mm = step * 1e3;
+    let pdf_mm2 = 1.0 / (list.len() as f64 * step_mm * step_mm);
+    Some(Cells { step_m: step, big_m, list, mask, pdf_mm2 })
 }
 
 /// How light paths choose their emitter: among the emissive triangles that can blur into the
@@ -148,11 +286,17 @@ struct EmitterChoice {
     pmf: Vec<f32>,
     /// Radius (m, world) of the emitter each light index belongs to (0 for other lights).
     radius_m: Vec<f32>,
+    /// The emitter (connected set) each light index belongs to, as an index into `emitters`
+    /// (`u32::MAX` for other lights).
+    emitter_of: Vec<u32>,
+    /// Each emitter that light paths may choose: (centre of its bounds, world; its radius, m).
+    emitters: Vec<(Vec3, f32)>,
 }
 
 /// Radius (m) of each connected set of triangles, per triangle (sets: triangles sharing a
-/// vertex position, bit for bit; the radius: of the sphere with the set's area).
-fn component_radii(tris: &[[Vec3; 3]]) -> Vec<f32> {
+/// vertex position, bit for bit; the radius: of the sphere with the set's area), the set's id
+/// (its first triangle's index) and the centre of its bounds.
+fn component_radii(tris: &[[Vec3; 3]]) -> Vec<(f32, usize, Vec3)> {
     // 1. Union-find over triangles, joined through their vertex positions.
     let mut parent: Vec<usize> = (0..tris.len()).collect();
     fn root(parent: &mut [usize], mut i: usize) -> usize {
@@ -187,9 +331,9 @@ fn component_radii(tris: &[[Vec3; 3]]) -> Vec<f32> {
     }
     roots
         .iter()
-        .map(|r| {
-            let (lo, hi, area) = sets[r];
-            (area / (4.0 * std::f32::consts::PI)).sqrt().min(0.5 * (hi - lo).length())
+        .map(|&r| {
+            let (lo, hi, area) = sets[&r];
+            ((area / (4.0 * std::f32::consts::PI)).sqrt().min(0.5 * (hi - lo).length()), r, 0.5 * (lo + hi))
         })
         .collect()
 }
@@ -209,15 +353,15 @@ impl EmitterChoice {
         let (w, h) = (settings.width as f64, settings.height as f64);
         let [x0, y0, x1, y1] = settings.crop.map(|c| c as f64);
         let candidates: Vec<(usize, [Vec3; 3], f32)> = scene.emissive_triangles().collect();
-        let radii = component_radii(&candidates.iter().map(|c| c.1).collect::<Vec<_>>());
+        let components = component_radii(&candidates.iter().map(|c| c.1).collect::<Vec<_>>());
         let mut radius_m = vec![0.0f32; scene.light_count()];
-        for (c, &r) in candidates.iter().zip(&radii) {
+        for (c, &(r, _, _)) in candidates.iter().zip(&components) {
             radius_m[c.0] = r;
         }
         let kept: Vec<(usize, f32)> = candidates
             .par_iter()
-            .zip(radii.par_iter())
-            .filter_map(|(&(i, v, power), &radius)| {
+            .zip(components.par_iter())
+            .filter_map(|(&(i, v, power), &(radius, _, _))| {
                 if !(power > 0.0) {
                     return None;
                 }
@@ -263,7 +407,20 @@ impl EmitterChoice {
             acc += p as f64 / total;
             cdf.push((i, acc as f32));
         }
-        Some(EmitterChoice { cdf, pmf, radius_m })
+        // The emitters of the kept triangles, in the order of their first kept triangle.
+        let mut emitter_of = vec![u32::MAX; scene.light_count()];
+        let mut emitters = Vec::new();
+        let mut index_of = std::collections::HashMap::new();
+        for (c, &(r, id, centre)) in candidates.iter().zip(&components) {
+            if pmf[c.0] > 0.0 {
+                let k = *index_of.entry(id).or_insert_with(|| {
+                    emitters.push((centre, r));
+                    emitters.len() as u32 - 1
+                });
+                emitter_of[c.0] = k;
+            }
+        }
+        Some(EmitterChoice { cdf, pmf, radius_m, emitter_of, emitters })
     }
 
     /// The emitter for sample `u` in [0, 1): (light index, probability).
@@ -392,7 +549,6 @@ impl<'a> BokehTracer<'a> {
         let (w, h) = (settings.width, settings.height);
         let crop = settings.crop;
         let window_px = (crop[2] - crop[0]) as f64 * (crop[3] - crop[1]) as f64;
-        let radius_mm = radius_m * 1e3;
         let sensor = camera.sensor();
         let to_camera = to_world.inverse();
         let defocus = Defocus {
@@ -412,6 +568,17 @@ impl<'a> BokehTracer<'a> {
             // camera's weight is then 1 everywhere, as without light paths).
             return Ok(None);
         };
+        // The shared disc, and through a real lens each emitter's part of it (the first
+        // MAX_EMITTER_CELLS; the thin and thick lenses' opening is the same from every point).
+        let disc = Disc::new(radius_m, disc_z_m, &to_world);
+        let cells: Vec<Option<Cells>> = if camera.real_lens().is_some() {
+            emitters.emitters[..emitters.emitters.len().min(MAX_EMITTER_CELLS)]
+                .par_iter()
+                .map(|&(c, r)| emitter_cells(camera, &to_camera, c, r, radius_m, disc_z_m, primary_nm))
+                .collect()
+        } else {
+            Vec::new()
+        };
         Ok(Some(BokehTracer {
             scene,
             camera,
@@ -419,9 +586,8 @@ impl<'a> BokehTracer<'a> {
             to_camera,
             forward: to_world.transform_vector3(DVec3::NEG_Z).normalize().as_vec3(),
             disc_z_m,
-            radius_m,
-            disc_centre: to_world.transform_point3(DVec3::new(0.0, 0.0, disc_z_m)).as_vec3(),
-            disc_pdf_mm2: 1.0 / (std::f64::consts::PI * radius_mm * radius_mm),
+            disc,
+            cells,
             paths_per_spp: (settings.paths as f64 * window_px).ceil().max(1.0) as u64,
             px_area_mm2: sensor.width_mm / w as f64 * (sensor.height_mm / h as f64),
             width: w,
@@ -475,20 +641,32 @@ impl<'a> BokehTracer<'a> {
             return 0.0;
         }
         // 1. Where the ray's line crosses the disc's plane (it may be behind the ray's origin,
-        //    inside the lens).
-        let centre = self.disc_centre;
+        //    inside the lens), and the density of p there: on the disc, or on the emitter's
+        //    cells.
+        let centre = self.disc.centre_world;
         let cos_p = dir.dot(self.forward);
         if cos_p.abs() < 1e-6 {
             return 0.0;
         }
         let p = origin + dir * ((centre - origin).dot(self.forward) / cos_p);
-        if (p - centre).length() as f64 > self.radius_m {
+        let pdf_mm2 = match self.cells_of(light) {
+            None if (p - centre).length() as f64 > self.disc.radius_m => return 0.0,
+            None => self.disc.pdf_mm2,
+            Some(cells) => cells.pdf_mm2(self.to_camera.transform_point3(p.as_dvec3()).truncate()),
+        };
+        if pdf_mm2 == 0.0 {
             return 0.0;
         }
         // 2. The light paths' choice of this emitter point from p.
         let dist = (hit.position - p).length();
         let pdf_w = self.scene.triangle_light_pdf_with_pmf(pmf, hit, dir, dist) as f64;
-        alpha * self.paths_per_spp as f64 * self.disc_pdf_mm2 * pdf_w / cos_p.abs() as f64
+        alpha * self.paths_per_spp as f64 * pdf_mm2 * pdf_w / cos_p.abs() as f64
+    }
+
+    /// The cells the light paths of emitter triangle `light` aim at (None: the whole disc).
+    fn cells_of(&self, light: usize) -> Option<&Cells> {
+        let e = *self.emitters.emitter_of.get(light)?;
+        self.cells.get(e as usize)?.as_ref()
     }
 
     /// Traces the light paths of samples `spp` and adds their splats to `splat` (the window's
@@ -498,34 +676,42 @@ impl<'a> BokehTracer<'a> {
     /// adds m / K to the splats' sample count (their scale in the image is one over the sum):
     /// every light path is an estimate of the whole window on its own, so any number of them is
     /// unbiased, and the MIS weights, made with the nominal K, still sum to one on every path.
-    pub(crate) fn trace_pass(&self, spp: std::ops::Range<u32>, splat: &mut [Vec3], share: f64) -> u64 {
+    /// Also returns how many of the pass's light paths reached the window (added at least one
+    /// splat).
+    pub(crate) fn trace_pass(&self, spp: std::ops::Range<u32>, splat: &mut [Vec3], share: f64) -> (u64, u64) {
         let k = if share >= 1.0 {
             self.paths_per_spp
         } else {
             ((share.max(0.0) * self.paths_per_spp as f64).ceil() as u64).clamp(1, self.paths_per_spp)
         };
+        let mut landed = 0;
         for s in spp {
             let mut start = 0;
             while start < k {
                 let end = (start + CHUNK * BATCH).min(k);
                 let chunks: Vec<u64> = (start..end).step_by(CHUNK as usize).collect();
-                let parts: Vec<Vec<(u32, Vec3)>> = chunks
+                let parts: Vec<(Vec<(u32, Vec3)>, u64)> = chunks
                     .par_iter()
                     .map(|&c0| {
-                        let mut out = Vec::new();
+                        let (mut out, mut reached) = (Vec::new(), 0);
                         for i in c0..(c0 + CHUNK).min(end) {
+                            let before = out.len();
                             self.trace_one(i, s, &mut out);
+                            reached += (out.len() > before) as u64;
                         }
-                        out
+                        (out, reached)
                     })
                     .collect();
-                for (px, v) in parts.into_iter().flatten() {
-                    splat[px as usize] += v;
+                for (out, reached) in parts {
+                    landed += reached;
+                    for (px, v) in out {
+                        splat[px as usize] += v;
+                    }
                 }
                 start = end;
             }
         }
-        k
+        (k, landed)
     }
 
     /// K: the light paths of one sample over the whole window.
@@ -541,11 +727,16 @@ impl<'a> BokehTracer<'a> {
         let u_pick = sampler.next_1d();
         let u_light = sampler.next_2d();
         let u_lambda = sampler.next_1d();
-        let disc = concentric_disk(u_disc.as_dvec2()) * self.radius_m;
-        let p_cam = DVec3::new(disc.x, disc.y, self.disc_z_m);
-        let p_world = self.to_world.transform_point3(p_cam).as_vec3();
-        // 2. An emitter point seen from p (punctual lights and the sky are not seen directly).
+        // 2. The emitter, a point p on its disc, and a point of it seen from p (punctual lights
+        //    and the sky are not seen directly).
         let Some((light, pmf)) = self.emitters.pick(u_pick) else { return };
+        let cells = self.cells_of(light);
+        let q = match cells {
+            None => concentric_disk(u_disc.as_dvec2()) * self.disc.radius_m,
+            Some(c) => c.sample(u_disc.as_dvec2()),
+        };
+        let p_cam = DVec3::new(q.x, q.y, self.disc_z_m);
+        let p_world = self.to_world.transform_point3(p_cam).as_vec3();
         let Some(ls) = self.scene.sample_chosen_light(p_world, light, pmf, u_light) else { return };
         let Some(y) = ls.target.filter(|_| !ls.delta) else { return };
         let (lambda, lambda_weight) =
@@ -584,7 +775,8 @@ impl<'a> BokehTracer<'a> {
         if !(cos_p > 1e-9) {
             return;
         }
-        let light_density = alpha * self.paths_per_spp as f64 * self.disc_pdf_mm2 * ls.pdf as f64 / cos_p;
+        let pdf_mm2 = cells.map_or(self.disc.pdf_mm2, |c| c.pdf_mm2);
+        let light_density = alpha * self.paths_per_spp as f64 * pdf_mm2 * ls.pdf as f64 / cos_p;
         let base = ls.radiance * lambda_weight * conn.importance as f32;
         // 6. Splat into those pixels.
         // The filter is separable: its density along each axis, once per column and row (per

@@ -296,6 +296,8 @@ pub struct RenderResult {
     pub camera_rays: u64,
     /// Bokeh light paths started (0 without them).
     pub light_paths: u64,
+    /// Those of them that reached the window (added at least one splat).
+    pub light_paths_landed: u64,
     /// Samples dropped as non-finite.
     pub dropped_samples: u64,
 }
@@ -478,7 +480,7 @@ pub(crate) fn render_samples(
     let mut all_converged = false;
     // The light paths' sample count: a sample adds the part of its light paths traced (1 without
     // adaptive sampling, so then the count is `done`).
-    let (mut light_samples, mut light_paths) = (0f64, 0u64);
+    let (mut light_samples, mut light_paths, mut light_paths_landed) = (0f64, 0u64, 0u64);
     // 1. Progressive passes: 1, 2, 4, ... samples, at most 16 spp per pass (with adaptive
     //    sampling, passes end where the tests are made: see `adaptive_next_check`).
     let mut done = 0u32;
@@ -612,9 +614,10 @@ pub(crate) fn render_samples(
                 // Light paths serve the whole window; once the pixels they reach have stopped,
                 // tracing them all would make the render's cost follow its slowest pixel.
                 let share = if converged.is_empty() { 1.0 } else { light_share_open(&film.splat, &converged) };
-                let traced = b.trace_pass(range.clone(), &mut film.splat, share);
+                let (traced, landed) = b.trace_pass(range.clone(), &mut film.splat, share);
                 light_samples += traced as f64 / b.paths_per_sample() as f64 * n as f64;
                 light_paths += traced * n as u64;
+                light_paths_landed += landed;
             }
             done += n;
             film.splat_scale = 1.0 / light_samples as f32;
@@ -650,6 +653,7 @@ pub(crate) fn render_samples(
         seconds: start.elapsed().as_secs_f64(),
         camera_rays: camera_rays.load(Ordering::Relaxed),
         light_paths,
+        light_paths_landed,
         dropped_samples: dropped.load(Ordering::Relaxed),
     })
 }

@@ -141,6 +141,7 @@ pub(crate) fn cancelled(settings: &RenderSettings, start: Instant) -> RenderResu
         seconds: start.elapsed().as_secs_f64(),
         camera_rays: 0,
         light_paths: 0,
+        light_paths_landed: 0,
         dropped_samples: 0,
     }
 }

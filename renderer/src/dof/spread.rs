@@ -397,6 +397,7 @@ pub fn render_spread(
         seconds: start.elapsed().as_secs_f64(),
         camera_rays: optics.rays_traced() + weights.rays,
         light_paths: 0,
+        light_paths_landed: 0,
         dropped_samples: 0,
     })
 }
