@@ -358,6 +358,7 @@ impl EmitterChoice {
         for (c, &(r, _, _)) in candidates.iter().zip(&components) {
             radius_m[c.0] = r;
         }
+        let probes = probes_per_triangle(candidates.len());
         let kept: Vec<(usize, f32)> = candidates
             .par_iter()
             .zip(components.par_iter())
@@ -391,7 +392,7 @@ impl EmitterChoice {
                 //    the share of it the lens sees ([`visible_share`], at least one probe's).
                 let d2 = ((y[0] + y[1] + y[2]) / 3.0).length_squared().max(1e-12);
                 let share = (alpha[0] + alpha[1] + alpha[2]) / 3.0;
-                let seen = visible_share(scene, i, disc_world).max(MIN_SEEN_SHARE);
+                let seen = visible_share(scene, i, disc_world, probes).max(MIN_SEEN_SHARE);
                 Some((i, (power as f64 / d2 * share * seen) as f32))
             })
             .collect();
@@ -449,22 +450,42 @@ const TRIANGLE_PROBES: [(f32, f32); 4] = [(0.44, 0.5), (0.9, 0.1), (0.9, 0.9), (
 /// The share of the segments between emissive triangle `light` and the light-path disc
 /// (`disc_world`, its probe points) that are unoccluded, each made as a light path makes it
 /// (the emitter point as light sampling places it, facing the disc point; a one-sided emitter
-/// seen from behind counts as hidden). The emitter choice weighs each triangle by it (at least
-/// [`MIN_SEEN_SHARE`]): the far side of a lamp's sphere or a lamp behind a wall takes few light
-/// paths. Both strategies use the same choice, so the image stays unbiased whatever the share.
-fn visible_share(scene: &RenderScene, light: usize, disc_world: &[Vec3; DISC_PROBES]) -> f64 {
+/// seen from behind counts as hidden), over the first `probes` of the 16 (triangle point,
+/// disc point) pairs in [`probe_pair`]'s order. The emitter choice weighs each triangle by it
+/// (at least [`MIN_SEEN_SHARE`]): the far side of a lamp's sphere or a lamp behind a wall takes
+/// few light paths. Both strategies use the same choice, so the image stays unbiased whatever
+/// the share.
+fn visible_share(scene: &RenderScene, light: usize, disc_world: &[Vec3; DISC_PROBES], probes: usize) -> f64 {
     let mut seen = 0;
-    for &(u0, u1) in &TRIANGLE_PROBES {
-        for &p in disc_world {
-            let Some(y) = scene.sample_chosen_light(p, light, 1.0, Vec2::new(u0, u1)).and_then(|ls| ls.target) else {
-                continue;
-            };
-            if !scene.occluded(y, p - y, 1.0 - 1e-4) {
-                seen += 1;
-            }
+    for j in 0..probes {
+        let (t, d) = probe_pair(j);
+        let (u0, u1) = TRIANGLE_PROBES[t];
+        let p = disc_world[d];
+        let Some(y) = scene.sample_chosen_light(p, light, 1.0, Vec2::new(u0, u1)).and_then(|ls| ls.target) else {
+            continue;
+        };
+        if !scene.occluded(y, p - y, 1.0 - 1e-4) {
+            seen += 1;
         }
     }
-    seen as f64 / (TRIANGLE_PROBES.len() * DISC_PROBES) as f64
+    seen as f64 / probes as f64
+}
+
+/// Pair `j` of [`visible_share`]'s probes: (triangle point, disc point). Each run of four
+/// takes every triangle point and every disc point once; all 16 are every pair once.
+fn probe_pair(j: usize) -> (usize, usize) {
+    (j % 4, (j % 4 + j / 4) % 4)
+}
+
+/// Most probe segments [`visible_share`] tests over all candidate emitter triangles. Past it a
+/// triangle gets fewer than all 16, at least one, so the set-up stays bounded: with 16 each, a
+/// million emissive triangles in view took about 2 s on 2 threads.
+const PROBE_BUDGET: usize = 1 << 18;
+
+/// The probes each of `candidates` emissive triangles gets: all 16 within [`PROBE_BUDGET`]
+/// (the street's 11 600), else the budget's share, at least one.
+fn probes_per_triangle(candidates: usize) -> usize {
+    (PROBE_BUDGET / candidates.max(1)).clamp(1, TRIANGLE_PROBES.len() * DISC_PROBES)
 }
 
 /// Ratios ρ = (blur + 1 px) / (the emitter's sharp image size) below which light paths take no
@@ -808,6 +829,39 @@ impl<'a> BokehTracer<'a> {
                     out.push((index(ix, iy) as u32, v));
                 }
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// All 16 probes are every (triangle point, disc point) pair once, and each run of four
+    /// takes every triangle point and every disc point once (so a budget of 4, 8 or 12 spreads
+    /// over both).
+    #[test]
+    fn probe_pairs_cover_triangle_and_disc_points() {
+        let all: std::collections::HashSet<_> = (0..16).map(probe_pair).collect();
+        assert_eq!(all.len(), 16);
+        for run in 0..4 {
+            let pairs: Vec<_> = (4 * run..4 * run + 4).map(probe_pair).collect();
+            for k in 0..4 {
+                assert!(pairs.iter().any(|p| p.0 == k) && pairs.iter().any(|p| p.1 == k), "run {run}: {pairs:?}");
+            }
+        }
+    }
+
+    /// Within the budget every triangle gets all 16 probes; a million get one each.
+    #[test]
+    fn probes_stay_within_the_budget() {
+        assert_eq!(probes_per_triangle(0), 16);
+        assert_eq!(probes_per_triangle(11_600), 16);
+        assert_eq!(probes_per_triangle(100_000), 2);
+        assert_eq!(probes_per_triangle(1_000_000), 1);
+        for n in [1, 16_384, 16_385, 50_000, 262_144, 5_000_000] {
+            let k = probes_per_triangle(n);
+            assert!((1..=16).contains(&k) && (k == 1 || n * k <= PROBE_BUDGET), "{n} triangles: {k} probes");
         }
     }
 }
