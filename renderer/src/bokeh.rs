@@ -32,12 +32,13 @@
 //! paths, where share is the part of the splats so far that lies in pixels still sampled, and
 //! the splats are divided by the light paths traced (in samples' worth) rather than by the
 //! samples: each light path estimates the whole window on its own, and the MIS weights keep
-//! the nominal K, so the image stays unbiased while the light paths' cost follows the pixels
+//! the nominal K, so the image stays consistent (as adaptive stopping itself, the count depends
+//! on earlier splats: a ratio bias of order 1/n) while the light paths' cost follows the pixels
 //! that still need them instead of the slowest pixel.
 //!
 //! | name | type | unit | default |
 //! |---|---|---|---|
-//! | `MAX_EMITTER_CELLS` | constant: emitters given cells of their own through a real lens (the rest aim at the disc) | — | 256 |
+//! | `MAX_EMITTER_CELLS` | constant: emitters given cells of their own through a real lens, those light paths choose most (the rest aim at the disc) | — | 256 |
 //! | `DISC_GRID` | constant: cells across the disc's diameter | — | 20 |
 //! | `bokeh_paths` | f32: light paths per pixel per sample (0 = off); every model with a lens (thin, thick, exact, LRTF), not the pinhole | — | 0 |
 
@@ -158,7 +159,8 @@ impl Disc {
     }
 }
 
-/// Most emitters a real lens measures a domain of its own for; the rest aim at the shared disc.
+/// Most emitters a real lens measures a domain of its own for (those light paths choose most);
+/// the rest aim at the shared disc.
 const MAX_EMITTER_CELLS: usize = 256;
 /// Grid cells across the shared disc's diameter, of which an emitter's domain is made.
 const DISC_GRID: usize = 20;
@@ -358,8 +360,8 @@ impl EmitterChoice {
         for (c, &(r, _, _)) in candidates.iter().zip(&components) {
             radius_m[c.0] = r;
         }
-        let probes = probes_per_triangle(candidates.len());
-        let kept: Vec<(usize, f32)> = candidates
+        // (light index, weight before the visible share, whether it is probed)
+        let in_view: Vec<(usize, f64, bool)> = candidates
             .par_iter()
             .zip(components.par_iter())
             .filter_map(|(&(i, v, power), &(radius, _, _))| {
@@ -377,7 +379,9 @@ impl EmitterChoice {
                 let blur = y.iter().map(|&p| defocus.blur_px(p)).fold(0.0, f64::max);
                 let (mut lo, mut hi) = (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY));
                 for &p in &y {
-                    let Some(c) = camera.connect(p, DVec3::ZERO, wavelength_nm) else { return Some((i, power)) };
+                    let Some(c) = camera.connect(p, DVec3::ZERO, wavelength_nm) else {
+                        return Some((i, power as f64, false));
+                    };
                     let px = DVec2::new(c.film.x * w, c.film.y * h);
                     lo = lo.min(px);
                     hi = hi.max(px);
@@ -389,11 +393,23 @@ impl EmitterChoice {
                 }
                 // 3. Weighted by the flux it sends into the lens (power over squared distance)
                 //    times the share light paths take of it (α, at the vertices on average) and
-                //    the share of it the lens sees ([`visible_share`], at least one probe's).
+                //    (below) the share of it the lens sees.
                 let d2 = ((y[0] + y[1] + y[2]) / 3.0).length_squared().max(1e-12);
                 let share = (alpha[0] + alpha[1] + alpha[2]) / 3.0;
-                let seen = visible_share(scene, i, disc_world, probes).max(MIN_SEEN_SHARE);
-                Some((i, (power as f64 / d2 * share * seen) as f32))
+                Some((i, power as f64 / d2 * share, true))
+            })
+            .collect();
+        // 4. The share the lens sees ([`visible_share`], at least one probe's), with the probes
+        //    of the triangles in view within the budget.
+        let probes = probes_per_triangle(in_view.iter().filter(|t| t.2).count());
+        let kept: Vec<(usize, f32)> = in_view
+            .par_iter()
+            .map(|&(i, w, probed)| {
+                if probed {
+                    (i, (w * visible_share(scene, i, disc_world, probes).max(MIN_SEEN_SHARE)) as f32)
+                } else {
+                    (i, w as f32)
+                }
             })
             .collect();
         let total: f64 = kept.iter().map(|&(_, p)| p as f64).sum();
@@ -477,7 +493,7 @@ fn probe_pair(j: usize) -> (usize, usize) {
     (j % 4, (j % 4 + j / 4) % 4)
 }
 
-/// Most probe segments [`visible_share`] tests over all candidate emitter triangles. Past it a
+/// Most probe segments [`visible_share`] tests over the emitter triangles in view. Past it a
 /// triangle gets fewer than all 16, at least one, so the set-up stays bounded: with 16 each, a
 /// million emissive triangles in view took about 2 s on 2 threads.
 const PROBE_BUDGET: usize = 1 << 18;
@@ -589,14 +605,33 @@ impl<'a> BokehTracer<'a> {
             // camera's weight is then 1 everywhere, as without light paths).
             return Ok(None);
         };
-        // The shared disc, and through a real lens each emitter's part of it (the first
-        // MAX_EMITTER_CELLS; the thin and thick lenses' opening is the same from every point).
+        // The shared disc, and through a real lens each emitter's part of it (for the
+        // MAX_EMITTER_CELLS emitters chosen most; the thin and thick lenses' opening is the
+        // same from every point).
         let disc = Disc::new(radius_m, disc_z_m, &to_world);
         let cells: Vec<Option<Cells>> = if camera.real_lens().is_some() {
-            emitters.emitters[..emitters.emitters.len().min(MAX_EMITTER_CELLS)]
+            // the emitters light paths choose most (their triangles' probabilities summed)
+            let mut chosen = vec![0f64; emitters.emitters.len()];
+            for (light, &e) in emitters.emitter_of.iter().enumerate() {
+                if let Some(c) = chosen.get_mut(e as usize) {
+                    *c += emitters.pmf[light] as f64;
+                }
+            }
+            let mut order: Vec<usize> = (0..chosen.len()).collect();
+            order.sort_by(|&a, &b| chosen[b].total_cmp(&chosen[a]).then(a.cmp(&b)));
+            order.truncate(MAX_EMITTER_CELLS);
+            let measured: Vec<(usize, Option<Cells>)> = order
                 .par_iter()
-                .map(|&(c, r)| emitter_cells(camera, &to_camera, c, r, radius_m, disc_z_m, primary_nm))
-                .collect()
+                .map(|&k| {
+                    let (c, r) = emitters.emitters[k];
+                    (k, emitter_cells(camera, &to_camera, c, r, radius_m, disc_z_m, primary_nm))
+                })
+                .collect();
+            let mut cells = vec![None; chosen.len()];
+            for (k, c) in measured {
+                cells[k] = c;
+            }
+            cells
         } else {
             Vec::new()
         };
@@ -692,11 +727,12 @@ impl<'a> BokehTracer<'a> {
 
     /// Traces the light paths of samples `spp` and adds their splats to `splat` (the window's
     /// pixels, row-major). `share` in (0, 1] is the part of each sample's light paths traced
-    /// (its first ⌈share · K⌉ of K; 1: all): adaptive sampling traces fewer once the pixels
-    /// they land in have stopped. Returns m, the light paths traced per sample; each sample
-    /// adds m / K to the splats' sample count (their scale in the image is one over the sum):
-    /// every light path is an estimate of the whole window on its own, so any number of them is
-    /// unbiased, and the MIS weights, made with the nominal K, still sum to one on every path.
+    /// (its first ⌈share · K⌉ of K, at least one; 1: all): adaptive sampling traces fewer once
+    /// the pixels they land in have stopped. Returns m, the light paths traced per sample; each
+    /// sample adds m / K to the splats' sample count (their scale in the image is one over the
+    /// sum): every light path is an estimate of the whole window on its own, so any fixed
+    /// number of them is unbiased, and the MIS weights, made with the nominal K, still sum to
+    /// one on every path.
     /// Also returns how many of the pass's light paths reached the window (added at least one
     /// splat).
     pub(crate) fn trace_pass(&self, spp: std::ops::Range<u32>, splat: &mut [Vec3], share: f64) -> (u64, u64) {

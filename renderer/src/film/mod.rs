@@ -189,7 +189,8 @@ pub struct Film {
     pub pixels: Vec<PixelSums>,
     /// Light-path splats (radiance sums; empty when no light paths are traced).
     pub splat: Vec<Vec3>,
-    /// Scale of `splat` in the image (1 / samples per pixel done).
+    /// Scale of `splat` in the image (1 / the light paths' sample count: the samples done, or
+    /// under adaptive sampling the light paths traced in samples' worth).
     pub splat_scale: f32,
 }
 
