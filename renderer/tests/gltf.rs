@@ -591,12 +591,22 @@ fn gltf_draco_meshes() {
     }
     // an attribute the compressed mesh does not hold and with no data of its own is an error
     // naming its accessor (not a read of the compressed bytes)
-    let bytes = std::fs::read(data("draco/draco.glb")).unwrap();
+    let glb = edit_glb("draco/draco.glb", |json| {
+        let ext = &mut json["meshes"][0]["primitives"][0]["extensions"]["KHR_draco_mesh_compression"];
+        let colour = ext["attributes"].as_object_mut().unwrap().remove("COLOR_0").unwrap();
+        assert_eq!(colour, 3, "COLOR_0 is Draco attribute 3 (and accessor 3) in this file");
+    });
+    let Err(err) = load_gltf_slice(&glb, None, "draco-without-colour.glb") else { panic!("loaded") };
+    let err = err.to_string();
+    assert!(err.contains("accessors[3].bufferView"), "{err}");
+}
+
+/// A GLB test file with its JSON chunk changed by `edit` (the binary chunk kept).
+fn edit_glb(name: &str, edit: impl FnOnce(&mut serde_json::Value)) -> Vec<u8> {
+    let bytes = std::fs::read(data(name)).unwrap();
     let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
     let mut json: serde_json::Value = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
-    let ext = &mut json["meshes"][0]["primitives"][0]["extensions"]["KHR_draco_mesh_compression"];
-    let colour = ext["attributes"].as_object_mut().unwrap().remove("COLOR_0").unwrap();
-    assert_eq!(colour, 3, "COLOR_0 is Draco attribute 3 (and accessor 3) in this file");
+    edit(&mut json);
     let mut chunk = serde_json::to_vec(&json).unwrap();
     chunk.resize(chunk.len().div_ceil(4) * 4, b' ');
     let rest = &bytes[20 + json_len..];
@@ -607,7 +617,91 @@ fn gltf_draco_meshes() {
     glb.extend_from_slice(b"JSON");
     glb.extend_from_slice(&chunk);
     glb.extend_from_slice(rest);
-    let Err(err) = load_gltf_slice(&glb, None, "draco-without-colour.glb") else { panic!("loaded") };
-    let err = err.to_string();
-    assert!(err.contains("accessors[3].bufferView"), "{err}");
+    glb
+}
+
+/// `EXT_mesh_gpu_instancing`: Blender's export of seven linked duplicates of a cube under a
+/// rotated empty (non-uniform scales, one mirrored) with its "GPU Instances" option loads to
+/// the same instances as its export without it (`tests/scene/make_gpu_instancing_fixtures.py`):
+/// the same mesh placed at the same world vertices (within 10⁻⁵ m), with the same handedness.
+#[test]
+fn gltf_gpu_instancing_matches_the_nodes_it_replaces() {
+    let nodes = load_gltf(&data("gpu_instancing/nodes.glb")).unwrap();
+    let instanced = load_gltf(&data("gpu_instancing/instanced.glb")).unwrap();
+    assert!(instanced.warnings.is_empty(), "{:?}", instanced.warnings);
+    assert_eq!(nodes.instances.len(), 8, "seven cubes and a plane");
+    assert_eq!(instanced.instances.len(), nodes.instances.len());
+    // each instance's world vertices, matched to the other file's instance nearest to them
+    let world = |s: &Scene, i: usize| {
+        let inst = &s.instances[i];
+        let m = &s.meshes[inst.mesh as usize];
+        m.positions.iter().map(|&p| inst.object_to_world.transform_point3(p)).collect::<Vec<Vec3>>()
+    };
+    let det = |s: &Scene, i: usize| s.instances[i].object_to_world.matrix3.determinant();
+    let mut used = vec![false; instanced.instances.len()];
+    let mut mirrored = 0;
+    for a in 0..nodes.instances.len() {
+        let wa = world(&nodes, a);
+        let (b, worst) = (0..instanced.instances.len())
+            .filter(|&b| !used[b] && world(&instanced, b).len() == wa.len())
+            .map(|b| (b, world(&instanced, b).iter().zip(&wa).map(|(p, q)| p.distance(*q)).fold(0.0f32, f32::max)))
+            .min_by(|x, y| x.1.total_cmp(&y.1))
+            .expect("an instance left to match");
+        assert!(worst < 1e-5, "instance {a}: nearest instanced copy {b} is {worst} m off");
+        assert_eq!(det(&nodes, a) < 0.0, det(&instanced, b) < 0.0, "instance {a}: handedness");
+        used[b] = true;
+        mirrored += (det(&nodes, a) < 0.0) as usize;
+    }
+    assert_eq!(mirrored, 1, "one cube is mirrored");
+    // without the extension the loader would see one cube (on the empty) and the plane
+    let glb = edit_glb("gpu_instancing/instanced.glb", |json| {
+        json["nodes"][0]["extensions"].as_object_mut().unwrap().remove("EXT_mesh_gpu_instancing");
+    });
+    assert_eq!(load_gltf_slice(&glb, None, "plain.glb").unwrap().instances.len(), 2);
+}
+
+/// Malformed `EXT_mesh_gpu_instancing` attributes are errors naming the file, the node and the
+/// attribute; application attributes (`_ID`) are ignored, unknown ones warned about.
+#[test]
+fn gltf_gpu_instancing_bad_attributes() {
+    let attrs = |json: &mut serde_json::Value| -> serde_json::Map<String, serde_json::Value> {
+        json["nodes"][0]["extensions"]["EXT_mesh_gpu_instancing"]["attributes"].as_object().unwrap().clone()
+    };
+    let with = |edit: &dyn Fn(&mut serde_json::Map<String, serde_json::Value>)| {
+        edit_glb("gpu_instancing/instanced.glb", |json| {
+            let mut a = attrs(json);
+            edit(&mut a);
+            json["nodes"][0]["extensions"]["EXT_mesh_gpu_instancing"]["attributes"] = a.into();
+        })
+    };
+    let error = |glb: Vec<u8>| match load_gltf_slice(&glb, None, "scatter.glb") {
+        Ok(_) => panic!("loaded"),
+        Err(e) => e.to_string(),
+    };
+    // the rotation's VEC4 accessor as the scale
+    let e = error(with(&|a| {
+        a["SCALE"] = a["ROTATION"].clone();
+    }));
+    assert!(e.contains("scatter.glb") && e.contains("node 0 'Scatter'") && e.contains("attribute SCALE"), "{e}");
+    // a translation accessor of another count (the cube's 24 positions, not 7 instances)
+    let e = error(with(&|a| {
+        a["TRANSLATION"] = 0.into();
+    }));
+    assert!(e.contains("different counts"), "{e}");
+    // an accessor that does not exist, and no attribute at all
+    let e = error(with(&|a| {
+        a["ROTATION"] = 999.into();
+    }));
+    assert!(e.contains("attribute ROTATION: accessor 999 does not exist"), "{e}");
+    let e = error(with(&|a| a.clear()));
+    assert!(e.contains("none of the attributes"), "{e}");
+    // `_ID` is the application's; an unknown attribute is a warning
+    let glb = with(&|a| {
+        a.insert("_ID".into(), a["TRANSLATION"].clone());
+        a.insert("COLOR".into(), a["TRANSLATION"].clone());
+    });
+    let scene = load_gltf_slice(&glb, None, "scatter.glb").unwrap();
+    assert_eq!(scene.instances.len(), 8);
+    assert_eq!(scene.warnings.len(), 1, "{:?}", scene.warnings);
+    assert!(scene.warnings[0].contains("attribute COLOR is not supported"), "{:?}", scene.warnings);
 }

@@ -25,6 +25,7 @@
 //! | `KHR_materials_transmission` `transmissionFactor` | `Material::transmission` (solid glass refracting by `ior`, as Cycles renders Blender's Transmission) | transmission texture ignored (warning); no `KHR_materials_volume` thin-walled case |
 //! | `KHR_draco_mesh_compression` | Draco-compressed primitives decoded (`draco-core`, pure Rust): attributes and indices from the decoded mesh, integer attributes normalized where their accessor says so | |
 //! | `EXT_texture_webp` | the texture's WebP image, in place of its PNG/JPEG fallback or of the `source` it lacks | |
+//! | `EXT_mesh_gpu_instancing` | the node's mesh once per instance, each an [`Instance`](super::Instance) with transform node × T·R·S (Blender writes it with the exporter's GPU Instances option) | `TRANSLATION`, `ROTATION`, `SCALE`; `_`-prefixed attributes ignored; a malformed attribute is an error naming the node |
 //! | `KHR_texture_transform` | offset, rotation, scale and texCoord on base colour, metallic-roughness and emissive textures (a normal map's tangent frame is not rotated) | |
 //! | no material | [`Material::default`] (white, metallic 1, roughness 1) | |
 //! | image (PNG, JPEG; file, data URI or bufferView) | [`Texture`], sampler wrap modes, `magFilter` nearest → nearest | missing or undecodable: warning and a 1×1 fallback: magenta for base colour, flat for normal maps, white for metallic-roughness, black for emission |
@@ -278,6 +279,7 @@ impl<'a> Loader<'a> {
             "KHR_texture_transform",
             "EXT_texture_webp",
             "KHR_draco_mesh_compression",
+            "EXT_mesh_gpu_instancing",
         ];
         let used: Vec<String> = self.doc.extensions_used().map(|s| s.to_string()).collect();
         for ext in used {

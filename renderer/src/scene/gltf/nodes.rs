@@ -4,7 +4,7 @@ use super::accessors::read_accessor;
 use super::{named, Loader, WATTS_TO_LUMENS};
 use crate::limits::MAX_NODE_INSTANCES;
 use crate::scene::{Light, Mesh, SceneCamera, SpotFalloff};
-use crate::Result;
+use crate::{Error, Result};
 use glam::{Affine3A, Mat3, Mat4, Quat, Vec2, Vec3, Vec4};
 use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::{Mode, Semantic};
@@ -47,7 +47,20 @@ impl Loader<'_> {
             let local = self.node_matrix(&node, &loc);
             let world = parent * local;
             if let Some(mesh) = node.mesh() {
-                self.add_mesh(&mesh, &world)?;
+                match self.gpu_instances(&node, &loc)? {
+                    // EXT_mesh_gpu_instancing: the mesh once per instance, the node's
+                    // transform applied after the instance's.
+                    Some(locals) => {
+                        instances += locals.len();
+                        if instances > MAX_NODE_INSTANCES {
+                            return Err(self.error(&loc, "EXT_mesh_gpu_instancing: too many instances"));
+                        }
+                        for m in locals {
+                            self.add_mesh(&mesh, &(world * m))?;
+                        }
+                    }
+                    None => self.add_mesh(&mesh, &world)?,
+                }
             }
             if let Some(light) = node.light() {
                 self.add_light(&light, &world, &loc);
@@ -60,6 +73,77 @@ impl Loader<'_> {
             }
         }
         Ok(())
+    }
+
+    /// The instance transforms of a node's `EXT_mesh_gpu_instancing` (None without it): per
+    /// instance T · R · S from its `TRANSLATION`, `ROTATION` (unit quaternion, float or
+    /// normalized integers) and `SCALE` attributes, each optional (0, identity, 1); attributes
+    /// whose names start with `_` (application data) are ignored. A missing or malformed
+    /// attribute is an error naming the node; a rotation of length zero or a non-finite
+    /// instance is skipped with a warning.
+    fn gpu_instances(&mut self, node: &gltf::Node, loc: &str) -> Result<Option<Vec<Mat4>>> {
+        const EXT: &str = "EXT_mesh_gpu_instancing";
+        let Some(ext) = node.extension_value(EXT) else { return Ok(None) };
+        let file = self.file.clone();
+        let fail = |what: String| Error::scene(&file, loc, format!("{EXT}: {what}"));
+        let Some(attributes) = ext.get("attributes").and_then(|a| a.as_object()) else {
+            return Err(fail("has no `attributes` object".into()));
+        };
+        // 1. Each attribute's values (VEC3 for translation and scale, VEC4 for rotation).
+        let read = |name: &str, dims: Dimensions| -> Result<Option<Vec<f32>>> {
+            let Some(v) = attributes.get(name) else { return Ok(None) };
+            let index = v.as_u64().ok_or_else(|| fail(format!("attribute {name} is not an accessor index")))?;
+            let acc = self
+                .doc
+                .accessors()
+                .nth(index as usize)
+                .ok_or_else(|| fail(format!("attribute {name}: accessor {index} does not exist")))?;
+            if acc.dimensions() != dims {
+                return Err(fail(format!(
+                    "attribute {name}: accessor {index} is {:?}, not {dims:?}",
+                    acc.dimensions()
+                )));
+            }
+            read_accessor(self, &acc).map(Some).map_err(|e| fail(format!("attribute {name}: accessor {index}: {e}")))
+        };
+        let translation = read("TRANSLATION", Dimensions::Vec3)?;
+        let rotation = read("ROTATION", Dimensions::Vec4)?;
+        let scale = read("SCALE", Dimensions::Vec3)?;
+        for name in attributes.keys() {
+            if !name.starts_with('_') && !["TRANSLATION", "ROTATION", "SCALE"].contains(&name.as_str()) {
+                self.warn(loc, format!("{EXT}: attribute {name} is not supported and is ignored"));
+            }
+        }
+        // 2. One instance count for all of them.
+        let counts = [(&translation, 3), (&rotation, 4), (&scale, 3)].map(|(v, n)| v.as_ref().map(|v| v.len() / n));
+        let Some(count) = counts.iter().flatten().next().copied() else {
+            return Err(fail("has none of the attributes TRANSLATION, ROTATION and SCALE".into()));
+        };
+        if counts.iter().flatten().any(|&c| c != count) {
+            return Err(fail(format!(
+                "its attributes have different counts ({counts:?}: translation, rotation, scale)"
+            )));
+        }
+        // 3. T · R · S per instance.
+        let mut out = Vec::with_capacity(count);
+        let mut skipped = 0usize;
+        for i in 0..count {
+            let t = translation.as_ref().map_or(Vec3::ZERO, |v| Vec3::from_slice(&v[3 * i..3 * i + 3]));
+            let q = rotation.as_ref().map_or(Quat::IDENTITY, |v| Quat::from_slice(&v[4 * i..4 * i + 4]));
+            let s = scale.as_ref().map_or(Vec3::ONE, |v| Vec3::from_slice(&v[3 * i..3 * i + 3]));
+            if !(t.is_finite() && s.is_finite() && q.is_finite() && q.length_squared() > 1e-12) {
+                skipped += 1;
+                continue;
+            }
+            out.push(Mat4::from_scale_rotation_translation(s, q.normalize(), t));
+        }
+        if skipped > 0 {
+            self.warn(
+                loc,
+                format!("{EXT}: {skipped} of {count} instances have a non-finite or zero transform; skipped"),
+            );
+        }
+        Ok(Some(out))
     }
 
     /// Fails if a node is (indirectly) its own descendant.
