@@ -1,8 +1,9 @@
 //! Textures: RGBA f32 texels with glTF wrap modes and bilinear filtering. Texels are linear,
 //! except where `srgb_encoded` keeps an 8-bit sRGB image's encoded values, decoded after
 //! filtering, as Cycles does with byte images (filtering the encoded values brightens a texel
-//! edge's blend, up to ~5 % on a checker). The add-on does that for Blender's images; glTF and
-//! USD images are decoded before filtering, as the glTF spec asks and USD's other renderers do.
+//! edge's blend, up to ~5 % on a checker). The add-on does that for Blender's images, and the
+//! glTF and USD loaders for files Blender wrote; other glTF and USD images are decoded before
+//! filtering, as the glTF spec asks and USD's other renderers do.
 
 use glam::{Vec2, Vec4};
 

@@ -60,10 +60,14 @@ impl Loader<'_> {
         let texture = match self.decode_image(tex.source().index()) {
             Ok(img) => {
                 let (w, h) = (img.width(), img.height());
-                // decoded before filtering, as the glTF spec asks ("to achieve correct
-                // filtering, the transfer function should be decoded before performing linear
-                // interpolation"); Cycles filters byte images encoded (see Texture)
-                let texels = image_texels(&img, kind.srgb());
+                // Colour images are decoded before filtering, as the glTF spec asks ("to achieve
+                // correct filtering, the transfer function should be decoded before performing
+                // linear interpolation"), except in a file Blender wrote: its images are
+                // Blender's, which Cycles filters encoded and decodes after (an image in the
+                // sRGB colour space, `compress_as_srgb`; see Texture), so the render of the
+                // export matches Cycles' render of the scene.
+                let srgb_encoded = kind.srgb() && self.blender_written;
+                let texels = image_texels(&img, kind.srgb() && !srgb_encoded);
                 Texture {
                     name: name.clone(),
                     width: w,
@@ -72,7 +76,7 @@ impl Loader<'_> {
                     wrap_s: wrap(sampler.wrap_s()),
                     wrap_t: wrap(sampler.wrap_t()),
                     bilinear,
-                    srgb_encoded: false,
+                    srgb_encoded,
                 }
             }
             Err(reason) => {

@@ -28,7 +28,7 @@
 //! | `EXT_mesh_gpu_instancing` | the node's mesh once per instance, each an [`Instance`](super::Instance) with transform node × T·R·S (Blender writes it with the exporter's GPU Instances option) | `TRANSLATION`, `ROTATION`, `SCALE`; `_`-prefixed attributes ignored; a malformed attribute is an error naming the node |
 //! | `KHR_texture_transform` | offset, rotation, scale and texCoord on base colour, metallic-roughness and emissive textures (a normal map's tangent frame is not rotated) | |
 //! | no material | [`Material::default`] (white, metallic 1, roughness 1) | |
-//! | image (PNG, JPEG; file, data URI or bufferView) | [`Texture`], sampler wrap modes, `magFilter` nearest → nearest | missing or undecodable: warning and a 1×1 fallback: magenta for base colour, flat for normal maps, white for metallic-roughness, black for emission |
+//! | image (PNG, JPEG; file, data URI or bufferView) | [`Texture`], sampler wrap modes, `magFilter` nearest → nearest; colour images decoded before filtering, as the glTF spec asks, except in files Blender wrote (`asset.generator` "Khronos glTF Blender I/O"), whose colour images are filtered encoded and decoded after, as Cycles renders Blender's sRGB images | missing or undecodable: warning and a 1×1 fallback: magenta for base colour, flat for normal maps, white for metallic-roughness, black for emission |
 //! | `KHR_lights_punctual` point, spot | [`Light::Point`], [`Light::Spot`]: `color × intensity / 683` W/sr | see below |
 //! | `KHR_lights_punctual` directional | [`Light::Directional`]: `color × intensity / 683` W/m² | |
 //! | perspective and orthographic cameras | [`SceneCamera`] (rigid part of the node's world transform); orthographic: `ortho_scale_m` = 2·max(xmag, ymag), as Blender's importer reads it | node scale ignored |
@@ -155,6 +155,9 @@ struct Loader<'a> {
     /// Triangles read, and dropped for non-finite positions.
     triangles_read: usize,
     triangles_dropped: usize,
+    /// Blender's exporter wrote the file (`asset.generator` "Khronos glTF Blender I/O …"):
+    /// its colour images are filtered as Cycles filters them (see `Loader::texture`).
+    blender_written: bool,
 }
 
 fn named(kind: &str, index: usize, name: Option<&str>) -> String {
@@ -235,6 +238,12 @@ impl<'a> Loader<'a> {
             default_material: None,
             triangles_read: 0,
             triangles_dropped: 0,
+            blender_written: doc
+                .as_json()
+                .asset
+                .generator
+                .as_deref()
+                .is_some_and(|g| g.starts_with("Khronos glTF Blender I/O")),
         };
         loader.warn_extensions();
         loader.load_buffers(blob)?;
