@@ -75,36 +75,19 @@ def _with_generator(glb: Path, generator: str, out: Path) -> Path:
 
 @pytest.fixture(scope="module")
 def checker_run(blender_run):
-    """The checker scene's GLB and USD exports and renders: (glb, Cycles images, petzval images
-    of the GLB, of the USD stage, the spheres' windows); afterwards rebuilds the main scene,
-    which the other modules' tests read from Blender."""
+    """The checker scene's export and renders: (glb, Cycles images, petzval images, the
+    spheres' windows); afterwards rebuilds the main scene, which the other modules' tests read
+    from Blender."""
     key_files = ("test_texture_filtering_cycles.py", "blender_scenes.py")
-    try:
-        glb, cyc, pz = S.glb_pairs(
-            blender_run, "texture-filtering", key_files, build_scene, CAMERA, WORLD_RGB, RESOLUTION, SPP, SEEDS
-        )
-        usd = glb.with_name("checker.usdc")
-        bpy.ops.wm.usd_export(filepath=str(usd))
-        # the stage's own camera (by its path) and world (a dome light): no --sensor-width or
-        # --environment
-        args = S.pinhole_args(CAMERA, WORLD_RGB, S.PETZVAL_MAX_DEPTH, RESOLUTION)
-        for flag in ("--sensor-width", "--environment"):
-            i = args.index(flag)
-            del args[i : i + 2]
-        args[args.index("--camera") + 1] = f"/root/{CAMERA.name}/{CAMERA.name}"
-        pz_usd = []
-        for seed in SEEDS:
-            out = glb.with_name(f"usd_seed{seed}.exr")
-            run_petzval(blender_run.binary, usd, out, args, SPP, seed)
-            pz_usd.append(B.read_rgb(out))
-        windows = S.sphere_windows(CAMERA.name, RESOLUTION, [(x, 0.0, 0.0) for _, x in SPHERES], SPHERE_RADIUS)
-        yield glb, cyc, pz, pz_usd, windows
-    finally:
-        S.build_scene(blender_run.workdir)
+    xs = [x for _, x in SPHERES]
+    yield from S.sphere_scene_renders(
+        blender_run, "texture-filtering", key_files, build_scene, CAMERA, WORLD_RGB, RESOLUTION, SPP, SEEDS, xs,
+        SPHERE_RADIUS,
+    )  # fmt: skip
 
 
 def test_linear_checker_matches_cycles_through_gltf(checker_run, report):
-    glb, cyc, pz, _, windows = checker_run
+    glb, cyc, pz, windows = checker_run
     from test_cycles_match import _glb_json
 
     doc = _glb_json(glb)
@@ -113,15 +96,6 @@ def test_linear_checker_matches_cycles_through_gltf(checker_run, report):
     names = [name for name, _ in SPHERES]
     label = f"Linear 8-bit sRGB checker (glTF, Blender-written): floor and sphere vs Cycles, {SPP} spp"
     S.assert_spheres_match(cyc, pz, windows, names, label, report, MAX_MEAN_Z2, MAX_ABS_Z, MEAN_TOL)
-
-
-def test_linear_checker_matches_cycles_through_usd(checker_run, report):
-    """The same scene through Blender's USD export (a stage Blender wrote: its sRGB images are
-    filtered as Cycles filters them)."""
-    _, cyc, _, pz_usd, windows = checker_run
-    names = [name for name, _ in SPHERES]
-    label = f"Linear 8-bit sRGB checker (USD, Blender-written): floor and sphere vs Cycles, {SPP} spp"
-    S.assert_spheres_match(cyc, pz_usd, windows, names, label, report, MAX_MEAN_Z2, MAX_ABS_Z, MEAN_TOL)
 
 
 def test_spec_filtering_is_the_negative_control(checker_run, blender_run, report):
