@@ -86,6 +86,7 @@ const FLAGS: &[(&str, Kind)] = &[
     ("--time-limit", Kind::Float),
     ("--camera", Kind::Name),
     ("--frame", Kind::Float),
+    ("--fps", Kind::Float),
     ("--frames", Kind::Frames),
     ("--settings", Kind::Name),
     ("--environment", Kind::Environment),

@@ -97,14 +97,21 @@ pub struct RenderArgs {
     /// Scene camera by name, or a USD camera prim path (default: the first).
     #[arg(long)]
     pub camera: Option<String>,
-    /// USD time code to render (default: the stage's startTimeCode, else the default values).
+    /// Frame to render: a USD time code (default: the stage's startTimeCode, else the default
+    /// values), or for glTF the node animations at FRAME / --fps seconds (as Blender's exporter
+    /// writes frame F at F / fps; default: the nodes' own transforms).
     #[arg(long, allow_hyphen_values = true)]
     pub frame: Option<f64>,
+    /// Frames per second of a glTF file's animation (glTF stores seconds): --frame F renders
+    /// its nodes at F / FPS seconds. Blender's default scene rate is 24.
+    #[arg(long, default_value_t = 24.0)]
+    pub fps: f64,
     /// Catmull-Clark levels for USD meshes whose subdivisionScheme is catmullClark (Blender's
     /// "Best Match" export of a Subdivision modifier); 0 renders the cage.
     #[arg(long, default_value_t = petzval_usd::subdiv::DEFAULT_LEVEL, value_parser = clap::value_parser!(u32).range(0..=8))]
     pub subdivision_level: u32,
-    /// USD frames START-END[xSTEP] (inclusive), rendered one after another; `-o` names each
+    /// Frames START-END[xSTEP] (inclusive; USD time codes, or glTF frames as --frame),
+    /// rendered one after another; `-o` names each
     /// frame with a run of `#` (`out.####.exr` → `out.1001.exr`).
     #[arg(long)]
     pub frames: Option<String>,
@@ -507,10 +514,9 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
             (shot.scene, None)
         }
         Some(path) => {
-            if args.frame.is_some() {
-                return Err(settings_err("frame", "--frame applies to USD shots only".into()));
-            }
-            (gltf::load_gltf(path)?, None)
+            // a frame of a glTF file's animation: its time in seconds
+            let time_s = args.frame.map(|f| f / args.fps);
+            (gltf::load_gltf_at(path, time_s)?, None)
         }
         None => {
             let (s, shot) = demo::demo_scene();
@@ -947,6 +953,12 @@ pub struct Preflight {
 /// camera, and autofocus.
 pub fn preflight(args: &RenderArgs) -> Result<Preflight, Error> {
     check_frames(args)?;
+    if !(args.fps.is_finite() && args.fps > 0.0) {
+        return Err(settings_err("fps", format!("must be a positive number of frames per second, got {}", args.fps)));
+    }
+    if let Some(f) = args.frame.filter(|f| !f.is_finite()) {
+        return Err(settings_err("frame", format!("must be a finite number, got {f}")));
+    }
     if let Some(t) = args.time_limit {
         // Duration::from_secs_f64 panics on negative, NaN and huge values: refuse them here.
         if !(t.is_finite() && t > 0.0 && t <= MAX_TIME_LIMIT_S) {

@@ -3,7 +3,7 @@
 //! worked out by hand from the numbers in that script.
 
 use glam::{Vec2, Vec3, Vec4};
-use petzval_renderer::scene::gltf::{load_gltf, load_gltf_slice};
+use petzval_renderer::scene::gltf::{load_gltf, load_gltf_at, load_gltf_slice, load_gltf_slice_at};
 use petzval_renderer::scene::texture::{srgb_to_linear, Wrap};
 use petzval_renderer::scene::{AlphaMode, Light, Material, Scene, SpotFalloff};
 use petzval_renderer::Error;
@@ -704,4 +704,123 @@ fn gltf_gpu_instancing_bad_attributes() {
     assert_eq!(scene.instances.len(), 8);
     assert_eq!(scene.warnings.len(), 1, "{:?}", scene.warnings);
     assert!(scene.warnings[0].contains("attribute COLOR is not supported"), "{:?}", scene.warnings);
+}
+
+/// The placements a test compares: every instance's transform, every camera's and every point
+/// light's position, as flat lists of floats.
+fn placements(s: &Scene) -> Vec<f32> {
+    let mut v = Vec::new();
+    for i in &s.instances {
+        v.extend(i.object_to_world.to_cols_array());
+    }
+    for c in &s.cameras {
+        v.extend(c.to_world.to_cols_array());
+    }
+    for l in &s.lights {
+        if let Light::Point { position, .. } = l {
+            v.extend(position.to_array());
+        }
+    }
+    v
+}
+
+/// Node animation: Blender's export of an animated scene (a cube moving, turning and scaling
+/// under a turning empty, a flying camera with linear keys, a lamp with two Bezier keys; 24
+/// fps), evaluated at frame F / 24 s, places everything where Blender's static export at frame
+/// F does (`tests/scene/make_gltf_animation_fixtures.py`). Sampled at every frame (LINEAR):
+/// everything within 10⁻⁵, also from one scene animation whose focal-length channel is a
+/// KHR_animation_pointer (dropped with a warning). With Bezier keys written as CUBICSPLINE: the camera and the lamp
+/// (a two-key Bezier is a cubic in time) within 10⁻⁵; the cube's matrix within 0.1 (0.057 at
+/// frame 13), since the exporter approximates its Euler-angle curves by quaternion splines and
+/// its three unevenly spaced keys' Bezier handles by Hermite tangents. Without a time the nodes' own transforms are used.
+#[test]
+fn gltf_node_animation_matches_blenders_frames() {
+    let worst = |a: &[f32], b: &[f32]| {
+        assert_eq!(a.len(), b.len());
+        a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max)
+    };
+    // cameras and point lights only
+    let rigs = |s: &Scene| placements(&Scene { instances: Vec::new(), ..s.clone() });
+    for &f in &[1u32, 7, 13, 24] {
+        let at = |name: &str| load_gltf_at(&data(name), Some(f as f64 / 24.0)).unwrap();
+        let want = load_gltf(&data(&format!("animation/frame_{f}.glb"))).unwrap();
+        let sampled = at("animation/animated.glb");
+        assert!(sampled.warnings.is_empty(), "{:?}", sampled.warnings);
+        let d = worst(&placements(&sampled), &placements(&want));
+        assert!(d <= 1e-5, "sampled export at frame {f}: worst difference {d}");
+        // one scene animation with the focal length as a KHR_animation_pointer channel: that
+        // channel is dropped (a warning), the node channels still play
+        let pointer = at("animation/pointer.glb");
+        assert_eq!(pointer.warnings.len(), 1, "{:?}", pointer.warnings);
+        assert!(pointer.warnings[0].contains("KHR_animation_pointer"), "{:?}", pointer.warnings);
+        let d = worst(&placements(&pointer), &placements(&want));
+        assert!(d <= 1e-5, "scene-animation export at frame {f}: worst difference {d}");
+        let cubic = at("animation/animated_cubic.glb");
+        let d = worst(&rigs(&cubic), &rigs(&want));
+        assert!(d <= 1e-5, "cubic export at frame {f}: camera and lamp off by {d}");
+        let d = worst(&placements(&cubic), &placements(&want));
+        assert!(d <= 0.1, "cubic export at frame {f}: the cube off by {d}");
+    }
+    // frames 1 and 24 differ (the test can fail), and no time keeps the file's node transforms
+    let unflattened = |name: &str| placements(&load_gltf(&data(name)).unwrap());
+    let (first, last) = (unflattened("animation/frame_1.glb"), unflattened("animation/frame_24.glb"));
+    assert!(worst(&first, &last) > 0.5);
+    assert_eq!(unflattened("animation/animated.glb").len(), first.len());
+}
+
+/// A hand-written sampler of each interpolation, against values worked out by hand; malformed
+/// samplers are errors naming the animation.
+#[test]
+fn gltf_animation_interpolations() {
+    // times 1, 3; translations (0,0,0), (4,2,-2); STEP, LINEAR, CUBICSPLINE (tangents 0 and
+    // then out-tangent (2,0,0) of key 0 and in-tangent (0,0,0) of key 1)
+    let floats: Vec<f32> = vec![
+        1.0, 3.0, // 0: times
+        0.0, 0.0, 0.0, 4.0, 2.0, -2.0, // 1: LINEAR/STEP values
+        0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, // 2: cubic key 0 (in, value, out)
+        0.0, 0.0, 0.0, 4.0, 2.0, -2.0, 0.0, 0.0, 0.0, // cubic key 1
+    ];
+    let bytes: Vec<u8> = floats.iter().flat_map(|x| x.to_le_bytes()).collect();
+    let uri = format!("data:application/octet-stream;base64,{}", crate::common::base64(&bytes));
+    let file = |interp: &str, output: usize, times_count: usize| {
+        serde_json::json!({
+            "asset": {"version": "2.0"},
+            "scene": 0, "scenes": [{"nodes": [0]}],
+            "nodes": [{"name": "Mover", "camera": 0}],
+            "cameras": [{"type": "perspective", "perspective": {"yfov": 0.5, "znear": 0.1}}],
+            "buffers": [{"byteLength": bytes.len(), "uri": uri}],
+            "bufferViews": [
+                {"buffer": 0, "byteOffset": 0, "byteLength": 8},
+                {"buffer": 0, "byteOffset": 8, "byteLength": 24},
+                {"buffer": 0, "byteOffset": 32, "byteLength": 72}
+            ],
+            "accessors": [
+                {"bufferView": 0, "componentType": 5126, "count": times_count, "type": "SCALAR"},
+                {"bufferView": 1, "componentType": 5126, "count": 2, "type": "VEC3"},
+                {"bufferView": 2, "componentType": 5126, "count": 6, "type": "VEC3"}
+            ],
+            "animations": [{"name": "Move", "channels": [{"sampler": 0, "target": {"node": 0, "path": "translation"}}],
+                            "samplers": [{"input": 0, "output": output, "interpolation": interp}]}]
+        })
+        .to_string()
+    };
+    let position = |json: &str, t: f64| {
+        let s = load_gltf_slice_at(json.as_bytes(), None, "anim.gltf", Some(t)).unwrap();
+        s.cameras[0].to_world.translation.to_array()
+    };
+    let (linear, step, cubic) = (file("LINEAR", 1, 2), file("STEP", 1, 2), file("CUBICSPLINE", 2, 2));
+    assert_eq!(position(&linear, 0.0), [0.0, 0.0, 0.0], "before the first key");
+    assert_eq!(position(&linear, 2.5), [3.0, 1.5, -1.5]);
+    assert_eq!(position(&linear, 9.0), [4.0, 2.0, -2.0], "after the last key");
+    assert_eq!(position(&step, 2.9), [0.0, 0.0, 0.0]);
+    assert_eq!(position(&step, 3.0), [4.0, 2.0, -2.0]);
+    // Hermite at s = 1/2, interval 2: (p0 + p1)/2 + (dt/8)(m0 − m1) = (2,1,−1) + (2/8)·(2,0,0)
+    let c = position(&cubic, 2.0);
+    assert!((c[0] - 2.5).abs() < 1e-6 && (c[1] - 1.0).abs() < 1e-6 && (c[2] + 1.0).abs() < 1e-6, "{c:?}");
+    // malformed: a cubic sampler with the LINEAR output (2 values for 2 keys, not 6); one key time
+    // for two values
+    for (json, what) in [(file("CUBICSPLINE", 1, 2), "9 floats per key"), (file("LINEAR", 1, 1), "1 key times")] {
+        let e = load_gltf_slice_at(json.as_bytes(), None, "anim.gltf", Some(1.0)).unwrap_err().to_string();
+        assert!(e.contains("anim.gltf") && e.contains("animation 0 'Move'") && e.contains(what), "{e}");
+    }
 }

@@ -1,7 +1,7 @@
 //! Meshes and instances: the two-level BVH against the flattened scene, mirrored, rotated and
 //! non-uniformly scaled instances against analytic hits, shadow rays, and glTF shared meshes.
 
-use crate::common::icosphere;
+use crate::common::{base64, icosphere};
 use glam::{Affine3A, Mat3, Quat, Vec2, Vec3, Vec4};
 use petzval_renderer::integrator::{PathTracer, RenderScene};
 use petzval_renderer::sampler::PixelSampler;
@@ -288,22 +288,6 @@ fn shadow_rays_through_instances() {
         |k: u32| rs.sample_light_at(Vec3::new(-0.8, 0.5, 0.0), Vec3::Y, (k as f32 + 0.5) / 32.0, Vec2::new(0.4, 0.6));
     assert!((0..32)
         .any(|k| area_sample(k).is_some_and(|l| l.target.is_some() && l.pdf > 0.0 && l.radiance.max_element() > 0.0)));
-}
-
-fn base64(bytes: &[u8]) -> String {
-    const A: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::new();
-    for c in bytes.chunks(3) {
-        let n = (c[0] as u32) << 16 | (*c.get(1).unwrap_or(&0) as u32) << 8 | *c.get(2).unwrap_or(&0) as u32;
-        for k in 0..4 {
-            if k <= c.len() {
-                out.push(A[(n >> (18 - 6 * k) & 63) as usize] as char);
-            } else {
-                out.push('=');
-            }
-        }
-    }
-    out
 }
 
 #[test]

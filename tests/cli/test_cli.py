@@ -138,6 +138,10 @@ BAD_RENDER_ARGS = [
     ("zero-layer-spp", ["--method", "ibrt", "--layer-spp", "0"], ["layer_spp"]),
     ("nan-layer-margin", ["--method", "ibrt", "--layer-margin", "nan"], ["layer_margin"]),
     ("zero-layer-texels", ["--method", "ibrt", "--layer-texels", "0"], ["layer_texels"]),
+    # session 33: glTF frames (--frame / --fps)
+    ("zero-fps", ["--fps", "0"], ["fps"]),
+    ("nan-fps", ["--fps", "nan"], ["fps"]),
+    ("nan-frame", ["--frame", "nan"], ["frame"]),
 ]
 
 
@@ -779,3 +783,24 @@ def test_signal_writes_complete_exr_marked_incomplete(petzval, tmp_path, sig):
 
 if __name__ == "__main__":
     sys.exit(pytest.main([__file__, "-v"]))
+
+
+ANIMATION = REPO / "renderer" / "tests" / "data" / "gltf" / "animation"
+
+
+def test_gltf_frames_render_the_animation(petzval, tmp_path):
+    """`--frames` on a Blender glTF export with animation renders each frame at frame / --fps
+    seconds: frame 24 of the animated file matches Blender's static export of frame 24 (the same
+    node transforms within 10⁻⁵, so the same image within float noise), and frame 1 differs."""
+    common = ["--camera", "Camera", "--lens", "pinhole", "--resolution", "48x32", "--spp", "4", "--no-png"]
+    r = run(petzval, ["render", str(ANIMATION / "animated.glb"), "-o", "anim.####.exr", "--frames", "1-24x23",
+                      *common], tmp_path)  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    r = run(petzval, ["render", str(ANIMATION / "frame_24.glb"), "-o", "static.exr", *common], tmp_path)
+    assert r.returncode == 0, r.stderr
+    _, first = read_exr(tmp_path / "anim.0001.exr")
+    _, last = read_exr(tmp_path / "anim.0024.exr")
+    _, static = read_exr(tmp_path / "static.exr")
+    scale = float(np.mean(np.abs(static["R"]))) + 1e-6
+    assert float(np.mean(np.abs(last["R"] - static["R"]))) / scale < 1e-3
+    assert float(np.mean(np.abs(first["R"] - static["R"]))) / scale > 0.05

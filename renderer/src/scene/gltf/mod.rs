@@ -31,6 +31,7 @@
 //! | image (PNG, JPEG; file, data URI or bufferView) | [`Texture`], sampler wrap modes, `magFilter` nearest → nearest; colour images decoded before filtering, as the glTF spec asks, except in files Blender wrote (`asset.generator` "Khronos glTF Blender I/O"), whose colour images are filtered encoded and decoded after, as Cycles renders Blender's sRGB images | missing or undecodable: warning and a 1×1 fallback: magenta for base colour, flat for normal maps, white for metallic-roughness, black for emission |
 //! | `KHR_lights_punctual` point, spot | [`Light::Point`], [`Light::Spot`]: `color × intensity / 683` W/sr | see below |
 //! | `KHR_lights_punctual` directional | [`Light::Directional`]: `color × intensity / 683` W/m² | |
+//! | node animation (`translation`, `rotation`, `scale` channels) | evaluated at the time asked ([`load_gltf_at`]; `petzval render --frame F` asks for F / `--fps`, as Blender's exporter writes frame F at F / fps seconds), else the nodes' own TRS | see `animation.rs` |
 //! | perspective and orthographic cameras | [`SceneCamera`] (rigid part of the node's world transform); orthographic: `ortho_scale_m` = 2·max(xmag, ymag), as Blender's importer reads it | node scale ignored |
 //!
 //! Light units. Blender's glTF exporter (io_scene_gltf2, as bundled with Blender 5.0.1:
@@ -60,6 +61,7 @@
 //! | `accessors.rs` | buffers, URIs (data, files), accessor decoding |
 
 mod accessors;
+mod animation;
 mod materials;
 mod nodes;
 
@@ -85,18 +87,38 @@ const MAX_FILE_BYTES: u64 = 4 << 30;
 /// mode or camera type, ignored extensions, dropped non-finite triangles) are reported in
 /// [`Scene::warnings`].
 pub fn load_gltf(path: &Path) -> Result<Scene> {
+    load_gltf_at(path, None)
+}
+
+/// [`load_gltf`] with the file's node animations evaluated at `time_s` seconds (None: the
+/// nodes' own transforms; see `animation.rs`).
+pub fn load_gltf_at(path: &Path, time_s: Option<f64>) -> Result<Scene> {
     // a regular file only: a device or pipe named as the scene is refused, not read without bound
     let bytes = crate::optics::read_input_file(path, MAX_FILE_BYTES, "glTF file")?;
     let base = path.parent().map(|p| if p.as_os_str().is_empty() { Path::new(".") } else { p });
-    load_gltf_slice(&bytes, base, &path.display().to_string())
+    load_gltf_slice_at(&bytes, base, &path.display().to_string(), time_s)
 }
 
 /// Loads glTF from memory. `base_dir` resolves relative URIs (None: only embedded data is
 /// allowed); `file_name` is used in messages.
 pub fn load_gltf_slice(bytes: &[u8], base_dir: Option<&Path>, file_name: &str) -> Result<Scene> {
+    load_gltf_slice_at(bytes, base_dir, file_name, None)
+}
+
+/// [`load_gltf_slice`] with the node animations evaluated at `time_s` seconds.
+pub fn load_gltf_slice_at(
+    bytes: &[u8],
+    base_dir: Option<&Path>,
+    file_name: &str,
+    time_s: Option<f64>,
+) -> Result<Scene> {
+    if let Some(t) = time_s.filter(|t| !t.is_finite()) {
+        return Err(Error::scene(file_name, "", format!("animation time {t} s is not finite")));
+    }
     // Defence in depth: the loader checks every index and byte range itself, but the `gltf`
     // crate's accessors rely on its validation; a panic there becomes an error, not a crash.
-    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| Loader::load(bytes, base_dir, file_name)));
+    let result =
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| Loader::load(bytes, base_dir, file_name, time_s)));
     match result {
         Ok(r) => r,
         Err(payload) => {
@@ -158,6 +180,8 @@ struct Loader<'a> {
     /// Blender's exporter wrote the file (`asset.generator` "Khronos glTF Blender I/O …"):
     /// its colour images are filtered as Cycles filters them (see `Loader::texture`).
     blender_written: bool,
+    /// The animated nodes' TRS parts at the time asked (empty without a time).
+    animated: HashMap<usize, animation::AnimatedTrs>,
 }
 
 fn named(kind: &str, index: usize, name: Option<&str>) -> String {
@@ -168,7 +192,7 @@ fn named(kind: &str, index: usize, name: Option<&str>) -> String {
 }
 
 impl<'a> Loader<'a> {
-    fn load(bytes: &[u8], base: Option<&Path>, file: &str) -> Result<Scene> {
+    fn load(bytes: &[u8], base: Option<&Path>, file: &str, time_s: Option<f64>) -> Result<Scene> {
         let err = |m: String| Error::scene(file, "", m);
         if bytes.is_empty() {
             return Err(err("empty file".into()));
@@ -183,7 +207,8 @@ impl<'a> Loader<'a> {
                 )));
             }
         }
-        let gltf::Gltf { document, blob } = gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| {
+        let (bytes, pointer_channels) = without_pointer_channels(bytes);
+        let gltf::Gltf { document, blob } = gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| {
             // Blender exports an empty scene without `nodes`, which the gltf crate requires.
             if e.to_string().contains("missing field `nodes`") {
                 err("the scene is empty (the file has no nodes): no camera and nothing to render".into())
@@ -244,9 +269,22 @@ impl<'a> Loader<'a> {
                 .generator
                 .as_deref()
                 .is_some_and(|g| g.starts_with("Khronos glTF Blender I/O")),
+            animated: HashMap::new(),
         };
         loader.warn_extensions();
+        if pointer_channels > 0 {
+            loader.warn(
+                "",
+                format!(
+                    "{pointer_channels} KHR_animation_pointer channel(s) (material, light or camera properties) are not \
+                     supported and are ignored"
+                ),
+            );
+        }
         loader.load_buffers(blob)?;
+        if let Some(t) = time_s {
+            loader.animated = loader.animated_nodes(t as f32)?;
+        }
         loader.load_materials();
         loader.walk_nodes()?;
         if loader.triangles_read > 0
@@ -289,6 +327,8 @@ impl<'a> Loader<'a> {
             "EXT_texture_webp",
             "KHR_draco_mesh_compression",
             "EXT_mesh_gpu_instancing",
+            // its channels are removed with their own warning (`without_pointer_channels`)
+            "KHR_animation_pointer",
         ];
         let used: Vec<String> = self.doc.extensions_used().map(|s| s.to_string()).collect();
         for ext in used {
@@ -296,6 +336,49 @@ impl<'a> Loader<'a> {
                 self.warn("", format!("extension {ext} is not supported and is ignored"));
             }
         }
+    }
+}
+
+/// The file without its `KHR_animation_pointer` channels (those with no target node, which the
+/// gltf crate's JSON types require), and how many were removed; animations left without a
+/// channel go too. The bytes are returned as they are when there is none (or the JSON does not
+/// parse: the gltf crate reports that).
+fn without_pointer_channels(bytes: &[u8]) -> (std::borrow::Cow<'_, [u8]>, usize) {
+    use std::borrow::Cow;
+    const NAME: &[u8] = b"KHR_animation_pointer";
+    let glb = bytes.starts_with(b"glTF").then(|| gltf::binary::Glb::from_slice(bytes).ok()).flatten();
+    let json: &[u8] = match &glb {
+        Some(g) => &g.json,
+        None => bytes,
+    };
+    if !json.windows(NAME.len()).any(|w| w == NAME) {
+        return (Cow::Borrowed(bytes), 0);
+    }
+    let Ok(mut root) = serde_json::from_slice::<serde_json::Value>(json) else { return (Cow::Borrowed(bytes), 0) };
+    let mut removed = 0;
+    if let Some(animations) = root.get_mut("animations").and_then(|a| a.as_array_mut()) {
+        for anim in animations.iter_mut() {
+            if let Some(channels) = anim.get_mut("channels").and_then(|c| c.as_array_mut()) {
+                let before = channels.len();
+                channels.retain(|c| c.get("target").and_then(|t| t.get("node")).is_some());
+                removed += before - channels.len();
+            }
+        }
+        animations.retain(|a| a.get("channels").and_then(|c| c.as_array()).is_none_or(|c| !c.is_empty()));
+    }
+    if removed == 0 {
+        return (Cow::Borrowed(bytes), 0);
+    }
+    let Ok(new_json) = serde_json::to_vec(&root) else { return (Cow::Borrowed(bytes), 0) };
+    match glb {
+        Some(g) => {
+            let glb = gltf::binary::Glb { header: g.header, json: Cow::Owned(new_json), bin: g.bin };
+            match glb.to_vec() {
+                Ok(v) => (Cow::Owned(v), removed),
+                Err(_) => (Cow::Borrowed(bytes), 0),
+            }
+        }
+        None => (Cow::Owned(new_json), removed),
     }
 }
 

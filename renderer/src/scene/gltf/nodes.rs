@@ -195,9 +195,11 @@ impl Loader<'_> {
                 m
             }
             gltf::scene::Transform::Decomposed { translation, rotation, scale } => {
-                let mut t = Vec3::from_array(translation);
-                let mut s = Vec3::from_array(scale);
-                let mut q = Quat::from_array(rotation);
+                // the animated parts at the time asked, where the node is animated
+                let anim = self.animated.get(&node.index()).copied().unwrap_or_default();
+                let mut t = anim.translation.unwrap_or(Vec3::from_array(translation));
+                let mut s = anim.scale.unwrap_or(Vec3::from_array(scale));
+                let mut q = anim.rotation.unwrap_or(Quat::from_array(rotation));
                 if !t.is_finite() {
                     self.warn(loc, "translation is not finite; using 0");
                     t = Vec3::ZERO;

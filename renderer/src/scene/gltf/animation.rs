@@ -1,0 +1,177 @@
+//! Node animation: the translation, rotation and scale channels of every animation in the
+//! file, evaluated at one time (seconds), replace the animated nodes' own TRS.
+//!
+//! | glTF | result |
+//! |---|---|
+//! | channel `translation`, `rotation`, `scale` | that part of the node's TRS at the time; the rest from the node |
+//! | sampler `STEP`, `LINEAR` (rotation: shortest-path slerp), `CUBICSPLINE` (Hermite, tangents × the key interval) | as the glTF spec defines them; before the first key the first value, after the last the last |
+//! | several animations | all applied at the same time (Blender writes one per object's action); where two target the same node and path, the later one wins, with a warning |
+//! | channel `weights` (morph targets), `KHR_animation_pointer` | ignored with a warning |
+//! | an animated node with a `matrix` | the matrix kept, with a warning (the spec allows TRS only) |
+//! | malformed sampler (input not scalar floats, counts that differ, times not increasing) | error naming the animation and channel |
+//!
+//! Blender's exporter writes a frame `f` at `f / fps` seconds (`io_scene_gltf2`,
+//! `exp/animation/keyframes.py`: `frame / (fps · fps_base)`), so frame `f` of a Blender export
+//! is rendered at that time; see `petzval render --frame` and `--fps`.
+
+use super::accessors::read_accessor;
+use super::{named, Loader};
+use crate::Result;
+use glam::{Quat, Vec3, Vec4};
+use gltf::accessor::Dimensions;
+use gltf::animation::{Interpolation, Property};
+use std::collections::HashMap;
+
+/// The animated parts of one node's TRS at the time asked.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(super) struct AnimatedTrs {
+    /// Translation.
+    pub translation: Option<Vec3>,
+    /// Unit rotation.
+    pub rotation: Option<Quat>,
+    /// Scale.
+    pub scale: Option<Vec3>,
+}
+
+/// A sampler's keys: times (s) and values (`n` floats per key; CUBICSPLINE: in-tangent,
+/// value, out-tangent, each `n` floats).
+struct Keys {
+    times: Vec<f32>,
+    values: Vec<f32>,
+    n: usize,
+    interpolation: Interpolation,
+}
+
+impl Keys {
+    /// The value at `t` (n floats).
+    fn at(&self, t: f32) -> Vec<f32> {
+        let n = self.n;
+        let cubic = self.interpolation == Interpolation::CubicSpline;
+        // element k of key i (CUBICSPLINE: its value, between the two tangents)
+        let value = |i: usize| {
+            let base = if cubic { (3 * i + 1) * n } else { i * n };
+            &self.values[base..base + n]
+        };
+        let last = self.times.len() - 1;
+        // 1. Outside the keys: the first or the last value.
+        if !(t > self.times[0]) {
+            return value(0).to_vec();
+        }
+        if t >= self.times[last] {
+            return value(last).to_vec();
+        }
+        // 2. The interval [t_i, t_i+1) holding t.
+        let i = self.times.partition_point(|&k| k <= t) - 1;
+        let dt = self.times[i + 1] - self.times[i];
+        let s = (t - self.times[i]) / dt;
+        let (a, b) = (value(i), value(i + 1));
+        match self.interpolation {
+            Interpolation::Step => a.to_vec(),
+            Interpolation::Linear => a.iter().zip(b).map(|(x, y)| x + (y - x) * s).collect(),
+            Interpolation::CubicSpline => {
+                // Hermite: out-tangent of key i, in-tangent of key i + 1, scaled by the interval
+                let out_tangent = &self.values[(3 * i + 2) * n..(3 * i + 3) * n];
+                let in_tangent = &self.values[(3 * (i + 1)) * n..(3 * (i + 1) + 1) * n];
+                let (s2, s3) = (s * s, s * s * s);
+                let (h00, h10, h01, h11) =
+                    (2.0 * s3 - 3.0 * s2 + 1.0, s3 - 2.0 * s2 + s, -2.0 * s3 + 3.0 * s2, s3 - s2);
+                (0..n).map(|k| h00 * a[k] + h10 * dt * out_tangent[k] + h01 * b[k] + h11 * dt * in_tangent[k]).collect()
+            }
+        }
+    }
+
+    /// The rotation at `t`: LINEAR keys by shortest-path slerp, the others as [`Keys::at`];
+    /// normalised.
+    fn rotation_at(&self, t: f32) -> Quat {
+        let q = |v: &[f32]| Quat::from_vec4(Vec4::from_slice(v));
+        if self.interpolation == Interpolation::Linear && t > self.times[0] && t < self.times[self.times.len() - 1] {
+            let i = self.times.partition_point(|&k| k <= t) - 1;
+            let s = (t - self.times[i]) / (self.times[i + 1] - self.times[i]);
+            let (a, b) = (q(&self.values[4 * i..4 * i + 4]), q(&self.values[4 * (i + 1)..4 * (i + 2)]));
+            let (a, b) = (a.normalize(), b.normalize());
+            // glam's slerp takes the shorter arc
+            return a.slerp(b, s).normalize();
+        }
+        q(&self.at(t)).normalize()
+    }
+}
+
+impl Loader<'_> {
+    /// Every animated node's TRS parts at `time_s` (node index → parts).
+    pub(super) fn animated_nodes(&mut self, time_s: f32) -> Result<HashMap<usize, AnimatedTrs>> {
+        let mut out: HashMap<usize, AnimatedTrs> = HashMap::new();
+        let doc = self.doc;
+        for anim in doc.animations() {
+            let anim_loc = named("animation", anim.index(), anim.name());
+            for channel in anim.channels() {
+                let loc = format!("{anim_loc}, channel {}", channel.index());
+                let target = channel.target();
+                let node = target.node();
+                let property = target.property();
+                let dims = match property {
+                    Property::Translation | Property::Scale => Dimensions::Vec3,
+                    Property::Rotation => Dimensions::Vec4,
+                    Property::MorphTargetWeights => {
+                        self.warn(&loc, "morph target weights are not supported; ignored");
+                        continue;
+                    }
+                };
+                if matches!(node.transform(), gltf::scene::Transform::Matrix { .. }) {
+                    self.warn(
+                        &named("node", node.index(), node.name()),
+                        "is animated but has a matrix (glTF allows TRS only); the matrix is kept",
+                    );
+                    continue;
+                }
+                // 1. The sampler's keys, checked.
+                let sampler = channel.sampler();
+                let input = sampler.input();
+                let output = sampler.output();
+                if input.dimensions() != Dimensions::Scalar {
+                    return Err(self.error(&loc, format!("sampler input is {:?}, not SCALAR", input.dimensions())));
+                }
+                if output.dimensions() != dims {
+                    return Err(self.error(&loc, format!("sampler output is {:?}, not {dims:?}", output.dimensions())));
+                }
+                let times = read_accessor(self, &input).map_err(|e| self.error(&loc, format!("sampler input: {e}")))?;
+                let values =
+                    read_accessor(self, &output).map_err(|e| self.error(&loc, format!("sampler output: {e}")))?;
+                let n = if dims == Dimensions::Vec3 { 3 } else { 4 };
+                let interpolation = sampler.interpolation();
+                let per_key = if interpolation == Interpolation::CubicSpline { 3 * n } else { n };
+                if times.is_empty() || values.len() != times.len() * per_key {
+                    return Err(self.error(
+                        &loc,
+                        format!(
+                            "{} key times but {} output floats ({per_key} floats per key)",
+                            times.len(),
+                            values.len()
+                        ),
+                    ));
+                }
+                if times.windows(2).any(|w| !(w[1] > w[0])) || !times.iter().all(|t| t.is_finite()) {
+                    return Err(self.error(&loc, "key times are not finite and strictly increasing"));
+                }
+                let keys = Keys { times, values, n, interpolation };
+                // 2. The value at the time.
+                let entry = out.entry(node.index()).or_default();
+                let replaced = match property {
+                    Property::Translation => entry.translation.replace(Vec3::from_slice(&keys.at(time_s))).is_some(),
+                    Property::Scale => entry.scale.replace(Vec3::from_slice(&keys.at(time_s))).is_some(),
+                    Property::Rotation => entry.rotation.replace(keys.rotation_at(time_s)).is_some(),
+                    Property::MorphTargetWeights => false,
+                };
+                if replaced {
+                    self.warn(
+                        &loc,
+                        format!(
+                            "{} animates {property:?} again; this animation's value is used",
+                            named("node", node.index(), node.name())
+                        ),
+                    );
+                }
+            }
+        }
+        Ok(out)
+    }
+}
