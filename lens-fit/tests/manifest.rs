@@ -220,6 +220,32 @@ fn an_eight_bit_capture_read_as_linear_by_default_is_warned_about() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// A camera JPEG (8-bit RGB, how most photographs arrive) is read: its size and three
+/// channels, flagged 8-bit so that an unstated transfer is warned about.
+#[test]
+fn a_jpeg_capture_is_read() {
+    let dir = std::env::temp_dir().join(format!("petzval-fit-jpeg-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    image::RgbImage::from_fn(32, 16, |x, y| image::Rgb([(x * 6) as u8, (y * 12) as u8, 128]))
+        .save(dir.join("c.jpg"))
+        .unwrap();
+    let text = GOOD
+        .replacen("captures/c01.exr", "c.jpg", 1)
+        .replacen("dark_frame = \"captures/dark.exr\"\n", "", 1)
+        .replacen("mask = \"captures/c01_mask.png\"\n", "", 1)
+        .replacen("transfer = \"linear\"\n", "", 1)
+        .replacen("wavelength_nm = 550", "wavelength_nm = \"rgb\"", 1);
+    let m = Manifest::parse(&text, &dir.join("m.toml")).unwrap();
+    let img = petzval_fit::captures::load(&m.captures[0]).unwrap();
+    assert_eq!((img.width, img.height, img.channels.len()), (32, 16, 3));
+    assert!(img.eight_bit);
+    // the flat blue channel (level 128) survives the compression within a few levels
+    let blue = img.channels[2].iter().sum::<f64>() / img.channels[2].len() as f64;
+    assert!((blue - 128.0).abs() < 4.0, "blue mean {blue}");
+    assert!(petzval_fit::captures::transfer_warning(&m.captures[0], &img).is_some_and(|w| w.contains("c.jpg")));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// A floating-point TIFF (grey or RGB, as raw converters write them) is read as linear values
 /// with no clipping level, as an EXR is: the values come back exactly, and none is masked.
 #[test]
