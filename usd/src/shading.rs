@@ -44,6 +44,9 @@ pub struct Materials {
     pending_color: Option<(String, Vec3)>,
     /// The varname found while reading the current material.
     pending_st: Option<String>,
+    /// sRGB images are filtered encoded and decoded after, as Cycles renders Blender's images
+    /// (on stages Blender wrote); otherwise decoded before filtering.
+    filter_encoded: bool,
 }
 
 /// The material bound to `prim` (its own `material:binding`, else its nearest ancestor's).
@@ -75,6 +78,12 @@ fn source_prim(stage: &usd::Stage, prim: &usd::Prim, input: &str) -> Option<(usd
 }
 
 impl Materials {
+    /// No materials yet; `filter_encoded`: filter sRGB images encoded, as Cycles does (for
+    /// stages Blender wrote).
+    pub fn filtering_encoded(filter_encoded: bool) -> Materials {
+        Materials { filter_encoded, ..Materials::default() }
+    }
+
     /// The texture-coordinate primvar (without `primvars:`) material `id` reads, when its
     /// textures name one through a `UsdPrimvarReader_float2`.
     pub fn st_name(&self, id: u32) -> Option<&str> {
@@ -339,7 +348,8 @@ impl Materials {
         if let Some(&i) = self.textures.get(&key) {
             return Ok(Some(TextureRef { index: i, uv_set: 0, transform }));
         }
-        let t = match load_image(&path.1, srgb) {
+        let srgb_encoded = srgb && self.filter_encoded;
+        let t = match load_image(&path.1, srgb && !srgb_encoded) {
             Ok((w, h, texels)) => Texture {
                 name: path.0.clone(),
                 width: w,
@@ -348,7 +358,7 @@ impl Materials {
                 wrap_s: ws,
                 wrap_t: wt,
                 bilinear: true,
-                srgb_encoded: false,
+                srgb_encoded,
             },
             Err(e) => {
                 if !path.1.is_empty() {
@@ -382,9 +392,9 @@ pub(crate) fn read_packaged(package: &str, inner: &str) -> Result<Vec<u8>, Strin
     Ok(bytes)
 }
 
-/// (width, height, linear texels): decoded before filtering, as USD's renderers (Storm's sRGB
-/// textures, Karma, RenderMan) do; only Cycles filters byte images encoded (see `Texture`; the
-/// add-on does that for Blender's own images).
+/// (width, height, texels), decoded to linear with `srgb`: before filtering, as USD's renderers
+/// (Storm's sRGB textures, Karma, RenderMan) do; only Cycles filters sRGB images encoded (see
+/// `Texture`), which this crate follows on stages Blender wrote, as the add-on does.
 fn load_image(path: &str, srgb: bool) -> Result<(u32, u32, Vec<Vec4>), String> {
     let img = match openusd::ar::split_package_relative_path_outer(path) {
         Some((package, inner)) => {

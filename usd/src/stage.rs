@@ -134,15 +134,16 @@ fn is_light(ty: &str) -> bool {
 impl<'a> Walker<'a> {
     /// A walker over `stage` at `time`.
     pub fn new(stage: &'a usd::Stage, time: Option<f64>) -> Result<Self, Error> {
+        let units = StageUnits::read(stage)?;
         Ok(Walker {
             subdivision_level: crate::subdiv::DEFAULT_LEVEL,
             reader: Reader { stage, time },
-            units: StageUnits::read(stage)?,
+            units,
             scene: Scene::default(),
             cameras: Vec::new(),
             info: StageInfo::default(),
             warnings: Vec::new(),
-            materials: Materials::default(),
+            materials: Materials::filtering_encoded(units.blender_authored),
             meshes_by_prim: HashMap::new(),
             prototypes: HashMap::new(),
             unsupported: BTreeSet::new(),

@@ -2,10 +2,8 @@
 //! except where `srgb_encoded` keeps an 8-bit sRGB image's encoded values, decoded after
 //! filtering, as Cycles does with byte images (filtering the encoded values brightens a texel
 //! edge's blend, up to ~5 % on a checker). The add-on does that for Blender's images, and the
-//! glTF loader for files Blender wrote (whose samplers carry Blender's interpolation); other
-//! glTF files' and USD stages' images are decoded before filtering, as the glTF spec asks and
-//! USD's other renderers do (a USD stage does not record whether Blender's image was Linear or
-//! Closest).
+//! glTF and USD loaders for files Blender wrote; other glTF files' and USD stages' images are
+//! decoded before filtering, as the glTF spec asks and USD's other renderers do.
 
 use glam::{Vec2, Vec4};
 
