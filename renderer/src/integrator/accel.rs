@@ -1483,39 +1483,57 @@ impl RenderScene {
         })
     }
 
-    /// Builds the full hit record for triangle `tri` of instance `inst` at barycentrics
-    /// (b1, b2), hit at distance `t` along unit `dir`; attributes in world space.
-    pub fn surface_hit(&self, inst: u32, tri: u32, b1: f32, b2: f32, t: f32, dir: Vec3) -> SurfaceHit {
-        let xf = self.xforms[inst as usize];
+    /// The hit's smooth normal: its vertex normals interpolated (world space, on the geometric
+    /// normal's side), before any normal map; the geometric normal where the mesh has none.
+    /// Cycles' bump shadowing term compares a normal-mapped normal with it.
+    pub fn smooth_normal(&self, hit: &SurfaceHit) -> Vec3 {
+        let (b1, b2) = (hit.barycentrics.x, hit.barycentrics.y);
+        self.smooth_normal_at(hit.instance, hit.triangle, b1, b2, hit.geometric_normal)
+    }
+
+    /// [`RenderScene::smooth_normal`] for triangle `tri` of instance `inst` at (b1, b2), whose
+    /// geometric normal is `ng`.
+    #[inline]
+    fn smooth_normal_at(&self, inst: u32, tri: u32, b1: f32, b2: f32, ng: Vec3) -> Vec3 {
         let (mesh, info) = self.mesh_of(inst);
+        if !info.has_normals {
+            return ng;
+        }
+        let xf = &self.xforms[inst as usize];
         let world_normals =
             self.world_attributes[self.scene.instances[inst as usize].mesh as usize].as_ref().map(|w| &w.normals[..]);
         let idx = mesh.indices[tri as usize].map(|i| i as usize);
-        let p = self.world_triangle(inst, tri);
-        let b0 = 1.0 - b1 - b2;
-        let position = p[0] * b0 + p[1] * b1 + p[2] * b2;
-        let ng = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or(Vec3::Z) * xf.sign;
         // a vertex normal in world space (precomputed for a baked, transformed mesh)
         let world_n = |i: usize| match world_normals {
             Some(w) => w[i],
             None if xf.identity => mesh.normals[i],
             None => (xf.normal * mesh.normals[i]).normalize_or_zero(),
         };
-        let mut ns = if info.has_normals {
-            let n = world_n(idx[0]) * b0 + world_n(idx[1]) * b1 + world_n(idx[2]) * b2;
-            let n = n.normalize_or_zero();
-            if n == Vec3::ZERO || !n.is_finite() {
-                ng
-            } else if n.dot(ng) < 0.0 {
-                // Vertex normals disagreeing with the winding: keep the shading normal on the
-                // geometric side so front/back stay consistent.
-                -n
-            } else {
-                n
-            }
-        } else {
+        let b0 = 1.0 - b1 - b2;
+        let n = world_n(idx[0]) * b0 + world_n(idx[1]) * b1 + world_n(idx[2]) * b2;
+        let n = n.normalize_or_zero();
+        if n == Vec3::ZERO || !n.is_finite() {
             ng
-        };
+        } else if n.dot(ng) < 0.0 {
+            // Vertex normals disagreeing with the winding: keep the shading normal on the
+            // geometric side so front/back stay consistent.
+            -n
+        } else {
+            n
+        }
+    }
+
+    /// Builds the full hit record for triangle `tri` of instance `inst` at barycentrics
+    /// (b1, b2), hit at distance `t` along unit `dir`; attributes in world space.
+    pub fn surface_hit(&self, inst: u32, tri: u32, b1: f32, b2: f32, t: f32, dir: Vec3) -> SurfaceHit {
+        let xf = self.xforms[inst as usize];
+        let (mesh, info) = self.mesh_of(inst);
+        let idx = mesh.indices[tri as usize].map(|i| i as usize);
+        let p = self.world_triangle(inst, tri);
+        let b0 = 1.0 - b1 - b2;
+        let position = p[0] * b0 + p[1] * b1 + p[2] * b2;
+        let ng = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or(Vec3::Z) * xf.sign;
+        let mut ns = self.smooth_normal_at(inst, tri, b1, b2, ng);
         let (uv0, uv1) = self.uvs_at(inst, tri, b1, b2);
         let material_id = mesh.material_ids[tri as usize];
         let mat = &self.scene.materials[material_id as usize];

@@ -778,10 +778,15 @@ impl<'a> Bsdf<'a> {
     /// f(wo, wi)·|cos θi| (local frame, `wo` above the surface; `wi` below counts only for
     /// a transmissive BSDF).
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        self.eval_bumped(wo, wi, None)
+    }
+
+    /// [`Bsdf::eval`] for a normal-mapped surface where `bump` is given (see [`Bump`]).
+    fn eval_bumped(&self, wo: Vec3, wi: Vec3, bump: Option<Bump>) -> Vec3 {
         match self.coat {
-            None => self.eval_under(wo, wi),
+            None => self.eval_under(wo, wi, bump),
             Some(c) => {
-                let under = self.eval_under(wo, wi);
+                let under = self.eval_under(wo, wi, bump);
                 let under = if under == Vec3::ZERO { under } else { under * c.under_weight(wo.z) };
                 under + Vec3::splat(c.eval(wo, wi))
             }
@@ -803,16 +808,21 @@ impl<'a> Bsdf<'a> {
     /// Samples wi: `u1` picks the lobe, `u2` the direction. None when the BSDF is black, the
     /// sample falls below the surface (through it, for an opaque BSDF), or its pdf is zero.
     pub fn sample(&self, wo: Vec3, u2: Vec2, u1: f32) -> Option<BsdfSample> {
-        let Some(c) = self.coat else { return self.sample_under(wo, u2, u1) };
+        self.sample_bumped(wo, u2, u1, None)
+    }
+
+    /// [`Bsdf::sample`] with the bump shadowing of [`Bsdf::eval_bumped`] in the sample's value.
+    fn sample_bumped(&self, wo: Vec3, u2: Vec2, u1: f32, bump: Option<Bump>) -> Option<BsdfSample> {
+        let Some(c) = self.coat else { return self.sample_under(wo, u2, u1, bump) };
         // 1. The coat or what lies under it, by their albedos at μo (u1 reused within), 2. the
         //    mixture's pdf and value.
         let pc = self.coat_probability(c, wo);
         let wi = if u1 < pc {
             c.sample_direction(wo, u2)?
         } else {
-            self.sample_under(wo, u2, ((u1 - pc) / (1.0 - pc)).min(ONE_BELOW))?.wi
+            self.sample_under(wo, u2, ((u1 - pc) / (1.0 - pc)).min(ONE_BELOW), bump)?.wi
         };
-        weighted_sample(wi, self.pdf(wo, wi), || self.eval(wo, wi))
+        weighted_sample(wi, self.pdf(wo, wi), || self.eval_bumped(wo, wi, bump))
     }
 
     /// The probability of sampling the coat for `wo`: its albedo against the rest's, as the
@@ -841,11 +851,12 @@ impl<'a> Bsdf<'a> {
     }
 
     /// f·|cos θi| of everything under the coat (all of it for an uncoated BSDF).
-    fn eval_under(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+    fn eval_under(&self, wo: Vec3, wi: Vec3, bump: Option<Bump>) -> Vec3 {
         match &self.glass {
-            None => self.eval_opaque(wo, wi),
+            None => self.eval_opaque(wo, wi, bump),
             Some((w, g)) => {
-                let opaque = if wi.z > 0.0 { self.eval_opaque(wo, wi) * (1.0 - w) } else { Vec3::ZERO };
+                let opaque =
+                    if wi.z > 0.0 || bump.is_some() { self.eval_opaque(wo, wi, bump) * (1.0 - w) } else { Vec3::ZERO };
                 opaque + g.eval(wo, wi) * *w
             }
         }
@@ -864,19 +875,23 @@ impl<'a> Bsdf<'a> {
     }
 
     /// Samples everything under the coat (all of it for an uncoated BSDF).
-    fn sample_under(&self, wo: Vec3, u2: Vec2, u1: f32) -> Option<BsdfSample> {
-        let Some((w, g)) = &self.glass else { return self.sample_opaque(wo, u2, u1) };
+    fn sample_under(&self, wo: Vec3, u2: Vec2, u1: f32, bump: Option<Bump>) -> Option<BsdfSample> {
+        let Some((w, g)) = &self.glass else { return self.sample_opaque(wo, u2, u1, bump) };
         // 1. A lobe by its weight (u1 reused within it), 2. the mixture's pdf and value.
         let wi = if u1 < *w {
             g.sample_direction(wo, u2, (u1 / w).min(ONE_BELOW))?
         } else {
-            self.sample_opaque(wo, u2, ((u1 - w) / (1.0 - w)).min(ONE_BELOW))?.wi
+            self.sample_opaque(wo, u2, ((u1 - w) / (1.0 - w)).min(ONE_BELOW), bump)?.wi
         };
-        weighted_sample(wi, self.pdf_under(wo, wi), || self.eval_under(wo, wi))
+        weighted_sample(wi, self.pdf_under(wo, wi), || self.eval_under(wo, wi, bump))
     }
 
-    /// The opaque lobes' f·cos θi; zero unless both directions are above the surface.
-    fn eval_opaque(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+    /// The opaque lobes' f·cos θi; zero unless both directions are above the surface (for a
+    /// normal-mapped surface see [`Bsdf::eval_opaque_mapped`]).
+    fn eval_opaque(&self, wo: Vec3, wi: Vec3, bump: Option<Bump>) -> Vec3 {
+        if let Some(b) = bump {
+            return self.eval_opaque_mapped(wo, wi, b);
+        }
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return Vec3::ZERO;
         }
@@ -912,6 +927,46 @@ impl<'a> Bsdf<'a> {
         }
     }
 
+    /// [`Bsdf::eval_opaque`] for a normal-mapped surface, as Cycles' Principled BSDF has it: the
+    /// specular lobes (and M) on this frame's normal (the mapped normal, corrected by
+    /// [`ensure_valid_specular_reflection`]), the diffuse lobe on the mapped normal itself
+    /// (`b.mapped`, whose cosine it takes) times [`bump_shadowing`] against the smooth normal.
+    fn eval_opaque_mapped(&self, wo: Vec3, wi: Vec3, b: Bump) -> Vec3 {
+        let cos_diffuse = b.mapped.dot(wi);
+        if wo.z <= 0.0 || (wi.z <= 0.0 && cos_diffuse <= 0.0) {
+            return Vec3::ZERO;
+        }
+        // 1. The diffuse lobe (under the specular layer's albedo at μo, where there is one).
+        let e1o = if self.layered { self.row.e(wo.z).0 } else { 1.0 };
+        let mut r = Vec3::ZERO;
+        if cos_diffuse > 0.0 && self.diffuse_scale != Vec3::ZERO {
+            let layer = if self.layered { 1.0 - self.e_d(wo.z, e1o) } else { 1.0 };
+            r += self.diffuse_scale * (layer * bump_shadowing(b.smooth, b.mapped, wi) * cos_diffuse);
+        }
+        if wi.z <= 0.0 {
+            return if r.is_finite() { r } else { Vec3::ZERO };
+        }
+        // 2. M and the specular lobe, as in `eval_opaque`.
+        let mut f = Vec3::ZERO;
+        if self.layered && self.ms_scale != Vec3::ZERO {
+            f += self.ms_scale * ((1.0 - e1o).max(0.0) * (1.0 - self.row.e(wi.z).0).max(0.0));
+        }
+        let h = if self.diel.is_some() || self.metallic > 0.0 { (wo + wi).normalize_or_zero() } else { Vec3::ZERO };
+        if h.z > 0.0 {
+            let voh = wo.dot(h).max(0.0);
+            let d = ggx_d(h.z, self.a2);
+            let g2 = 1.0 / (1.0 + smith_lambda(wo.z, self.a2) + smith_lambda(wi.z, self.a2));
+            let v = g2 / (4.0 * wo.z * wi.z);
+            f += self.fresnel_boosted(voh, e1o) * (d * v);
+        }
+        let r = r + f * wi.z;
+        if r.is_finite() {
+            r
+        } else {
+            Vec3::ZERO
+        }
+    }
+
     /// The opaque lobes' pdf.
     fn pdf_opaque(&self, wo: Vec3, wi: Vec3) -> f32 {
         if wo.z <= 0.0 || wi.z <= 0.0 {
@@ -934,7 +989,7 @@ impl<'a> Bsdf<'a> {
     }
 
     /// Samples the opaque lobes.
-    fn sample_opaque(&self, wo: Vec3, u2: Vec2, u1: f32) -> Option<BsdfSample> {
+    fn sample_opaque(&self, wo: Vec3, u2: Vec2, u1: f32, bump: Option<Bump>) -> Option<BsdfSample> {
         if wo.z <= 0.0 {
             return None;
         }
@@ -951,7 +1006,7 @@ impl<'a> Bsdf<'a> {
         if wi.z <= 0.0 {
             return None;
         }
-        weighted_sample(wi, self.pdf_opaque(wo, wi), || self.eval_opaque(wo, wi))
+        weighted_sample(wi, self.pdf_opaque(wo, wi), || self.eval_opaque(wo, wi, bump))
     }
 }
 
@@ -1097,6 +1152,74 @@ impl Coat {
 }
 
 /// A sampled direction `wi` with its pdf and its f·|cos| (`eval`, called only for a positive
+/// A normal-mapped surface's two extra normals, in the local frame of [`Bsdf`] (whose +z is
+/// the mapped normal corrected for specular reflection): Cycles' diffuse closure uses the
+/// mapped normal as it is, and masks it against the smooth normal.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Bump {
+    /// The interpolated vertex normal (before the normal map), unit.
+    pub smooth: Vec3,
+    /// The normal-mapped normal before the specular correction, unit.
+    pub mapped: Vec3,
+}
+
+/// Cycles' bump shadowing term for a normal-mapped diffuse lobe (`bump_shadowing_term` with
+/// Bump Map Correction, Blender's default: Conty Estevez et al., "A Microfacet-Based Shadowing
+/// Function to Solve the Bump Terminator Problem", 2019), for the smooth normal Ns, the lobe's
+/// normal N and light direction ωi (unit): 0 where Ns and N put ωi on different sides; else the
+/// GGX masking G1(α², |Ns·ωi|) of a roughness α² = min(1, tan²θd / 8) from the angle θd
+/// between N and Ns.
+#[inline]
+pub fn bump_shadowing(smooth: Vec3, n: Vec3, wi: Vec3) -> f32 {
+    let (cos_ns_i, cos_ns_n, cos_n_i) = (smooth.dot(wi), smooth.dot(n), n.dot(wi));
+    // 1. The light on different sides of the two normals: none.
+    if cos_ns_i * cos_ns_n * cos_n_i < 0.0 {
+        return 0.0;
+    }
+    // 2. GGX masking by the normals' deviation.
+    let (cos_i, cos_d) = (cos_ns_i.abs(), cos_ns_n.abs());
+    if cos_d >= 1.0 || cos_i >= 1.0 {
+        return 1.0;
+    }
+    if cos_i < 1e-6 {
+        return 0.0;
+    }
+    let tan2_d = 1.0 / (cos_d * cos_d) - 1.0;
+    let alpha2 = (0.125 * tan2_d).clamp(0.0, 1.0);
+    let tan2_i = 1.0 / (cos_i * cos_i) - 1.0;
+    2.0 / (1.0 + (1.0 + alpha2 * tan2_i).sqrt())
+}
+
+/// Cycles' `ensure_valid_specular_reflection` (applied to normal-mapped normals with Bump Map
+/// Correction): where the mapped normal `n` would reflect the view direction `wo` (unit, away
+/// from the surface) below the geometric surface `ng` (on wo's side), `n` is turned toward `ng`
+/// until the reflection leaves at min(0.9·(wo·ng), 0.01) above it.
+pub fn ensure_valid_specular_reflection(ng: Vec3, wo: Vec3, n: Vec3) -> Vec3 {
+    let r = 2.0 * n.dot(wo) * n - wo;
+    let iz = wo.dot(ng);
+    let threshold = (0.9 * iz).min(0.01);
+    if ng.dot(r) >= threshold {
+        return n;
+    }
+    // In the frame (X, ·, Ng) with n in the X–Ng plane, solve 4a·z⁴ − 2b·z² + c = 0 for the
+    // new normal's z = N'·Ng so that the reflection's height is the threshold; the root
+    // whose sign matches wo's X component is the one the unsquared equation holds for.
+    let x = (n - n.dot(ng) * ng).try_normalize().unwrap_or(n);
+    let ix = wo.dot(x);
+    let a = ix * ix + iz * iz;
+    let b = 2.0 * (a + iz * threshold);
+    let c = (threshold + iz) * (threshold + iz);
+    let root = (b * b - 4.0 * a * c).max(0.0).sqrt();
+    let nz2 = if ix < 0.0 { 0.25 * (b + root) / a } else { 0.25 * (b - root) / a };
+    let (nx, nz) = ((1.0 - nz2).max(0.0).sqrt(), nz2.max(0.0).sqrt());
+    let out = nx * x + nz * ng;
+    if out.is_finite() {
+        out
+    } else {
+        n
+    }
+}
+
 /// pdf) as a [`BsdfSample`]; None when the pdf is not positive or the weight is zero or not
 /// finite.
 #[inline]
@@ -1353,6 +1476,9 @@ pub struct SurfaceBsdf<'a> {
     b: Vec3,
     /// Geometric normal on wo's side.
     pub ng: Vec3,
+    /// A normal map's smooth and mapped normals in the local frame
+    /// ([`SurfaceBsdf::with_normal_map`]).
+    bump: Option<Bump>,
 }
 
 impl<'a> SurfaceBsdf<'a> {
@@ -1373,7 +1499,22 @@ impl<'a> SurfaceBsdf<'a> {
             }
         }
         let (t, b) = orthonormal_basis(n);
-        SurfaceBsdf { bsdf, n, t, b, ng }
+        SurfaceBsdf { bsdf, n, t, b, ng, bump: None }
+    }
+
+    /// The same BSDF on a normal-mapped surface, whose shading normal (given to
+    /// [`SurfaceBsdf::new`]) is the mapped normal corrected by
+    /// [`ensure_valid_specular_reflection`]: `mapped` is the mapped normal before the
+    /// correction and `smooth` the surface's smooth normal (world; either side). The diffuse lobe
+    /// then uses `mapped` and Cycles' bump shadowing term ([`Bsdf::eval_opaque_mapped`]).
+    pub fn with_normal_map(mut self, smooth: Vec3, mapped: Vec3) -> Self {
+        let side = |v: Vec3| if v.dot(self.ng) >= 0.0 { v } else { -v };
+        let smooth = self.to_local(side(smooth)).normalize_or_zero();
+        let mapped = self.to_local(side(mapped)).normalize_or_zero();
+        if smooth != Vec3::ZERO && mapped != Vec3::ZERO && smooth.is_finite() && mapped.is_finite() {
+            self.bump = Some(Bump { smooth, mapped });
+        }
+        self
     }
 
     /// World → local.
@@ -1408,7 +1549,7 @@ impl<'a> SurfaceBsdf<'a> {
         if !self.consistent(wi, local) {
             return Vec3::ZERO;
         }
-        self.bsdf.eval(self.to_local(wo), local)
+        self.bsdf.eval_bumped(self.to_local(wo), local, self.bump)
     }
 
     /// f·cos for a light sample's direction: as [`SurfaceBsdf::eval`] without the geometric
@@ -1416,7 +1557,7 @@ impl<'a> SurfaceBsdf<'a> {
     /// mesh the light may lie below the flat triangle yet above the shading normal; the shadow
     /// ray then decides ([`super::accel::RenderScene::shadow_origin`]).
     pub fn eval_light(&self, wo: Vec3, wi: Vec3) -> Vec3 {
-        self.bsdf.eval(self.to_local(wo), self.to_local(wi))
+        self.bsdf.eval_bumped(self.to_local(wo), self.to_local(wi), self.bump)
     }
 
     /// The pdf that weights a light sample's direction against BSDF sampling (without the
@@ -1437,7 +1578,7 @@ impl<'a> SurfaceBsdf<'a> {
     /// Samples a world direction (None when it would go through the geometric surface, or,
     /// refracted, would not).
     pub fn sample(&self, wo: Vec3, u2: Vec2, u1: f32) -> Option<BsdfSample> {
-        let s = self.bsdf.sample(self.to_local(wo), u2, u1)?;
+        let s = self.bsdf.sample_bumped(self.to_local(wo), u2, u1, self.bump)?;
         let wi = self.to_world(s.wi).normalize_or_zero();
         if !self.consistent(wi, s.wi) {
             return None;
@@ -1449,6 +1590,57 @@ impl<'a> SurfaceBsdf<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Cycles' bump shadowing: 1 without a normal map (N = Ns), 0 with the light between the two
+    /// normals' horizons, else GGX's G1 at α² = tan²θd / 8 (worked by hand for θd = 30°,
+    /// cos θi = 0.5: α² = 1/24, tan² = 3, G1 = 2 / (1 + √(1 + 1/8)) = 0.97140), and it grows
+    /// as the light rises.
+    #[test]
+    fn bump_shadowing_meets_its_definition() {
+        let z = Vec3::Z;
+        let ns = Vec3::new(0.5, 0.0, 0.75f32.sqrt()); // 30° from N = +z
+        assert_eq!(bump_shadowing(z, z, Vec3::new(0.6, 0.0, 0.8)), 1.0);
+        // above N, below Ns: none
+        let between = Vec3::new(-0.9, 0.0, 0.3).normalize();
+        assert!(between.z > 0.0 && ns.dot(between) < 0.0);
+        assert_eq!(bump_shadowing(ns, z, between), 0.0);
+        // cos θi (against Ns) = 0.5
+        let wi = (ns * 0.5 + Vec3::Y * 0.75f32.sqrt()).normalize();
+        let g = bump_shadowing(ns, z, wi);
+        assert!((g - 2.0 / (1.0 + (1.0f32 + 1.0 / 8.0).sqrt())).abs() < 1e-5, "{g}");
+        let mut last = 0.0;
+        for k in 1..=20 {
+            let c = k as f32 / 20.0;
+            let w = (ns * c + Vec3::Y * (1.0 - c * c).max(0.0).sqrt()).normalize();
+            let g = bump_shadowing(ns, z, w);
+            assert!(g >= last && g <= 1.0, "not rising at cos {c}: {g} after {last}");
+            last = g;
+        }
+    }
+
+    /// Cycles' specular-reflection correction leaves a normal alone where the view reflects
+    /// above the surface; elsewhere the new normal is unit, lies between the old one and the
+    /// geometric normal, and reflects the view exactly min(0.9·(ωo·Ng), 0.01) above the surface.
+    #[test]
+    fn ensure_valid_specular_reflection_lifts_the_reflection_to_its_threshold() {
+        let ng = Vec3::Z;
+        let wo = Vec3::new(0.0, -0.95, 0.3).normalize();
+        let kept = Vec3::new(0.0, -0.2, 1.0).normalize();
+        assert_eq!(ensure_valid_specular_reflection(ng, wo, kept), kept);
+        for tilt in [0.3f32, 0.6, 1.0, 1.3] {
+            let n = Vec3::new(0.1 * tilt, tilt.sin(), tilt.cos()).normalize(); // away from the viewer
+            let r = 2.0 * n.dot(wo) * n - wo;
+            assert!(r.z < 0.01, "tilt {tilt}: the case does not need the correction");
+            let m = ensure_valid_specular_reflection(ng, wo, n);
+            assert!((m.length() - 1.0).abs() < 1e-5, "tilt {tilt}: |n'| = {}", m.length());
+            let r2 = 2.0 * m.dot(wo) * m - wo;
+            let t = (0.9 * wo.z).min(0.01);
+            assert!((r2.z - t).abs() < 1e-4, "tilt {tilt}: reflection height {} not {t}", r2.z);
+            assert!(m.z > n.z, "tilt {tilt}: not turned toward Ng");
+            let plane = n.cross(ng).normalize();
+            assert!(m.dot(plane).abs() < 1e-5, "tilt {tilt}: n' left the plane of n and Ng");
+        }
+    }
 
     /// Cycles' F82 tint: plain Schlick for a white tint (bit for bit), F0 head-on, 1 at grazing,
     /// `tint` × Schlick's at μ = 1/7; its closed-form hemispherical average against quadrature;

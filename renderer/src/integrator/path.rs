@@ -28,7 +28,7 @@
 use glam::Vec3;
 
 use super::accel::{RenderScene, SurfaceHit};
-use super::bsdf::{fresnel_dielectric, Bsdf, SurfaceBsdf};
+use super::bsdf::{ensure_valid_specular_reflection, fresnel_dielectric, Bsdf, SurfaceBsdf};
 use super::lights::env_radiance;
 use crate::sampler::PixelSampler;
 use crate::scene::{AngleWeight, MaterialMix};
@@ -430,15 +430,26 @@ impl PathTracer {
             // Lambertian BSDF placed as if seen from the far side (wo mirrored through the
             // surface), so that it scatters there.
             let wo_s = if translucent { wo - 2.0 * wo.dot(hit.geometric_normal) * hit.geometric_normal } else { wo };
-            let sb = SurfaceBsdf::new(bsdf, hit.geometric_normal, hit.shading_normal, wo_s);
+            // A normal-mapped surface keeps the geometric normal's test: Cycles' bump shadowing
+            // term is zero for light below the geometric surface.
+            let bumped = scene.scene().materials[hit.material_id as usize].normal_texture.is_some();
+            // With Cycles' Bump Map Correction (Blender's default): a mapped normal that would
+            // reflect the view below the surface is turned toward the geometric normal, and the
+            // diffuse lobe is masked against the smooth normal (`bump_shadowing`).
+            let sb = if bumped {
+                let ng = hit.geometric_normal_toward(wo_s);
+                let n = if hit.shading_normal.dot(ng) >= 0.0 { hit.shading_normal } else { -hit.shading_normal };
+                let corrected = ensure_valid_specular_reflection(ng, wo_s, n);
+                SurfaceBsdf::new(bsdf, hit.geometric_normal, corrected, wo_s)
+                    .with_normal_map(scene.smooth_normal(&hit), n)
+            } else {
+                SurfaceBsdf::new(bsdf, hit.geometric_normal, hit.shading_normal, wo_s)
+            };
 
             // Next-event estimation (lights chosen by the shading normal, as Cycles does, from
             // both sides where the BSDF transmits; the shadow ray leaves from the smooth surface
             // near a terminator).
             let select_n = if translucent || sb.bsdf.transmits() { Vec3::ZERO } else { sb.n };
-            // A normal-mapped surface keeps the geometric normal's test: Cycles' bump shadowing
-            // term is zero for light below the geometric surface.
-            let bumped = scene.scene().materials[hit.material_id as usize].normal_texture.is_some();
             if let Some(ls) = scene.sample_light_at(hit.position, select_n, u_pick, u_light) {
                 if ls.delta || nee {
                     let f = tint * if bumped { sb.eval(wo_s, ls.wi) } else { sb.eval_light(wo_s, ls.wi) };
