@@ -54,3 +54,20 @@ def run_petzval(binary: Path, glb: Path, out: Path, args: list[str], spp: int, s
     if proc.returncode != 0 or not out.is_file():
         raise AssertionError(f"`{' '.join(cmd)}` exited {proc.returncode}:\n{proc.stderr[-3000:]}")
     return seconds, proc.stderr
+
+
+def edit_glb(glb: Path, out: Path, edit: Callable[[dict], None]) -> Path:
+    """A copy of `glb` at `out` with its JSON chunk changed in place by `edit(doc)` (the binary
+    chunk kept): for negative controls that remove or alter one thing in an export."""
+    import struct
+
+    data = glb.read_bytes()
+    (json_len,) = struct.unpack_from("<I", data, 12)
+    doc = json.loads(data[20 : 20 + json_len])
+    edit(doc)
+    chunk = json.dumps(doc).encode()
+    chunk += b" " * (-len(chunk) % 4)
+    rest = data[20 + json_len :]
+    header = struct.pack("<4sII", b"glTF", 2, 20 + len(chunk) + len(rest)) + struct.pack("<I4s", len(chunk), b"JSON")
+    out.write_bytes(header + chunk + rest)
+    return out

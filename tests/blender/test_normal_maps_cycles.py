@@ -25,9 +25,7 @@ the whole image by far.
 
 from __future__ import annotations
 
-import json
 import math
-import struct
 from pathlib import Path
 
 import numpy as np
@@ -38,7 +36,7 @@ try:
 except Exception as e:  # ImportError, or a broken install
     pytest.skip(f"Blender's Python module cannot be imported ({type(e).__name__}: {e})", allow_module_level=True)
 
-from renders import run_petzval
+from renders import edit_glb, run_petzval
 from test_cycles_match import MEAN_TOL, _block_verdict, _fmt_verdict, _passes
 
 import blender_compare as B
@@ -124,18 +122,13 @@ def build_scene(tmpdir: Path) -> None:
 
 
 def _without_normal_maps(glb: Path, out: Path) -> Path:
-    """A copy of `glb` whose materials have no normalTexture (the binary chunk kept)."""
-    data = glb.read_bytes()
-    (json_len,) = struct.unpack_from("<I", data, 12)
-    doc = json.loads(data[20 : 20 + json_len])
-    removed = sum(m.pop("normalTexture", None) is not None for m in doc["materials"])
-    assert removed == 1, f"{removed} normal maps in the export"
-    chunk = json.dumps(doc).encode()
-    chunk += b" " * (-len(chunk) % 4)
-    rest = data[20 + json_len :]
-    header = struct.pack("<4sII", b"glTF", 2, 20 + len(chunk) + len(rest)) + struct.pack("<I4s", len(chunk), b"JSON")
-    out.write_bytes(header + chunk + rest)
-    return out
+    """A copy of `glb` whose materials have no normalTexture."""
+
+    def edit(doc):
+        removed = sum(m.pop("normalTexture", None) is not None for m in doc["materials"])
+        assert removed == 1, f"{removed} normal maps in the export"
+
+    return edit_glb(glb, out, edit)
 
 
 def _args() -> list[str]:

@@ -15,8 +15,6 @@ filtering").
 
 from __future__ import annotations
 
-import json
-import struct
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +25,7 @@ try:
 except Exception as e:  # ImportError, or a broken install
     pytest.skip(f"Blender's Python module cannot be imported ({type(e).__name__}: {e})", allow_module_level=True)
 
-from renders import run_petzval
+from renders import edit_glb, run_petzval
 
 import blender_compare as B
 import blender_scenes as S
@@ -59,20 +57,6 @@ def build_scene(tmpdir: Path) -> None:
     S.spheres_on_floor(tmpdir, WORLD_RGB, materials, SPHERE_RADIUS, ((2.0, -2.5, 2.5), 300.0), CAMERA, RESOLUTION)
 
 
-def _with_generator(glb: Path, generator: str, out: Path) -> Path:
-    """A copy of `glb` whose asset.generator is `generator` (the binary chunk kept)."""
-    data = glb.read_bytes()
-    (json_len,) = struct.unpack_from("<I", data, 12)
-    doc = json.loads(data[20 : 20 + json_len])
-    doc["asset"]["generator"] = generator
-    chunk = json.dumps(doc).encode()
-    chunk += b" " * (-len(chunk) % 4)
-    rest = data[20 + json_len :]
-    header = struct.pack("<4sII", b"glTF", 2, 20 + len(chunk) + len(rest)) + struct.pack("<I4s", len(chunk), b"JSON")
-    out.write_bytes(header + chunk + rest)
-    return out
-
-
 @pytest.fixture(scope="module")
 def checker_run(blender_run):
     """The checker scene's export and renders: (glb, Cycles images, petzval images, the
@@ -102,7 +86,7 @@ def test_spec_filtering_is_the_negative_control(checker_run, blender_run, report
     """The same export, said to be written by another tool: decoded before filtering, as the glTF
     spec asks. The z-test that the Blender-written file passes fails by far."""
     glb, cyc, *_ = checker_run
-    other = _with_generator(glb, "another exporter", glb.with_name("spec.glb"))
+    other = edit_glb(glb, glb.with_name("spec.glb"), lambda doc: doc["asset"].update(generator="another exporter"))
     args = S.pinhole_args(CAMERA, WORLD_RGB, S.PETZVAL_MAX_DEPTH, RESOLUTION)
     spec = []
     for seed in SEEDS:
