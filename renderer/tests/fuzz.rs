@@ -79,7 +79,11 @@ fn gltf_files_never_panic() {
 fn lrtf_seed() -> Vec<u8> {
     let lens = library_lens(fuzzing::LRTF_LENS).unwrap();
     let table = LrtfTable::bake(&lens, &BakeOptions { resolution: 8, ..BakeOptions::default() }, &|_| {}).unwrap();
-    let path = std::env::temp_dir().join(format!("petzval-fuzz-seed-{}.lrtf", std::process::id()));
+    // one file per call: tests run on several threads of one process, and two of them bake a
+    // seed (a name from the process id alone let one remove the other's file before it was read)
+    static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let path = std::env::temp_dir().join(format!("petzval-fuzz-seed-{}-{call}.lrtf", std::process::id()));
     table.save(&path).unwrap();
     let bytes = std::fs::read(&path).unwrap();
     let _ = std::fs::remove_file(&path);
