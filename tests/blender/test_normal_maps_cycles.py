@@ -1,9 +1,7 @@
 """Normal maps and textured emission against Cycles through Blender's GLB export: a floor and a
 tilted panel with a tangent-space normal map of sinusoidal bumps (8-bit Non-Color PNG, Normal
 Map node, strength 1), a sign whose Emission Color is a striped image, a plain sphere; a point
-light, a low sun and a grey world. (Alpha cut-outs are not in this scene: a leaf cut out by a
-BLEND alpha texture cast a shadow whose blocks differed from Cycles' by up to 13σ in session 33,
-not yet understood; docs/cycles-comparison.md, "Normal maps".)
+light, a low sun and a grey world. (Alpha cut-outs have their own test, test_alpha_cycles.py.)
 
 Cycles (Blender 5.0, Bump Map Correction on, its default) shades a normal-mapped Principled
 BSDF with two normals: its specular lobes on the mapped normal turned toward the geometric one
