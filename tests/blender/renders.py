@@ -71,3 +71,42 @@ def edit_glb(glb: Path, out: Path, edit: Callable[[dict], None]) -> Path:
     header = struct.pack("<4sII", b"glTF", 2, 20 + len(chunk) + len(rest)) + struct.pack("<I4s", len(chunk), b"JSON")
     out.write_bytes(header + chunk + rest)
     return out
+
+
+def scene_pairs(blender_run, name: str, key_files, build, camera: str, args: list[str], spp: int, seeds):
+    """For a test module's fixture: builds a scene with `build(workdir)`, exports it as GLB and
+    renders it with Cycles from `camera` (cached by `key_files`' text) and with `petzval render
+    ARGS`, once per seed: (glb, Cycles images, petzval images, the workdir). The caller rebuilds
+    the main scene afterwards."""
+    import blender_compare as B
+    import blender_scenes as S
+
+    bpy = S._import_bpy()
+    workdir = blender_run.workdir / name
+    cache_dir = blender_run.cache_dir.parent / f"cycles-{name}-{cache_key(bpy, *key_files)}"
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    build(workdir)
+    glb = S.export_glb(workdir / f"{name}.glb")
+    cyc, pz = [], []
+    for seed in seeds:
+        cfg = S.CyclesSettings(samples=spp, seed=seed)
+        render = lambda out, cfg=cfg: S.render_cycles(cfg, camera, out)  # noqa: E731
+        exr, _, _ = cached_render(bpy, cache_dir, f"cycles_spp{spp}_seed{seed}", render)
+        cyc.append(B.read_rgb(exr))
+        out = workdir / f"petzval_seed{seed}.exr"
+        run_petzval(blender_run.binary, glb, out, args, spp, seed)
+        pz.append(B.read_rgb(out))
+    return glb, cyc, pz, workdir
+
+
+def pinhole_glb_args(camera: str, world_rgb, resolution: tuple[int, int], sensor_mm: float = 36.0) -> list[str]:
+    """`petzval render` options for a pinhole Blender camera by name (no depth of field), its
+    sensor width, Cycles' 1.5 px filter, the world colour and the bounce limit."""
+    import blender_scenes as S
+
+    w, h = resolution
+    return [
+        "--camera", camera, "--lens", "pinhole", "--sensor-width", f"{sensor_mm:g}", "--natural-vignetting", "off",
+        "--filter-width", "1.5", "--environment", ",".join(str(c) for c in world_rgb),
+        "--max-depth", str(S.PETZVAL_MAX_DEPTH), "--resolution", f"{w}x{h}",
+    ]  # fmt: skip

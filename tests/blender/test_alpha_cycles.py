@@ -24,7 +24,7 @@ try:
 except Exception as e:  # ImportError, or a broken install
     pytest.skip(f"Blender's Python module cannot be imported ({type(e).__name__}: {e})", allow_module_level=True)
 
-from renders import cache_key, cached_render, edit_glb, run_petzval
+from renders import edit_glb, pinhole_glb_args, run_petzval, scene_pairs
 from test_cycles_match import MEAN_TOL, _block_verdict, _fmt_verdict, _passes
 from test_normal_maps_cycles import _image
 
@@ -73,34 +73,16 @@ def build_scene(tmpdir: Path) -> None:
 
 
 def _args() -> list[str]:
-    w, h = RESOLUTION
-    return [
-        "--camera", CAMERA_NAME, "--lens", "pinhole", "--sensor-width", "36", "--natural-vignetting", "off",
-        "--filter-width", "1.5", "--environment", ",".join(str(c) for c in WORLD_RGB),
-        "--max-depth", str(S.PETZVAL_MAX_DEPTH), "--resolution", f"{w}x{h}",
-    ]  # fmt: skip
+    return pinhole_glb_args(CAMERA_NAME, WORLD_RGB, RESOLUTION)
 
 
 @pytest.fixture(scope="module")
 def leaf_run(blender_run):
     """The scene's export, Cycles' renders (cached) and petzval's; afterwards rebuilds the main
     scene, which the other modules' tests read from Blender."""
-    workdir = blender_run.workdir / "alpha"
-    key = cache_key(bpy, "test_alpha_cycles.py", "test_normal_maps_cycles.py", "blender_scenes.py")
-    cache_dir = blender_run.cache_dir.parent / f"cycles-alpha-{key}"
-    cache_dir.mkdir(parents=True, exist_ok=True)
+    key_files = ("test_alpha_cycles.py", "test_normal_maps_cycles.py", "blender_scenes.py")
     try:
-        build_scene(workdir)
-        glb = S.export_glb(workdir / "alpha.glb")
-        cyc, pz = [], []
-        for seed in SEEDS:
-            cfg = S.CyclesSettings(samples=SPP, seed=seed)
-            render = lambda out, cfg=cfg: S.render_cycles(cfg, CAMERA_NAME, out)  # noqa: E731
-            exr, _, _ = cached_render(bpy, cache_dir, f"cycles_spp{SPP}_seed{seed}", render)
-            cyc.append(B.read_rgb(exr))
-            out = workdir / f"petzval_seed{seed}.exr"
-            run_petzval(blender_run.binary, glb, out, _args(), SPP, seed)
-            pz.append(B.read_rgb(out))
+        glb, cyc, pz, _ = scene_pairs(blender_run, "alpha", key_files, build_scene, CAMERA_NAME, _args(), SPP, SEEDS)
         yield glb, cyc, pz
     finally:
         S.build_scene(blender_run.workdir)

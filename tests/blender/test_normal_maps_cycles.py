@@ -34,7 +34,7 @@ try:
 except Exception as e:  # ImportError, or a broken install
     pytest.skip(f"Blender's Python module cannot be imported ({type(e).__name__}: {e})", allow_module_level=True)
 
-from renders import edit_glb, run_petzval
+from renders import edit_glb, pinhole_glb_args, run_petzval, scene_pairs
 from test_cycles_match import MEAN_TOL, _block_verdict, _fmt_verdict, _passes
 
 import blender_compare as B
@@ -130,36 +130,18 @@ def _without_normal_maps(glb: Path, out: Path) -> Path:
 
 
 def _args() -> list[str]:
-    w, h = RESOLUTION
-    return [
-        "--camera", CAMERA_NAME, "--lens", "pinhole", "--sensor-width", "36", "--natural-vignetting", "off",
-        "--filter-width", "1.5", "--environment", ",".join(str(c) for c in WORLD_RGB),
-        "--max-depth", str(S.PETZVAL_MAX_DEPTH), "--resolution", f"{w}x{h}",
-    ]  # fmt: skip
+    return pinhole_glb_args(CAMERA_NAME, WORLD_RGB, RESOLUTION)
 
 
 @pytest.fixture(scope="module")
 def bump_run(blender_run):
     """The scene's export, Cycles' renders (cached) and petzval's; afterwards rebuilds the main
     scene, which the other modules' tests read from Blender."""
-    from renders import cache_key, cached_render
-
-    workdir = blender_run.workdir / "normal-maps"
-    key = cache_key(bpy, "test_normal_maps_cycles.py", "blender_scenes.py")
-    cache_dir = blender_run.cache_dir.parent / f"cycles-normal-maps-{key}"
-    cache_dir.mkdir(parents=True, exist_ok=True)
+    key_files = ("test_normal_maps_cycles.py", "blender_scenes.py")
     try:
-        build_scene(workdir)
-        glb = S.export_glb(workdir / "normal-maps.glb")
-        cyc, pz = [], []
-        for seed in SEEDS:
-            cfg = S.CyclesSettings(samples=SPP, seed=seed)
-            render = lambda out, cfg=cfg: S.render_cycles(cfg, CAMERA_NAME, out)  # noqa: E731
-            exr, _, _ = cached_render(bpy, cache_dir, f"cycles_spp{SPP}_seed{seed}", render)
-            cyc.append(B.read_rgb(exr))
-            out = workdir / f"petzval_seed{seed}.exr"
-            run_petzval(blender_run.binary, glb, out, _args(), SPP, seed)
-            pz.append(B.read_rgb(out))
+        glb, cyc, pz, workdir = scene_pairs(
+            blender_run, "normal-maps", key_files, build_scene, CAMERA_NAME, _args(), SPP, SEEDS
+        )
         # each 8×8 block's mean depth along the view axis (the environment counted far)
         z = B.read_exr(workdir / f"petzval_seed{SEEDS[0]}.exr")["Z"]
         depth = B.block_sum(np.where(np.isfinite(z), z, 1e6), 8) / 64
