@@ -1487,22 +1487,32 @@ impl RenderScene {
     /// normal's side), before any normal map; the geometric normal where the mesh has none.
     /// Cycles' bump shadowing term compares a normal-mapped normal with it.
     pub fn smooth_normal(&self, hit: &SurfaceHit) -> Vec3 {
-        let (b1, b2) = (hit.barycentrics.x, hit.barycentrics.y);
-        self.smooth_normal_at(hit.instance, hit.triangle, b1, b2, hit.geometric_normal)
+        let (inst, (b1, b2)) = (hit.instance, (hit.barycentrics.x, hit.barycentrics.y));
+        let (mesh, info) = self.mesh_of(inst);
+        let idx = mesh.indices[hit.triangle as usize].map(|i| i as usize);
+        self.smooth_normal_at(inst, mesh, info, idx, b1, b2, hit.geometric_normal)
     }
 
-    /// [`RenderScene::smooth_normal`] for triangle `tri` of instance `inst` at (b1, b2), whose
-    /// geometric normal is `ng`.
+    /// [`RenderScene::smooth_normal`] at (b1, b2) of the triangle with vertex indices `idx` of
+    /// instance `inst` (mesh `mesh`), whose geometric normal is `ng`.
+    #[allow(clippy::too_many_arguments)]
     #[inline]
-    fn smooth_normal_at(&self, inst: u32, tri: u32, b1: f32, b2: f32, ng: Vec3) -> Vec3 {
-        let (mesh, info) = self.mesh_of(inst);
+    fn smooth_normal_at(
+        &self,
+        inst: u32,
+        mesh: &Mesh,
+        info: MeshInfo,
+        idx: [usize; 3],
+        b1: f32,
+        b2: f32,
+        ng: Vec3,
+    ) -> Vec3 {
         if !info.has_normals {
             return ng;
         }
         let xf = &self.xforms[inst as usize];
         let world_normals =
             self.world_attributes[self.scene.instances[inst as usize].mesh as usize].as_ref().map(|w| &w.normals[..]);
-        let idx = mesh.indices[tri as usize].map(|i| i as usize);
         // a vertex normal in world space (precomputed for a baked, transformed mesh)
         let world_n = |i: usize| match world_normals {
             Some(w) => w[i],
@@ -1533,7 +1543,7 @@ impl RenderScene {
         let b0 = 1.0 - b1 - b2;
         let position = p[0] * b0 + p[1] * b1 + p[2] * b2;
         let ng = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or(Vec3::Z) * xf.sign;
-        let mut ns = self.smooth_normal_at(inst, tri, b1, b2, ng);
+        let mut ns = self.smooth_normal_at(inst, mesh, info, idx, b1, b2, ng);
         let (uv0, uv1) = self.uvs_at(inst, tri, b1, b2);
         let material_id = mesh.material_ids[tri as usize];
         let mat = &self.scene.materials[material_id as usize];

@@ -66,7 +66,9 @@ impl Loader<'_> {
                 // Blender's, which Cycles filters encoded and decodes after (an image in the
                 // sRGB colour space, `compress_as_srgb`; see Texture), so the render of the
                 // export matches Cycles' render of the scene.
-                let srgb_encoded = kind.srgb() && self.blender_written;
+                // (Nearest filtering returns a texel as it is: decoded at load, the same values
+                // without a decode per lookup.)
+                let srgb_encoded = kind.srgb() && self.blender_written && bilinear;
                 let texels = image_texels(&img, kind.srgb() && !srgb_encoded);
                 Texture {
                     name: name.clone(),
