@@ -73,11 +73,11 @@ def edit_glb(glb: Path, out: Path, edit: Callable[[dict], None]) -> Path:
     return out
 
 
-def scene_pairs(blender_run, name: str, key_files, build, camera: str, args: list[str], spp: int, seeds):
-    """For a test module's fixture: builds a scene with `build(workdir)`, exports it as GLB and
-    renders it with Cycles from `camera` (cached by `key_files`' text) and with `petzval render
-    ARGS`, once per seed: (glb, Cycles images, petzval images, the workdir). The caller rebuilds
-    the main scene afterwards."""
+def scene_pairs(blender_run, name: str, key_files, build, camera: str, args: list[str], spp: int, seeds, export=None):
+    """For a test module's fixture: builds a scene with `build(workdir)`, exports it as GLB
+    (`export(path)`, default the suite's static export) and renders it with Cycles from `camera`
+    (cached by `key_files`' text) and with `petzval render ARGS`, once per seed: (glb, Cycles
+    images, petzval images, the workdir). The caller rebuilds the main scene afterwards."""
     import blender_compare as B
     import blender_scenes as S
 
@@ -86,7 +86,7 @@ def scene_pairs(blender_run, name: str, key_files, build, camera: str, args: lis
     cache_dir = blender_run.cache_dir.parent / f"cycles-{name}-{cache_key(bpy, *key_files)}"
     cache_dir.mkdir(parents=True, exist_ok=True)
     build(workdir)
-    glb = S.export_glb(workdir / f"{name}.glb")
+    glb = (export or S.export_glb)(workdir / f"{name}.glb")
     cyc, pz = [], []
     for seed in seeds:
         cfg = S.CyclesSettings(samples=spp, seed=seed)

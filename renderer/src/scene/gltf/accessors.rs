@@ -227,7 +227,10 @@ fn read_accessor_f64(loader: &Loader, acc: &gltf::Accessor) -> std::result::Resu
         Dimensions::Vec2 => 2,
         Dimensions::Vec3 => 3,
         Dimensions::Vec4 => 4,
-        d => return Err(format!("matrix accessor type {d:?} is not supported here")),
+        // a skin's inverse bind matrices (floats only: the spec's only type for them, and the
+        // only matrix layout without column padding)
+        Dimensions::Mat4 if acc.data_type() == DataType::F32 => 16,
+        d => return Err(format!("matrix accessor type {d:?} of {:?} is not supported here", acc.data_type())),
     };
     let t = acc.data_type();
     let count = acc.count();

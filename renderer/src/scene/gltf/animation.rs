@@ -6,7 +6,8 @@
 //! | channel `translation`, `rotation`, `scale` | that part of the node's TRS at the time; the rest from the node |
 //! | sampler `STEP`, `LINEAR` (rotation: shortest-path slerp), `CUBICSPLINE` (Hermite, tangents × the key interval) | as the glTF spec defines them; before the first key the first value, after the last the last |
 //! | several animations | all applied at the same time (Blender writes one per object's action); where two target the same node and path, the later one wins, with a warning |
-//! | channel `weights` (morph targets), `KHR_animation_pointer` | ignored with a warning |
+//! | channel `weights` | the node's morph target weights at the time (as many per key as the sampler holds; see `deform.rs`) |
+//! | `KHR_animation_pointer` | ignored with a warning |
 //! | an animated node with a `matrix` | the matrix kept, with a warning (the spec allows TRS only) |
 //! | malformed sampler (input not scalar floats, counts that differ, times not increasing) | error naming the animation and channel |
 //!
@@ -31,6 +32,15 @@ pub(super) struct AnimatedTrs {
     pub rotation: Option<Quat>,
     /// Scale.
     pub scale: Option<Vec3>,
+}
+
+/// Every animated node's state at the time asked.
+#[derive(Debug, Clone, Default)]
+pub(super) struct Animated {
+    /// Node index → its animated TRS parts.
+    pub trs: HashMap<usize, AnimatedTrs>,
+    /// Node index → its morph target weights.
+    pub weights: HashMap<usize, Vec<f32>>,
 }
 
 /// A sampler's keys: times (s) and values (`n` floats per key; CUBICSPLINE: in-tangent,
@@ -97,9 +107,9 @@ impl Keys {
 }
 
 impl Loader<'_> {
-    /// Every animated node's TRS parts at `time_s` (node index → parts).
-    pub(super) fn animated_nodes(&mut self, time_s: f32) -> Result<HashMap<usize, AnimatedTrs>> {
-        let mut out: HashMap<usize, AnimatedTrs> = HashMap::new();
+    /// Every animated node's TRS parts and morph target weights at `time_s`.
+    pub(super) fn animated_nodes(&mut self, time_s: f32) -> Result<Animated> {
+        let mut out = Animated::default();
         let doc = self.doc;
         for anim in doc.animations() {
             let anim_loc = named("animation", anim.index(), anim.name());
@@ -111,12 +121,11 @@ impl Loader<'_> {
                 let dims = match property {
                     Property::Translation | Property::Scale => Dimensions::Vec3,
                     Property::Rotation => Dimensions::Vec4,
-                    Property::MorphTargetWeights => {
-                        self.warn(&loc, "morph target weights are not supported; ignored");
-                        continue;
-                    }
+                    Property::MorphTargetWeights => Dimensions::Scalar,
                 };
-                if matches!(node.transform(), gltf::scene::Transform::Matrix { .. }) {
+                if property != Property::MorphTargetWeights
+                    && matches!(node.transform(), gltf::scene::Transform::Matrix { .. })
+                {
                     self.warn(
                         &named("node", node.index(), node.name()),
                         "is animated but has a matrix (glTF allows TRS only); the matrix is kept",
@@ -136,9 +145,15 @@ impl Loader<'_> {
                 let times = read_accessor(self, &input).map_err(|e| self.error(&loc, format!("sampler input: {e}")))?;
                 let values =
                     read_accessor(self, &output).map_err(|e| self.error(&loc, format!("sampler output: {e}")))?;
-                let n = if dims == Dimensions::Vec3 { 3 } else { 4 };
                 let interpolation = sampler.interpolation();
-                let per_key = if interpolation == Interpolation::CubicSpline { 3 * n } else { n };
+                let cubic = if interpolation == Interpolation::CubicSpline { 3 } else { 1 };
+                let n = match dims {
+                    Dimensions::Vec3 => 3,
+                    Dimensions::Vec4 => 4,
+                    // weights: as many per key as the output holds (one per morph target)
+                    _ => (values.len() / (times.len() * cubic).max(1)).max(1),
+                };
+                let per_key = cubic * n;
                 if times.is_empty() || values.len() != times.len() * per_key {
                     return Err(self.error(
                         &loc,
@@ -154,12 +169,12 @@ impl Loader<'_> {
                 }
                 let keys = Keys { times, values, n, interpolation };
                 // 2. The value at the time.
-                let entry = out.entry(node.index()).or_default();
+                let entry = out.trs.entry(node.index()).or_default();
                 let replaced = match property {
                     Property::Translation => entry.translation.replace(Vec3::from_slice(&keys.at(time_s))).is_some(),
                     Property::Scale => entry.scale.replace(Vec3::from_slice(&keys.at(time_s))).is_some(),
                     Property::Rotation => entry.rotation.replace(keys.rotation_at(time_s)).is_some(),
-                    Property::MorphTargetWeights => false,
+                    Property::MorphTargetWeights => out.weights.insert(node.index(), keys.at(time_s)).is_some(),
                 };
                 if replaced {
                     self.warn(

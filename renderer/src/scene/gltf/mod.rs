@@ -32,6 +32,7 @@
 //! | `KHR_lights_punctual` point, spot | [`Light::Point`], [`Light::Spot`]: `color × intensity / 683` W/sr | see below |
 //! | `KHR_lights_punctual` directional | [`Light::Directional`]: `color × intensity / 683` W/m² | |
 //! | node animation (`translation`, `rotation`, `scale` channels) | evaluated at the time asked ([`load_gltf_at`]; `petzval render --frame F` asks for F / `--fps`, as Blender's exporter writes frame F at F / fps seconds), else the nodes' own TRS | see `animation.rs` |
+//! | skins, morph targets (and their `weights` animation) | meshes deformed per node, as the spec defines it (linear blend skinning after the morph targets) | see `deform.rs` |
 //! | perspective and orthographic cameras | [`SceneCamera`] (rigid part of the node's world transform); orthographic: `ortho_scale_m` = 2·max(xmag, ymag), as Blender's importer reads it | node scale ignored |
 //!
 //! Light units. Blender's glTF exporter (io_scene_gltf2, as bundled with Blender 5.0.1:
@@ -59,9 +60,11 @@
 //! | `nodes.rs` | node hierarchy, meshes and primitives, lights, cameras |
 //! | `materials.rs` | materials, images and textures |
 //! | `accessors.rs` | buffers, URIs (data, files), accessor decoding |
+//! | `deform.rs` | skins and morph targets |
 
 mod accessors;
 mod animation;
+mod deform;
 mod materials;
 mod nodes;
 
@@ -180,8 +183,10 @@ struct Loader<'a> {
     /// Blender's exporter wrote the file (`asset.generator` "Khronos glTF Blender I/O …"):
     /// its colour images are filtered as Cycles filters them (see `Loader::texture`).
     blender_written: bool,
-    /// The animated nodes' TRS parts at the time asked (empty without a time).
-    animated: HashMap<usize, animation::AnimatedTrs>,
+    /// The animated nodes' TRS parts and morph weights at the time asked (empty without a time).
+    animated: animation::Animated,
+    /// Every node's world matrix along its parent chain, once a skin needs them.
+    node_worlds: Option<Vec<glam::Mat4>>,
 }
 
 fn named(kind: &str, index: usize, name: Option<&str>) -> String {
@@ -269,7 +274,8 @@ impl<'a> Loader<'a> {
                 .generator
                 .as_deref()
                 .is_some_and(|g| g.starts_with("Khronos glTF Blender I/O")),
-            animated: HashMap::new(),
+            animated: animation::Animated::default(),
+            node_worlds: None,
         };
         loader.warn_extensions();
         if pointer_channels > 0 {

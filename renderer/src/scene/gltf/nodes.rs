@@ -1,6 +1,7 @@
 //! The node hierarchy: transforms, meshes and their primitives, lights and cameras.
 
 use super::accessors::read_accessor;
+use super::deform::Deform;
 use super::{named, Loader, WATTS_TO_LUMENS};
 use crate::limits::MAX_NODE_INSTANCES;
 use crate::scene::{Light, Mesh, SceneCamera, SpotFalloff};
@@ -47,7 +48,20 @@ impl Loader<'_> {
             let local = self.node_matrix(&node, &loc);
             let world = parent * local;
             if let Some(mesh) = node.mesh() {
+                // A skin or morph weights: the mesh deformed for this node (`deform.rs`).
+                let deform = self.deformation(&node, &mesh, &world, &loc)?;
+                let id = match &deform {
+                    Some(d) => self.read_deformed_mesh(&mesh, d)?,
+                    None => self.shared_mesh(&mesh)?,
+                };
                 match self.gpu_instances(&node, &loc)? {
+                    // A skinned mesh is in world space already (the node's transform ignored).
+                    _ if deform.as_ref().is_some_and(|d| d.joints.is_some()) => {
+                        if node.extension_value("EXT_mesh_gpu_instancing").is_some() {
+                            self.warn(&loc, "EXT_mesh_gpu_instancing on a skinned mesh is not supported; ignored");
+                        }
+                        self.place_mesh(id, &mesh, &Mat4::IDENTITY);
+                    }
                     // EXT_mesh_gpu_instancing: the mesh once per instance, the node's
                     // transform applied after the instance's.
                     Some(locals) => {
@@ -56,10 +70,10 @@ impl Loader<'_> {
                             return Err(self.error(&loc, "EXT_mesh_gpu_instancing: too many instances"));
                         }
                         for m in locals {
-                            self.add_mesh(&mesh, &(world * m))?;
+                            self.place_mesh(id, &mesh, &(world * m));
                         }
                     }
-                    None => self.add_mesh(&mesh, &world)?,
+                    None => self.place_mesh(id, &mesh, &world),
                 }
             }
             if let Some(light) = node.light() {
@@ -196,7 +210,7 @@ impl Loader<'_> {
             }
             gltf::scene::Transform::Decomposed { translation, rotation, scale } => {
                 // the animated parts at the time asked, where the node is animated
-                let anim = self.animated.get(&node.index()).copied().unwrap_or_default();
+                let anim = self.animated.trs.get(&node.index()).copied().unwrap_or_default();
                 let mut t = anim.translation.unwrap_or(Vec3::from_array(translation));
                 let mut s = anim.scale.unwrap_or(Vec3::from_array(scale));
                 let mut q = anim.rotation.unwrap_or(Quat::from_array(rotation));
@@ -345,33 +359,36 @@ impl Loader<'_> {
 
     // ---------------------------------------------------------------- meshes
 
-    /// Places glTF mesh `mesh` with `world`: the mesh is read once (object space, all its
-    /// triangle primitives in one [`Mesh`]) and every node using it becomes an instance.
-    pub(super) fn add_mesh(&mut self, mesh: &gltf::Mesh, world: &Mat4) -> Result<()> {
-        let id = match self.mesh_ids.get(&mesh.index()) {
-            Some(&id) => id,
-            None => {
-                let m = self.read_mesh(mesh)?;
-                let id = (!m.indices.is_empty()).then(|| self.scene.add_mesh(m));
-                self.mesh_ids.insert(mesh.index(), id);
-                id
-            }
-        };
-        if let Some(id) = id {
-            if !world.is_finite() {
-                // a chain of finite node transforms can still overflow f32 (issue 12's fuzzing)
-                self.warn(
-                    &named("mesh", mesh.index(), mesh.name()),
-                    "its node's world transform is not finite; skipped",
-                );
-                return Ok(());
-            }
-            self.scene.add_instance(id, Affine3A::from_mat4(*world));
+    /// glTF mesh `mesh` undeformed, read once (object space, all its triangle primitives in one
+    /// [`Mesh`]) and shared by every node using it; None when it has no triangles.
+    fn shared_mesh(&mut self, mesh: &gltf::Mesh) -> Result<Option<u32>> {
+        if let Some(&id) = self.mesh_ids.get(&mesh.index()) {
+            return Ok(id);
         }
-        Ok(())
+        let m = self.read_mesh(mesh, None)?;
+        let id = (!m.indices.is_empty()).then(|| self.scene.add_mesh(m));
+        self.mesh_ids.insert(mesh.index(), id);
+        Ok(id)
     }
 
-    fn read_mesh(&mut self, mesh: &gltf::Mesh) -> Result<Mesh> {
+    /// glTF mesh `mesh` as `deform` deforms it (one node's own copy); None without triangles.
+    fn read_deformed_mesh(&mut self, mesh: &gltf::Mesh, deform: &Deform) -> Result<Option<u32>> {
+        let m = self.read_mesh(mesh, Some(deform))?;
+        Ok((!m.indices.is_empty()).then(|| self.scene.add_mesh(m)))
+    }
+
+    /// An instance of scene mesh `id` (glTF mesh `mesh`, for messages) placed by `world`.
+    fn place_mesh(&mut self, id: Option<u32>, mesh: &gltf::Mesh, world: &Mat4) {
+        let Some(id) = id else { return };
+        if !world.is_finite() {
+            // a chain of finite node transforms can still overflow f32 (issue 12's fuzzing)
+            self.warn(&named("mesh", mesh.index(), mesh.name()), "its node's world transform is not finite; skipped");
+            return;
+        }
+        self.scene.add_instance(id, Affine3A::from_mat4(*world));
+    }
+
+    fn read_mesh(&mut self, mesh: &gltf::Mesh, deform: Option<&Deform>) -> Result<Mesh> {
         let mesh_loc = named("mesh", mesh.index(), mesh.name());
         let mut out = Mesh::default();
         for prim in mesh.primitives() {
@@ -384,7 +401,7 @@ impl Loader<'_> {
                 Some(i) if i < self.scene.materials.len() => i as u32,
                 _ => self.default_material(),
             };
-            let m = self.read_primitive(&prim, &Mat4::IDENTITY, material, &loc)?;
+            let m = self.read_primitive(&prim, &Mat4::IDENTITY, material, &loc, deform)?;
             out.append(&m, 0);
         }
         Ok(out)
@@ -487,6 +504,7 @@ impl Loader<'_> {
         world: &Mat4,
         material: u32,
         loc: &str,
+        deform: Option<&Deform>,
     ) -> Result<Mesh> {
         let draco = self.decode_draco(prim, loc)?;
         let d = draco.as_ref();
@@ -500,7 +518,6 @@ impl Loader<'_> {
         let uv0 = self.attribute_f32(prim, d, Semantic::TexCoords(0), Dimensions::Vec2, Some(n), loc)?;
         let uv1 = self.attribute_f32(prim, d, Semantic::TexCoords(1), Dimensions::Vec2, Some(n), loc)?;
         let colors = self.vertex_colors(prim, d, n, loc)?;
-
         // Indices (a Draco mesh's faces).
         let mut flat: Vec<u32> = match (draco.as_ref(), prim.indices()) {
             (Some(d), _) => {
@@ -544,6 +561,23 @@ impl Loader<'_> {
             );
             flat.truncate(flat.len() - flat.len() % 3);
         }
+        // A skin or morph weights (`deform.rs`): positions, normals and tangents deformed.
+        let (positions, normals, tangents, mirrored) = match deform {
+            None => (positions, normals, tangents, Vec::new()),
+            Some(df) => {
+                let skin = match df.joints {
+                    Some(_) => self.skin_attributes(
+                        prim,
+                        |s| self.attribute_f32(prim, d, s, Dimensions::Vec4, Some(n), loc),
+                        loc,
+                    )?,
+                    None => Vec::new(),
+                };
+                let r =
+                    self.deform_primitive(prim, df, d.is_some(), positions, normals, tangents, &skin, &flat, loc)?;
+                (r.positions, r.normals, r.tangents, r.mirrored)
+            }
+        };
 
         // World-space attributes.
         let lin = Mat3::from_mat4(*world);
@@ -560,7 +594,9 @@ impl Loader<'_> {
         let mut tris: Vec<[u32; 3]> = Vec::with_capacity(flat.len() / 3);
         let mut dropped = 0usize;
         for t in flat.chunks_exact(3) {
-            let tri = if det < 0.0 { [t[0], t[2], t[1]] } else { [t[0], t[1], t[2]] };
+            // mirrored by the node, or by the skin at the triangle's first vertex
+            let flip = (det < 0.0) != mirrored.get(t[0] as usize).copied().unwrap_or(false);
+            let tri = if flip { [t[0], t[2], t[1]] } else { [t[0], t[1], t[2]] };
             if tri.iter().all(|&i| pos[i as usize].is_finite()) {
                 tris.push(tri);
             } else {
