@@ -38,6 +38,7 @@ use std::sync::Arc;
 pub mod demo;
 pub mod environment;
 pub mod gltf;
+pub mod normals;
 pub mod texture;
 
 pub use environment::Environment;

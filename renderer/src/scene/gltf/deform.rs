@@ -5,7 +5,7 @@
 //! | morph targets (`POSITION`, `NORMAL`, `TANGENT` displacements) | added to the base attributes × the node's weights, before skinning (the spec's order) | weights: the `weights` channel's at the time asked ([`super::load_gltf_at`]), else the node's `weights`, else the mesh's, else 0; a count that differs from the targets' is padded with 0 or cut, with a warning |
 //! | skin (`JOINTS_n` / `WEIGHTS_n` sets, `inverseBindMatrices`) | each vertex moved by Σ wᵢ · world(jointᵢ) · inverseBind(jointᵢ) (linear blend skinning as the spec defines it), its tangent by that matrix | the skinned node's own transform is ignored, as the spec asks; weights normalised to sum 1; a vertex with no weight keeps the node's transform (warning); a joint index out of range with a weight is an error naming the primitive and vertex |
 //! | joint transforms | the joints' world matrices along their parent chain, with their animation at the time asked | Blender writes a posed armature as the joints' animation, or (exporter options "Use Current Frame" and rest position off) as their TRS |
-//! | normals of a deformed mesh | where the file's normals are the geometry's own (corner-angle-weighted face normals within 2°, per vertex), derived again from the deformed geometry, as Blender recomputes them for the mesh Cycles renders; elsewhere (custom normals, hard edges) the spec's: morph `NORMAL` displacements, then the skin matrix's cofactor | see `rederive_normals`; coplanar flat-shaded faces turn smooth when deformed (a glTF file cannot tell them from a smooth plane) |
+//! | normals of a deformed mesh | where the file's normals are the geometry's own (corner-angle-weighted face normals within 2°, per vertex), derived again from the deformed geometry, as Blender recomputes them for the mesh Cycles renders; elsewhere (custom normals, hard edges) the spec's: morph `NORMAL` displacements, then the skin matrix's cofactor | see [`crate::scene::normals`]; coplanar flat-shaded faces turn smooth when deformed (a glTF file cannot tell them from a smooth plane) |
 //! | a deformed mesh | its own [`super::super::Mesh`] per node (world space for a skin), not shared | nodes without a skin and with all weights 0 keep sharing the undeformed mesh |
 //! | morph targets of a `KHR_draco_mesh_compression` primitive | ignored, with a warning | the extension does not carry targets; skins work (their attributes are decoded) |
 
@@ -205,8 +205,7 @@ impl Loader<'_> {
         }
         // 2. The skin: each vertex by its blended joint matrix.
         let Some(joints) = &deform.joints else {
-            let normals =
-                normals.map(|blended| rederive_normals(&rest.0, rest.1.as_deref(), &positions, blended, indices));
+            let normals = normals.map(|blended| rederive(&rest, &positions, blended, indices));
             return Ok(Deformed { positions, normals, tangents, mirrored: Vec::new() });
         };
         let mut mirrored = vec![false; n];
@@ -266,7 +265,7 @@ impl Loader<'_> {
                 t[4 * v + 3] *= sign;
             }
         }
-        let normals = normals.map(|blended| rederive_normals(&rest.0, rest.1.as_deref(), &positions, blended, indices));
+        let normals = normals.map(|blended| rederive(&rest, &positions, blended, indices));
         if unweighted > 0 {
             self.warn(
                 loc,
@@ -300,124 +299,13 @@ impl Loader<'_> {
     }
 }
 
-/// Normals the file's normals were derived from its geometry, derived again from the deformed
-/// geometry, as Blender does for the meshes Cycles renders (it recomputes the normals of a mesh
-/// deformed by an armature or shape keys); other vertices keep `blended` (the spec's: morph
-/// normal displacements, then the skin's cofactor).
-///
-/// Vertices with the same rest position and the same file normal form one smooth group (a UV
-/// seam splits vertices, a hard edge or a flat face splits their normals too). A group's normal
-/// is the corner-angle-weighted sum of its faces' normals (Blender's vertex normals; two
-/// triangles cut from one quad count as that quad, see [`faces_of`]; slivers, whose normal is
-/// rounding noise, left out). A
-/// vertex counts as derived when that sum over the rest geometry is within 2° of its file
-/// normal; then its normal is the same sum over the deformed geometry. (Coplanar flat-shaded
-/// faces cannot be told from a smooth-shaded plane in a glTF file: deformed, they turn smooth.)
-fn rederive_normals(
-    rest: &[f32],
-    file: Option<&[f32]>,
-    deformed: &[f32],
-    blended: Vec<f32>,
-    indices: &[u32],
-) -> Vec<f32> {
-    use std::collections::HashMap;
-    let Some(file) = file else { return blended };
-    let n = rest.len() / 3;
-    let v3 = |a: &[f32], i: usize| Vec3::from_slice(&a[3 * i..3 * i + 3]);
-    // 1. Smooth groups: rest position and file normal, bit for bit.
-    let mut groups: HashMap<[u32; 6], u32> = HashMap::new();
-    let group: Vec<u32> = (0..n)
-        .map(|i| {
-            let key = [v3(rest, i), v3(file, i)].map(|v| v.to_array().map(|x| (x + 0.0).to_bits()));
-            let key = [key[0][0], key[0][1], key[0][2], key[1][0], key[1][1], key[1][2]];
-            let next = groups.len() as u32;
-            *groups.entry(key).or_insert(next)
-        })
-        .collect();
-    // 2. Faces: the triangles, with two consecutive ones that share an edge and lie in one
-    //    plane at rest taken as the quad they were triangulated from (Blender's exporter writes
-    //    a quad as two such triangles, and Blender's normals weigh the quad's corners).
-    let faces = faces_of(indices, |i| v3(rest, i));
-    // 3. Angle-weighted face normals (Newell's, as Blender computes a polygon's) per group.
-    let sums = |pos: &[f32]| {
-        let mut acc = vec![Vec3::ZERO; groups.len()];
-        for face in &faces {
-            let corners: &[usize] = match face {
-                Face::Tri(t) => t,
-                Face::Quad(q) => q,
-            };
-            let k = corners.len();
-            let p = |j: usize| v3(pos, corners[j % k]);
-            let newell = (0..k).fold(Vec3::ZERO, |sum, j| sum + p(j).cross(p(j + 1)));
-            // a sliver (an n-gon's collinear vertices, triangulated) has a normal of rounding
-            // noise: left out (its vertices then fail the rest test below, unless other
-            // faces carry them)
-            let longest = (0..k).map(|j| (p(j + 1) - p(j)).length_squared()).fold(0.0f32, f32::max);
-            if !(newell.length() > 1e-3 * longest) {
-                continue;
-            }
-            let normal = newell.normalize();
-            for j in 0..k {
-                let angle = (p(j + k - 1) - p(j)).angle_between(p(j + 1) - p(j));
-                if angle.is_finite() {
-                    acc[group[corners[j]] as usize] += normal * angle;
-                }
-            }
-        }
-        acc
-    };
-    let (at_rest, now) = (sums(rest), sums(deformed));
-    // 4. Derived vertices take the deformed sum.
-    let cos_tolerance = 2.0f32.to_radians().cos();
-    let mut out = blended;
-    for i in 0..n {
-        let g = group[i] as usize;
-        let (r, d) = (at_rest[g].normalize_or_zero(), now[g].normalize_or_zero());
-        if r.dot(v3(file, i).normalize_or_zero()) >= cos_tolerance && d != Vec3::ZERO && d.is_finite() {
-            out[3 * i..3 * i + 3].copy_from_slice(&d.to_array());
-        }
-    }
-    out
-}
-
-/// A face of a deformed mesh: a triangle, or the quad two triangles were cut from.
-enum Face {
-    /// Three corners, in winding order.
-    Tri([usize; 3]),
-    /// Four corners, in winding order.
-    Quad([usize; 4]),
-}
-
-/// The faces of triangle list `indices`: consecutive triangles (a, b, c), (a', b', c') that
-/// share an edge in opposite directions and whose normals (at `rest(i)`) agree within 0.5° are
-/// one quad; the others stay triangles.
-fn faces_of(indices: &[u32], rest: impl Fn(usize) -> Vec3) -> Vec<Face> {
-    let tris: Vec<[usize; 3]> = indices.chunks_exact(3).map(|t| [0, 1, 2].map(|k| t[k] as usize)).collect();
-    let normal = |t: &[usize; 3]| (rest(t[1]) - rest(t[0])).cross(rest(t[2]) - rest(t[0])).normalize_or_zero();
-    let cos_planar = 0.5f32.to_radians().cos();
-    let mut out = Vec::with_capacity(tris.len());
-    let mut i = 0;
-    while i < tris.len() {
-        let t = tris[i];
-        let quad = tris.get(i + 1).and_then(|u| {
-            // the edge p → q of t that u runs q → p; x: t's other corner, y: u's
-            (0..3).find_map(|e| {
-                let (x, p, q) = (t[e], t[(e + 1) % 3], t[(e + 2) % 3]);
-                let f = (0..3).find(|&f| u[f] == q && u[(f + 1) % 3] == p)?;
-                let y = u[(f + 2) % 3];
-                (y != x && normal(&t).dot(normal(u)) >= cos_planar).then_some([x, p, y, q])
-            })
-        });
-        match quad {
-            Some(q) => {
-                out.push(Face::Quad(q));
-                i += 2;
-            }
-            None => {
-                out.push(Face::Tri(t));
-                i += 1;
-            }
-        }
-    }
-    out
+/// [`crate::scene::normals::rederive_normals`] on flat attribute arrays: `rest` = (positions,
+/// the file's normals) before deformation, `blended` the deformed normals the spec gives.
+fn rederive(rest: &(Vec<f32>, Option<Vec<f32>>), deformed: &[f32], blended: Vec<f32>, indices: &[u32]) -> Vec<f32> {
+    let Some(file) = &rest.1 else { return blended };
+    let vecs = |a: &[f32]| a.chunks_exact(3).map(Vec3::from_slice).collect::<Vec<_>>();
+    let triangles: Vec<[u32; 3]> = indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+    let mut normals = vecs(&blended);
+    crate::scene::normals::rederive_normals(&vecs(&rest.0), &vecs(file), &vecs(deformed), &mut normals, &triangles);
+    normals.iter().flat_map(|n| n.to_array()).collect()
 }
