@@ -8,11 +8,15 @@ not applied), so the tube arrives in its rest pose with a skin and the icosphere
 targets. The whole image is compared in 8×8 blocks (z-test, two seeds a side; the criteria of
 test_cycles_match.py) and its mean. The negative control is the same file without its skin and
 morph weights animated (the animations removed): the rest pose must fail the z-test by far.
+The same scene exported to USD with its animation (a Skeleton, a SkelAnimation, BlendShapes)
+and rendered at time code 13 is compared with the same Cycles images.
 """
 
 from __future__ import annotations
 
+import json
 import math
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -134,16 +138,19 @@ def skin_run(blender_run):
     scene, which the other modules' tests read from Blender."""
     key_files = ("test_skin_cycles.py", "blender_scenes.py")
     try:
-        glb, cyc, pz, _ = scene_pairs(
+        glb, cyc, pz, workdir = scene_pairs(
             blender_run, "skin", key_files, build_scene, CAMERA_NAME, _args(), SPP, SEEDS, export=export_animated
         )
-        yield glb, cyc, pz
+        # the same scene through Blender's USD export with its animation (UsdSkel)
+        usd = workdir / "skin.usdc"
+        bpy.ops.wm.usd_export(filepath=str(usd), export_animation=True)
+        yield glb, cyc, pz, usd
     finally:
         S.build_scene(blender_run.workdir)
 
 
 def test_skinned_and_morphed_meshes_match_cycles(skin_run, report):
-    glb, cyc, pz = skin_run
+    glb, cyc, pz, _ = skin_run
     doc = _glb_json(glb)
     assert doc.get("skins") and any(p.get("targets") for m in doc["meshes"] for p in m["primitives"]), (
         "the export has no skin or no morph targets"
@@ -159,7 +166,7 @@ def test_skinned_and_morphed_meshes_match_cycles(skin_run, report):
 
 
 def test_the_rest_pose_is_the_negative_control(skin_run, blender_run, report):
-    glb, cyc, _ = skin_run
+    glb, cyc, _, _ = skin_run
     rest = edit_glb(glb, glb.with_name("rest.glb"), lambda doc: doc.pop("animations", None))
     pz = []
     for seed in SEEDS:
@@ -169,3 +176,31 @@ def test_the_rest_pose_is_the_negative_control(skin_run, blender_run, report):
     v = _block_verdict(B.compare_blocks(cyc[0], cyc[1], pz[0], pz[1]))
     report.line(f"  negative control, the rest pose (animations removed): {_fmt_verdict(v)}")
     assert v["mean_z2"] > 20 * 1.5, f"the rest pose still passes: {_fmt_verdict(v)}"
+
+
+def test_the_usd_export_matches_cycles(skin_run, blender_run, report):
+    """The same scene through Blender's USD export with its animation: a Skeleton with a
+    SkelAnimation and BlendShapes (usd/src/skel.rs), rendered at time code 13."""
+    _, cyc, _, usd = skin_run
+    info = subprocess.run(
+        [str(blender_run.binary), "usd", "info", str(usd), "--json"], capture_output=True, text=True, check=True
+    )
+    (cam,) = [c["path"] for c in json.loads(info.stdout)["cameras"] if f"/{CAMERA_NAME}/" in c["path"] + "/"]
+    args = _args()
+    args[args.index("--camera") + 1] = cam
+    for flag in ("--sensor-width", "--environment"):  # the stage's camera and dome light
+        i = args.index(flag)
+        del args[i : i + 2]
+    pz = []
+    for seed in SEEDS:
+        out = usd.with_name(f"usd_seed{seed}.exr")
+        run_petzval(blender_run.binary, usd, out, args, SPP, seed)
+        pz.append(B.read_rgb(out))
+    v = _block_verdict(B.compare_blocks(cyc[0], cyc[1], pz[0], pz[1]))
+    ratio = B.mean_ratio((pz[0] + pz[1]) / 2, (cyc[0] + cyc[1]) / 2)
+    report.line(
+        f"  the same through USD (UsdSkel, time code {FRAME}): {_fmt_verdict(v)}; "
+        f"image mean petzval/Cycles R,G,B {ratio[0]:.4f} {ratio[1]:.4f} {ratio[2]:.4f}"
+    )
+    assert np.all(np.abs(ratio - 1) <= MEAN_TOL), f"image mean ratio {ratio}"
+    assert _passes(v), f"blocks differ beyond noise: {_fmt_verdict(v)}"

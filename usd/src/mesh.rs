@@ -9,14 +9,16 @@
 //! | `primvars:normals` (else `normals`) | constant, uniform, vertex, varying or faceVarying; `:indices` honoured | smooth area-weighted vertex normals |
 //! | the material's `UsdPrimvarReader_float2` varname, else `primvars:st`, else the first `texCoord2f[]` primvar | as normals; `t` is flipped to the renderer's top-left origin | none |
 //! | `GeomSubset` children (`elementType = face`) | their `material:binding` sets the material of their faces | the mesh's binding |
+//! | UsdSkel binding (`SkelBindingAPI`) | points posed by the skeleton and blend shapes at the time read, normals with them ([`crate::skel`]) | as authored |
 //!
 //! Vertices stay shared when every primvar is per point (vertex/varying/constant); a uniform
 //! or faceVarying primvar gives each face corner its own vertex.
 
+use crate::skel::Skinned;
 use crate::subdiv::{BoundaryRule, Cage, EdgeSharpness, VertexSharpness, INFINITELY_SHARP};
 use crate::value::{attr_error, Reader};
 use crate::Error;
-use glam::{DVec2, DVec3, Vec2, Vec3};
+use glam::{DMat3, DVec2, DVec3, Vec2, Vec3};
 use openusd::{sdf, usd};
 use petzval_renderer::scene::Mesh;
 use rustc_hash::FxHashMap as HashMap;
@@ -175,6 +177,8 @@ pub struct MeshReport {
     pub subdivision_level: Option<u32>,
     /// The primvar read as vertex colours.
     pub color_primvar: Option<String>,
+    /// Normals were authored (else computed from the geometry).
+    pub normals_authored: bool,
 }
 
 /// A face subset: its faces and the material id the caller bound to it.
@@ -189,6 +193,7 @@ pub struct Subset {
 
 /// Builds the mesh of `prim` (material ids: `material` for faces outside every subset),
 /// Catmull-Clark subdivided to `subdivision` levels when that is given (see [`crate::subdiv`]).
+#[allow(clippy::too_many_arguments)]
 pub fn build_mesh(
     reader: &Reader,
     prim: &usd::Prim,
@@ -197,6 +202,7 @@ pub fn build_mesh(
     st_preferred: Option<&str>,
     subdivision: Option<u32>,
     color: Option<(&str, Vec3)>,
+    deform: Option<&Skinned>,
 ) -> Result<(Mesh, MeshReport), Error> {
     let points = reader.vec3s(prim, "points")?.ok_or_else(|| attr_error(prim, "points", "a Mesh needs points"))?;
     let counts = reader.ints(prim, "faceVertexCounts")?.unwrap_or_default();
@@ -222,6 +228,15 @@ pub fn build_mesh(
     if let Some(p) = points.iter().find(|p| !p.is_finite()) {
         return Err(attr_error(prim, "points", format!("a point is not finite: {p}")));
     }
+    // a skinned mesh (crate::skel): its posed points, its normals by each point's skinning
+    let points = match deform {
+        Some(d) if d.points.len() == points.len() => d.points.clone(),
+        _ => points,
+    };
+    let normal_by = |p: usize, n: DVec3| match deform.and_then(|d| d.linear.get(p)) {
+        Some(m) => cofactor(m) * n,
+        None => n,
+    };
     let left = match reader.token(prim, "orientation")?.as_deref() {
         None | Some("rightHanded") => false,
         Some("leftHanded") => true,
@@ -307,14 +322,21 @@ pub fn build_mesh(
         .flatten()
         .all(|i| matches!(i, Interp::Vertex | Interp::Constant));
 
-    let mut report = MeshReport { faces: nfaces, st_primvar: st_primvar.clone(), color_primvar, ..Default::default() };
+    let mut report = MeshReport {
+        faces: nfaces,
+        st_primvar: st_primvar.clone(),
+        color_primvar,
+        normals_authored: normals.is_some(),
+        ..Default::default()
+    };
     let mut mesh = Mesh::default();
     let to_v2 = |v: DVec2| Vec2::new(v.x as f32, 1.0 - v.y as f32);
     if welded {
         mesh.positions = points.iter().map(|p| p.as_vec3()).collect();
         if let Some(n) = &normals {
-            mesh.normals =
-                (0..npoints).map(|p| n.at(0, p, 0).unwrap_or(DVec3::Z).as_vec3().normalize_or_zero()).collect();
+            mesh.normals = (0..npoints)
+                .map(|p| normal_by(p, n.at(0, p, 0).unwrap_or(DVec3::Z)).as_vec3().normalize_or_zero())
+                .collect();
         }
         if let Some(s) = &st {
             mesh.uv0 = (0..npoints).map(|p| to_v2(s.at(0, p, 0).unwrap_or(DVec2::ZERO))).collect();
@@ -344,7 +366,7 @@ pub fn build_mesh(
             }
             mesh.positions.push(points[p].as_vec3());
             if let Some(n) = &normals {
-                mesh.normals.push(n.at(f, p, fv).unwrap_or(DVec3::Z).as_vec3().normalize_or_zero());
+                mesh.normals.push(normal_by(p, n.at(f, p, fv).unwrap_or(DVec3::Z)).as_vec3().normalize_or_zero());
             }
             if let Some(s) = &st {
                 mesh.uv0.push(to_v2(s.at(f, p, fv).unwrap_or(DVec2::ZERO)));
@@ -365,6 +387,17 @@ pub fn build_mesh(
         mesh.normals = smooth_normals(&mesh);
     }
     Ok((mesh, report))
+}
+
+/// The cofactor of `m` (det × inverse transpose, defined for singular matrices too), signed so
+/// that it keeps a normal's side under a mirroring `m`: what carries normals through `m`.
+fn cofactor(m: &DMat3) -> DMat3 {
+    let c = DMat3::from_cols(m.y_axis.cross(m.z_axis), m.z_axis.cross(m.x_axis), m.x_axis.cross(m.y_axis));
+    if m.determinant() < 0.0 {
+        -c
+    } else {
+        c
+    }
 }
 
 /// A colour primvar's value as the renderer's vertex colour (linear RGB, alpha 1, negative

@@ -20,11 +20,13 @@ use crate::camera::{read_camera, UsdCamera};
 use crate::lights;
 use crate::mesh::{build_mesh, Subset};
 use crate::shading::Materials;
+use crate::skel::{skinned_points, Skinned};
 use crate::value::{attr_error, layer_of_prim, Reader};
 use crate::xform::{local_xform, StageUnits};
 use crate::Error;
 use glam::{Affine3A, DMat4, DQuat, DVec3};
 use openusd::{sdf, usd};
+use petzval_renderer::scene::normals::rederive_normals;
 use petzval_renderer::scene::{Light, Scene};
 use std::collections::{BTreeSet, HashMap};
 
@@ -106,6 +108,9 @@ pub struct Walker<'a> {
     pub subdivision_level: u32,
     materials: Materials,
     meshes_by_prim: HashMap<String, u32>,
+    /// Skinned meshes, whose points are in world space already (their prims' transforms do
+    /// not apply).
+    world_space_meshes: BTreeSet<String>,
     prototypes: HashMap<String, Vec<Placement>>,
     unsupported: BTreeSet<String>,
 }
@@ -145,6 +150,7 @@ impl<'a> Walker<'a> {
             warnings: Vec::new(),
             materials: Materials::filtering_encoded(units.blender_authored),
             meshes_by_prim: HashMap::new(),
+            world_space_meshes: BTreeSet::new(),
             prototypes: HashMap::new(),
             unsupported: BTreeSet::new(),
         })
@@ -236,7 +242,8 @@ impl<'a> Walker<'a> {
         match ty.as_str() {
             "Mesh" | "Cube" | "Sphere" | "Cylinder" | "Cone" | "Capsule" | "Plane" => {
                 let mesh = self.mesh(prim, &ty)?;
-                out.push((mesh, world, path.clone()));
+                let xf = if self.world_space_meshes.contains(&path) { DMat4::IDENTITY } else { world };
+                out.push((mesh, xf, path.clone()));
             }
             "PointInstancer" => {
                 self.point_instancer(prim, world, out)?;
@@ -350,15 +357,43 @@ impl<'a> Walker<'a> {
         let (mesh, report) = if ty == "Mesh" {
             let st = self.materials.st_name(material).map(str::to_string);
             let color = self.materials.color_primvar(material).map(|(n, c)| (n.to_string(), c));
-            build_mesh(
-                &self.reader,
-                prim,
-                material,
-                &subsets,
-                st.as_deref(),
-                subdivision,
-                color.as_ref().map(|(n, c)| (n.as_str(), *c)),
-            )?
+            let build = |deform: Option<&Skinned>| {
+                build_mesh(
+                    &self.reader,
+                    prim,
+                    material,
+                    &subsets,
+                    st.as_deref(),
+                    subdivision,
+                    color.as_ref().map(|(n, c)| (n.as_str(), *c)),
+                    deform,
+                )
+            };
+            // A skinned mesh (UsdSkel): posed, placed by its skeleton when skinned; normals it
+            // authors that are its geometry's own are derived again from the posed geometry.
+            let rest = self.reader.vec3s(prim, "points")?.unwrap_or_default();
+            match skinned_points(&self.reader, prim, &rest, &mut self.warnings)? {
+                Some(skinned) => {
+                    let (mut mesh, report) = build(Some(&skinned))?;
+                    if report.normals_authored && subdivision.is_none() {
+                        let (at_rest, _) = build(None)?;
+                        let mut normals = std::mem::take(&mut mesh.normals);
+                        rederive_normals(
+                            &at_rest.positions,
+                            &at_rest.normals,
+                            &mesh.positions,
+                            &mut normals,
+                            &mesh.indices,
+                        );
+                        mesh.normals = normals;
+                    }
+                    if skinned.world_space {
+                        self.world_space_meshes.insert(path.clone());
+                    }
+                    (mesh, report)
+                }
+                None => build(None)?,
+            }
         } else {
             let mut m = crate::shapes::shape_mesh(&self.reader, prim, ty)?.unwrap_or_default();
             m.material_ids = vec![material; m.indices.len()];
