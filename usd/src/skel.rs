@@ -80,14 +80,9 @@ fn inside_skel_root(reader: &Reader, prim: &usd::Prim) -> bool {
     false
 }
 
-/// The points of mesh `prim` (`points`, as authored) posed by its skeleton and blend shapes at
-/// the reader's time; None when the mesh is not skinned.
-pub fn skinned_points(
-    reader: &Reader,
-    prim: &usd::Prim,
-    points: &[DVec3],
-    warnings: &mut Vec<String>,
-) -> Result<Option<Skinned>, Error> {
+/// The points of mesh `prim` posed by its skeleton and blend shapes at the reader's time; None
+/// when the mesh is not skinned (its points are then not read here).
+pub fn skinned_points(reader: &Reader, prim: &usd::Prim, warnings: &mut Vec<String>) -> Result<Option<Skinned>, Error> {
     let stage = reader.stage;
     let path = prim.path().clone();
     let fail = |attr: &str, e: anyhow::Error| attr_error(prim, attr, format!("{e:#}"));
@@ -137,7 +132,7 @@ pub fn skinned_points(
     };
     let time = reader.time.map(usd::TimeCode::new).unwrap_or(usd::TimeCode::EARLIEST);
     // 3. Blend shapes, in the mesh's space.
-    let mut posed = points.to_vec();
+    let mut posed = reader.vec3s(prim, "points")?.unwrap_or_default();
     let shape_names = binding.blend_shapes().map_err(|e| fail("skel:blendShapes", e))?;
     if !shape_names.is_empty() {
         let targets = binding.blend_shape_targets().map_err(|e| fail("skel:blendShapeTargets", e))?;

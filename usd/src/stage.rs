@@ -371,8 +371,7 @@ impl<'a> Walker<'a> {
             };
             // A skinned mesh (UsdSkel): posed, placed by its skeleton when skinned; normals it
             // authors that are its geometry's own are derived again from the posed geometry.
-            let rest = self.reader.vec3s(prim, "points")?.unwrap_or_default();
-            match skinned_points(&self.reader, prim, &rest, &mut self.warnings)? {
+            match skinned_points(&self.reader, prim, &mut self.warnings)? {
                 Some(skinned) => {
                     let (mut mesh, report) = build(Some(&skinned))?;
                     if report.normals_authored && subdivision.is_none() {

@@ -442,6 +442,19 @@ impl PathTracer {
                 let corrected = ensure_valid_specular_reflection(ng, wo_s, n);
                 SurfaceBsdf::new(bsdf, hit.geometric_normal, corrected, wo_s)
                     .with_normal_map(scene.smooth_normal(&hit), n)
+            } else if bsdf.has_specular() && hit.shading_normal != hit.geometric_normal {
+                // Cycles applies the same correction wherever the shading normal is not the
+                // geometric one (smooth shading too): near a low-poly silhouette the specular
+                // lobes turn toward Ng rather than reflect into the surface; the diffuse lobe
+                // keeps the shading normal (no shadowing term: it is its own smooth normal).
+                let ng = hit.geometric_normal_toward(wo_s);
+                let n = if hit.shading_normal.dot(ng) >= 0.0 { hit.shading_normal } else { -hit.shading_normal };
+                let corrected = ensure_valid_specular_reflection(ng, wo_s, n);
+                if corrected == n {
+                    SurfaceBsdf::new(bsdf, hit.geometric_normal, hit.shading_normal, wo_s)
+                } else {
+                    SurfaceBsdf::new(bsdf, hit.geometric_normal, corrected, wo_s).with_normal_map(n, n)
+                }
             } else {
                 SurfaceBsdf::new(bsdf, hit.geometric_normal, hit.shading_normal, wo_s)
             };
