@@ -14,6 +14,7 @@ when missing).
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import struct
@@ -69,7 +70,7 @@ def assert_clean_failure(r: subprocess.CompletedProcess, cwd: Path, *words: str)
 
 
 # files the tests themselves put into the working directory
-INPUTS = {"corrupt.glb", "empty.glb"}
+INPUTS = {"corrupt.glb", "empty.glb", "crowd.gltf"}
 
 
 # ------------------------------------------------------------------------------------------
@@ -357,6 +358,52 @@ def test_gltf_buffers_larger_than_memory_fail_before_reading(petzval, tmp_path):
     (tmp_path / "corrupt.glb").write_text(text)
     r = run(petzval, ["render", "corrupt.glb", "--resolution", "24x16", "--spp", "1"], tmp_path)
     assert_clean_failure(r, tmp_path, "corrupt.glb", "buffers", "byteLength")
+
+
+def _morphed_copies_gltf(weight: float, nodes: int = 2000, n_vertices: int = 3000) -> str:
+    """A glTF whose one mesh (a triangle list with one morph target at `weight`) is used by
+    `nodes` nodes side by side, and a camera looking at them."""
+    import base64
+
+    pos = struct.pack(f"<{3 * n_vertices}f", *[float((i * 7919) % 97) / 97.0 for i in range(3 * n_vertices)])
+    delta = struct.pack(f"<{3 * n_vertices}f", *([0.0, 0.1, 0.0] * n_vertices))
+    data = base64.b64encode(pos + delta).decode()
+    doc = {
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": list(range(nodes + 1))}],
+        "nodes": [{"mesh": 0, "translation": [float(i % 50), float(i // 50), 0.0]} for i in range(nodes)]
+        + [{"camera": 0, "translation": [25.0, 20.0, 80.0]}],
+        "cameras": [{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.1}}],
+        "meshes": [
+            {"weights": [weight], "primitives": [{"attributes": {"POSITION": 0}, "targets": [{"POSITION": 1}]}]}
+        ],
+        "buffers": [{"byteLength": len(pos) * 2, "uri": f"data:application/octet-stream;base64,{data}"}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": len(pos)},
+            {"buffer": 0, "byteOffset": len(pos), "byteLength": len(pos)},
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": n_vertices, "type": "VEC3"},
+            {"bufferView": 1, "componentType": 5126, "count": n_vertices, "type": "VEC3"},
+        ],
+    }
+    return json.dumps(doc)
+
+
+@pytest.mark.parametrize("weight,fails", [(0.5, True), (0.0, False)], ids=["morphed", "shared"])
+def test_morphed_copies_beyond_memory_fail_before_reading(petzval, tmp_path, weight, fails):
+    """Morph weights (or a skin) give each node its own copy of the mesh: 2000 nodes deforming a
+    3000-vertex mesh need ~770 MB of copies, refused against a 200 MB budget, naming the file and
+    the mesh; with weight 0 the nodes share one mesh and the same file renders."""
+    (tmp_path / "crowd.gltf").write_text(_morphed_copies_gltf(weight))
+    env = dict(os.environ, RUST_BACKTRACE="0", PETZVAL_MEMORY_BYTES=str(200_000_000))
+    cmd = [str(petzval), "render", "crowd.gltf", "--resolution", "24x16", "--spp", "1", "-o", "x.exr"]
+    r = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=300, env=env)
+    if fails:
+        assert_clean_failure(r, tmp_path, "crowd.gltf", "mesh 0", "morphed copies", "memory")
+    else:
+        assert r.returncode == 0, r.stderr
 
 
 # ------------------------------------------------------------------------------------------

@@ -120,7 +120,13 @@ pub fn skinned_points(reader: &Reader, prim: &usd::Prim, warnings: &mut Vec<Stri
         SkelBindingAPI::get(stage, skel_path.clone()).map_err(|e| skel_fail("skel:animationSource", e))?;
     let anim_path = match skel_binding {
         Some(b) => b.inherited_animation_source().map_err(|e| skel_fail("skel:animationSource", e))?,
-        None => None,
+        // files written before SkelBindingAPI had to be applied author the relationship alone
+        None => skel_prim
+            .relationship("skel:animationSource")
+            .targets()
+            .map_err(|e| skel_fail("skel:animationSource", e))?
+            .into_iter()
+            .next(),
     };
     let anim_path = match anim_path {
         Some(p) => Some(p),

@@ -587,6 +587,17 @@ def {root} \"Root\"\n{{\n double3 xformOp:translate = (10, 0, 0)\n uniform token
     for (a, b) in v.iter().zip(want) {
         assert!(a.abs_diff_eq(b, 1e-6), "{v:?}");
     }
+    // a Skeleton that authors skel:animationSource without applying SkelBindingAPI (older
+    // files): still posed by its animation
+    let text = rig("SkelRoot", "0, 0, 1, 0, 1, 0", "2").replacen(
+        "def Skeleton \"Skel\" (\n  prepend apiSchemas = [\"SkelBindingAPI\"]\n )",
+        "def Skeleton \"Skel\"",
+        1,
+    );
+    assert!(!text.contains("def Skeleton \"Skel\" ("));
+    let shot = load(&write("rig_noapi.usda", &text), None).unwrap();
+    let v: Vec<DVec3> = world_vertices(&shot).into_iter().flat_map(|(_, v)| v.into_iter().map(|x| x.0)).collect();
+    assert!(v[2].abs_diff_eq(want[2], 1e-6), "{v:?}");
     // outside a SkelRoot: a warning, the mesh as authored (its own translation)
     let shot = load(&write("rig_xform.usda", &rig("Xform", "0, 0, 1, 0, 1, 0", "2")), None).unwrap();
     assert!(shot.scene.warnings.iter().any(|w| w.contains("outside any SkelRoot")), "{:?}", shot.scene.warnings);

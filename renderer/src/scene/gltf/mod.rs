@@ -187,6 +187,8 @@ struct Loader<'a> {
     animated: animation::Animated,
     /// Every node's world matrix along its parent chain, once a skin needs them.
     node_worlds: Option<Vec<glam::Mat4>>,
+    /// Estimated bytes of the deformed meshes' copies so far (checked against the memory budget).
+    deformed_bytes: u64,
 }
 
 fn named(kind: &str, index: usize, name: Option<&str>) -> String {
@@ -276,6 +278,7 @@ impl<'a> Loader<'a> {
                 .is_some_and(|g| g.starts_with("Khronos glTF Blender I/O")),
             animated: animation::Animated::default(),
             node_worlds: None,
+            deformed_bytes: 0,
         };
         loader.warn_extensions();
         if pointer_channels > 0 {

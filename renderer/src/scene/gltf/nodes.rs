@@ -373,6 +373,22 @@ impl Loader<'_> {
 
     /// glTF mesh `mesh` as `deform` deforms it (one node's own copy); None without triangles.
     fn read_deformed_mesh(&mut self, mesh: &gltf::Mesh, deform: &Deform) -> Result<Option<u32>> {
+        // Each deformed node holds its own copy: a file that deforms one large mesh for many
+        // nodes is refused before the copies exhaust memory (~128 B per vertex with the
+        // loader's temporaries).
+        let vertices: u64 =
+            mesh.primitives().filter_map(|p| p.get(&Semantic::Positions)).map(|a| a.count() as u64).sum();
+        self.deformed_bytes = self.deformed_bytes.saturating_add(vertices.saturating_mul(128));
+        if let Err(budget) = crate::limits::check_memory(self.deformed_bytes) {
+            return Err(self.error(
+                &named("mesh", mesh.index(), mesh.name()),
+                format!(
+                    "the skinned or morphed copies of the file's meshes need {}, {}",
+                    crate::limits::format_bytes(self.deformed_bytes),
+                    crate::limits::over_budget(budget)
+                ),
+            ));
+        }
         let m = self.read_mesh(mesh, Some(deform))?;
         Ok((!m.indices.is_empty()).then(|| self.scene.add_mesh(m)))
     }
