@@ -97,21 +97,27 @@ def build() -> None:
     scene.camera = camera
 
 
-def evaluated(path: Path) -> None:
+def evaluated_meshes(y_up: bool) -> dict:
+    """Per object, Blender's evaluated world-space vertex positions and normals (rounded to
+    10⁻⁶), in glTF's y-up axes (x, z, −y), as the exporter converts them, or Blender's own."""
     depsgraph = bpy.context.evaluated_depsgraph_get()
     out = {}
     for name in ("Tube", "Blob"):
         ob = bpy.data.objects[name].evaluated_get(depsgraph)
         mesh = ob.to_mesh()
-        # Blender's z-up (x, y, z) is glTF's y-up (x, z, −y), as the exporter converts it
         to_normal = ob.matrix_world.to_3x3().inverted().transposed()
         rows = []
         for v in mesh.vertices:
             p, n = ob.matrix_world @ v.co, (to_normal @ v.normal).normalized()
-            rows.append([round(x, 6) for x in (p.x, p.z, -p.y, n.x, n.z, -n.y)])
+            row = (p.x, p.z, -p.y, n.x, n.z, -n.y) if y_up else (*p, *n)
+            rows.append([round(x, 6) for x in row])
         out[name] = rows
         ob.to_mesh_clear()
-    path.write_text(json.dumps(out, separators=(",", ":")) + "\n")
+    return out
+
+
+def evaluated(path: Path) -> None:
+    path.write_text(json.dumps(evaluated_meshes(y_up=True), separators=(",", ":")) + "\n")
 
 
 def export(path: Path, **kw) -> None:

@@ -34,19 +34,7 @@ def export_with_blender() -> None:
     blender = {}
     for f in FRAMES:
         bpy.context.scene.frame_set(f)
-        depsgraph = bpy.context.evaluated_depsgraph_get()
-        frame = {}
-        for name in ("Tube", "Blob"):
-            ob = bpy.data.objects[name].evaluated_get(depsgraph)
-            mesh = ob.to_mesh()
-            to_normal = ob.matrix_world.to_3x3().inverted().transposed()
-            rows = []
-            for v in mesh.vertices:
-                p, n = ob.matrix_world @ v.co, (to_normal @ v.normal).normalized()
-                rows.append([round(x, 6) for x in (*p, *n)])
-            frame[name] = rows
-            ob.to_mesh_clear()
-        blender[f] = frame
+        blender[f] = scene.evaluated_meshes(y_up=False)
     (OUT / "blender.json").write_text(json.dumps(blender))
     bpy.context.scene.frame_set(1)
     bpy.ops.wm.usd_export(filepath=str(OUT / "skinned.usdc"), export_animation=True)
