@@ -4,7 +4,7 @@
 //! |---|---|---|
 //! | morph targets (`POSITION`, `NORMAL`, `TANGENT` displacements) | added to the base attributes × the node's weights, before skinning (the spec's order) | weights: the `weights` channel's at the time asked ([`super::load_gltf_at`]), else the node's `weights`, else the mesh's, else 0; a count that differs from the targets' is padded with 0 or cut, with a warning |
 //! | skin (`JOINTS_n` / `WEIGHTS_n` sets, `inverseBindMatrices`) | each vertex moved by Σ wᵢ · world(jointᵢ) · inverseBind(jointᵢ) (linear blend skinning as the spec defines it), its tangent by that matrix | the skinned node's own transform is ignored, as the spec asks; weights normalised to sum 1; a vertex with no weight keeps the node's transform (warning); a joint index out of range with a weight is an error naming the primitive and vertex |
-//! | joint transforms | the joints' world matrices along their parent chain, with their animation at the time asked | Blender writes a posed armature as the joints' animation, or (exporter options "Use Current Frame" and rest position off) as their TRS |
+//! | joint transforms | the joints' world matrices along their parent chain, with their animation at the time asked | Blender writes a posed armature as the joints' animation, or (exporter options "Use Current Frame" and rest position off) as their TRS; without a time, a skin whose joints are animated is a warning (the rest pose is rendered; `--frame F` renders the animation) |
 //! | normals of a deformed mesh | where the file's normals are the geometry's own (corner-angle-weighted face normals within 2°, per vertex), derived again from the deformed geometry, as Blender recomputes them for the mesh Cycles renders; elsewhere (custom normals, hard edges) the spec's: morph `NORMAL` displacements, then the skin matrix's cofactor | see [`crate::scene::normals`]; coplanar flat-shaded faces turn smooth when deformed (a glTF file cannot tell them from a smooth plane) |
 //! | a deformed mesh | its own [`super::super::Mesh`] per node (world space for a skin), not shared | nodes without a skin and with all weights 0 keep sharing the undeformed mesh; the copies are checked against the memory budget (~128 B per vertex) before they are made, an error naming the file and mesh |
 //! | morph targets of a `KHR_draco_mesh_compression` primitive | ignored, with a warning | the extension does not carry targets; skins work (their attributes are decoded) |
@@ -70,9 +70,27 @@ impl Loader<'_> {
             self.warn(loc, format!("{source} has non-finite values; those are taken as 0"));
             weights.iter_mut().filter(|w| !w.is_finite()).for_each(|w| *w = 0.0);
         }
-        // 2. The skin's joint matrices.
+        // 2. The skin's joint matrices (without a time, the joints' own TRS: say so where an
+        //    animation moves them, since Blender writes the rest pose there).
         let joints = match node.skin() {
-            Some(skin) => Some(self.joint_matrices(&skin, loc)?),
+            Some(skin) => {
+                if !self.timed {
+                    let joints: Vec<usize> = skin.joints().map(|j| j.index()).collect();
+                    let animated = self.doc.animations().flat_map(|a| a.channels().collect::<Vec<_>>()).any(|c| {
+                        joints.contains(&c.target().node().index())
+                            && c.target().property() != gltf::animation::Property::MorphTargetWeights
+                    });
+                    if animated {
+                        self.warn(
+                            loc,
+                            "its skin's joints are animated but no time was asked: rendered with the joints' own \
+                             transforms (Blender's exporter writes the rest pose there); --frame F renders the \
+                             animation",
+                        );
+                    }
+                }
+                Some(self.joint_matrices(&skin, loc)?)
+            }
             None => None,
         };
         if joints.is_none() && weights.iter().all(|&w| w == 0.0) {

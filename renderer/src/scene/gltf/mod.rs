@@ -189,6 +189,8 @@ struct Loader<'a> {
     node_worlds: Option<Vec<glam::Mat4>>,
     /// Estimated bytes of the deformed meshes' copies so far (checked against the memory budget).
     deformed_bytes: u64,
+    /// A time was asked (`load_gltf_at`): animations are evaluated.
+    timed: bool,
 }
 
 fn named(kind: &str, index: usize, name: Option<&str>) -> String {
@@ -279,6 +281,7 @@ impl<'a> Loader<'a> {
             animated: animation::Animated::default(),
             node_worlds: None,
             deformed_bytes: 0,
+            timed: false,
         };
         loader.warn_extensions();
         if pointer_channels > 0 {
@@ -291,6 +294,7 @@ impl<'a> Loader<'a> {
             );
         }
         loader.load_buffers(blob)?;
+        loader.timed = time_s.is_some();
         if let Some(t) = time_s {
             loader.animated = loader.animated_nodes(t as f32)?;
         }
