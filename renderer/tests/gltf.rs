@@ -983,3 +983,24 @@ fn gltf_skin_and_morph_by_hand() {
     let e = error(file(1, &|j| j["meshes"][0]["primitives"][0]["targets"][0]["POSITION"] = 6.into()));
     assert!(e.contains("morph target 0 POSITION") && e.contains("expected 3 × Vec3"), "{e}");
 }
+
+/// `skin/rig.gltf` (`tests/scene/make_gltf_fixtures.py`, also a fuzzing seed): a two-quad strip
+/// whose second joint turns 45° about x over one second, bending the strip about the line
+/// y = 1, and whose morph target lifts the top edge by 0.5 along z as its weight animates from
+/// 0 to 1. At t = 1 s the top edge, lifted to z = 0.5 and turned 45° about that line, is at
+/// y = 1 + cos 45° − 0.5 sin 45°, z = sin 45° + 0.5 cos 45° (worked by hand); the middle edge,
+/// half on each joint, lies on the axis and stays.
+#[test]
+fn gltf_rig_bends_and_morphs_as_worked_by_hand() {
+    let s = load_gltf_at(&data("skin/rig.gltf"), Some(1.0)).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    let (c, sn) = (std::f32::consts::FRAC_1_SQRT_2, std::f32::consts::FRAC_1_SQRT_2);
+    let (y, z) = (1.0 + c - 0.5 * sn, sn + 0.5 * c);
+    let want: Vec<(Vec3, Vec3)> =
+        [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::new(1.0, 1.0, 0.0), Vec3::new(0.0, y, z), Vec3::new(1.0, y, z)]
+            .into_iter()
+            .map(|p| (p, Vec3::Z))
+            .collect();
+    let d = hausdorff(&world_vertices(s), &want);
+    assert!(d < 1e-5, "{d}");
+}

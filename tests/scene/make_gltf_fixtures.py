@@ -414,8 +414,55 @@ def vertex_colours():
     write_json("vertex_colours.gltf", doc)
 
 
+def skinned_rig():
+    """skin/rig.gltf: a quad strip of two quads bent by a two-joint skin (the second joint
+    animated about x), with one morph target at weight 0.5 animated by a `weights` channel: a
+    small seed for the fuzzing of skins and morph targets."""
+    b = Builder()
+    pos = b.floats([(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (1.0, 1.0, 0.0), (0.0, 2.0, 0.0),
+                    (1.0, 2.0, 0.0)], "VEC3", minmax=True)
+    idx = b.indices([0, 1, 2, 2, 1, 3, 2, 3, 4, 4, 3, 5])
+    weights = b.floats([(1.0, 0.0, 0.0, 0.0)] * 2 + [(0.5, 0.5, 0.0, 0.0)] * 2 + [(0.0, 1.0, 0.0, 0.0)] * 2, "VEC4")
+    joints_blob = struct.pack("<24B", *([0, 1, 0, 0] * 6))
+    b.accessors.append({"bufferView": b.view(joints_blob, ARRAY_BUFFER), "componentType": 5121, "count": 6,
+                        "type": "VEC4"})
+    joints = len(b.accessors) - 1
+    delta = b.floats([(0.0, 0.0, 0.0)] * 4 + [(0.0, 0.0, 0.5)] * 2, "VEC3")
+    ibm_blob = struct.pack("<16f", *[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]) + struct.pack(
+        "<16f", *[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, -1, 0, 1])
+    b.accessors.append({"bufferView": b.view(ibm_blob), "componentType": FLOAT, "count": 2, "type": "MAT4"})
+    ibm = len(b.accessors) - 1
+    times = b.floats([(0.0,), (1.0,)], "SCALAR", minmax=True)
+    rot = b.floats([(0.0, 0.0, 0.0, 1.0), (0.38268343, 0.0, 0.0, 0.92387953)], "VEC4")
+    wts = b.floats([(0.0,), (1.0,)], "SCALAR")
+    doc = b.gltf(
+        None,
+        scene=0,
+        scenes=[{"nodes": [0, 1, 3]}],
+        nodes=[
+            {"name": "Strip", "mesh": 0, "skin": 0},
+            {"name": "Root", "children": [2]},
+            {"name": "Bend", "translation": [0.0, 1.0, 0.0]},
+            {"name": "Camera", "camera": 0, "translation": [0.5, 1.0, 4.0]},
+        ],
+        skins=[{"name": "Rig", "joints": [1, 2], "inverseBindMatrices": ibm}],
+        meshes=[{"name": "Strip", "weights": [0.5], "primitives": [
+            {"attributes": {"POSITION": pos, "JOINTS_0": joints, "WEIGHTS_0": weights}, "indices": idx,
+             "targets": [{"POSITION": delta}]}]}],
+        cameras=[{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.1}}],
+        animations=[{"name": "Bend", "channels": [
+            {"sampler": 0, "target": {"node": 2, "path": "rotation"}},
+            {"sampler": 1, "target": {"node": 0, "path": "weights"}}],
+            "samplers": [{"input": times, "output": rot}, {"input": times, "output": wts}]}],
+    )
+    doc["buffers"][0]["uri"] = data_uri(b.data)
+    (OUT / "skin").mkdir(parents=True, exist_ok=True)
+    write_json("skin/rig.gltf", doc)
+
+
 def main():
     OUT.mkdir(parents=True, exist_ok=True)
+    skinned_rig()
     vertex_colours()
     hierarchy()
     textured_quad()

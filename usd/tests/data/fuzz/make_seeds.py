@@ -185,12 +185,56 @@ def animated() -> None:
     stage.GetRootLayer().Save()
 
 
+def skel() -> None:
+    """A quad strip skinned to a two-joint Skeleton inside a SkelRoot, posed by a time-sampled
+    SkelAnimation, with a sparse BlendShape weighted by it (usd/src/skel.rs)."""
+    from pxr import UsdSkel
+
+    stage = new("skel.usda")
+    stage.SetStartTimeCode(1)
+    stage.SetEndTimeCode(10)
+    root = UsdSkel.Root.Define(stage, "/Rig")
+    skel = UsdSkel.Skeleton.Define(stage, "/Rig/Skel")
+    skel.CreateJointsAttr(["Hip", "Hip/Knee"])
+    skel.CreateBindTransformsAttr([Gf.Matrix4d(1), Gf.Matrix4d(1).SetTranslate(Gf.Vec3d(0, 1, 0))])
+    skel.CreateRestTransformsAttr([Gf.Matrix4d(1), Gf.Matrix4d(1).SetTranslate(Gf.Vec3d(0, 1, 0))])
+    anim = UsdSkel.Animation.Define(stage, "/Rig/Skel/Anim")
+    anim.CreateJointsAttr(["Hip/Knee"])
+    anim.CreateTranslationsAttr().Set(Vt.Vec3fArray([(0, 1, 0)]))
+    rotations = anim.CreateRotationsAttr()
+    rotations.Set(Vt.QuatfArray([Gf.Quatf(1, 0, 0, 0)]), 1)
+    rotations.Set(Vt.QuatfArray([Gf.Quatf(0.92387953, 0.38268343, 0, 0)]), 10)
+    anim.CreateScalesAttr().Set(Vt.Vec3hArray([(1, 1, 1)]))
+    anim.CreateBlendShapesAttr(["Lift"])
+    weights = anim.CreateBlendShapeWeightsAttr()
+    weights.Set(Vt.FloatArray([0.0]), 1)
+    weights.Set(Vt.FloatArray([1.0]), 10)
+    UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
+    m = UsdGeom.Mesh.Define(stage, "/Rig/Strip")
+    m.CreatePointsAttr([(0, 0, 0), (1, 0, 0), (0, 1, 0), (1, 1, 0), (0, 2, 0), (1, 2, 0)])
+    m.CreateFaceVertexCountsAttr([4, 4])
+    m.CreateFaceVertexIndicesAttr([0, 1, 3, 2, 2, 3, 5, 4])
+    binding = UsdSkel.BindingAPI.Apply(m.GetPrim())
+    binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
+    binding.CreateJointIndicesPrimvar(False, 2).Set([0, 0, 0, 0, 0, 1, 0, 1, 1, 0, 1, 0])
+    binding.CreateJointWeightsPrimvar(False, 2).Set([1, 0, 1, 0, 0.5, 0.5, 0.5, 0.5, 1, 0, 1, 0])
+    binding.CreateBlendShapesAttr(["Lift"])
+    shape = UsdSkel.BlendShape.Define(stage, "/Rig/Strip/Lift")
+    shape.CreateOffsetsAttr([(0, 0, 0.5), (0, 0, 0.5)])
+    shape.CreatePointIndicesAttr([4, 5])
+    binding.CreateBlendShapeTargetsRel().SetTargets([shape.GetPath()])
+    camera(stage, "/Cam")
+    _ = root
+    stage.GetRootLayer().Save()
+
+
 def main() -> None:
     OUT.mkdir(exist_ok=True)
     shot("shot.usda")
     instancing()
     lights_materials()
     animated()
+    skel()
     # the binary crate format: the first stage exported as .usdc
     Sdf.Layer.FindOrOpen(str(OUT / "shot.usda")).Export(str(OUT / "shot.usdc"))
 
