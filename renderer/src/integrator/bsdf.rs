@@ -923,14 +923,8 @@ impl<'a> Bsdf<'a> {
                 f += self.ms_scale * ((1.0 - e1o).max(0.0) * (1.0 - self.row.e(wi.z).0).max(0.0));
             }
         }
-        // the specular lobe, where there is one (a pure Lambertian base has none)
-        let h = if self.diel.is_some() || self.metallic > 0.0 { (wo + wi).normalize_or_zero() } else { Vec3::ZERO };
-        if h.z > 0.0 {
-            let voh = wo.dot(h).max(0.0);
-            let d = ggx_d(h.z, self.a2);
-            let g2 = 1.0 / (1.0 + smith_lambda(wo.z, self.a2) + smith_lambda(wi.z, self.a2));
-            let v = g2 / (4.0 * wo.z * wi.z);
-            f += self.fresnel_boosted(voh, e1o) * (d * v);
+        if let Some(s) = self.specular_lobe(wo, wi, e1o) {
+            f += s;
         }
         let r = f * wi.z;
         if r.is_finite() {
@@ -938,6 +932,22 @@ impl<'a> Bsdf<'a> {
         } else {
             Vec3::ZERO
         }
+    }
+
+    /// The specular (GGX) lobe's f for `wo`, `wi` above the surface, with `e1o` = E(μo) for its
+    /// boosted Fresnel; None where there is no lobe (a pure Lambertian base) or the half vector
+    /// is below the surface.
+    #[inline]
+    fn specular_lobe(&self, wo: Vec3, wi: Vec3, e1o: f32) -> Option<Vec3> {
+        let h = if self.diel.is_some() || self.metallic > 0.0 { (wo + wi).normalize_or_zero() } else { Vec3::ZERO };
+        if !(h.z > 0.0) {
+            return None;
+        }
+        let voh = wo.dot(h).max(0.0);
+        let d = ggx_d(h.z, self.a2);
+        let g2 = 1.0 / (1.0 + smith_lambda(wo.z, self.a2) + smith_lambda(wi.z, self.a2));
+        let v = g2 / (4.0 * wo.z * wi.z);
+        Some(self.fresnel_boosted(voh, e1o) * (d * v))
     }
 
     /// [`Bsdf::eval_opaque`] for a normal-mapped surface, as Cycles' Principled BSDF has it: the
@@ -964,13 +974,8 @@ impl<'a> Bsdf<'a> {
         if self.layered && self.ms_scale != Vec3::ZERO {
             f += self.ms_scale * ((1.0 - e1o).max(0.0) * (1.0 - self.row.e(wi.z).0).max(0.0));
         }
-        let h = if self.diel.is_some() || self.metallic > 0.0 { (wo + wi).normalize_or_zero() } else { Vec3::ZERO };
-        if h.z > 0.0 {
-            let voh = wo.dot(h).max(0.0);
-            let d = ggx_d(h.z, self.a2);
-            let g2 = 1.0 / (1.0 + smith_lambda(wo.z, self.a2) + smith_lambda(wi.z, self.a2));
-            let v = g2 / (4.0 * wo.z * wi.z);
-            f += self.fresnel_boosted(voh, e1o) * (d * v);
+        if let Some(s) = self.specular_lobe(wo, wi, e1o) {
+            f += s;
         }
         let r = r + f * wi.z;
         if r.is_finite() {
@@ -1176,7 +1181,6 @@ impl Coat {
     }
 }
 
-/// A sampled direction `wi` with its pdf and its f·|cos| (`eval`, called only for a positive
 /// A normal-mapped surface's two extra normals, in the local frame of [`Bsdf`] (whose +z is
 /// the mapped normal corrected for specular reflection): Cycles' diffuse closure uses the
 /// mapped normal as it is, and masks it against the smooth normal.
@@ -1245,6 +1249,7 @@ pub fn ensure_valid_specular_reflection(ng: Vec3, wo: Vec3, n: Vec3) -> Vec3 {
     }
 }
 
+/// A sampled direction `wi` with its pdf and its f·|cos| (`eval`, called only for a positive
 /// pdf) as a [`BsdfSample`]; None when the pdf is not positive or the weight is zero or not
 /// finite.
 #[inline]

@@ -433,24 +433,21 @@ impl PathTracer {
             // A normal-mapped surface keeps the geometric normal's test: Cycles' bump shadowing
             // term is zero for light below the geometric surface.
             let bumped = scene.scene().materials[hit.material_id as usize].normal_texture.is_some();
-            // With Cycles' Bump Map Correction (Blender's default): a mapped normal that would
-            // reflect the view below the surface is turned toward the geometric normal, and the
-            // diffuse lobe is masked against the smooth normal (`bump_shadowing`).
-            let sb = if bumped {
+            // With Cycles' Bump Map Correction (Blender's default): a shading normal that would
+            // reflect the view below the surface is turned toward the geometric normal for the
+            // specular lobes. Cycles does it wherever the shading normal is not the geometric
+            // one: under normal maps, whose diffuse lobe is also masked against the smooth
+            // normal (`bump_shadowing`), and on smooth-shaded meshes, near whose low-poly
+            // silhouettes the lobes would otherwise reflect into the surface (their diffuse lobe
+            // keeps the shading normal: it is its own smooth normal).
+            let sb = if bumped || (bsdf.has_specular() && hit.shading_normal != hit.geometric_normal) {
                 let ng = hit.geometric_normal_toward(wo_s);
                 let n = if hit.shading_normal.dot(ng) >= 0.0 { hit.shading_normal } else { -hit.shading_normal };
                 let corrected = ensure_valid_specular_reflection(ng, wo_s, n);
-                SurfaceBsdf::new(bsdf, hit.geometric_normal, corrected, wo_s)
-                    .with_normal_map(scene.smooth_normal(&hit), n)
-            } else if bsdf.has_specular() && hit.shading_normal != hit.geometric_normal {
-                // Cycles applies the same correction wherever the shading normal is not the
-                // geometric one (smooth shading too): near a low-poly silhouette the specular
-                // lobes turn toward Ng rather than reflect into the surface; the diffuse lobe
-                // keeps the shading normal (no shadowing term: it is its own smooth normal).
-                let ng = hit.geometric_normal_toward(wo_s);
-                let n = if hit.shading_normal.dot(ng) >= 0.0 { hit.shading_normal } else { -hit.shading_normal };
-                let corrected = ensure_valid_specular_reflection(ng, wo_s, n);
-                if corrected == n {
+                if bumped {
+                    SurfaceBsdf::new(bsdf, hit.geometric_normal, corrected, wo_s)
+                        .with_normal_map(scene.smooth_normal(&hit), n)
+                } else if corrected == n {
                     SurfaceBsdf::new(bsdf, hit.geometric_normal, hit.shading_normal, wo_s)
                 } else {
                     SurfaceBsdf::new(bsdf, hit.geometric_normal, corrected, wo_s).with_normal_map(n, n)

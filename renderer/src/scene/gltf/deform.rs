@@ -184,7 +184,8 @@ impl Loader<'_> {
         loc: &str,
     ) -> Result<Deformed> {
         let n = positions.len() / 3;
-        let rest = (positions.clone(), normals.clone());
+        // the rest positions and the file's normals, kept for re-deriving the normals
+        let rest = normals.as_ref().map(|n| (positions.clone(), n.clone()));
         // 1. Morph targets: displacements × weights.
         if draco && prim.morph_targets().next().is_some() {
             self.warn(loc, "morph targets of a Draco-compressed primitive are not supported; ignored");
@@ -269,11 +270,7 @@ impl Loader<'_> {
             let p = m.transform_point3(Vec3::from_slice(&positions[3 * v..3 * v + 3]));
             positions[3 * v..3 * v + 3].copy_from_slice(&p.to_array());
             if let Some(nrm) = normals.as_mut() {
-                let cof = Mat3::from_cols(
-                    lin.y_axis.cross(lin.z_axis),
-                    lin.z_axis.cross(lin.x_axis),
-                    lin.x_axis.cross(lin.y_axis),
-                ) * sign;
+                let cof = normal_matrix(&lin, sign);
                 let nv = (cof * Vec3::from_slice(&nrm[3 * v..3 * v + 3])).normalize_or_zero();
                 nrm[3 * v..3 * v + 3].copy_from_slice(&nv.to_array());
             }
@@ -317,13 +314,20 @@ impl Loader<'_> {
     }
 }
 
+/// The cofactor of `lin` (det × inverse transpose, defined even for singular matrices) times
+/// `sign` (−1 where `lin` mirrors): what carries normals through `lin`.
+pub(super) fn normal_matrix(lin: &Mat3, sign: f32) -> Mat3 {
+    Mat3::from_cols(lin.y_axis.cross(lin.z_axis), lin.z_axis.cross(lin.x_axis), lin.x_axis.cross(lin.y_axis)) * sign
+}
+
 /// [`crate::scene::normals::rederive_normals`] on flat attribute arrays: `rest` = (positions,
-/// the file's normals) before deformation, `blended` the deformed normals the spec gives.
-fn rederive(rest: &(Vec<f32>, Option<Vec<f32>>), deformed: &[f32], blended: Vec<f32>, indices: &[u32]) -> Vec<f32> {
-    let Some(file) = &rest.1 else { return blended };
+/// the file's normals) before deformation (None without normals), `blended` the deformed
+/// normals the spec gives.
+fn rederive(rest: &Option<(Vec<f32>, Vec<f32>)>, deformed: &[f32], blended: Vec<f32>, indices: &[u32]) -> Vec<f32> {
+    let Some((rest, file)) = rest else { return blended };
     let vecs = |a: &[f32]| a.chunks_exact(3).map(Vec3::from_slice).collect::<Vec<_>>();
     let triangles: Vec<[u32; 3]> = indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
     let mut normals = vecs(&blended);
-    crate::scene::normals::rederive_normals(&vecs(&rest.0), &vecs(file), &vecs(deformed), &mut normals, &triangles);
+    crate::scene::normals::rederive_normals(&vecs(rest), &vecs(file), &vecs(deformed), &mut normals, &triangles);
     normals.iter().flat_map(|n| n.to_array()).collect()
 }

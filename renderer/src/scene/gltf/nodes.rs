@@ -1,7 +1,7 @@
 //! The node hierarchy: transforms, meshes and their primitives, lights and cameras.
 
 use super::accessors::read_accessor;
-use super::deform::Deform;
+use super::deform::{normal_matrix, Deform};
 use super::{named, Loader, WATTS_TO_LUMENS};
 use crate::limits::MAX_NODE_INSTANCES;
 use crate::scene::{Light, Mesh, SceneCamera, SpotFalloff};
@@ -599,10 +599,7 @@ impl Loader<'_> {
         let lin = Mat3::from_mat4(*world);
         let det = lin.determinant();
         let sign = if det < 0.0 { -1.0 } else { 1.0 };
-        // Cofactor matrix = det × inverse transpose: defined even for singular matrices.
-        let cof =
-            Mat3::from_cols(lin.y_axis.cross(lin.z_axis), lin.z_axis.cross(lin.x_axis), lin.x_axis.cross(lin.y_axis))
-                * sign;
+        let cof = normal_matrix(&lin, sign);
         let pos: Vec<Vec3> =
             positions.chunks_exact(3).map(|p| world.transform_point3(Vec3::new(p[0], p[1], p[2]))).collect();
 
