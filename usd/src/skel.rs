@@ -164,6 +164,9 @@ pub fn skinned_points(reader: &Reader, prim: &usd::Prim, warnings: &mut Vec<Stri
             apply_blend_shape(reader, prim, target, w, &mut posed)?;
         }
     }
+    if let Some(p) = posed.iter().find(|p| !p.is_finite()) {
+        return Err(attr_error(prim, "skel:blendShapes", format!("a point with its blend shapes is not finite: {p}")));
+    }
     // 4. The joints' local transforms at the time: the animation's where it names the joint,
     //    else the rest pose.
     let rest = resolver.rest_pose_local();
@@ -177,7 +180,7 @@ pub fn skinned_points(reader: &Reader, prim: &usd::Prim, warnings: &mut Vec<Stri
     };
     if animated.is_none() && rest.len() != n_joints {
         warnings.push(format!(
-            "{}: {skel_path}: no restTransforms and no animation: the skeleton is not posed and {path} is rendered as authored",
+            "{}: {skel_path}: no restTransforms and no animation: the skeleton does not pose {path} (its blend shapes still apply)",
             layer_of_prim(&skel_prim)
         ));
         let linear = vec![DMat3::IDENTITY; posed.len()];

@@ -612,6 +612,9 @@ def {root} \"Root\"\n{{\n double3 xformOp:translate = (10, 0, 0)\n uniform token
     assert!(e.contains("/Root/Leg") && e.contains("primvars:skel:jointIndices") && e.contains("joint 7"), "{e}");
     let e = error("rig_count.usda", rig("SkelRoot", "0, 0, 1, 0", "2"));
     assert!(e.contains("primvars:skel:jointIndices") && e.contains("6 needed"), "{e}");
+    let text = rig("SkelRoot", "0, 0, 1, 0, 1, 0", "2").replace("offsets = [(0, 1, 0)]", "offsets = [(0, inf, 0)]");
+    let e = error("rig_inf.usda", text);
+    assert!(e.contains("/Root/Leg") && e.contains("skel:blendShapes") && e.contains("not finite"), "{e}");
     let e = error("rig_shape.usda", rig("SkelRoot", "0, 0, 1, 0, 1, 0", "5"));
     assert!(e.contains("/Root/Leg/Up") && e.contains("pointIndices") && e.contains("index 5"), "{e}");
 }
