@@ -52,6 +52,12 @@ enum Kind {
     Environment,
     /// `--camera`, `--settings`.
     Name,
+    /// `--data-window`.
+    DataWindow,
+    /// `--aspect-conform`.
+    Conform,
+    /// `--purposes`.
+    Purposes,
     /// A flag without a value.
     Switch,
     /// The scene (positional).
@@ -98,12 +104,48 @@ const FLAGS: &[(&str, Kind)] = &[
     ("--aovs", Kind::Aovs),
     ("--natural-vignetting", Kind::OnOff),
     ("--filter-width", Kind::Float),
+    ("--data-window", Kind::DataWindow),
+    ("--aspect-conform", Kind::Conform),
+    ("--purposes", Kind::Purposes),
     ("SCENE", Kind::Scene),
     ("--no-such-flag", Kind::Float),
     ("-x", Kind::Switch),
     ("--", Kind::Scene),
     ("--help", Kind::Switch),
 ];
+
+/// `--data-window`: crops, overscan, edges through pixel centres, empty, inverted, too far.
+const DATA_WINDOWS: &[&str] = &[
+    "0,0,1,1",
+    "0.25,0.25,0.75,0.75",
+    "-0.25,-0.25,1.25,1.25",
+    "0.5,0,0.5,1",
+    "1,1,0,0",
+    "0.3,0,0.31,1",
+    "-4,-4,5,5",
+    "-5,0,1,1",
+    "0,0,1",
+    "0,0,1,1,1",
+    "a,b,c,d",
+    "nan,0,1,1",
+    "0,0,inf,1",
+    "0.999,0.999,1,1",
+];
+
+/// `--aspect-conform`: UsdRender's tokens and near misses.
+const CONFORMS: &[&str] = &[
+    "expandAperture",
+    "cropAperture",
+    "adjustApertureWidth",
+    "adjustApertureHeight",
+    "adjustPixelAspectRatio",
+    "expand",
+    "CROPAPERTURE",
+];
+
+/// `--purposes`.
+const PURPOSES: &[&str] =
+    &["default,render", "proxy", "default,proxy,guide", "render", "", ",", "final", "default,,render"];
 
 /// Numbers: typical values of the flags and extremes.
 const FLOATS: &[&str] = &[
@@ -285,6 +327,9 @@ fn values(kind: Kind) -> Vec<String> {
         Kind::Aovs => s(AOVS),
         Kind::OnOff => s(ON_OFF),
         Kind::Frames => s(FRAMES),
+        Kind::DataWindow => s(DATA_WINDOWS),
+        Kind::Conform => s(CONFORMS),
+        Kind::Purposes => s(PURPOSES),
         Kind::Name => s(NAMES),
         Kind::Switch => vec![String::new()],
         Kind::Lens => {

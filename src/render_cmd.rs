@@ -3,8 +3,10 @@
 use clap::Args;
 use glam::{DAffine3, DVec2};
 use indicatif::{ProgressBar, ProgressStyle};
-use petzval_renderer::camera::host::{self, FilmBack, HostCamera, SensorFit, Shift};
-use petzval_renderer::film::{write_exr, write_png, ExrLayers, Metadata, PixelFilter, ToneMap};
+use petzval_renderer::camera::host::{self, ConformPolicy, FilmBack, HostCamera, SensorFit, Shift};
+use petzval_renderer::film::{
+    write_exr_framed, write_png, ExrFrame, ExrLayers, Metadata, PixelFilter, PixelWindow, ToneMap,
+};
 use petzval_renderer::integrator::RenderScene;
 use petzval_renderer::render::{CameraRig, RenderSettings};
 use petzval_renderer::scene::{demo, gltf, Environment, Scene, SceneCamera};
@@ -115,6 +117,22 @@ pub struct RenderArgs {
     /// frame with a run of `#` (`out.####.exr` → `out.1001.exr`).
     #[arg(long)]
     pub frames: Option<String>,
+    /// The pixels to render, in normalised device coordinates XMIN,YMIN,XMAX,YMAX ((0,0) the
+    /// frame's bottom-left corner, (1,1) its top-right; a pixel is in when its centre is), as
+    /// UsdRender's dataWindowNDC: a crop inside 0,0,1,1, overscan beyond it. The EXR's data
+    /// window holds them in the frame's display window (default: a USD shot's dataWindowNDC,
+    /// else the whole frame).
+    #[arg(long, allow_hyphen_values = true)]
+    pub data_window: Option<String>,
+    /// How a USD camera's aperture is fitted to the image's aspect: expandAperture,
+    /// cropAperture, adjustApertureWidth, adjustApertureHeight or adjustPixelAspectRatio
+    /// (UsdRender's aspectRatioConformPolicy; default: the shot's, else expandAperture).
+    #[arg(long)]
+    pub aspect_conform: Option<String>,
+    /// The USD geometry purposes rendered, comma-separated among default, render, proxy and
+    /// guide (default: a USD shot's includedPurposes, else default,render).
+    #[arg(long)]
+    pub purposes: Option<String>,
     /// USD RenderSettings prim (default: the stage's renderSettingsPrimPath): its camera,
     /// resolution and first product's productName, unless --camera, --resolution or -o say
     /// otherwise.
@@ -431,6 +449,15 @@ fn apply_settings(args: &mut RenderArgs, rs: &petzval_usd::render_settings::Rend
     if args.pixel_aspect.is_none() {
         args.pixel_aspect = Some(rs.pixel_aspect);
     }
+    if args.aspect_conform.is_none() {
+        args.aspect_conform = Some(rs.aspect_conform.clone());
+    }
+    if let (None, Some([x0, y0, x1, y1])) = (&args.data_window, rs.data_window_ndc) {
+        args.data_window = Some(format!("{x0},{y0},{x1},{y1}"));
+    }
+    if args.purposes.is_none() {
+        args.purposes = Some(rs.included_purposes.join(","));
+    }
     if !rs.vars.is_empty() && args.aovs.is_none() {
         // the RenderVars choose the EXR's channels unless --aovs was given
         args.aovs = Some(rs.aovs.join(","));
@@ -443,6 +470,30 @@ fn apply_settings(args: &mut RenderArgs, rs: &petzval_usd::render_settings::Rend
         args.resolution,
         args.output.display()
     );
+}
+
+/// `--data-window`'s four numbers.
+fn parse_ndc(s: &str) -> Result<[f64; 4], Error> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| settings_err("data_window", format!("'{s}' must be four numbers XMIN,YMIN,XMAX,YMAX")))?;
+    <[f64; 4]>::try_from(v)
+        .map_err(|_| settings_err("data_window", format!("'{s}' must be four numbers XMIN,YMIN,XMAX,YMAX")))
+}
+
+/// `--purposes`: the USD geometry purposes rendered (default: default and render).
+fn parse_purposes(s: Option<&str>) -> Result<petzval_usd::Purposes, Error> {
+    let Some(s) = s else { return Ok(petzval_usd::Purposes::default()) };
+    let names: Vec<&str> = s.split(',').map(str::trim).filter(|n| !n.is_empty()).collect();
+    if let Some(bad) = names.iter().find(|n| !matches!(**n, "default" | "render" | "proxy" | "guide")) {
+        return Err(settings_err(
+            "purposes",
+            format!("'{bad}' is not a purpose (default, render, proxy, guide) in '{s}'"),
+        ));
+    }
+    Ok(petzval_usd::Purposes::from_names(&names))
 }
 
 /// `--resolution`'s default.
@@ -507,7 +558,11 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
     let (mut scene, demo_shot): (Scene, Option<demo::DemoShot>) = match &args.scene {
         Some(path) if petzval_usd::is_usd_path(path) => {
             let usd_err = |e: petzval_usd::Error| usd_error(path, e);
-            let options = petzval_usd::LoadOptions { time: args.frame, subdivision_level: args.subdivision_level };
+            let options = petzval_usd::LoadOptions {
+                time: args.frame,
+                subdivision_level: args.subdivision_level,
+                purposes: parse_purposes(args.purposes.as_deref())?,
+            };
             let shot = petzval_usd::load_with(path, &options).map_err(usd_err)?;
             let cam = shot.camera(args.camera.as_deref()).map_err(usd_err)?.clone();
             usd_cam = Some((shot.file.clone(), cam, shot.time));
@@ -615,14 +670,30 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
             host::focal_length_from_yfov_mm(scene_cam.yfov_rad as f64, width, height, &sensor)?;
     }
     let host_camera = match &usd_cam {
-        Some((_, c, _)) => usd_host_camera(c, &args, focus_m)?,
-        None => flags_camera,
+        Some((_, c, _)) => usd_host_camera(c, &args, focus_m, (width, height))?,
+        None => {
+            if args.aspect_conform.is_some() {
+                eprintln!("note: --aspect-conform applies to a USD camera's aperture; this camera's sensor is fitted by its own rule");
+            }
+            flags_camera
+        }
     };
     let model = host_camera.lens_model;
-    let spec = host_camera.camera_spec(width, height)?;
+    let mut spec = host_camera.camera_spec(width, height)?;
+    // 3. The data window: a crop of the frame, or overscan rendered on the sensor extended
+    //    by the frame's pixel pitch (the frame's pixels stay where they were on the film).
+    let window = match &args.data_window {
+        Some(w) => PixelWindow::from_ndc(parse_ndc(w)?, width, height, "data_window")?,
+        None => PixelWindow::full(width, height),
+    };
+    let outer = window.union_with_frame(width, height);
+    if !window.inside(width, height) {
+        spec.sensor = spec.sensor.extended_to(width, height, &outer);
+    }
+    let (render_w, render_h) = (outer.width(), outer.height());
     // 4. The camera: auto picks the cheapest model within the error budget for this shot.
     let t0 = std::time::Instant::now();
-    let built = shot::build_for_scene(&spec, &render_scene, &to_world, width, height, args.spp, args.spectral)?;
+    let built = shot::build_for_scene(&spec, &render_scene, &to_world, render_w, render_h, args.spp, args.spectral)?;
     if model == LensModel::Auto {
         eprintln!(
             "lens model: {} (auto, {:.2} s to decide) — {}",
@@ -686,8 +757,10 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
         );
     }
     let settings = RenderSettings {
-        width,
-        height,
+        width: render_w,
+        height: render_h,
+        crop: (window != outer).then(|| window.crop_in(&outer)),
+        pixel_origin: [outer.x0 as i32, outer.y0 as i32],
         spp: args.spp,
         seed: args.seed,
         max_depth: args.max_depth,
@@ -733,8 +806,7 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
     let result = dof::render_method(method, &render_scene, &rig, &settings, &preview, &progress, None)?;
     bar.finish_and_clear();
     crate::signals::enter(crate::signals::Phase::Writing);
-    let pixels =
-        settings.crop.map_or(width as u64 * height as u64, |[x0, y0, x1, y1]| (x1 - x0) as u64 * (y1 - y0) as u64);
+    let pixels = window.width() as u64 * window.height() as u64;
     let mean_spp = result.camera_rays as f64 / pixels.max(1) as f64;
     if let Some(min_spp) = settings.adaptive_min_spp() {
         eprintln!(
@@ -752,6 +824,16 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
         result.camera_rays as f64 / result.seconds / 1e6,
         if result.complete { "" } else { " — stopped early" }
     );
+    if window != PixelWindow::full(width, height) {
+        eprintln!(
+            "data window: {}x{} pixels from ({}, {}) of the {width}x{height} frame{}",
+            window.width(),
+            window.height(),
+            window.x0,
+            window.y0,
+            if window.inside(width, height) { " (a crop)" } else { " (overscan)" }
+        );
+    }
     if result.light_paths > 0 {
         eprintln!(
             "bokeh light paths traced: {} ({:.2} per camera ray), {:.1} % of them reached the film",
@@ -783,7 +865,7 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
         ("shiftXMM".into(), format!("{}", s.shift_mm.x)),
         ("shiftYMM".into(), format!("{}", s.shift_mm.y)),
         ("sensorMM".into(), format!("{:.3}x{:.3}", s.width_mm, s.height_mm)),
-        ("pixelAspectRatio".into(), format!("{}", args.pixel_aspect.unwrap_or(1.0))),
+        ("pixelAspectRatio".into(), format!("{}", host_camera.film_back.pixel_aspect)),
         ("spp".into(), format!("{}", result.spp_done)),
         ("sppRequested".into(), format!("{}", args.spp)),
         ("sppMean".into(), format!("{mean_spp:.3}")),
@@ -807,7 +889,21 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
         metadata.push(("usdCamera".into(), c.path.clone()));
         metadata.push(("usdFrame".into(), time.map(|t| t.to_string()).unwrap_or_else(|| "default".into())));
     }
-    write_exr(&args.output, &result.image, outputs.layers, &metadata)?;
+    if window != PixelWindow::full(width, height) {
+        let [x0, y0, x1, y1] = [window.x0, window.y0, window.x1, window.y1];
+        metadata.push(("dataWindowPx".into(), format!("{x0},{y0},{x1},{y1}")));
+    }
+    if let Some(p) = usd_cam.as_ref().and(args.aspect_conform.as_ref()) {
+        metadata.push(("aspectConform".into(), p.clone()));
+    }
+    let frame = ExrFrame {
+        display_width: width,
+        display_height: height,
+        origin_x: window.x0 as i32,
+        origin_y: window.y0 as i32,
+        pixel_aspect: host_camera.film_back.pixel_aspect as f32,
+    };
+    write_exr_framed(&args.output, &result.image, outputs.layers, &metadata, &frame)?;
     eprintln!("wrote {}", args.output.display());
     if !args.no_png {
         write_png(&outputs.png, &result.image, args.exposure, outputs.tone)?;
@@ -821,12 +917,20 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
 /// (`--lens`, `--lens-model` other than auto, `--fstop`, `--focus`, `--focal-length`,
 /// non-zero `--tilt-*`/`--shift-*`, `--aperture`, `--lrtf-file`, `--tolerance` other than
 /// 0.25). Without a focus distance on the prim, `focus_m` (the autofocus) is used.
-fn usd_host_camera(c: &petzval_usd::UsdCamera, args: &RenderArgs, focus_m: Option<f64>) -> Result<HostCamera, Error> {
+fn usd_host_camera(
+    c: &petzval_usd::UsdCamera,
+    args: &RenderArgs,
+    focus_m: Option<f64>,
+    (width, height): (u32, u32),
+) -> Result<HostCamera, Error> {
     let mut h = c.host_camera().map_err(|e| match e {
         petzval_usd::Error::Renderer(e) => e,
         e => camera_err("usd", e.to_string()),
     })?;
     h.film_back.pixel_aspect = args.pixel_aspect.unwrap_or(1.0);
+    if let Some(p) = &args.aspect_conform {
+        h.film_back = p.parse::<ConformPolicy>()?.apply(h.film_back, width, height);
+    }
     if let Some(l) = &args.lens {
         h.lens = l.clone();
     }
@@ -981,6 +1085,18 @@ pub fn preflight(args: &RenderArgs) -> Result<Preflight, Error> {
     check_numbers(args)?;
     RenderSettings { width, height, spp: args.spp, max_depth: args.max_depth, ..RenderSettings::default() }
         .validate()?;
+    // the data window, and the frame its overscan makes (within the same limits)
+    if let Some(w) = &args.data_window {
+        let outer = PixelWindow::from_ndc(parse_ndc(w)?, width, height, "data_window")?.union_with_frame(width, height);
+        let (w, h) = (outer.width(), outer.height());
+        RenderSettings { width: w, height: h, spp: args.spp, max_depth: args.max_depth, ..RenderSettings::default() }
+            .validate()
+            .map_err(|e| settings_err("data_window", format!("its overscan makes a {w}x{h} frame: {e}")))?;
+    }
+    if let Some(p) = &args.aspect_conform {
+        p.parse::<ConformPolicy>()?;
+    }
+    parse_purposes(args.purposes.as_deref())?;
     if args.frame.is_some_and(|f| !f.is_finite()) {
         return Err(settings_err("frame", format!("must be a finite time code, got {}", args.frame.unwrap_or(0.0))));
     }

@@ -56,7 +56,10 @@ pub enum UsdCommand {
 pub fn run(cmd: UsdCommand) -> Result<(), petzval_usd::Error> {
     match cmd {
         UsdCommand::Info { shot, json, frame, instances, subdivision_level } => {
-            let s = petzval_usd::load_with(&shot, &petzval_usd::LoadOptions { time: frame, subdivision_level })?;
+            let s = petzval_usd::load_with(
+                &shot,
+                &petzval_usd::LoadOptions { time: frame, subdivision_level, ..Default::default() },
+            )?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&s.info_json(instances)).unwrap_or_default());
                 return Ok(());

@@ -85,6 +85,7 @@ pub(crate) fn render(
             bokeh_paths: bokeh_paths.unwrap_or(0.0),
             adaptive_threshold,
             adaptive_min_samples,
+            pixel_origin: [0, 0],
         };
         settings.validate().map_err(py_err)?;
         let method: dof::Method = method.parse().map_err(py_err)?;

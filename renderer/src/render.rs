@@ -13,6 +13,7 @@
 //! | `filter` | [`PixelFilter`] | px | Blackman–Harris spanning 3 px (Cycles' default) |
 //! | `clip_start_m`, `clip_end_m` | f64: clipping planes perpendicular to the view axis (Cycles) | m | 0, ∞ |
 //! | `crop` | optional `[x0, y0, x1, y1)` window of the frame to render (row 0 = top) | px | whole frame |
+//! | `pixel_origin` | the frame's pixel (0, 0) in the numbering that seeds each pixel's samples (overscan) | px | (0, 0) |
 //! | `adaptive_threshold` | f32: adaptive sampling's noise threshold, as Cycles' "Noise Threshold" (a pixel stops once its error estimate, over its 3×3 neighbourhood, is below it; see [`adaptive_converged`]); path tracing (`mc`) only | — | 0 (off: every pixel takes `spp`) |
 //! | `adaptive_min_samples` | u32: samples every pixel takes before adaptive sampling may stop it | — | 0 (auto, as Cycles: max(4, ⌈16 / threshold^0.3⌉)) |
 //! | `bokeh_paths` | f32: light paths from emitters through the lens per pixel per sample, combined with camera paths by MIS (see [`crate::bokeh`]; under adaptive sampling a pass traces only the share of them whose light lands in pixels still sampled); any model with a lens (thin, thick, exact, LRTF), not the pinhole | — | 0 (off; the CLI's and the Python module's auto gives 1 where it applies) |
@@ -70,6 +71,10 @@ pub struct RenderSettings {
     pub adaptive_threshold: f32,
     /// Samples every pixel takes before adaptive sampling may stop it (0: automatic).
     pub adaptive_min_samples: u32,
+    /// Where this frame's pixel (0, 0) sits in the frame its pixels are numbered by (a frame
+    /// extended for overscan starts left of and above the display frame): the pixels' sample
+    /// sequences follow that numbering, so a pixel renders the same with and without overscan.
+    pub pixel_origin: [i32; 2],
 }
 
 impl Default for RenderSettings {
@@ -89,6 +94,7 @@ impl Default for RenderSettings {
             bokeh_paths: 0.0,
             adaptive_threshold: 0.0,
             adaptive_min_samples: 0,
+            pixel_origin: [0, 0],
         }
     }
 }
@@ -524,7 +530,9 @@ pub(crate) fn render_samples(
                 let mut lambdas = [(wavelength_primary, Vec3::ONE); CAMERA_BATCH];
                 for (i, &(col, s)) in chunk.iter().enumerate() {
                     let x = col + x0 as usize;
-                    let mut sampler = PixelSampler::new(x as u32, y as u32, s, settings.seed);
+                    let [ox, oy] = settings.pixel_origin;
+                    let (sx, sy) = ((x as i64 + ox as i64) as u32, (y as i64 + oy as i64) as u32);
+                    let mut sampler = PixelSampler::new(sx, sy, s, settings.seed);
                     let off = filter.sample(sampler.next_2d());
                     film_uv[i] = DVec2::new(
                         (x as f64 + 0.5 + off.x as f64) / w as f64,

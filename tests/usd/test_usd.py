@@ -818,6 +818,177 @@ def test_pixel_aspect_ratio_widens_the_frame_on_the_film(petzval: Path, tmp_path
     assert sensor("--pixel-aspect", "1") == pytest.approx((36.0, 27.0), abs=1e-3)
 
 
+def _window_stage(tmp_path: Path, name: str) -> tuple[Path, Usd.Stage]:
+    """A 50 mm camera (36 × 24 mm aperture, no depth of field) facing a grey quad at 3 m, a
+    second quad right of the frame (x 1.3–1.6 m: film x 21.7–26.7 mm, beyond the frame's
+    18 mm half-width) and a dome light; RenderSettings at 40 × 30 px."""
+    from pxr import UsdRender
+
+    path = tmp_path / f"{name}.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    q = quad(stage, "/Q")
+    q.AddTranslateOp().Set((-0.5, -0.5, -3))
+    side = quad(stage, "/Side")
+    side.AddTranslateOp().Set((1.3, -0.5, -3))
+    side.AddScaleOp().Set((0.3, 1, 1))
+    UsdLux.DomeLight.Define(stage, "/Env")
+    c = UsdGeom.Camera.Define(stage, "/Cam")
+    c.CreateFocalLengthAttr(0.5)
+    c.CreateHorizontalApertureAttr(0.36)
+    c.CreateVerticalApertureAttr(0.24)
+    rs = UsdRender.Settings.Define(stage, "/Render/Settings")
+    rs.CreateCameraRel().SetTargets(["/Cam"])
+    rs.CreateResolutionAttr(Gf.Vec2i(40, 30))
+    stage.SetMetadata("renderSettingsPrimPath", "/Render/Settings")
+    return path, stage
+
+
+def _exr(path: Path) -> tuple[dict, np.ndarray]:
+    import OpenEXR
+
+    with OpenEXR.File(str(path)) as f:
+        h = dict(f.header())
+        rgb = np.asarray(f.channels()["RGBA"].pixels)[..., :3]
+    return h, rgb.astype(np.float64)
+
+
+def test_data_window_crops_and_overscans(petzval: Path, tmp_path: Path) -> None:
+    """UsdRender dataWindowNDC: a window inside the frame renders exactly those pixels of the
+    full render (the EXR's data window inside its 40 × 30 display window, pixels whose centres
+    lie in the window); a window beyond it renders overscan, continuing the pixel grid: the
+    frame's pixels as before and the quad right of the frame where the pinhole puts it."""
+    path, stage = _window_stage(tmp_path, "window")
+    stage.GetRootLayer().Save()
+    common = ["--spp", "4", "--no-png", "--seed", "3"]
+    full = tmp_path / "full.exr"
+    run(petzval, "render", str(path), "-o", str(full), *common)
+    hf, img = _exr(full)
+    assert (hf["displayWindow"][0].tolist(), hf["displayWindow"][1].tolist()) == ([0, 0], [39, 29])
+    # 1. A crop, authored on the settings: columns with centres in [0.25, 0.75) → 10..29; rows
+    #    with centres (y up) in (0.25, 0.75] → 7..21 (the top-left rule).
+    from pxr import UsdRender
+
+    rs = UsdRender.Settings(stage.GetPrimAtPath("/Render/Settings"))
+    rs.CreateDataWindowNDCAttr(Gf.Vec4f(0.25, 0.25, 0.75, 0.75))
+    stage.GetRootLayer().Save()
+    crop = tmp_path / "crop.exr"
+    run(petzval, "render", str(path), "-o", str(crop), *common)
+    hc, cimg = _exr(crop)
+    assert (hc["dataWindow"][0].tolist(), hc["dataWindow"][1].tolist()) == ([10, 7], [29, 21])
+    assert (hc["displayWindow"][0].tolist(), hc["displayWindow"][1].tolist()) == ([0, 0], [39, 29])
+    assert np.array_equal(cimg, img[7:22, 10:30]), "a crop renders the full render's pixels"
+    # 2. Overscan, authored on a product over the settings': a quarter frame on each side.
+    prod = UsdRender.Product.Define(stage, "/Render/Product")
+    prod.CreateProductNameAttr(str(tmp_path / "over.exr"))
+    prod.CreateDataWindowNDCAttr(Gf.Vec4f(-0.25, 0.0, 1.25, 1.0))
+    rs.CreateProductsRel().SetTargets([prod.GetPath()])
+    stage.GetRootLayer().Save()
+    run(petzval, "render", str(path), *common)
+    ho, oimg = _exr(tmp_path / "over.exr")
+    assert (ho["dataWindow"][0].tolist(), ho["dataWindow"][1].tolist()) == ([-10, 0], [49, 29])
+    assert oimg.shape == (30, 60, 3)
+    inner = oimg[:, 10:50]
+    rel = np.abs(inner - img) / np.maximum(img, 1e-3)
+    assert np.median(rel) < 1e-5 and np.mean(rel < 1e-3) > 0.97, (np.median(rel), np.mean(rel < 1e-3))
+    # the side quad: film x 21.67–26.67 mm at 0.9 mm per pixel → 24.1–29.6 px right of the
+    # centre → frame columns 44.1–49.6 (overscan), rows 15 ± 9.3: darker there than the dome
+    # above it (rows 0–2) in the same column; columns 43 and 49 take part of it through the
+    # 3-pixel filter and are not asserted
+    dark = [oimg[10:20, 10 + c].mean() < 0.5 * oimg[0:3, 10 + c].mean() for c in range(40, 50)]
+    assert dark[0:3] == [False] * 3 and dark[4:9] == [True] * 5, dark
+    assert not any(img[10:20, c].mean() < 0.5 * img[0:3, c].mean() for c in range(30, 40)), "not in the frame"
+    # the command line's window wins over the product's; an empty one is refused
+    run(petzval, "render", str(path), "--data-window", "0,0,1,1", *common)
+    assert np.array_equal(_exr(tmp_path / "over.exr")[1], img)
+    bad = ["-o", str(tmp_path / "bad.exr"), "--data-window", "0.3,0,0.31,1"]
+    r = run(petzval, "render", str(path), *bad, *common, ok=False)
+    assert r.returncode != 0 and "data_window" in r.stderr and "no pixel centre" in r.stderr, r.stderr
+    assert not (tmp_path / "bad.exr").exists()
+
+
+def test_aspect_ratio_conform_policies(petzval: Path, tmp_path: Path) -> None:
+    """UsdRender aspectRatioConformPolicy fits the camera's 36 × 24 mm aperture to the image's
+    aspect as the schema says: expand or crop the aperture, adjust its width or its height
+    (keeping the other), or adjust the pixel aspect (recorded in the EXR's pixelAspectRatio)."""
+    from pxr import UsdRender
+
+    path, stage = _window_stage(tmp_path, "conform")
+    rs = UsdRender.Settings(stage.GetPrimAtPath("/Render/Settings"))
+    policy = rs.CreateAspectRatioConformPolicyAttr("expandAperture")
+    expected = {
+        # 60 × 20 px: aspect 3, wider than the aperture's 1.5
+        (60, 20): {
+            "expandAperture": (72.0, 24.0),
+            "cropAperture": (36.0, 12.0),
+            "adjustApertureWidth": (72.0, 24.0),
+            "adjustApertureHeight": (36.0, 12.0),
+            "adjustPixelAspectRatio": (36.0, 24.0),
+        },
+        # 20 × 30 px: aspect 2/3, narrower
+        (20, 30): {
+            "expandAperture": (36.0, 54.0),
+            "cropAperture": (16.0, 24.0),
+            "adjustApertureWidth": (16.0, 24.0),
+            "adjustApertureHeight": (36.0, 54.0),
+            "adjustPixelAspectRatio": (36.0, 24.0),
+        },
+    }
+    for (w, h), table in expected.items():
+        rs.GetResolutionAttr().Set(Gf.Vec2i(w, h))
+        for name, sensor in table.items():
+            policy.Set(name)
+            stage.GetRootLayer().Save()
+            out = tmp_path / f"{name}_{w}x{h}.exr"
+            run(petzval, "render", str(path), "--spp", "1", "--no-png", "-o", str(out))
+            hd, _ = _exr(out)
+            got = tuple(float(v) for v in hd["petzval/sensorMM"].split("x"))
+            assert got == pytest.approx(sensor, abs=1e-3), (name, w, h, got)
+            par = (36 / 24) * h / w if name == "adjustPixelAspectRatio" else 1.0
+            assert hd["pixelAspectRatio"] == pytest.approx(par, rel=1e-6), (name, hd["pixelAspectRatio"])
+            assert hd["petzval/aspectConform"] == name
+    # the command line wins; an unknown policy names the attribute and the prim
+    out = tmp_path / "cli.exr"
+    run(petzval, "render", str(path), "--spp", "1", "--no-png", "-o", str(out), "--aspect-conform", "cropAperture")
+    assert _exr(out)[0]["petzval/sensorMM"] == "16.000x24.000"
+    policy.Set("squeeze")
+    stage.GetRootLayer().Save()
+    r = run(petzval, "render", str(path), "--spp", "1", "--no-png", "-o", str(tmp_path / "x.exr"), ok=False)
+    assert "aspectRatioConformPolicy" in r.stderr and "/Render/Settings" in r.stderr and "squeeze" in r.stderr, r.stderr
+
+
+def test_included_purposes_choose_the_geometry(petzval: Path, tmp_path: Path) -> None:
+    """RenderSettings includedPurposes: by default render- and default-purpose geometry; with
+    proxy included and render left out, the proxy subtree renders, and a mesh authored
+    `render` inside it inherits the proxy purpose (UsdGeomImageable), while the render quad
+    does not. `--purposes` overrides the settings."""
+    from pxr import UsdRender
+
+    path, stage = _window_stage(tmp_path, "purposes")
+    UsdGeom.Imageable(stage.GetPrimAtPath("/Side")).CreatePurposeAttr("render")
+    proxy = UsdGeom.Xform.Define(stage, "/Proxy")
+    proxy.CreatePurposeAttr("proxy")
+    for k in range(3):
+        m = quad(stage, f"/Proxy/P{k}")
+        if k == 0:
+            UsdGeom.Imageable(m).CreatePurposeAttr("render")
+    stage.GetRootLayer().Save()
+
+    def triangles(*extra: str) -> int:
+        r = run(petzval, "render", str(path), "--spp", "1", "--no-png", "-o", str(tmp_path / "p.exr"), *extra)
+        line = next(ln for ln in r.stderr.splitlines() if ln.startswith("scene: "))
+        return int(line.split()[1])
+
+    assert triangles() == 4  # /Q and /Side
+    rs = UsdRender.Settings(stage.GetPrimAtPath("/Render/Settings"))
+    rs.CreateIncludedPurposesAttr(["default", "proxy"])
+    stage.GetRootLayer().Save()
+    assert triangles() == 2 + 6  # /Q and the three proxy quads
+    assert triangles("--purposes", "render") == 2  # /Side only
+    r = run(petzval, "render", str(path), "--purposes", "default,final", "-o", str(tmp_path / "q.exr"), ok=False)
+    assert "purposes" in r.stderr and "final" in r.stderr, r.stderr
+
+
 def test_render_vars_choose_the_exr_channels(petzval: Path, tmp_path: Path) -> None:
     """RenderVars' sourceName picks the EXR's channels (colour always; normal, albedo; an unknown
     one is listed as skipped); --aovs overrides them."""

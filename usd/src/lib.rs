@@ -161,11 +161,52 @@ pub struct LoadOptions {
     /// Catmull-Clark levels for meshes whose `subdivisionScheme` is `catmullClark`
     /// (`--subdivision-level`; 0 renders the cage).
     pub subdivision_level: u32,
+    /// The `purpose` values rendered (a RenderSettings' `includedPurposes`).
+    pub purposes: Purposes,
 }
 
 impl Default for LoadOptions {
     fn default() -> Self {
-        LoadOptions { time: None, subdivision_level: subdiv::DEFAULT_LEVEL }
+        LoadOptions { time: None, subdivision_level: subdiv::DEFAULT_LEVEL, purposes: Purposes::default() }
+    }
+}
+
+/// Which geometry purposes a render includes (UsdRender's `includedPurposes`). A prim's
+/// purpose is its authored `purpose` unless an ancestor's is other than `default`, which it
+/// then inherits (UsdGeomImageable).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Purposes {
+    /// `default`.
+    pub default: bool,
+    /// `render`.
+    pub render: bool,
+    /// `proxy`.
+    pub proxy: bool,
+    /// `guide`.
+    pub guide: bool,
+}
+
+impl Default for Purposes {
+    fn default() -> Self {
+        Purposes { default: true, render: true, proxy: false, guide: false }
+    }
+}
+
+impl Purposes {
+    /// The purposes named (`default`, `render`, `proxy`, `guide`; others are ignored).
+    pub fn from_names<S: AsRef<str>>(names: &[S]) -> Self {
+        let has = |p: &str| names.iter().any(|n| n.as_ref() == p);
+        Purposes { default: has("default"), render: has("render"), proxy: has("proxy"), guide: has("guide") }
+    }
+
+    /// Whether geometry of purpose `p` is rendered (an unknown purpose counts as `default`).
+    pub fn includes(&self, p: &str) -> bool {
+        match p {
+            "render" => self.render,
+            "proxy" => self.proxy,
+            "guide" => self.guide,
+            _ => self.default,
+        }
     }
 }
 
@@ -182,6 +223,7 @@ pub fn load_with(path: &Path, options: &LoadOptions) -> Result<UsdShot, Error> {
     let time = time.or(frame_range.map(|r| r.0));
     let mut walker = stage::Walker::new(&stage, time)?;
     walker.subdivision_level = options.subdivision_level;
+    walker.purposes = options.purposes;
     let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| walker.run()));
     match run {
         Ok(r) => r?,

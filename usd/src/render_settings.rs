@@ -5,7 +5,12 @@
 //! |---|---|---|---|
 //! | `camera` (rel) | RenderSettings, overridden by the product's | the camera prim | the first camera |
 //! | `resolution` (int2) | RenderSettings, overridden by the product's | pixels | 2048 × 1080 |
-//! | `pixelAspectRatio` | RenderSettings | non-square pixels: the frame covers `columns × ratio / rows` of the film back (`--pixel-aspect` overrides) | 1 |
+//! | `pixelAspectRatio` | RenderSettings, overridden by the product's | non-square pixels: the frame covers `columns × ratio / rows` of the film back (`--pixel-aspect` overrides) | 1 |
+//! | `aspectRatioConformPolicy` (token) | RenderSettings, overridden by the product's | how the camera's aperture is fitted to the image's aspect (`--aspect-conform` overrides) | `expandAperture` |
+//! | `dataWindowNDC` (float4) | RenderSettings, overridden by the product's | the pixels rendered: a crop inside (0, 0, 1, 1), overscan beyond it (`--data-window` overrides) | (0, 0, 1, 1) |
+//! | `includedPurposes` (token[]) | RenderSettings | the purposes of the geometry rendered | `default`, `render` |
+//! | `instantaneousShutter`, `disableMotionBlur` | either | nothing to do: petzval renders no motion blur | — |
+//! | `disableDepthOfField` | either | not read (listed when true) | — |
 //! | `products` (rel) | RenderSettings | RenderProduct prims; the first is rendered | none |
 //! | `productName` | RenderProduct | the output file (`####` = frame) | — |
 //! | `orderedVars` (rel) | RenderProduct | RenderVar prims: their `sourceName` picks the EXR's channels (color/Ci/rgba always; depth/z, normal/N, albedo/diffuseColor; others listed as skipped) unless `--aovs` is given | — |
@@ -33,6 +38,12 @@ pub struct RenderSettings {
     pub aovs: Vec<String>,
     /// Width over height of one pixel (`pixelAspectRatio`).
     pub pixel_aspect: f64,
+    /// `aspectRatioConformPolicy` (one of UsdRender's tokens).
+    pub aspect_conform: String,
+    /// `dataWindowNDC` (xmin, ymin, xmax, ymax); None when unauthored.
+    pub data_window_ndc: Option<[f64; 4]>,
+    /// `includedPurposes` (the settings'; products cannot change which geometry exists).
+    pub included_purposes: Vec<String>,
     /// What was ignored.
     pub warnings: Vec<String>,
     /// The RenderProduct these values come from (None: the settings alone).
@@ -88,15 +99,29 @@ pub fn read(path: &Path, time: Option<f64>, settings: Option<&str>) -> Result<Op
         vars: Vec::new(),
         aovs: Vec::new(),
         pixel_aspect: 1.0,
+        aspect_conform: CONFORM_POLICIES[0].to_string(),
+        data_window_ndc: None,
+        included_purposes: vec!["default".into(), "render".into()],
         warnings: Vec::new(),
         product_path: None,
         others: Vec::new(),
     };
-    let par = reader.f64_or(&prim, "pixelAspectRatio", 1.0)?;
-    if !(par.is_finite() && par > 0.0) {
-        return Err(attr_error(&prim, "pixelAspectRatio", format!("must be positive, got {par}")));
+    apply_base(&mut out, &reader, &prim)?;
+    match reader.raw(&prim, "includedPurposes")? {
+        None => {}
+        Some(sdf::Value::TokenVec(v)) => out.included_purposes = v.iter().map(|t| t.as_str().to_string()).collect(),
+        Some(sdf::Value::StringVec(v)) => out.included_purposes = v,
+        Some(v) => return Err(attr_error(&prim, "includedPurposes", format!("expected token[], got {v:?}"))),
     }
-    out.pixel_aspect = par;
+    for p in &out.included_purposes {
+        if !matches!(p.as_str(), "default" | "render" | "proxy" | "guide") {
+            return Err(attr_error(
+                &prim,
+                "includedPurposes",
+                format!("'{p}' is not a purpose (default, render, proxy, guide)"),
+            ));
+        }
+    }
     let products = prim
         .relationship("products")
         .targets()
@@ -134,6 +159,7 @@ fn apply_product(
     if let Some(r) = resolution(reader, &product)? {
         out.resolution = r;
     }
+    apply_base(out, reader, &product)?;
     out.product_name = reader.token(&product, "productName")?.filter(|s| !s.is_empty());
     let targets = product
         .relationship("orderedVars")
@@ -156,6 +182,55 @@ fn apply_product(
                 "{v}: RenderVar sourceName '{source}' is not a channel petzval renders (color, depth, normal, albedo); skipped"
             )),
         }
+    }
+    Ok(())
+}
+
+/// UsdRender's `aspectRatioConformPolicy` tokens (the first is the fallback).
+pub const CONFORM_POLICIES: [&str; 5] =
+    ["expandAperture", "cropAperture", "adjustApertureWidth", "adjustApertureHeight", "adjustPixelAspectRatio"];
+
+/// The RenderSettingsBase attributes authored on `prim` (the settings, then a product over
+/// them) other than camera and resolution: pixel aspect, conform policy, data window, and the
+/// shutter and depth-of-field switches.
+fn apply_base(out: &mut RenderSettings, reader: &Reader, prim: &openusd::usd::Prim) -> Result<(), Error> {
+    let path = prim.path().to_string();
+    if reader.raw(prim, "pixelAspectRatio")?.is_some() {
+        let par = reader.f64_or(prim, "pixelAspectRatio", 1.0)?;
+        if !(par.is_finite() && par > 0.0) {
+            return Err(attr_error(prim, "pixelAspectRatio", format!("must be positive, got {par}")));
+        }
+        out.pixel_aspect = par;
+    }
+    if let Some(p) = reader.token(prim, "aspectRatioConformPolicy")? {
+        if !CONFORM_POLICIES.contains(&p.as_str()) {
+            return Err(attr_error(
+                prim,
+                "aspectRatioConformPolicy",
+                format!("'{p}' is not a policy ({})", CONFORM_POLICIES.join(", ")),
+            ));
+        }
+        out.aspect_conform = p;
+    }
+    let window = match reader.raw(prim, "dataWindowNDC")? {
+        None => None,
+        Some(sdf::Value::Vec4f(v)) => Some([v.x, v.y, v.z, v.w].map(f64::from)),
+        Some(sdf::Value::Vec4d(v)) => Some([v.x, v.y, v.z, v.w]),
+        Some(v) => return Err(attr_error(prim, "dataWindowNDC", format!("expected a float4, got {v:?}"))),
+    };
+    if let Some(w) = window {
+        let ok = w.iter().all(|v| v.is_finite()) && w[0] < w[2] && w[1] < w[3];
+        if !ok {
+            return Err(attr_error(
+                prim,
+                "dataWindowNDC",
+                format!("{w:?} must be (xmin, ymin, xmax, ymax) with xmin < xmax and ymin < ymax"),
+            ));
+        }
+        out.data_window_ndc = Some(w);
+    }
+    if reader.bool(prim, "disableDepthOfField")? == Some(true) {
+        out.warnings.push(format!("{path}.disableDepthOfField is not read: the camera's depth of field renders"));
     }
     Ok(())
 }

@@ -4,7 +4,7 @@
 //!
 //! | prim | result |
 //! |---|---|
-//! | inactive, `visibility = invisible`, `purpose` guide or proxy | skipped with its subtree |
+//! | inactive, `visibility = invisible`, a `purpose` not included (guide and proxy by default; [`crate::Purposes`]) | skipped with its subtree |
 //! | `Mesh` | one mesh, one instance |
 //! | native instance (`instanceable`) | the prototype's meshes built once, one instance each per instance prim |
 //! | `PointInstancer` | the prototypes' meshes built once; instance i = instancer · T(positions[i]) · R(orientations[i]) · S(scales[i]) · prototype root; `invisibleIds` (against `ids`, else the index) skipped; the instancer's children are not rendered directly |
@@ -106,6 +106,10 @@ pub struct Walker<'a> {
     pub warnings: Vec<String>,
     /// Catmull-Clark levels for meshes with `subdivisionScheme = catmullClark`.
     pub subdivision_level: u32,
+    /// The geometry purposes rendered.
+    pub purposes: crate::Purposes,
+    /// The purpose an ancestor other than `default` passes down (None: none did).
+    inherited_purpose: Option<String>,
     materials: Materials,
     meshes_by_prim: HashMap<String, u32>,
     /// Skinned meshes, whose points are in world space already (their prims' transforms do
@@ -142,6 +146,8 @@ impl<'a> Walker<'a> {
         let units = StageUnits::read(stage)?;
         Ok(Walker {
             subdivision_level: crate::subdiv::DEFAULT_LEVEL,
+            purposes: crate::Purposes::default(),
+            inherited_purpose: None,
             reader: Reader { stage, time },
             units,
             scene: Scene::default(),
@@ -220,10 +226,16 @@ impl<'a> Walker<'a> {
         if self.reader.token(prim, "visibility")?.as_deref() == Some("invisible") {
             return Ok(());
         }
-        if let Some(p) = self.reader.token(prim, "purpose")? {
-            if p == "guide" || p == "proxy" {
-                return Ok(());
-            }
+        // The prim's purpose (an ancestor's other than default wins); a subtree of a purpose
+        // not rendered is skipped, default-purpose geometry only where `default` is not.
+        let purpose = match (&self.inherited_purpose, self.reader.token(prim, "purpose")?) {
+            (Some(p), _) => p.clone(),
+            (None, Some(p)) => p,
+            (None, None) => "default".to_string(),
+        };
+        let default_purpose = !matches!(purpose.as_str(), "render" | "proxy" | "guide");
+        if !default_purpose && !self.purposes.includes(&purpose) {
+            return Ok(());
         }
         let local = local_xform(&self.reader, prim)?;
         let world = if local.resets { local.matrix } else { parent * local.matrix };
@@ -240,7 +252,9 @@ impl<'a> Walker<'a> {
             }
         }
         match ty.as_str() {
-            "Mesh" | "Cube" | "Sphere" | "Cylinder" | "Cone" | "Capsule" | "Plane" => {
+            "Mesh" | "Cube" | "Sphere" | "Cylinder" | "Cone" | "Capsule" | "Plane"
+                if !default_purpose || self.purposes.default =>
+            {
                 let mesh = self.mesh(prim, &ty)?;
                 let xf = if self.world_space_meshes.contains(&path) { DMat4::IDENTITY } else { world };
                 out.push((mesh, xf, path.clone()));
@@ -275,9 +289,14 @@ impl<'a> Walker<'a> {
             }
             _ => {}
         }
+        let outer_purpose = self.inherited_purpose.clone();
+        if !default_purpose {
+            self.inherited_purpose = Some(purpose);
+        }
         for child in children(prim)? {
             self.walk(&child, world, out, in_proto)?;
         }
+        self.inherited_purpose = outer_purpose;
         Ok(())
     }
 

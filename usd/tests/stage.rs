@@ -618,3 +618,47 @@ def {root} \"Root\"\n{{\n double3 xformOp:translate = (10, 0, 0)\n uniform token
     let e = error("rig_shape.usda", rig("SkelRoot", "0, 0, 1, 0, 1, 0", "5"));
     assert!(e.contains("/Root/Leg/Up") && e.contains("pointIndices") && e.contains("index 5"), "{e}");
 }
+
+/// RenderSettingsBase over settings and product: the product's pixel aspect, conform policy and
+/// data window win over the settings'; includedPurposes is the settings'; malformed values are
+/// errors naming the layer, prim and attribute.
+#[test]
+fn render_settings_base_attributes_and_their_errors() {
+    use petzval_usd::render_settings::read;
+    let stage = |settings_extra: &str, product_extra: &str| {
+        format!(
+            "#usda 1.0\n(\n renderSettingsPrimPath = \"/R/S\"\n)\ndef Camera \"C\"\n{{\n}}\ndef Scope \"R\"\n{{\n def RenderSettings \"S\"\n {{\n  rel camera = </C>\n  rel products = </R/P>\n  float pixelAspectRatio = 2\n  uniform token aspectRatioConformPolicy = \"cropAperture\"\n  float4 dataWindowNDC = (0, 0, 0.5, 0.5)\n{settings_extra}\n }}\n def RenderProduct \"P\"\n {{\n{product_extra}\n }}\n}}\n"
+        )
+    };
+    // 1. The settings' values where the product authors none.
+    let p = write("rs_base.usda", &stage("", ""));
+    let rs = read(&p, None, None).unwrap().unwrap();
+    assert_eq!((rs.pixel_aspect, rs.aspect_conform.as_str()), (2.0, "cropAperture"));
+    assert_eq!(rs.data_window_ndc, Some([0.0, 0.0, 0.5, 0.5]));
+    assert_eq!(rs.included_purposes, ["default", "render"]);
+    // 2. The product's over them; includedPurposes from the settings.
+    let p = write(
+        "rs_product.usda",
+        &stage(
+            "  uniform token[] includedPurposes = [\"default\", \"proxy\"]",
+            "  float pixelAspectRatio = 1.5\n  uniform token aspectRatioConformPolicy = \"adjustApertureWidth\"\n  float4 dataWindowNDC = (-0.1, -0.1, 1.1, 1.1)",
+        ),
+    );
+    let rs = read(&p, None, None).unwrap().unwrap();
+    assert_eq!((rs.pixel_aspect, rs.aspect_conform.as_str()), (1.5, "adjustApertureWidth"));
+    let w = rs.data_window_ndc.unwrap();
+    assert!((w[0] + 0.1).abs() < 1e-6 && (w[3] - 1.1).abs() < 1e-6, "{w:?}");
+    assert_eq!(rs.included_purposes, ["default", "proxy"]);
+    // 3. Errors name the layer, the prim and the attribute.
+    for (name, settings_extra, product_extra, attr) in [
+        ("rs_bad1.usda", "", "  float4 dataWindowNDC = (0.5, 0, 0.5, 1)", "/R/P.dataWindowNDC"),
+        ("rs_bad2.usda", "", "  uniform token aspectRatioConformPolicy = \"fit\"", "/R/P.aspectRatioConformPolicy"),
+        ("rs_bad3.usda", "  uniform token[] includedPurposes = [\"final\"]", "", "/R/S.includedPurposes"),
+        ("rs_bad4.usda", "", "  float pixelAspectRatio = -1", "/R/P.pixelAspectRatio"),
+        ("rs_bad5.usda", "", "  float2 dataWindowNDC = (0, 1)", "/R/P.dataWindowNDC"),
+    ] {
+        let p = write(name, &stage(settings_extra, product_extra));
+        let e = read(&p, None, None).err().unwrap_or_else(|| panic!("{name}: an error")).to_string();
+        assert!(e.contains(name) && e.contains(attr), "{name}: {e}");
+    }
+}

@@ -45,6 +45,8 @@ pub enum SensorFit {
     Vertical,
     /// USD's `expandAperture`: the larger of the two apertures at the image's aspect.
     Expand,
+    /// USD's `cropAperture`: the smaller of the two apertures at the image's aspect.
+    Crop,
 }
 
 impl FromStr for SensorFit {
@@ -55,10 +57,76 @@ impl FromStr for SensorFit {
             "horizontal" | "HORIZONTAL" => Ok(SensorFit::Horizontal),
             "vertical" | "VERTICAL" => Ok(SensorFit::Vertical),
             "expand" | "expandAperture" => Ok(SensorFit::Expand),
+            "crop" | "cropAperture" => Ok(SensorFit::Crop),
             f => Err(Error::camera(
                 "sensor_fit",
-                format!("expected 'auto', 'horizontal', 'vertical' or 'expand', got '{f}'"),
+                format!("expected 'auto', 'horizontal', 'vertical', 'expand' or 'crop', got '{f}'"),
             )),
+        }
+    }
+}
+
+/// UsdRender's `aspectRatioConformPolicy`: how a film back whose aspect differs from the
+/// image's (columns × pixel aspect / rows) is fitted to it (the CLI's `--aspect-conform`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ConformPolicy {
+    /// `expandAperture`: the aperture grows to the image's aspect (more of the scene).
+    #[default]
+    ExpandAperture,
+    /// `cropAperture`: the aperture shrinks to the image's aspect (less of the scene).
+    CropAperture,
+    /// `adjustApertureWidth`: the height is kept, the width follows.
+    AdjustApertureWidth,
+    /// `adjustApertureHeight`: the width is kept, the height follows.
+    AdjustApertureHeight,
+    /// `adjustPixelAspectRatio`: the pixels take the aspect that makes the image cover the
+    /// aperture exactly (any authored pixel aspect is disregarded).
+    AdjustPixelAspectRatio,
+}
+
+impl FromStr for ConformPolicy {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "expandAperture" => Ok(ConformPolicy::ExpandAperture),
+            "cropAperture" => Ok(ConformPolicy::CropAperture),
+            "adjustApertureWidth" => Ok(ConformPolicy::AdjustApertureWidth),
+            "adjustApertureHeight" => Ok(ConformPolicy::AdjustApertureHeight),
+            "adjustPixelAspectRatio" => Ok(ConformPolicy::AdjustPixelAspectRatio),
+            p => Err(Error::camera(
+                "aspect_conform",
+                format!("expected expandAperture, cropAperture, adjustApertureWidth, adjustApertureHeight or adjustPixelAspectRatio, got '{p}'"),
+            )),
+        }
+    }
+}
+
+impl std::fmt::Display for ConformPolicy {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            ConformPolicy::ExpandAperture => "expandAperture",
+            ConformPolicy::CropAperture => "cropAperture",
+            ConformPolicy::AdjustApertureWidth => "adjustApertureWidth",
+            ConformPolicy::AdjustApertureHeight => "adjustApertureHeight",
+            ConformPolicy::AdjustPixelAspectRatio => "adjustPixelAspectRatio",
+        })
+    }
+}
+
+impl ConformPolicy {
+    /// `film_back` (its width and height the aperture) fitted by this policy to a `width` ×
+    /// `height` pixel image: the fit, and for `adjustPixelAspectRatio` the pixel aspect.
+    pub fn apply(self, film_back: FilmBack, width: u32, height: u32) -> FilmBack {
+        match self {
+            ConformPolicy::ExpandAperture => FilmBack { fit: SensorFit::Expand, ..film_back },
+            ConformPolicy::CropAperture => FilmBack { fit: SensorFit::Crop, ..film_back },
+            ConformPolicy::AdjustApertureWidth => FilmBack { fit: SensorFit::Vertical, ..film_back },
+            ConformPolicy::AdjustApertureHeight => FilmBack { fit: SensorFit::Horizontal, ..film_back },
+            ConformPolicy::AdjustPixelAspectRatio => FilmBack {
+                fit: SensorFit::Expand,
+                pixel_aspect: film_back.width_mm / film_back.height_mm * height as f64 / width.max(1) as f64,
+                ..film_back
+            },
         }
     }
 }
@@ -138,6 +206,10 @@ impl FilmBack {
             SensorFit::Vertical => (self.height_mm * aspect, self.height_mm, self.height_mm),
             SensorFit::Expand => {
                 let sw = self.width_mm.max(self.height_mm * aspect);
+                (sw, sw / aspect, sw)
+            }
+            SensorFit::Crop => {
+                let sw = self.width_mm.min(self.height_mm * aspect);
                 (sw, sw / aspect, sw)
             }
         };

@@ -9,8 +9,10 @@
 
 pub mod metrics;
 mod output;
+mod window;
 
-pub use output::{write_exr, write_png, ExrLayers, Metadata, ToneMap};
+pub use output::{write_exr, write_exr_framed, write_png, ExrFrame, ExrLayers, Metadata, ToneMap};
+pub use window::{PixelWindow, MAX_OVERSCAN_FRAMES};
 
 use glam::{Vec2, Vec3};
 

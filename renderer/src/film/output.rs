@@ -41,8 +41,44 @@ fn text(s: &str) -> Text {
     Text::from_slice_unchecked(clean.as_bytes())
 }
 
-/// Writes `image` as an EXR file.
+/// Where an EXR's pixels sit in its frame: the display window (the whole frame) and the data
+/// window's top-left pixel, which is negative or beyond the frame for overscan; and the pixel
+/// aspect ratio (OpenEXR's `pixelAspectRatio`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExrFrame {
+    /// Frame (display window) width in pixels.
+    pub display_width: u32,
+    /// Frame (display window) height in pixels.
+    pub display_height: u32,
+    /// The image's first column in the frame.
+    pub origin_x: i32,
+    /// The image's first row in the frame (row 0 at the top).
+    pub origin_y: i32,
+    /// Width over height of one pixel.
+    pub pixel_aspect: f32,
+}
+
+/// Writes `image` as an EXR file whose data window is the whole frame.
 pub fn write_exr(path: &Path, image: &Image, layers: ExrLayers, metadata: &Metadata) -> Result<()> {
+    let frame = ExrFrame {
+        display_width: image.width,
+        display_height: image.height,
+        origin_x: 0,
+        origin_y: 0,
+        pixel_aspect: 1.0,
+    };
+    write_exr_framed(path, image, layers, metadata, &frame)
+}
+
+/// Writes `image` as an EXR file placed in `frame` (data window inside the display window for
+/// a crop, reaching beyond it for overscan).
+pub fn write_exr_framed(
+    path: &Path,
+    image: &Image,
+    layers: ExrLayers,
+    metadata: &Metadata,
+    frame: &ExrFrame,
+) -> Result<()> {
     let (w, h) = (image.width as usize, image.height as usize);
     let chan =
         |name: &str, f: &dyn Fn(usize) -> f32| AnyChannel::new(name, FlatSamples::F32((0..w * h).map(f).collect()));
@@ -63,8 +99,12 @@ pub fn write_exr(path: &Path, image: &Image, layers: ExrLayers, metadata: &Metad
             channels.push(chan(name, &|i| image.albedo[i][k]));
         }
     }
-    let layer = Layer::new((w, h), LayerAttributes::default(), Encoding::SMALL_LOSSLESS, AnyChannels::sort(channels));
+    let attributes = LayerAttributes { layer_position: Vec2(frame.origin_x, frame.origin_y), ..Default::default() };
+    let layer = Layer::new((w, h), attributes, Encoding::SMALL_LOSSLESS, AnyChannels::sort(channels));
     let mut img = exr::image::Image::from_layer(layer);
+    img.attributes.display_window =
+        IntegerBounds::from_dimensions((frame.display_width as usize, frame.display_height as usize));
+    img.attributes.pixel_aspect = frame.pixel_aspect;
     for (k, v) in metadata {
         img.attributes.other.insert(text(&format!("petzval/{k}")), AttributeValue::Text(text(v)));
     }
