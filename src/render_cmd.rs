@@ -688,7 +688,7 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
     };
     let outer = window.union_with_frame(width, height);
     if !window.inside(width, height) {
-        spec.sensor = spec.sensor.extended_to(width, height, &outer);
+        spec.sensor = spec.sensor.extended_to(width, height, [outer.x0, outer.y0, outer.x1, outer.y1]);
     }
     let (render_w, render_h) = (outer.width(), outer.height());
     // 4. The camera: auto picks the cheapest model within the error budget for this shot.

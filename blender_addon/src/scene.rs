@@ -6,8 +6,8 @@ use numpy::{AllowTypeChange, PyArrayLike1, PyArrayLike2, PyArrayLike3};
 use petzval_renderer::scene::environment::EnvironmentMap;
 use petzval_renderer::scene::texture::Wrap;
 use petzval_renderer::scene::{
-    AlphaMode, AngleWeight, Environment, Light, Material, MaterialMix, Mesh, MetalFresnel, SpotFalloff, Texture,
-    TextureRef, UvTransform,
+    AlphaMode, AngleWeight, Anisotropy, AnisotropyTangent, Environment, Light, Material, MaterialMix, Mesh,
+    MetalFresnel, SpotFalloff, Texture, TextureRef, UvTransform,
 };
 use pyo3::prelude::*;
 use std::sync::Arc;
@@ -176,7 +176,7 @@ impl PyScene {
     }
 
     /// Adds a glTF metallic-roughness material; returns its index.
-    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true, light_emitter = false, visible_to_camera = true, transmission = 0.0, coat_weight = 0.0, coat_roughness = 0.03, coat_ior = 1.5, coat_tint = vec![1.0, 1.0, 1.0], scatter_tint = vec![1.0, 1.0, 1.0], metal_fresnel = "f82", edge_tint = vec![1.0, 1.0, 1.0], translucent = false, mix_material = None, mix_weight = 0.0, mix_weight_texture = None, mix_weight_angle = None, uv_transforms = None, specular_tint = vec![1.0, 1.0, 1.0]))]
+    #[pyo3(signature = (name, base_color = vec![0.8, 0.8, 0.8, 1.0], metallic = 0.0, roughness = 0.5, ior = 1.5, specular = 1.0, emission = vec![0.0, 0.0, 0.0], alpha_mode = "opaque", alpha_cutoff = 0.5, base_color_texture = None, metallic_roughness_texture = None, normal_texture = None, normal_scale = 1.0, emission_texture = None, double_sided = true, light_emitter = false, visible_to_camera = true, transmission = 0.0, coat_weight = 0.0, coat_roughness = 0.03, coat_ior = 1.5, coat_tint = vec![1.0, 1.0, 1.0], scatter_tint = vec![1.0, 1.0, 1.0], metal_fresnel = "f82", edge_tint = vec![1.0, 1.0, 1.0], translucent = false, mix_material = None, mix_weight = 0.0, mix_weight_texture = None, mix_weight_angle = None, uv_transforms = None, specular_tint = vec![1.0, 1.0, 1.0], anisotropic = 0.0, anisotropic_rotation = 0.0, anisotropy_model = "principled", anisotropy_tangent = "radial_z"))]
     #[allow(clippy::too_many_arguments)]
     fn add_material(
         &mut self,
@@ -212,6 +212,10 @@ impl PyScene {
         mix_weight_angle: Option<(String, f64)>,
         uv_transforms: Option<std::collections::BTreeMap<String, Vec<Vec<f64>>>>,
         specular_tint: Vec<f64>,
+        anisotropic: f64,
+        anisotropic_rotation: f64,
+        anisotropy_model: &str,
+        anisotropy_tangent: &str,
     ) -> PyResult<usize> {
         guard(|| {
             let bc = match base_color.as_slice() {
@@ -255,6 +259,42 @@ impl PyScene {
                         name,
                         "metal_fresnel",
                         format!("expected \"f82\" or \"constant\", got {other:?}"),
+                    ))
+                }
+            };
+            // anisotropy: Principled Anisotropic in [0, 1] or a Glossy BSDF's in [-1, 1]
+            if !(anisotropic.is_finite() && (-1.0..=1.0).contains(&anisotropic)) {
+                return Err(scene_err(name, "anisotropic", format!("{anisotropic} is outside [-1, 1]")));
+            }
+            if !anisotropic_rotation.is_finite() {
+                return Err(scene_err(
+                    name,
+                    "anisotropic_rotation",
+                    format!("must be finite, got {anisotropic_rotation}"),
+                ));
+            }
+            let tangent = match anisotropy_tangent {
+                "radial_x" => AnisotropyTangent::Radial(0),
+                "radial_y" => AnisotropyTangent::Radial(1),
+                "radial_z" => AnisotropyTangent::Radial(2),
+                "uv_map" => AnisotropyTangent::UvMap,
+                other => {
+                    return Err(scene_err(
+                        name,
+                        "anisotropy_tangent",
+                        format!("expected \"radial_x\", \"radial_y\", \"radial_z\" or \"uv_map\", got {other:?}"),
+                    ))
+                }
+            };
+            let (a, rot) = (anisotropic as f32, anisotropic_rotation as f32);
+            let anisotropy = match anisotropy_model {
+                "principled" if anisotropic >= 0.0 => Anisotropy::principled(a, rot, tangent),
+                "glossy" => Anisotropy::glossy(a, rot, tangent),
+                other => {
+                    return Err(scene_err(
+                        name,
+                        "anisotropy_model",
+                        format!("expected \"principled\" (anisotropic in [0, 1]) or \"glossy\", got {other:?} with anisotropic {anisotropic}"),
                     ))
                 }
             };
@@ -333,6 +373,7 @@ impl PyScene {
                 specular_tint: non_negative_rgb(name, "specular_tint", &specular_tint)?,
                 translucent,
                 mix,
+                anisotropy,
             };
             let mut m = m;
             for (field, rows) in uv_transforms.unwrap_or_default() {

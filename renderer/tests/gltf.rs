@@ -496,6 +496,45 @@ fn gltf_specular_level_and_tint() {
     assert!(!w.contains("KHR_materials_specular is not supported"), "{w}");
 }
 
+/// `KHR_materials_anisotropy`: the spec's lobe (α_t = mix(α, 1, s²), along the UV tangent, the
+/// rotation in radians) in files other writers made; in files Blender wrote, Blender's Principled
+/// Anisotropic on Cycles' default radial tangent (about the mesh's +Y, Blender's Z), as Blender's
+/// importer reads the extension back. A texture is named in a warning; a strength of 0 is
+/// isotropic; a malformed extension is a warning and isotropic.
+#[test]
+fn gltf_anisotropy_by_writer() {
+    use petzval_renderer::scene::{AnisotropyKind, AnisotropyTangent};
+    let doc = |generator: &str| {
+        format!(
+            r#"{{"asset": {{"version": "2.0", "generator": "{generator}"}}, "extensionsUsed": ["KHR_materials_anisotropy"],
+        "materials": [
+            {{"name": "Brushed", "extensions": {{"KHR_materials_anisotropy": {{"anisotropyStrength": 0.6, "anisotropyRotation": 1.5707964}}}}}},
+            {{"name": "Textured", "extensions": {{"KHR_materials_anisotropy": {{"anisotropyStrength": 0.3, "anisotropyTexture": {{"index": 0}}}}}}}},
+            {{"name": "Zero", "extensions": {{"KHR_materials_anisotropy": {{"anisotropyStrength": 0.0}}}}}},
+            {{"name": "Bad", "extensions": {{"KHR_materials_anisotropy": {{"anisotropyStrength": "x"}}}}}},
+            {{"name": "Plain"}}],
+        "textures": [{{"source": 0}}], "images": [{{"uri": "missing.png"}}],
+        "scenes": [{{"nodes": []}}]}}"#
+        )
+    };
+    let other = load_gltf_slice(doc("three.js").as_bytes(), None, "aniso.gltf").unwrap();
+    let a = other.materials[0].anisotropy.expect("anisotropic");
+    assert_eq!((a.kind, a.tangent), (AnisotropyKind::Khr(0.6), AnisotropyTangent::UvMap));
+    assert!((a.rotation_turns - 0.25).abs() < 1e-6, "{a:?}");
+    assert!(other.materials[1].anisotropy.is_some());
+    assert!(other.materials[2].anisotropy.is_none() && other.materials[3].anisotropy.is_none());
+    assert!(other.materials[4].anisotropy.is_none());
+    let w = other.warnings.join("\n");
+    assert!(w.contains("anisotropyTexture") && w.contains("KHR_materials_anisotropy:"), "{w}");
+    assert!(!w.contains("KHR_materials_anisotropy is not supported"), "{w}");
+    let blender = load_gltf_slice(doc("Khronos glTF Blender I/O v5.0.21").as_bytes(), None, "aniso.gltf").unwrap();
+    let b = blender.materials[0].anisotropy.expect("anisotropic");
+    let aspect = (1.0f32 - 0.6 * 0.9).sqrt();
+    assert_eq!(b.kind, AnisotropyKind::Scale(glam::Vec2::new(1.0 / aspect, aspect)));
+    assert_eq!(b.tangent, AnisotropyTangent::Radial(1));
+    assert!((b.rotation_turns - 0.25).abs() < 1e-6, "{b:?}");
+}
+
 /// `COLOR_0` as normalized bytes (VEC4) and as floats (VEC3, clamped to [0, 1], alpha 1), and a
 /// primitive without it (white), merged into one mesh.
 #[test]

@@ -8,9 +8,8 @@ test_cycles_match.py), and each sphere's mean over the middle of its disc within
 standard errors. The sharpest coat is 0.15: at 0.05 the point light's highlight is smaller than
 a pixel, so few camera samples find it and its estimate at 128 spp is heavy-tailed (seeds of
 the same renderer differ by up to 8× in its energy); the add-on's suite compares a coat of 0.05
-lit by an environment texture. The spheres are dielectrics: rough metals differ from Cycles' in their lobe's shape
-by design (test_metals_cycles.py; this scene with a gold sphere and no coat at all: mean z² 22),
-and a coated metal is compared in tests/blender_addon (variant "coat"). Before
+lit by an environment texture. The spheres are dielectrics; a coated metal is compared in
+tests/blender_addon (variant "coat"). Before
 session 26 the coat was read as an unsupported extension and ignored; docs/cycles-comparison.md,
 "Clear coat", has the numbers.
 """

@@ -251,6 +251,55 @@ def _principled_lambert(name, base):
     return mat
 
 
+def _anisotropic_sphere(mat, small: bool) -> None:
+    """The "aniso" variant's spheres: a brushed gold metal (Anisotropic 0.8, Rotation 0.1, the
+    Tangent input unlinked: Cycles' default radial tangent about the object's Z axis) and a
+    blue dielectric (Anisotropic 0.6, Specular IOR Level 0.8) whose tangent is a Tangent node's
+    radial X."""
+    p = mat.node_tree.nodes.get("Principled BSDF")
+    if small:
+        p.inputs["Base Color"].default_value = (1.0, 0.78, 0.34, 1.0)
+        p.inputs["Metallic"].default_value = 1.0
+        p.inputs["Roughness"].default_value = 0.3
+        p.inputs["Anisotropic"].default_value = 0.8
+        p.inputs["Anisotropic Rotation"].default_value = 0.1
+    else:
+        p.inputs["Base Color"].default_value = (0.1, 0.25, 0.6, 1.0)
+        p.inputs["Roughness"].default_value = 0.25
+        p.inputs["Specular IOR Level"].default_value = 0.8
+        p.inputs["Anisotropic"].default_value = 0.6
+        t = mat.node_tree.nodes.new("ShaderNodeTangent")
+        t.direction_type = "RADIAL"
+        t.axis = "X"
+        mat.node_tree.links.new(t.outputs["Tangent"], p.inputs["Tangent"])
+
+
+def _add_anisotropic_objects(b) -> None:
+    """The "aniso" variant's cylinder with a Glossy BSDF (Anisotropy -0.6, along its UV map's
+    tangent through a Tangent node; shaded smooth by angle) and a small sun whose highlights the
+    lobes stretch."""
+    b.ops.mesh.primitive_cylinder_add(vertices=48, radius=0.3, depth=0.9, location=(1.5, 1.2, 0.45))
+    b.ops.object.shade_smooth_by_angle()  # smooth side, flat cap (a fully smooth cap rim: see docs)
+
+    def glossy(nt):
+        g = nt.nodes.new("ShaderNodeBsdfGlossy")
+        g.inputs["Color"].default_value = (0.9, 0.9, 0.92, 1.0)
+        g.inputs["Roughness"].default_value = 0.35
+        g.inputs["Anisotropy"].default_value = -0.6
+        t = nt.nodes.new("ShaderNodeTangent")
+        t.direction_type = "UV_MAP"
+        nt.links.new(t.outputs["Tangent"], g.inputs["Tangent"])
+        return g
+
+    b.context.active_object.data.materials.append(_node_material("BrushedCylinder", glossy))
+    sun = b.data.lights.new("AnisoSun", "SUN")
+    sun.energy = 3.0
+    sun.angle = math.radians(2.0)
+    obj = b.data.objects.new("AnisoSun", sun)
+    b.context.scene.collection.objects.link(obj)
+    obj.rotation_euler = (math.radians(35.0), 0.0, math.radians(30.0))
+
+
 def _node_material(name, build):
     """A material whose Surface is the shader `build(node_tree)` returns (the default
     Principled BSDF removed)."""
@@ -564,7 +613,9 @@ def build_lights_scene(variant: str):
         world.use_nodes = True
     nt = world.node_tree
     bg = nt.nodes.get("Background")
-    bg.inputs["Strength"].default_value = 0.5 if variant in ("world", "glass", "coat", "paint", "shaders") else 0.0
+    bg.inputs["Strength"].default_value = (
+        0.5 if variant in ("world", "glass", "coat", "paint", "shaders", "aniso") else 0.0
+    )
     env = nt.nodes.new("ShaderNodeTexEnvironment")
     env.image = _environment_image()
     mapping = nt.nodes.new("ShaderNodeMapping")
@@ -577,7 +628,7 @@ def build_lights_scene(variant: str):
 
     b.ops.mesh.primitive_plane_add(size=8.0, location=(0.0, 2.0, 0.0))
     ground = _principled_lambert("Ground", (0.5, 0.5, 0.5))
-    if variant in ("texture", "glass", "ortho", "coat", "paint", "shaders"):
+    if variant in ("texture", "glass", "ortho", "coat", "paint", "shaders", "aniso"):
         # the ground's colour from a coarse 8-bit checker with Linear interpolation
         tex = ground.node_tree.nodes.new("ShaderNodeTexImage")
         tex.image = _checker_image()
@@ -627,9 +678,13 @@ def build_lights_scene(variant: str):
                 p.inputs["Specular IOR Level"].default_value = 0.75
         if variant == "paint":
             _paint_sphere(b, b.context.active_object, mat, small=r < 0.4)
+        if variant == "aniso":
+            _anisotropic_sphere(mat, small=r < 0.4)
         b.context.active_object.data.materials.append(mat)
     if variant == "shaders":
         _add_shader_objects(b)
+    if variant == "aniso":
+        _add_anisotropic_objects(b)
 
     lights = (("Rect", "RECTANGLE", 1.0, 0.5, (0.8, 1.0, 2.6), 300.0, (1.0, 0.85, 0.7)),
               ("Disc", "DISK", 0.6, 0.6, (-1.2, 2.5, 2.4), 150.0, (0.7, 0.8, 1.0)))

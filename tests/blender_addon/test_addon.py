@@ -287,7 +287,21 @@ SPP_LIGHTS = 128
 
 @pytest.mark.parametrize(
     "variant",
-    ["area", "world", "spots", "soft", "texture", "hidden", "terminator", "glass", "coat", "paint", "shaders", "ortho"],
+    [
+        "area",
+        "world",
+        "spots",
+        "soft",
+        "texture",
+        "hidden",
+        "terminator",
+        "glass",
+        "coat",
+        "paint",
+        "shaders",
+        "aniso",
+        "ortho",
+    ],
 )
 def test_area_lights_and_environment_match_cycles(addon, report, variant):
     """What tests/blender's glTF scene cannot carry, against Cycles (8x8 block z-test and image
@@ -310,7 +324,9 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
     (the viewport display colour was used); "shaders": a tinted Glass BSDF, a Mix Shader of a Diffuse
     and a Glossy BSDF, a Metallic BSDF, a Diffuse mixed with a Transparent BSDF and an Emission
     added to a Diffuse (all but the Principled, Diffuse and Emission shaders were rendered with the
-    viewport display colour); "ortho": the
+    viewport display colour); "aniso": anisotropic lobes, a brushed metal sphere on Cycles' default
+    radial tangent, a dielectric one on a Tangent node's radial X and a Glossy BSDF cylinder on its
+    UV map's tangent (anisotropy was ignored: round highlights); "ortho": the
     "texture" scene through an orthographic camera (VERTICAL fit, shifted, Cycles' depth of field;
     it was refused)."""
     H.build_lights_scene(variant)
@@ -337,6 +353,7 @@ def test_area_lights_and_environment_match_cycles(addon, report, variant):
         "over a checker",
         "paint": "spheres coloured by colour attributes (Color Attribute node, Attribute node) over a checker",
         "shaders": "Glass, Glossy, Metallic and Transparent BSDFs through Mix and Add Shaders over a checker",
+        "aniso": "anisotropic metal, dielectric and Glossy BSDF (radial Z, radial X and UV-map tangents) under a sun",
         "ortho": "an orthographic camera (scale 3 m, VERTICAL fit, shifted, f/4 at 2.5 m) over a sun-lit checker",
     }[variant]
     report.line(f"{what} vs Cycles, {w}x{h} {SPP_LIGHTS} spp x seeds {SEEDS} ({secs:.1f} s per F12)")

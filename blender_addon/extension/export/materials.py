@@ -395,9 +395,7 @@ class Materials:
             kw["metal_fresnel"] = "constant"
             self._roughness_into(mat, node, kw, 1.0)
             self._normal(mat, node, kw)
-            v = value(node, "Anisotropy", 0.0)
-            if (isinstance(v, float) and v != 0.0) or t == "BSDF_ANISOTROPIC":
-                self.notes.warn(f"material '{name}': Anisotropy")
+            self._anisotropy(mat, node, kw, "glossy", "Anisotropy", "Rotation")
             mix.bsdfs.append((weight, kw))
             return None
         if t == "BSDF_TRANSLUCENT":
@@ -471,9 +469,8 @@ class Materials:
             if source(node.inputs.get("Edge Tint")) is not None:
                 self.notes.warn(f"material '{mat.name}': Edge Tint from a node (its unlinked value used)")
         self._roughness_into(mat, node, kw, 1.0)
-        v = value(node, "Anisotropy", 0.0)
-        if isinstance(v, float) and v != 0.0:
-            self.notes.warn(f"material '{mat.name}': Anisotropy")
+        # the Metallic BSDF's anisotropy is the Principled BSDF's (Cycles' aspect √(1 − 0.9 A))
+        self._anisotropy(mat, node, kw, "principled", "Anisotropy", "Rotation")
         self._normal(mat, node, kw)
         return kw
 
@@ -737,17 +734,53 @@ class Materials:
         if coat > 0.0 and source(node.inputs.get("Coat Normal")) is not None:
             self.notes.warn(f"material '{name}': Coat Normal (the coat uses the surface's normal)")
 
+        self._anisotropy(mat, node, kw, "principled", "Anisotropic", "Anisotropic Rotation")
+
         # lobes glTF/Petzval's BSDF does not have
         for label, inp in (
             ("Sheen", "Sheen Weight"),
             ("Subsurface", "Subsurface Weight"),
-            ("Anisotropy", "Anisotropic"),
             ("Thin film", "Thin Film Thickness"),
         ):
             v = value(node, inp, 0.0)
             if (isinstance(v, float) and v > 0.0) or source(node.inputs.get(inp)) is not None:
                 self.notes.warn(f"material '{name}': {label}")
         return kw
+
+    def _anisotropy(self, mat, node, kw: dict, model: str, amount: str, rotation: str) -> None:
+        """Anisotropic specular lobes (Cycles' set-up, `model` "principled" or "glossy"): the
+        unlinked Anisotropy and Rotation values, and the tangent: unlinked, Cycles' default (the
+        radial tangent about the object's Z axis, from its generated coordinates); a Tangent node,
+        radial about its axis or along the UV map (the active render one; a named map is listed).
+        Anything else on these inputs is listed and its unlinked value used."""
+        name = mat.name
+        a = value(node, amount, 0.0)
+        a = float(a) if isinstance(a, (int, float)) else 0.0
+        for inp in (amount, rotation):
+            if source(node.inputs.get(inp)) is not None:
+                self.notes.warn(f"material '{name}': {inp} from a node (its unlinked value used)")
+        if a == 0.0:
+            return
+        lo = 0.0 if model == "principled" else -1.0
+        kw["anisotropic"] = min(max(a, lo), 1.0)
+        r = value(node, rotation, 0.0)
+        kw["anisotropic_rotation"] = float(r) if isinstance(r, (int, float)) else 0.0
+        kw["anisotropy_model"] = model
+        tangent = "radial_z"
+        tsrc = source(node.inputs.get("Tangent"))
+        if tsrc is not None:
+            tn = tsrc[0]
+            if tn.type == "TANGENT" and tn.direction_type == "RADIAL":
+                tangent = "radial_" + tn.axis.lower()
+            elif tn.type == "TANGENT" and tn.direction_type == "UV_MAP":
+                tangent = "uv_map"
+                if tn.uv_map:
+                    self.notes.warn(
+                        f"material '{name}': Tangent along UV map '{tn.uv_map}' (the active render UV map used)"
+                    )
+            else:
+                self.notes.warn(f"material '{name}': Tangent from a {tn.type} node (the default radial tangent used)")
+        kw["anisotropy_tangent"] = tangent
 
     def _normal(self, mat, node, kw: dict) -> None:
         """A tangent-space Normal Map node with an Image Texture on the shader's Normal input

@@ -91,17 +91,17 @@ impl Sensor {
         DVec2::new((sx - self.shift_mm.x) / self.width_mm + 0.5, 0.5 - (sy - self.shift_mm.y) / self.height_mm)
     }
 
-    /// The sensor of the `frame` × pixel grid that continues this sensor's `width` × `height`
-    /// one to the pixel rectangle `outer` (which holds the frame: overscan): each pixel of the
-    /// frame keeps its place on the film, the grid's pitch is unchanged, and the tilt still
-    /// pivots where the optical axis meets the sensor.
-    pub fn extended_to(&self, width: u32, height: u32, outer: &crate::film::PixelWindow) -> Sensor {
+    /// The sensor of the pixel grid that continues this sensor's `width` × `height` one to the
+    /// pixel rectangle `[x0, y0, x1, y1)` (frame pixels, row 0 at the top; it holds the frame:
+    /// overscan): each pixel of the frame keeps its place on the film, the grid's pitch is
+    /// unchanged, and the tilt still pivots where the optical axis meets the sensor.
+    pub fn extended_to(&self, width: u32, height: u32, [x0, y0, x1, y1]: [i64; 4]) -> Sensor {
         let (pitch_x, pitch_y) = (self.width_mm / width as f64, self.height_mm / height as f64);
         // 1. The same pitch over the larger grid.
-        let (w2, h2) = (outer.width() as f64, outer.height() as f64);
+        let (w2, h2) = ((x1 - x0) as f64, (y1 - y0) as f64);
         // 2. The grid's centre moves by its offset from the frame's centre (+y frames the top).
-        let dx_px = 0.5 * (outer.x0 + outer.x1) as f64 - 0.5 * width as f64;
-        let dy_px = 0.5 * (outer.y0 + outer.y1) as f64 - 0.5 * height as f64;
+        let dx_px = 0.5 * (x0 + x1) as f64 - 0.5 * width as f64;
+        let dy_px = 0.5 * (y0 + y1) as f64 - 0.5 * height as f64;
         Sensor {
             width_mm: pitch_x * w2,
             height_mm: pitch_y * h2,
@@ -173,7 +173,6 @@ impl PreparedSensor {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::film::PixelWindow;
 
     /// Every pixel of the frame lands on the same film point (within 10⁻¹² mm) on the sensor
     /// extended for overscan, tilted and shifted or not, whichever side the overscan grows.
@@ -189,21 +188,15 @@ mod tests {
                 tilt_y_deg: -5.0,
             },
         ];
-        let windows = [
-            PixelWindow { x0: -10, y0: 0, x1: 40, y1: 20 },
-            PixelWindow { x0: 0, y0: -7, x1: 55, y1: 31 },
-            PixelWindow { x0: -3, y0: -3, x1: 43, y1: 23 },
-        ];
+        let windows: [[i64; 4]; 3] = [[-10, 0, 40, 20], [0, -7, 55, 31], [-3, -3, 43, 23]];
         for s in sensors {
             for outer in windows {
                 let (w, h) = (40u32, 20u32);
-                let e = s.extended_to(w, h, &outer);
+                let e = s.extended_to(w, h, outer);
+                let [x0, y0, x1, y1] = outer.map(|v| v as f64);
                 for (i, j) in [(0.0, 0.0), (39.5, 19.5), (12.25, 7.75), (40.0, 20.0)] {
                     let film = DVec2::new(i / w as f64, j / h as f64);
-                    let film_e = DVec2::new(
-                        (i - outer.x0 as f64) / outer.width() as f64,
-                        (j - outer.y0 as f64) / outer.height() as f64,
-                    );
+                    let film_e = DVec2::new((i - x0) / (x1 - x0), (j - y0) / (y1 - y0));
                     let (a, b) = (s.film_point(film, 50.0), e.film_point(film_e, 50.0));
                     assert!((a - b).length() < 1e-12, "{s:?} {outer:?} ({i}, {j}): {a} vs {b}");
                 }

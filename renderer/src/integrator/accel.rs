@@ -61,7 +61,7 @@ use super::lights::{EmitterGroup, LightSet};
 use super::packet::{self, PACKET};
 use super::traverse;
 use crate::sampler::hash_u32;
-use crate::scene::{cofactor, AlphaMode, Material, Mesh, Scene, TextureRef};
+use crate::scene::{cofactor, AlphaMode, AnisotropyTangent, Material, Mesh, Scene, TextureRef};
 use crate::Result;
 
 /// BVH build quality (obvhs presets; all PLOC + reinsertion, no spatial splits).
@@ -623,6 +623,9 @@ pub struct RenderScene {
     mesh_info: Vec<MeshInfo>,
     /// Per mesh: a baked mesh's world-space attributes, where its instance transforms it.
     world_attributes: Vec<Option<WorldAttributes>>,
+    /// Per mesh, where some material is anisotropic: its texture space (centre, extents) for
+    /// radial tangents; empty otherwise.
+    texspaces: Vec<(Vec3, Vec3)>,
     pub(crate) alpha_tests: Vec<AlphaTest>,
     /// Per material: its clear coat, built once.
     coats: Vec<Option<Coat>>,
@@ -772,10 +775,12 @@ impl RenderScene {
             .materials
             .iter()
             .map(|m| {
-                (m.metallic == 0.0 && m.metallic_roughness_texture.is_none())
+                (m.metallic == 0.0 && m.metallic_roughness_texture.is_none() && m.anisotropy.is_none())
                     .then(|| Bsdf::new(Vec3::ZERO, m.metallic, m.roughness, m.specular, m.ior))
             })
             .collect();
+        let texspaces =
+            if scene.materials.iter().any(|m| m.anisotropy.is_some()) { texture_spaces(&scene.meshes) } else { vec![] };
         let alpha_flag = |mesh: &Mesh, t: u32| {
             if alpha_tests[mesh.material_ids[t as usize] as usize] != AlphaTest::None {
                 ALPHA_BIT
@@ -1023,6 +1028,7 @@ impl RenderScene {
             xforms,
             mesh_info,
             world_attributes,
+            texspaces,
             alpha_tests,
             any_stochastic,
             any_hidden_from_camera,
@@ -1483,6 +1489,67 @@ impl RenderScene {
         })
     }
 
+    /// The tangent an anisotropic material `a` takes at `hit` (world space, unit): its source
+    /// ([`AnisotropyTangent`]) made perpendicular to the hit's smooth shading normal, as Cycles'
+    /// Tangent node makes it (`cross(N, normalize(cross(T, N)))`), then turned about `n` (the
+    /// normal the lobes use) by the rotation. None where it is undefined (on the radial axis,
+    /// no UVs): the lobes then keep an arbitrary frame.
+    pub fn anisotropy_tangent(&self, hit: &SurfaceHit, a: &crate::scene::Anisotropy, n: Vec3) -> Option<Vec3> {
+        let (inst, tri) = (hit.instance, hit.triangle);
+        let (mesh, info) = self.mesh_of(inst);
+        let idx = mesh.indices[tri as usize].map(|i| i as usize);
+        let (b1, b2) = (hit.barycentrics.x, hit.barycentrics.y);
+        let b = [1.0 - b1 - b2, b1, b2];
+        let xf = &self.xforms[inst as usize];
+        // 1. The source, in world space.
+        let t = match a.tangent {
+            AnisotropyTangent::Radial(axis) => {
+                let (centre, extent) = *self.texspaces.get(self.scene.instances[inst as usize].mesh as usize)?;
+                let p = mesh.positions[idx[0]] * b[0] + mesh.positions[idx[1]] * b[1] + mesh.positions[idx[2]] * b[2];
+                let g = (p - centre) / extent;
+                let t_obj = match axis {
+                    0 => Vec3::new(0.0, -g.z, g.y),
+                    1 => Vec3::new(-g.z, 0.0, g.x),
+                    _ => Vec3::new(-g.y, g.x, 0.0),
+                };
+                if xf.identity {
+                    t_obj
+                } else {
+                    xf.normal * t_obj
+                }
+            }
+            AnisotropyTangent::UvMap => {
+                let uvs = info.has_uv0.then(|| idx.map(|i| mesh.uv0[i]));
+                let tangents = info.has_tangents.then(|| {
+                    idx.map(|i| {
+                        let t = mesh.tangents[i];
+                        if xf.identity || t == Vec4::ZERO {
+                            t
+                        } else {
+                            (xf.object_to_world.matrix3 * glam::Vec3A::from(t.truncate())).extend(t.w)
+                        }
+                    })
+                });
+                let p = self.world_triangle(inst, tri);
+                let (t, _) = tangent_frame(p, tangents, uvs, b, hit.shading_normal);
+                t
+            }
+        };
+        // 2. Perpendicular to the smooth normal, then turned about the lobes' normal.
+        let ns = hit.shading_normal;
+        let t = ns.cross(t.cross(ns).normalize_or_zero());
+        if t == Vec3::ZERO || !t.is_finite() {
+            return None;
+        }
+        let t = if a.rotation_turns != 0.0 {
+            let (sin, cos) = (a.rotation_turns * std::f32::consts::TAU).sin_cos();
+            t * cos + n.cross(t) * sin + n * (n.dot(t) * (1.0 - cos))
+        } else {
+            t
+        };
+        Some(t)
+    }
+
     /// The hit's smooth normal: its vertex normals interpolated (world space, on the geometric
     /// normal's side), before any normal map; the geometric normal where the mesh has none.
     /// Cycles' bump shadowing term compares a normal-mapped normal with it.
@@ -1743,6 +1810,24 @@ fn world_triangle(
 /// (glTF: bitangent = n × t · w), else the triangle's UV derivatives (glTF's v axis points
 /// down the image, so the bitangent is −∂p/∂v), else an arbitrary frame. Positions and
 /// tangents in world space.
+/// Each mesh's texture space as Blender computes it automatically (`BKE_mesh_texspace_calc`):
+/// the centre of its bounding box and its extents, a zero extent counting as 2 (half-size 1)
+/// and a tiny one as 2·10⁻⁵.
+fn texture_spaces(meshes: &[Mesh]) -> Vec<(Vec3, Vec3)> {
+    meshes
+        .iter()
+        .map(|m| {
+            let inf = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+            let (lo, hi) = m.positions.iter().fold(inf, |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+            if !(lo.is_finite() && hi.is_finite()) {
+                return (Vec3::ZERO, Vec3::splat(2.0));
+            }
+            let half = ((hi - lo) * 0.5).to_array().map(|h| if h == 0.0 { 1.0 } else { h.max(1e-5) });
+            ((lo + hi) * 0.5, Vec3::from_array(half) * 2.0)
+        })
+        .collect()
+}
+
 fn tangent_frame(
     p: [Vec3; 3],
     tangents: Option<[Vec4; 3]>,

@@ -208,14 +208,20 @@ fn material_bsdf_of<'s>(scene: &'s RenderScene, hit: &SurfaceHit, id: u32) -> (B
     let mut bsdf = match scene.bsdf_template(id) {
         // 1. Metallic 0, no texture for it: the material's BSDF, built once, with this base.
         Some(template) => template.with_base(base),
-        // 2. Otherwise built here.
+        // 2. Otherwise built here (anisotropic: its albedo tables at (α_x·α_y)^¼).
         None => {
             let (mut metallic, mut roughness) = (mat.metallic, mat.roughness);
             if let Some(mr) = scene.texture(mat.metallic_roughness_texture, hit.uv0, hit.uv1) {
                 metallic *= mr.z;
                 roughness *= mr.y;
             }
-            let bsdf = Bsdf::new(base, metallic, roughness, mat.specular, mat.ior);
+            let bsdf = match &mat.anisotropy {
+                None => Bsdf::new(base, metallic, roughness, mat.specular, mat.ior),
+                Some(a) => {
+                    let (alphas, table_roughness) = Bsdf::anisotropic_alphas(roughness, a.kind);
+                    Bsdf::new(base, metallic, table_roughness, mat.specular, mat.ior).with_anisotropic_alphas(alphas)
+                }
+            };
             if metallic > 0.0 && !mat.metal_fresnel.is_schlick() {
                 bsdf.with_metal_fresnel(&mat.metal_fresnel)
             } else {
@@ -440,20 +446,29 @@ impl PathTracer {
             // normal (`bump_shadowing`), and on smooth-shaded meshes, near whose low-poly
             // silhouettes the lobes would otherwise reflect into the surface (their diffuse lobe
             // keeps the shading normal: it is its own smooth normal).
+            // Anisotropic lobes take the material's tangent about the lobes' normal.
+            let aniso =
+                if bsdf.is_anisotropic() { scene.scene().materials[scatter_id as usize].anisotropy } else { None };
+            let place = |shading: Vec3| {
+                let sb = SurfaceBsdf::new(bsdf, hit.geometric_normal, shading, wo_s);
+                match aniso.as_ref().and_then(|a| scene.anisotropy_tangent(&hit, a, sb.n)) {
+                    Some(t) => sb.with_tangent(t),
+                    None => sb,
+                }
+            };
             let sb = if bumped || (bsdf.has_specular() && hit.shading_normal != hit.geometric_normal) {
                 let ng = hit.geometric_normal_toward(wo_s);
                 let n = if hit.shading_normal.dot(ng) >= 0.0 { hit.shading_normal } else { -hit.shading_normal };
                 let corrected = ensure_valid_specular_reflection(ng, wo_s, n);
                 if bumped {
-                    SurfaceBsdf::new(bsdf, hit.geometric_normal, corrected, wo_s)
-                        .with_normal_map(scene.smooth_normal(&hit), n)
+                    place(corrected).with_normal_map(scene.smooth_normal(&hit), n)
                 } else if corrected == n {
-                    SurfaceBsdf::new(bsdf, hit.geometric_normal, hit.shading_normal, wo_s)
+                    place(hit.shading_normal)
                 } else {
-                    SurfaceBsdf::new(bsdf, hit.geometric_normal, corrected, wo_s).with_normal_map(n, n)
+                    place(corrected).with_normal_map(n, n)
                 }
             } else {
-                SurfaceBsdf::new(bsdf, hit.geometric_normal, hit.shading_normal, wo_s)
+                place(hit.shading_normal)
             };
 
             // Next-event estimation (lights chosen by the shading normal, as Cycles does, from

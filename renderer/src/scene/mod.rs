@@ -167,6 +167,9 @@ pub struct Material {
     /// the two). Emission, alpha and the shading normal stay this material's. None for glTF
     /// and USD.
     pub mix: Option<MaterialMix>,
+    /// Anisotropic specular lobes (Blender's Principled Anisotropic, a Glossy BSDF's
+    /// Anisotropy); None: isotropic.
+    pub anisotropy: Option<Anisotropy>,
 }
 
 /// A metal's Fresnel reflectance against the angle of incidence: see [`Material::metal_fresnel`].
@@ -262,8 +265,91 @@ impl Default for Material {
             specular_tint: Vec3::ONE,
             translucent: false,
             mix: None,
+            anisotropy: None,
         }
     }
+}
+
+/// Anisotropic specular lobes: how α = roughness² becomes (α_x along the tangent, α_y across),
+/// and the tangent, turned about the shading normal.
+///
+/// | name | type | unit | default |
+/// |---|---|---|---|
+/// | `kind` | [`AnisotropyKind`]: Cycles' scaled α, or `KHR_materials_anisotropy`'s | — | — |
+/// | `rotation_turns` | tangent turned about the normal (right-handed) | turns | 0 |
+/// | `tangent` | [`AnisotropyTangent`] | — | radial about the object's local Z (Blender's unlinked Tangent input) |
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Anisotropy {
+    /// How α splits into α_x and α_y.
+    pub kind: AnisotropyKind,
+    /// The tangent's rotation about the shading normal, in turns (Blender's Anisotropic Rotation,
+    /// glTF's anisotropyRotation / 2π).
+    pub rotation_turns: f32,
+    /// Where the tangent comes from.
+    pub tangent: AnisotropyTangent,
+}
+
+/// How an anisotropic material's α = roughness² becomes (α_x, α_y).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum AnisotropyKind {
+    /// Cycles: α scaled by x along the tangent and y across, each side saturated at 1
+    /// (Principled Anisotropic A: (1/a, a), a = √(1 − 0.9·A); Glossy BSDF Anisotropy A ≥ 0:
+    /// (1 − A, 1/(1 − A)), A < 0: (1/(1 + A), 1 + A)).
+    Scale(glam::Vec2),
+    /// `KHR_materials_anisotropy`: α_t = mix(α, 1, strength²) along the tangent, α across.
+    Khr(f32),
+}
+
+impl Anisotropy {
+    /// Blender's Principled BSDF Anisotropic `a` (clamped to [0, 1]) and Anisotropic Rotation
+    /// (turns), with the tangent `tangent`; None where `a` is 0.
+    pub fn principled(a: f32, rotation_turns: f32, tangent: AnisotropyTangent) -> Option<Self> {
+        let a = if a.is_finite() { a.clamp(0.0, 1.0) } else { 0.0 };
+        if a <= 0.0 {
+            return None;
+        }
+        let aspect = (1.0 - a * 0.9).sqrt();
+        let rotation_turns = if rotation_turns.is_finite() { rotation_turns } else { 0.0 };
+        let kind = AnisotropyKind::Scale(glam::Vec2::new(1.0 / aspect, aspect));
+        Some(Anisotropy { kind, rotation_turns, tangent })
+    }
+
+    /// Blender's Glossy BSDF Anisotropy `a` (clamped to ±0.99) and Rotation (turns); None
+    /// where |a| ≤ 10⁻⁴ (Cycles' isotropic case).
+    pub fn glossy(a: f32, rotation_turns: f32, tangent: AnisotropyTangent) -> Option<Self> {
+        let a = if a.is_finite() { a.clamp(-0.99, 0.99) } else { 0.0 };
+        if a.abs() <= 1e-4 {
+            return None;
+        }
+        let scale =
+            if a < 0.0 { glam::Vec2::new(1.0 / (1.0 + a), 1.0 + a) } else { glam::Vec2::new(1.0 - a, 1.0 / (1.0 - a)) };
+        let rotation_turns = if rotation_turns.is_finite() { rotation_turns } else { 0.0 };
+        Some(Anisotropy { kind: AnisotropyKind::Scale(scale), rotation_turns, tangent })
+    }
+
+    /// `KHR_materials_anisotropy`'s anisotropyStrength (clamped to [0, 1]) and
+    /// anisotropyRotation (radians) along the UV map's tangent; None where the strength is 0.
+    pub fn khr(strength: f32, rotation_rad: f32) -> Option<Self> {
+        let s = if strength.is_finite() { strength.clamp(0.0, 1.0) } else { 0.0 };
+        if s <= 0.0 {
+            return None;
+        }
+        let rotation_turns = if rotation_rad.is_finite() { rotation_rad / std::f32::consts::TAU } else { 0.0 };
+        Some(Anisotropy { kind: AnisotropyKind::Khr(s), rotation_turns, tangent: AnisotropyTangent::UvMap })
+    }
+}
+
+/// Where an anisotropic material's tangent comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AnisotropyTangent {
+    /// Blender's radial tangent about the object's local X (0), Y (1) or Z (2) axis through
+    /// the centre of its texture space (the mesh's bounding box): for Z, (−(y − c_y)/e_y,
+    /// (x − c_x)/e_x, 0) with c the centre and e the extents (Cycles' Tangent node, radial;
+    /// Blender's default for a Principled BSDF's unlinked Tangent input).
+    Radial(u8),
+    /// Along +u of the UV map (the mesh's tangents where it has them, else derived from its
+    /// UVs; Cycles' Tangent node with a UV map).
+    UvMap,
 }
 
 impl Material {

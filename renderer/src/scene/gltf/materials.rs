@@ -2,7 +2,7 @@
 
 use super::{named, Loader, TexKind};
 use crate::scene::texture::{srgb_to_linear, Wrap};
-use crate::scene::{AlphaMode, Material, Texture, TextureRef, UvTransform};
+use crate::scene::{AlphaMode, Anisotropy, AnisotropyTangent, Material, Texture, TextureRef, UvTransform};
 use glam::{Vec2, Vec3, Vec4};
 use std::sync::Arc;
 
@@ -221,6 +221,7 @@ impl Loader<'_> {
                 None => 0.0,
             };
             let (coat, coat_roughness) = self.clearcoat(&loc, m.extension_value("KHR_materials_clearcoat"));
+            let anisotropy = self.anisotropy(&loc, m.extension_value("KHR_materials_anisotropy"));
             let alpha_mode = match m.alpha_mode() {
                 gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
                 gltf::material::AlphaMode::Mask => {
@@ -258,6 +259,7 @@ impl Loader<'_> {
                 specular_tint,
                 translucent: false,
                 mix: None,
+                anisotropy,
             });
         }
     }
@@ -285,6 +287,37 @@ impl Loader<'_> {
         let weight = self.unit_factor(loc, "clearcoatFactor", parsed.clearcoat_factor, 0.0);
         let roughness = self.unit_factor(loc, "clearcoatRoughnessFactor", parsed.clearcoat_roughness_factor, 0.0);
         (weight, roughness)
+    }
+
+    /// `KHR_materials_anisotropy` (strength and rotation; the texture is reported and ignored).
+    /// The spec's lobe (α_t = mix(α, 1, strength²) along the UV tangent turned by the rotation),
+    /// except in files Blender wrote: Blender's exporter writes its Principled Anisotropic as
+    /// the strength and its importer reads it back so, with Cycles' default tangent (radial
+    /// about the object's Z axis, glTF's +Y), so those render as Cycles renders the material.
+    fn anisotropy(&mut self, loc: &str, ext: Option<&serde_json::Value>) -> Option<Anisotropy> {
+        let ext = ext?;
+        let parsed: AnisotropyExt = match serde_json::from_value(ext.clone()) {
+            Ok(a) => a,
+            Err(e) => {
+                self.warn(loc, format!("KHR_materials_anisotropy: {e}; the material is isotropic"));
+                return None;
+            }
+        };
+        if parsed.anisotropy_texture.is_some() {
+            self.warn(loc, "KHR_materials_anisotropy: anisotropyTexture ignored (the strength and rotation are used)");
+        }
+        let strength = self.unit_factor(loc, "anisotropyStrength", parsed.anisotropy_strength, 0.0);
+        let rotation = if parsed.anisotropy_rotation.is_finite() {
+            parsed.anisotropy_rotation
+        } else {
+            self.warn(loc, "anisotropyRotation is not finite; using 0");
+            0.0
+        };
+        if self.blender_written {
+            Anisotropy::principled(strength, rotation / std::f32::consts::TAU, AnisotropyTangent::Radial(1))
+        } else {
+            Anisotropy::khr(strength, rotation)
+        }
     }
 
     pub(super) fn unit_factor(&mut self, loc: &str, what: &str, v: f32, default: f32) -> f32 {
@@ -355,6 +388,24 @@ fn image_texels(img: &image::DynamicImage, srgb: bool) -> Vec<Vec4> {
             })
             .collect()
     }
+}
+
+/// The `KHR_materials_anisotropy` extension object of a material.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields, rename_all = "camelCase")]
+struct AnisotropyExt {
+    #[serde(default)]
+    anisotropy_strength: f32,
+    #[serde(default)]
+    anisotropy_rotation: f32,
+    #[serde(default)]
+    anisotropy_texture: Option<serde_json::Value>,
+    #[serde(default)]
+    #[allow(dead_code)]
+    extensions: Option<serde_json::Value>,
+    #[serde(default)]
+    #[allow(dead_code)]
+    extras: Option<serde_json::Value>,
 }
 
 /// The `KHR_materials_clearcoat` extension object of a material.

@@ -23,6 +23,7 @@
 //! | `KHR_materials_specular` `specularFactor` | `Material::specular` | specular colour and textures ignored (warning) |
 //! | `KHR_materials_ior` | `Material::ior` | |
 //! | `KHR_materials_transmission` `transmissionFactor` | `Material::transmission` (solid glass refracting by `ior`, as Cycles renders Blender's Transmission) | transmission texture ignored (warning); no `KHR_materials_volume` thin-walled case |
+//! | `KHR_materials_anisotropy` strength, rotation | `Material::anisotropy`: the spec's lobe (α_t = mix(α, 1, strength²) along the UV tangent turned by the rotation); in files Blender wrote, Blender's Principled Anisotropic on Cycles' default radial tangent (about the mesh's +Y, Blender's Z), as Blender's importer reads it | `anisotropyTexture` ignored (warning) |
 //! | `KHR_draco_mesh_compression` | Draco-compressed primitives decoded (`draco-core`, pure Rust): attributes and indices from the decoded mesh, integer attributes normalized where their accessor says so | |
 //! | `EXT_texture_webp` | the texture's WebP image, in place of its PNG/JPEG fallback or of the `source` it lacks | |
 //! | `EXT_mesh_gpu_instancing` | the node's mesh once per instance, each an [`Instance`](super::Instance) with transform node × T·R·S (Blender writes it with the exporter's GPU Instances option) | `TRANSLATION`, `ROTATION`, `SCALE`; `_`-prefixed attributes ignored; a malformed attribute is an error naming the node |
@@ -335,6 +336,7 @@ impl<'a> Loader<'a> {
             "KHR_materials_ior",
             "KHR_materials_specular",
             "KHR_materials_transmission",
+            "KHR_materials_anisotropy",
             "KHR_mesh_quantization",
             "KHR_texture_transform",
             "EXT_texture_webp",
