@@ -68,19 +68,15 @@ def build_scene(tmpdir: Path) -> None:
 def coat_run(blender_run):
     """The coat scene's export and renders; afterwards rebuilds the main scene, which the other
     modules' tests read from Blender."""
-    try:
-        glb, cyc, pz = S.glb_pairs(
-            blender_run, "coat", ("test_coat_cycles.py", "blender_scenes.py"), build_scene, CAMERA, WORLD_RGB,
-            RESOLUTION, SPP, SEEDS,
-        )  # fmt: skip
-        windows = S.sphere_windows(CAMERA.name, RESOLUTION, [(x, 0.0, 0.0) for *_, x in SPHERES], SPHERE_RADIUS)
-        yield glb, windows, cyc, pz
-    finally:
-        S.build_scene(blender_run.workdir)
+    xs = [x for *_, x in SPHERES]
+    yield from S.sphere_scene_renders(
+        blender_run, "coat", ("test_coat_cycles.py", "blender_scenes.py"), build_scene, CAMERA,
+        WORLD_RGB, RESOLUTION, SPP, SEEDS, xs, SPHERE_RADIUS,
+    )  # fmt: skip
 
 
 def test_coated_spheres_match_cycles_through_gltf(coat_run, report):
-    glb, windows, cyc, pz = coat_run
+    glb, cyc, pz, windows = coat_run
     # the export carries the coat as KHR_materials_clearcoat
     from test_cycles_match import _glb_json
 

@@ -65,19 +65,15 @@ def build_scene(tmpdir: Path) -> None:
 def metal_run(blender_run):
     """The metal scene's renders; afterwards rebuilds the main scene, which the other modules'
     tests read from Blender."""
-    try:
-        _, cyc, pz = S.glb_pairs(
-            blender_run, "metals", ("test_metals_cycles.py", "blender_scenes.py"), build_scene, CAMERA,
-            WORLD_RGB, RESOLUTION, SPP, SEEDS,
-        )  # fmt: skip
-        windows = S.sphere_windows(CAMERA.name, RESOLUTION, [(x, 0.0, 0.0) for *_, x in SPHERES], SPHERE_RADIUS)
-        yield windows, cyc, pz
-    finally:
-        S.build_scene(blender_run.workdir)
+    xs = [x for *_, x in SPHERES]
+    yield from S.sphere_scene_renders(
+        blender_run, "metals", ("test_metals_cycles.py", "blender_scenes.py"), build_scene, CAMERA,
+        WORLD_RGB, RESOLUTION, SPP, SEEDS, xs, SPHERE_RADIUS,
+    )  # fmt: skip
 
 
 def test_rough_metals_match_cycles(metal_run, report):
-    windows, cyc, pz = metal_run
+    _, cyc, pz, windows = metal_run
     failures = []
     for (name, _base, roughness, _x), (ratio, se) in zip(SPHERES, S.window_means(cyc, pz, windows), strict=True):
         report.line(

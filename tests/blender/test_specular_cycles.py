@@ -67,21 +67,17 @@ def build_scene(tmpdir: Path) -> None:
 def specular_run(blender_run):
     """The glossy scene's renders and the spheres' windows; afterwards rebuilds the main scene,
     which the other modules' tests read from Blender."""
-    try:
-        _, cyc, pz = S.glb_pairs(
-            blender_run, "specular", ("test_specular_cycles.py", "blender_scenes.py"), build_scene, CAMERA,
-            WORLD_RGB, RESOLUTION, SPP, SEEDS,
-        )  # fmt: skip
-        windows = S.sphere_windows(CAMERA.name, RESOLUTION, [(x, 0.0, 0.0) for *_, x in SPHERES], SPHERE_RADIUS)
-        yield cyc, pz, windows
-    finally:
-        S.build_scene(blender_run.workdir)
+    xs = [x for *_, x in SPHERES]
+    yield from S.sphere_scene_renders(
+        blender_run, "specular", ("test_specular_cycles.py", "blender_scenes.py"), build_scene, CAMERA,
+        WORLD_RGB, RESOLUTION, SPP, SEEDS, xs, SPHERE_RADIUS,
+    )  # fmt: skip
 
 
 def test_specular_layers_match_cycles_on_average(specular_run, report):
     """The image means per channel within 1 %, and each sphere's mean over the middle of its
     disc within 1 % or four standard errors."""
-    cyc, pz, windows = specular_run
+    _, cyc, pz, windows = specular_run
     ratio = B.mean_ratio((pz[0] + pz[1]) / 2, (cyc[0] + cyc[1]) / 2)
     spheres = [(name, r, se) for (name, *_), (r, se) in zip(SPHERES, S.window_means(cyc, pz, windows), strict=True)]
     report.line(
@@ -102,7 +98,7 @@ def test_specular_layers_match_cycles_on_average(specular_run, report):
     "world stopped being a light); docs/cycles-comparison.md, 'Specular layers'",
 )
 def test_specular_layers_match_cycles_block_for_block(specular_run, report):
-    cyc, pz, _ = specular_run
+    _, cyc, pz, _ = specular_run
     z = B.compare_blocks(cyc[0], cyc[1], pz[0], pz[1]).z
     mean_z2, max_abs_z = float(np.mean(z**2)), float(np.max(np.abs(z)))
     report.line(

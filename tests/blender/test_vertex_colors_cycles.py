@@ -79,19 +79,15 @@ def build_scene(tmpdir: Path) -> None:
 def painted_run(blender_run):
     """The painted scene's export and renders; afterwards rebuilds the main scene, which the
     other modules' tests read from Blender."""
-    try:
-        glb, cyc, pz = S.glb_pairs(
-            blender_run, "vertex-colours", ("test_vertex_colors_cycles.py", "blender_scenes.py"), build_scene,
-            CAMERA, WORLD_RGB, RESOLUTION, SPP, SEEDS,
-        )  # fmt: skip
-        windows = S.sphere_windows(CAMERA.name, RESOLUTION, [(x, 0.0, 0.0) for *_, x in SPHERES], SPHERE_RADIUS)
-        yield glb, windows, cyc, pz
-    finally:
-        S.build_scene(blender_run.workdir)
+    xs = [x for *_, x in SPHERES]
+    yield from S.sphere_scene_renders(
+        blender_run, "vertex-colours", ("test_vertex_colors_cycles.py", "blender_scenes.py"), build_scene, CAMERA,
+        WORLD_RGB, RESOLUTION, SPP, SEEDS, xs, SPHERE_RADIUS,
+    )  # fmt: skip
 
 
 def test_painted_spheres_match_cycles_through_gltf(painted_run, report):
-    glb, windows, cyc, pz = painted_run
+    glb, cyc, pz, windows = painted_run
     # the export carries the colours as COLOR_0, with a white base colour
     from test_cycles_match import _glb_json
 

@@ -790,21 +790,8 @@ def test_pixel_aspect_ratio_widens_the_frame_on_the_film(petzval: Path, tmp_path
     import OpenEXR
     from pxr import UsdRender
 
-    path = tmp_path / "par.usda"
-    stage = Usd.Stage.CreateNew(str(path))
-    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
-    q = quad(stage, "/Q")
-    q.AddTranslateOp().Set((-0.5, -0.5, -3))
-    UsdLux.DomeLight.Define(stage, "/Env")
-    c = UsdGeom.Camera.Define(stage, "/Cam")
-    c.CreateFocalLengthAttr(0.5)
-    c.CreateHorizontalApertureAttr(0.36)
-    c.CreateVerticalApertureAttr(0.24)
-    rs = UsdRender.Settings.Define(stage, "/Render/Settings")
-    rs.CreateCameraRel().SetTargets(["/Cam"])
-    rs.CreateResolutionAttr(Gf.Vec2i(40, 30))
-    rs.CreatePixelAspectRatioAttr(2.0)
-    stage.SetMetadata("renderSettingsPrimPath", "/Render/Settings")
+    path, stage = _window_stage(tmp_path, "par")
+    UsdRender.Settings(stage.GetPrimAtPath("/Render/Settings")).CreatePixelAspectRatioAttr(2.0)
     stage.GetRootLayer().Save()
 
     def sensor(*extra: str) -> tuple[float, float]:

@@ -267,13 +267,8 @@ impl Loader<'_> {
     /// `KHR_materials_clearcoat` (coat weight and roughness; a coat of IOR 1.5, untinted): the
     /// factors are used, the textures and the coat's own normal map are reported and ignored.
     fn clearcoat(&mut self, loc: &str, ext: Option<&serde_json::Value>) -> (f32, f32) {
-        let Some(ext) = ext else { return (0.0, 0.0) };
-        let parsed: Clearcoat = match serde_json::from_value(ext.clone()) {
-            Ok(c) => c,
-            Err(e) => {
-                self.warn(loc, format!("KHR_materials_clearcoat: {e}; the coat is ignored"));
-                return (0.0, 0.0);
-            }
+        let Some(parsed) = self.material_extension::<Clearcoat>(loc, "KHR_materials_clearcoat", ext, "the coat") else {
+            return (0.0, 0.0);
         };
         for (what, present) in [
             ("clearcoatTexture", parsed.clearcoat_texture.is_some()),
@@ -295,14 +290,7 @@ impl Loader<'_> {
     /// the strength and its importer reads it back so, with Cycles' default tangent (radial
     /// about the object's Z axis, glTF's +Y), so those render as Cycles renders the material.
     fn anisotropy(&mut self, loc: &str, ext: Option<&serde_json::Value>) -> Option<Anisotropy> {
-        let ext = ext?;
-        let parsed: AnisotropyExt = match serde_json::from_value(ext.clone()) {
-            Ok(a) => a,
-            Err(e) => {
-                self.warn(loc, format!("KHR_materials_anisotropy: {e}; the material is isotropic"));
-                return None;
-            }
-        };
+        let parsed: AnisotropyExt = self.material_extension(loc, "KHR_materials_anisotropy", ext, "the anisotropy")?;
         if parsed.anisotropy_texture.is_some() {
             self.warn(loc, "KHR_materials_anisotropy: anisotropyTexture ignored (the strength and rotation are used)");
         }
@@ -317,6 +305,24 @@ impl Loader<'_> {
             Anisotropy::principled(strength, rotation / std::f32::consts::TAU, AnisotropyTangent::Radial(1))
         } else {
             Anisotropy::khr(strength, rotation)
+        }
+    }
+
+    /// A material extension's object `ext` parsed as `T`; a malformed one is a warning naming
+    /// the extension, and `what` is then ignored.
+    fn material_extension<T: serde::de::DeserializeOwned>(
+        &mut self,
+        loc: &str,
+        name: &str,
+        ext: Option<&serde_json::Value>,
+        what: &str,
+    ) -> Option<T> {
+        match serde_json::from_value(ext?.clone()) {
+            Ok(parsed) => Some(parsed),
+            Err(e) => {
+                self.warn(loc, format!("{name}: {e}; {what} is ignored"));
+                None
+            }
         }
     }
 
