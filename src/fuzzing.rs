@@ -459,7 +459,7 @@ fn values(kind: Kind) -> Vec<String> {
 }
 
 /// Every kind, in the order of [`value_table`].
-const KINDS: [Kind; 17] = [
+const KINDS: [Kind; 20] = [
     Kind::Float,
     Kind::Int,
     Kind::Resolution,
@@ -477,6 +477,9 @@ const KINDS: [Kind; 17] = [
     Kind::Name,
     Kind::Switch,
     Kind::Scene,
+    Kind::DataWindow,
+    Kind::Conform,
+    Kind::Purposes,
 ];
 
 /// The values of every kind, made once.
@@ -485,6 +488,7 @@ fn value_table() -> &'static Vec<Vec<String>> {
     T.get_or_init(|| KINDS.iter().map(|k| values(*k)).collect())
 }
 
+/// `kind`'s row of [`value_table`] (every kind has one: `every_kind_has_its_values`).
 fn kind_index(kind: Kind) -> usize {
     KINDS.iter().position(|k| *k == kind).unwrap_or(0)
 }
@@ -638,4 +642,18 @@ pub fn render_small(argv: &[String], out_dir: &Path) -> Result<PathBuf, NotRende
         return Err(NotRendered::Failed(format!("{} was not written", out.display())));
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every flag's kind has its own row of values: a kind missing from `KINDS` would silently
+    /// draw the numbers' row.
+    #[test]
+    fn every_kind_has_its_values() {
+        for (flag, kind) in FLAGS {
+            assert!(KINDS.contains(kind), "{flag}: its kind is not in KINDS");
+        }
+    }
 }

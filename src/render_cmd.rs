@@ -251,7 +251,18 @@ fn parse_environment(s: &str, strength: f32) -> Result<Environment, Error> {
     if !c.is_finite() || c.min_element() < 0.0 {
         return Err(settings_err("environment", format!("must be finite and non-negative, got '{s}'")));
     }
-    Ok(Environment::Constant(c * strength))
+    // the scene's own check (`Scene::check_values`), here before anything loads
+    let limit = petzval_renderer::limits::MAX_RADIANCE;
+    let radiance = c * strength;
+    if !(radiance.is_finite() && radiance.max_element() <= limit) {
+        return Err(settings_err(
+            "environment",
+            format!(
+                "radiance '{s}' × --environment-strength {strength} is outside 0…{limit:e} (the brightest value petzval renders)"
+            ),
+        ));
+    }
+    Ok(Environment::Constant(radiance))
 }
 
 /// Where the outputs go, checked before the render.

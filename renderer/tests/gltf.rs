@@ -190,6 +190,10 @@ fn gltf_textured_quad_material_and_texel_lookup() {
     );
     assert!(!s.warnings.iter().any(|w| w.contains("KHR_materials_clearcoat is not supported")), "{:?}", s.warnings);
     assert!(s.warnings.iter().any(|w| w.contains("KHR_materials_sheen is not supported")), "{:?}", s.warnings);
+    // KHR_materials_anisotropy (a file no Blender wrote): the spec's lobe along the UV tangent
+    let a = m.anisotropy.expect("anisotropic");
+    assert_eq!(a.kind, petzval_renderer::scene::AnisotropyKind::Khr(0.5));
+    assert!((a.rotation_turns - 0.125).abs() < 1e-6, "{a:?}");
 }
 
 #[test]

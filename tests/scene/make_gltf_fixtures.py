@@ -159,7 +159,8 @@ def textured_quad():
     doc = b.gltf(
         "quad.bin",
         extensionsUsed=["KHR_materials_emissive_strength", "KHR_materials_specular", "KHR_materials_ior",
-                        "KHR_texture_transform", "KHR_materials_clearcoat", "KHR_materials_sheen"],
+                        "KHR_texture_transform", "KHR_materials_clearcoat", "KHR_materials_sheen",
+                        "KHR_materials_anisotropy"],
         scenes=[{"nodes": [0]}],
         nodes=[{"name": "Quad", "mesh": 0}],
         meshes=[{"name": "Quad", "primitives": [{"attributes": attrs, "indices": idx, "material": 0}]}],
@@ -195,6 +196,7 @@ def textured_quad():
                 "KHR_materials_clearcoat": {"clearcoatFactor": 0.75, "clearcoatRoughnessFactor": 0.2,
                                             "clearcoatNormalTexture": {"index": 1}},
                 "KHR_materials_sheen": {"sheenColorFactor": [1, 1, 1]},
+                "KHR_materials_anisotropy": {"anisotropyStrength": 0.5, "anisotropyRotation": 0.7853981633974483},
             },
         }],
         textures=[{"name": "CheckerTex", "source": 0, "sampler": 0}, {"source": 1, "sampler": 1}],
