@@ -107,6 +107,7 @@ const FLAGS: &[(&str, Kind)] = &[
     ("--data-window", Kind::DataWindow),
     ("--aspect-conform", Kind::Conform),
     ("--purposes", Kind::Purposes),
+    ("--no-dof", Kind::Switch),
     ("SCENE", Kind::Scene),
     ("--no-such-flag", Kind::Float),
     ("-x", Kind::Switch),

@@ -133,6 +133,10 @@ pub struct RenderArgs {
     /// guide (default: a USD shot's includedPurposes, else default,render).
     #[arg(long)]
     pub purposes: Option<String>,
+    /// No depth of field (UsdRender's disableDepthOfField, which a USD shot's settings may also
+    /// ask for): a thin lens renders as a pinhole; a real lens keeps its stop (noted).
+    #[arg(long)]
+    pub no_dof: bool,
     /// USD RenderSettings prim (default: the stage's renderSettingsPrimPath): its camera,
     /// resolution and first product's productName, unless --camera, --resolution or -o say
     /// otherwise.
@@ -469,6 +473,7 @@ fn apply_settings(args: &mut RenderArgs, rs: &petzval_usd::render_settings::Rend
     if args.purposes.is_none() {
         args.purposes = Some(rs.included_purposes.join(","));
     }
+    args.no_dof |= rs.disable_depth_of_field;
     if !rs.vars.is_empty() && args.aovs.is_none() {
         // the RenderVars choose the EXR's channels unless --aovs was given
         args.aovs = Some(rs.aovs.join(","));
@@ -689,6 +694,18 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
             flags_camera
         }
     };
+    // No depth of field: a thin lens becomes a pinhole; a real lens's stop is its own.
+    let mut host_camera = host_camera;
+    if args.no_dof {
+        if host_camera.lens == "thin" {
+            host_camera.f_number = None;
+        } else if host_camera.lens != "pinhole" {
+            eprintln!(
+                "note: --no-dof (disableDepthOfField) keeps '{}' at its stop: a real lens's depth of field is its optics",
+                host_camera.lens
+            );
+        }
+    }
     let model = host_camera.lens_model;
     let mut spec = host_camera.camera_spec(width, height)?;
     // 3. The data window: a crop of the frame, or overscan rendered on the sensor extended

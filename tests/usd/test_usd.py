@@ -976,6 +976,38 @@ def test_included_purposes_choose_the_geometry(petzval: Path, tmp_path: Path) ->
     assert "purposes" in r.stderr and "final" in r.stderr, r.stderr
 
 
+def test_disable_depth_of_field_renders_the_thin_lens_as_a_pinhole(petzval: Path, tmp_path: Path) -> None:
+    """UsdRender disableDepthOfField: the USD camera's thin lens (fStop 2, focused at 3 m)
+    renders as a pinhole (the EXR's fNumber is inf); a product's false overrides the settings'
+    true; `--no-dof` asks for the same from the command line."""
+    from pxr import UsdRender
+
+    path, stage = _window_stage(tmp_path, "nodof")
+    cam = UsdGeom.Camera(stage.GetPrimAtPath("/Cam"))
+    cam.CreateFStopAttr(2.0)
+    cam.CreateFocusDistanceAttr(3.0)
+    rs = UsdRender.Settings(stage.GetPrimAtPath("/Render/Settings"))
+    stage.GetRootLayer().Save()
+
+    def f_number(*extra: str) -> str:
+        out = tmp_path / f"nodof{len(extra)}.exr"
+        run(petzval, "render", str(path), "--spp", "1", "--no-png", "-o", str(out), *extra)
+        return _exr(out)[0]["petzval/fNumber"]
+
+    assert f_number() == "2.0000"
+    assert f_number("--no-dof") == "inf"
+    rs.CreateDisableDepthOfFieldAttr(True)
+    stage.GetRootLayer().Save()
+    assert f_number() == "inf"
+    prod = UsdRender.Product.Define(stage, "/Render/Product")
+    prod.CreateProductNameAttr(str(tmp_path / "nodof_product.exr"))
+    prod.CreateDisableDepthOfFieldAttr(False)
+    rs.CreateProductsRel().SetTargets([prod.GetPath()])
+    stage.GetRootLayer().Save()
+    run(petzval, "render", str(path), "--spp", "1", "--no-png")
+    assert _exr(tmp_path / "nodof_product.exr")[0]["petzval/fNumber"] == "2.0000"
+
+
 def test_render_vars_choose_the_exr_channels(petzval: Path, tmp_path: Path) -> None:
     """RenderVars' sourceName picks the EXR's channels (colour always; normal, albedo; an unknown
     one is listed as skipped); --aovs overrides them."""

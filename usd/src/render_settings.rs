@@ -10,7 +10,7 @@
 //! | `dataWindowNDC` (float4) | RenderSettings, overridden by the product's | the pixels rendered: a crop inside (0, 0, 1, 1), overscan beyond it (`--data-window` overrides) | (0, 0, 1, 1) |
 //! | `includedPurposes` (token[]) | RenderSettings | the purposes of the geometry rendered | `default`, `render` |
 //! | `instantaneousShutter`, `disableMotionBlur` | either | nothing to do: petzval renders no motion blur | — |
-//! | `disableDepthOfField` | either | not read (listed when true) | — |
+//! | `disableDepthOfField` (bool) | RenderSettings, overridden by the product's | true: no depth of field (a thin lens renders as a pinhole; a real lens keeps its stop, listed; `--no-dof` asks for it too) | false |
 //! | `products` (rel) | RenderSettings | RenderProduct prims; the first is rendered | none |
 //! | `productName` | RenderProduct | the output file (`####` = frame) | — |
 //! | `orderedVars` (rel) | RenderProduct | RenderVar prims: their `sourceName` picks the EXR's channels (color/Ci/rgba always; depth/z, normal/N, albedo/diffuseColor; others listed as skipped) unless `--aovs` is given | — |
@@ -44,6 +44,8 @@ pub struct RenderSettings {
     pub data_window_ndc: Option<[f64; 4]>,
     /// `includedPurposes` (the settings'; products cannot change which geometry exists).
     pub included_purposes: Vec<String>,
+    /// `disableDepthOfField`.
+    pub disable_depth_of_field: bool,
     /// What was ignored.
     pub warnings: Vec<String>,
     /// The RenderProduct these values come from (None: the settings alone).
@@ -102,6 +104,7 @@ pub fn read(path: &Path, time: Option<f64>, settings: Option<&str>) -> Result<Op
         aspect_conform: CONFORM_POLICIES[0].to_string(),
         data_window_ndc: None,
         included_purposes: vec!["default".into(), "render".into()],
+        disable_depth_of_field: false,
         warnings: Vec::new(),
         product_path: None,
         others: Vec::new(),
@@ -191,10 +194,9 @@ pub const CONFORM_POLICIES: [&str; 5] =
     ["expandAperture", "cropAperture", "adjustApertureWidth", "adjustApertureHeight", "adjustPixelAspectRatio"];
 
 /// The RenderSettingsBase attributes authored on `prim` (the settings, then a product over
-/// them) other than camera and resolution: pixel aspect, conform policy, data window, and the
-/// shutter and depth-of-field switches.
+/// them) other than camera and resolution: pixel aspect, conform policy, data window and the
+/// depth-of-field switch.
 fn apply_base(out: &mut RenderSettings, reader: &Reader, prim: &openusd::usd::Prim) -> Result<(), Error> {
-    let path = prim.path().to_string();
     if reader.raw(prim, "pixelAspectRatio")?.is_some() {
         let par = reader.f64_or(prim, "pixelAspectRatio", 1.0)?;
         if !(par.is_finite() && par > 0.0) {
@@ -229,8 +231,8 @@ fn apply_base(out: &mut RenderSettings, reader: &Reader, prim: &openusd::usd::Pr
         }
         out.data_window_ndc = Some(w);
     }
-    if reader.bool(prim, "disableDepthOfField")? == Some(true) {
-        out.warnings.push(format!("{path}.disableDepthOfField is not read: the camera's depth of field renders"));
+    if let Some(d) = reader.bool(prim, "disableDepthOfField")? {
+        out.disable_depth_of_field = d;
     }
     Ok(())
 }
