@@ -1520,16 +1520,7 @@ impl RenderScene {
             }
             AnisotropyTangent::UvMap => {
                 let uvs = info.has_uv0.then(|| idx.map(|i| mesh.uv0[i]));
-                let tangents = info.has_tangents.then(|| {
-                    idx.map(|i| {
-                        let t = mesh.tangents[i];
-                        if xf.identity || t == Vec4::ZERO {
-                            t
-                        } else {
-                            (xf.object_to_world.matrix3 * glam::Vec3A::from(t.truncate())).extend(t.w)
-                        }
-                    })
-                });
+                let tangents = info.has_tangents.then(|| world_tangents(mesh, xf, idx));
                 let p = self.world_triangle(inst, tri);
                 let (t, _) = tangent_frame(p, tangents, uvs, b, hit.shading_normal);
                 t
@@ -1616,18 +1607,7 @@ impl RenderScene {
         let mat = &self.scene.materials[material_id as usize];
         if let Some(nref) = mat.normal_texture {
             if let Some(texel) = self.texture(Some(nref), uv0, uv1) {
-                let tangents = info.has_tangents.then(|| {
-                    idx.map(|i| {
-                        let t = mesh.tangents[i];
-                        if xf.identity || t == Vec4::ZERO {
-                            t
-                        } else {
-                            (xf.object_to_world.matrix3 * glam::Vec3A::from(t.truncate()))
-                                .normalize_or_zero()
-                                .extend(t.w * xf.sign)
-                        }
-                    })
-                });
+                let tangents = info.has_tangents.then(|| world_tangents(mesh, &xf, idx));
                 let uvs = if nref.uv_set == 1 && info.has_uv1 {
                     Some(idx.map(|i| mesh.uv1[i]))
                 } else if info.has_uv0 {
@@ -1806,10 +1786,6 @@ fn world_triangle(
     })
 }
 
-/// Orthonormal tangent and bitangent around `n` for normal mapping: the vertex tangents
-/// (glTF: bitangent = n × t · w), else the triangle's UV derivatives (glTF's v axis points
-/// down the image, so the bitangent is −∂p/∂v), else an arbitrary frame. Positions and
-/// tangents in world space.
 /// Each mesh's texture space as Blender computes it automatically (`BKE_mesh_texspace_calc`):
 /// the centre of its bounding box and its extents, a zero extent counting as 2 (half-size 1)
 /// and a tiny one as 2·10⁻⁵.
@@ -1828,6 +1804,23 @@ fn texture_spaces(meshes: &[Mesh]) -> Vec<(Vec3, Vec3)> {
         .collect()
 }
 
+/// The vertex tangents of triangle `idx` of `mesh` in world space (the xyz part by the
+/// instance's matrix, normalised; w × sign(det)), as normal maps and anisotropic lobes use them.
+fn world_tangents(mesh: &Mesh, xf: &InstanceXf, idx: [usize; 3]) -> [Vec4; 3] {
+    idx.map(|i| {
+        let t = mesh.tangents[i];
+        if xf.identity || t == Vec4::ZERO {
+            t
+        } else {
+            (xf.object_to_world.matrix3 * glam::Vec3A::from(t.truncate())).normalize_or_zero().extend(t.w * xf.sign)
+        }
+    })
+}
+
+/// Orthonormal tangent and bitangent around `n` for normal mapping: the vertex tangents
+/// (glTF: bitangent = n × t · w), else the triangle's UV derivatives (glTF's v axis points
+/// down the image, so the bitangent is −∂p/∂v), else an arbitrary frame. Positions and
+/// tangents in world space.
 fn tangent_frame(
     p: [Vec3; 3],
     tangents: Option<[Vec4; 3]>,
