@@ -6,7 +6,7 @@ use petzval_renderer::optics::pupil::ExitPupilBounds;
 use petzval_renderer::{load_lens, Error, Ray, Sensor, TraceDirection, LIBRARY};
 use std::time::Instant;
 
-pub(super) fn bench_lens(only: Option<String>, rays: usize, json: bool) -> Result<(), Error> {
+pub(super) fn bench_lens(only: Option<String>, rays: usize, fstop: Option<f64>, json: bool) -> Result<(), Error> {
     let names: Vec<String> = match only {
         Some(n) => vec![n],
         None => LIBRARY.iter().map(|e| e.name.to_string()).collect(),
@@ -14,14 +14,18 @@ pub(super) fn bench_lens(only: Option<String>, rays: usize, json: bool) -> Resul
     if !json {
         println!("Exact trace, film → scene, primary wavelength, 1 thread, {rays} rays per lens; film points uniform over a 36×24 mm sensor");
         println!(
-            "(clamped to the lens's image circle), rear-plane points from the exit-pupil bounds, focus at infinity."
+            "(clamped to the lens's image circle), rear-plane points from the exit-pupil bounds, focus at infinity, {}.",
+            fstop.map_or("each lens wide open".to_string(), |f| format!("stopped down to f/{f}"))
         );
         println!();
         println!("| lens | surfaces | ns/ray (all) | ns/ray (passing) | rejection (pupil bounds) | rejection (whole rear disc) | bounds build ms |");
         println!("|---|---|---|---|---|---|---|");
     }
     for name in names {
-        let lens = load_lens(&name)?;
+        let mut lens = load_lens(&name)?;
+        if let Some(f) = fstop {
+            lens = lens.stopped_down_or_open(f)?.0;
+        }
         let film_z = lens.last_vertex_z_mm() + lens.focus_image_distance_mm(None)?;
         let sensor = Sensor::default();
         let (r_max, _) = sensor.extent();
@@ -61,7 +65,7 @@ pub(super) fn bench_lens(only: Option<String>, rays: usize, json: bool) -> Resul
         if json {
             println!(
                 "{}",
-                serde_json::json!({"lens": name, "surfaces": lens.surfaces().len(), "ns_per_ray": ns_all, "ns_per_passing_ray": ns_pass,
+                serde_json::json!({"lens": name, "f_number": fstop, "surfaces": lens.surfaces().len(), "ns_per_ray": ns_all, "ns_per_passing_ray": ns_pass,
                     "rejection_rate": rej, "rejection_rate_rear_disc": rej_disc, "bounds_build_ms": build_ms})
             );
         } else {

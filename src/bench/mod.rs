@@ -36,6 +36,10 @@ pub enum BenchCommand {
         /// Rays per lens.
         #[arg(long, default_value_t = 400_000)]
         rays: usize,
+        /// Stop every lens down to this f-number (a lens that cannot open that wide stays
+        /// fully open); default: each lens wide open.
+        #[arg(long)]
+        fstop: Option<f64>,
         /// Print JSON lines instead of a table.
         #[arg(long)]
         json: bool,
@@ -161,7 +165,7 @@ pub enum BenchCommand {
 /// Runs a benchmark.
 pub fn run(cmd: BenchCommand) -> Result<(), Error> {
     match cmd {
-        BenchCommand::Lens { lens, rays, json } => bench_lens(lens, rays, json),
+        BenchCommand::Lens { lens, rays, fstop, json } => bench_lens(lens, rays, fstop, json),
         BenchCommand::Render { resolution, spp, triangles } => bench_render(&resolution, spp, triangles),
         BenchCommand::Bokeh { resolution, reference_spp, target, save } => {
             bench_bokeh(&resolution, reference_spp, target, save.as_deref())

@@ -32,6 +32,20 @@
 //! the regions can be smaller than the grid's cells (at the spectral range's ends above all),
 //! so those intervals are traced again on a grid four times finer until one has none.
 //!
+//! **Lenses stopped down far.** The rear grid's cells (1/16 of three rear semi-diameters: 0.56 mm
+//! on wide-22mm) are larger than the passing region of a small stop (wide-22mm: about 0.6 mm
+//! across at f/22, 0.13 mm at f/96), which the grid then finds only in part or not at all
+//! (before this search: at f/32 wide-22mm, angenieux-double-gauss-100mm and
+//! aspheric-fisheye-10mm lost every passing ray outside the defensive disc, and past f/96 the
+//! camera could not be built). Where the grid finds fewer than [`NEAR_CHIEF_BELOW`] rays from the
+//! film's centre, every film point is also searched on a fine grid (1/16 of the cell where the
+//! grid found none, 1/4 where it found a few) about its chief ray's aim point on the rear plane
+//! ([`chief_aim_from_film`]: at a small stop the region lies about it), grown while the region
+//! reaches its edge; margins are then two fine cells (the grid's own points keep two grid
+//! cells). The radial outlines are taken about a centre that slides with the film radius
+//! ([`Outline::drift_per_mm`], the chief rays' aim points at the interval's ends), since the
+//! region moves further than its own size across an interval.
+//!
 //! All of the above is found by tracing samples, so it can miss a sliver of the passing region
 //! (the brute-force stress sweep finds about one passing ray in 40 million outside it on bladed
 //! stops and tilted sensors). Sampling therefore mixes in a **defensive disc**
@@ -47,6 +61,7 @@
 //! | `intervals` | usize, radial intervals over the film | — | 64 |
 //! | `film_samples` | usize, film points per interval | — | 16 |
 //! | `grid` | usize, rear-plane grid per side | — | 48 |
+//! | [`NEAR_CHIEF_BELOW`] | usize, rays from the film's centre below which the fine search runs | — | 16 |
 //! | [`FILM_CELLS`] | usize, film cells per side (no rotational symmetry) | — | 16 |
 //! | [`SPECTRAL_RANGE_NM`] | wavelengths the outlines of dispersive lenses also hold | nm | 380, 780 |
 //! | [`DEFENSIVE_FRACTION`] | f64, share of samples drawn in the defensive disc | — | 1/128 |
@@ -111,6 +126,22 @@ pub const SPECTRAL_RANGE_NM: [f64; 2] = [380.0, 780.0];
 /// Film cells per side of the square a lens without rotational symmetry is outlined over.
 pub const FILM_CELLS: usize = 16;
 
+/// Points each side of the chief ray's aim point in the fine search of a lens stopped down
+/// beyond what the rear grid resolves (the module's "Lenses stopped down far").
+pub const NEAR_CHIEF_HALF: usize = 16;
+
+/// The fine search's spacing as a share of the rear grid's cell where the grid finds no ray from
+/// the film's centre (four times that where it finds a few).
+pub const NEAR_CHIEF_REFINE: f64 = 1.0 / 16.0;
+
+/// How far (in rear-grid cells) the fine search about the chief ray may grow: a larger region
+/// has enough grid points of its own.
+pub const NEAR_CHIEF_REACH_CELLS: f64 = 4.0;
+
+/// The rear grid resolves the passing region when it finds at least this many rays from the
+/// film's centre; below, the fine search about each film point's chief ray is used instead.
+pub const NEAR_CHIEF_BELOW: usize = 16;
+
 /// The share of pupil samples drawn uniformly in the defensive disc (which holds every passing
 /// ray) instead of the traced bounds: every passing ray keeps a positive density. Each costs
 /// about one more absorbed ray in 128 (the disc is mostly absorbed).
@@ -128,6 +159,11 @@ pub struct Outline {
     cdf: Vec<f64>,
     /// Polygon area (mm²).
     pub area: f64,
+    /// How far the centre moves along x per mm of film radius (radial intervals of a lens
+    /// stopped down beyond what the rear grid resolves, whose region slides with the film point
+    /// by more than its own size across an interval; 0 elsewhere): for a film point at radius r
+    /// the outline lies about `centre + (drift_per_mm · r, 0)`.
+    pub drift_per_mm: f64,
 }
 
 impl Outline {
@@ -147,13 +183,18 @@ impl Outline {
             cdf.push(acc);
         }
         cdf[n] = 1.0;
-        Some(Outline { centre, radii, cdf, area })
+        Some(Outline { centre, radii, cdf, area, drift_per_mm: 0.0 })
     }
 
     fn vertex(&self, k: usize) -> DVec2 {
         let n = self.radii.len();
         let phi = std::f64::consts::TAU * (k % n) as f64 / n as f64;
         self.centre + DVec2::new(phi.cos(), phi.sin()) * self.radii[k % n]
+    }
+
+    /// The offset of the outline for a film point at radius `r` (zero unless it drifts).
+    fn shift(&self, r: f64) -> DVec2 {
+        DVec2::new(self.drift_per_mm * r, 0.0)
     }
 
     /// Whether `p` (film point on +x frame) is inside.
@@ -356,8 +397,35 @@ impl ExitPupilBounds {
         ends: &[f64],
         film_slope: Option<DVec2>,
     ) -> Self {
+        // A lens stopped down so far that the rear grid finds no ray from the film's centre is
+        // traced by the fine search about each film point's chief ray instead ("tiny stops").
+        let near_chief = {
+            let half = 1.5 * lens.rear_semi_diameter_mm();
+            let (cell, centre) = (2.0 * half / 48.0, DVec3::new(0.0, 0.0, film_z_mm));
+            let mut passing = 0usize;
+            let wl = lens.primary_wavelength_nm();
+            let grid_origin = [lens.last_vertex_z_mm(), -half, -half];
+            for_each_passing(lens, wl, centre, grid_origin, DVec2::splat(cell), 48, |_| passing += 1);
+            match passing {
+                0 => Some(cell * NEAR_CHIEF_REFINE),
+                n if n < NEAR_CHIEF_BELOW => Some(cell * NEAR_CHIEF_REFINE * 4.0),
+                _ => None,
+            }
+        };
+        let compute = |resolution, slope| {
+            Self::compute_with_ends(
+                lens,
+                film_z_mm,
+                film_dz_mm,
+                max_film_radius_mm,
+                resolution,
+                ends,
+                slope,
+                near_chief,
+            )
+        };
         if lens.is_rotationally_symmetric() && lens.aperture().is_circular() {
-            Self::compute_with_ends(lens, film_z_mm, film_dz_mm, max_film_radius_mm, [64, 16, 48], ends, None)
+            compute([64, 16, 48], None)
         } else {
             // No rotational symmetry (the lens, or a bladed, masked or squeezed stop, whose
             // region does not turn with the film point): one union box serves every film point
@@ -365,9 +433,8 @@ impl ExitPupilBounds {
             // rays). Outlines per film cell then tighten it (a 5-blade stop at f/4 on
             // double-gauss-50mm: 14 % absorbed, 29 % in the circumscribed circle's radial
             // outlines).
-            let mut bounds =
-                Self::compute_with_ends(lens, film_z_mm, film_dz_mm, max_film_radius_mm, [16, 4, 48], ends, film_slope);
-            bounds.cells = bounds.film_cells(lens, film_dz_mm, film_slope, FILM_CELLS, 48);
+            let mut bounds = compute([16, 4, 48], film_slope);
+            bounds.cells = bounds.film_cells(lens, film_dz_mm, film_slope, FILM_CELLS, 48, near_chief);
             bounds
         }
     }
@@ -390,12 +457,17 @@ impl ExitPupilBounds {
             [intervals, film_samples, grid],
             &[],
             None,
+            None,
         )
     }
 
     /// [`ExitPupilBounds::compute_with`] also holding the wavelengths `ends`; `resolution` is
     /// (intervals, film samples per interval, rear grid per side); `film_slope`: the sensor
-    /// plane, where known, on which the union box (no rotational symmetry) is traced.
+    /// plane, where known, on which the union box (no rotational symmetry) is traced;
+    /// `near_chief`: each film point's region is found by the fine search of this spacing (mm)
+    /// about its chief ray ([`for_each_passing_near_chief`]) instead of the rear grid, and the
+    /// grid's cell (margins, the rim's trace) is that spacing.
+    #[allow(clippy::too_many_arguments)]
     fn compute_with_ends(
         lens: &Lens,
         film_z_mm: f64,
@@ -404,11 +476,19 @@ impl ExitPupilBounds {
         resolution: [usize; 3],
         spectral_ends: &[f64],
         film_slope: Option<DVec2>,
+        near_chief: Option<f64>,
     ) -> Self {
         let [intervals, film_samples, grid] = resolution;
         let rear_z = lens.last_vertex_z_mm();
         let half = 1.5 * lens.rear_semi_diameter_mm();
-        let cell = 2.0 * half / grid as f64;
+        let tiny = near_chief.is_some();
+        let grid_cell = 2.0 * half / grid as f64;
+        let cell = near_chief.unwrap_or(grid_cell);
+        // With the fine search the rear grid still runs (it finds regions the chief ray does
+        // not reach, where an element's rim vignettes it); its points are grown so that with the
+        // fine margin below they keep the grid's own (two grid cells).
+        let grid_growth = DVec2::splat(2.0 * (grid_cell - cell));
+        let reach = NEAR_CHIEF_REACH_CELLS * grid_cell;
         let wl = lens.primary_wavelength_nm();
         let symmetric = lens.is_rotationally_symmetric() && lens.aperture().is_circular();
         // The union box over a known sensor plane needs its points only; else the z span.
@@ -449,21 +529,37 @@ impl ExitPupilBounds {
                                 fp.z = film_z_mm + slope.x * fp.x + slope.y * fp.y;
                             }
                             all_pts.push(fp);
-                            for_each_passing(lens, wl, fp, [rear_z, -half, -half], DVec2::splat(cell), grid, |q| {
-                                b.grow(q);
+                            let grid_origin = [rear_z, -half, -half];
+                            for_each_passing(lens, wl, fp, grid_origin, DVec2::splat(grid_cell), grid, |q| {
+                                b.grow(q - grid_growth);
+                                b.grow(q + grid_growth);
                                 sum += q;
                                 count += 1;
                             });
+                            if tiny {
+                                for_each_passing_near_chief(lens, wl, fp, [rear_z, cell, reach], |q| {
+                                    b.grow(q);
+                                    sum += q;
+                                    count += 1;
+                                });
+                            }
                             // Dispersive lenses: the spectral range's ends on a grid of half the
                             // resolution (the image circle and the region shift with the
                             // wavelength), each passing point grown by half its cell (with the
                             // margin below, one and a half).
                             for &wl_end in spectral_ends {
-                                let coarse = DVec2::splat(2.0 * cell);
+                                let coarse = DVec2::splat(2.0 * grid_cell);
+                                let grow = DVec2::splat(grid_cell) + grid_growth;
                                 for_each_passing(lens, wl_end, fp, [rear_z, -half, -half], coarse, grid / 2, |q| {
-                                    b.grow(q - DVec2::splat(cell));
-                                    b.grow(q + DVec2::splat(cell));
+                                    b.grow(q - grow);
+                                    b.grow(q + grow);
                                 });
+                                if tiny {
+                                    for_each_passing_near_chief(lens, wl_end, fp, [rear_z, cell, reach], |q| {
+                                        b.grow(q - DVec2::splat(cell));
+                                        b.grow(q + DVec2::splat(cell));
+                                    });
+                                }
                             }
                         }
                     }
@@ -476,11 +572,13 @@ impl ExitPupilBounds {
         //     grid's cells (aspheric-fisheye-10mm at f/8: 0.8 × 1.7 mm against 1.6 mm cells at
         //     380 nm). The intervals past the last one with passing rays are traced again on a
         //     grid four times finer over the previous interval's box, until one has none.
-        let fine = cell / 4.0;
+        //     (With the fine search too, this grid keeps the rear grid's scale.)
+        let fine = grid_cell / 4.0;
         let mut k = traced.iter().rposition(|t| !t.0.is_empty()).map_or(traced.len(), |last| last + 1);
         while k < traced.len() && k > 0 {
             let prev = traced[k - 1].0;
-            let window = Box2 { min: prev.min - DVec2::splat(2.0 * cell), max: prev.max + DVec2::splat(2.0 * cell) };
+            let reach = DVec2::splat(2.0 * grid_cell);
+            let window = Box2 { min: prev.min - reach, max: prev.max + reach };
             let n = ((window.max - window.min).max_element() / fine).ceil().max(1.0) as usize;
             let step = (window.max - window.min) / n as f64;
             let found: Vec<Box2> = traced[k]
@@ -490,8 +588,8 @@ impl ExitPupilBounds {
                     let mut b = Box2::EMPTY;
                     for &w in std::iter::once(&wl).chain(spectral_ends) {
                         for_each_passing(lens, w, fp, [rear_z, window.min.x, window.min.y], step, n, |q| {
-                            b.grow(q - step);
-                            b.grow(q + step);
+                            b.grow(q - (step + grid_growth));
+                            b.grow(q + (step + grid_growth));
                         });
                     }
                     b
@@ -530,7 +628,7 @@ impl ExitPupilBounds {
                     if b.is_empty() {
                         None
                     } else {
-                        outline_of(lens, [wl, rear_z], *b, pts, DVec2::new(centroid.x, 0.0), spectral_ends)
+                        outline_of(lens, [wl, rear_z], *b, pts, DVec2::new(centroid.x, 0.0), spectral_ends, tiny)
                     }
                 })
                 .collect()
@@ -552,7 +650,9 @@ impl ExitPupilBounds {
 
     /// Outlines per film cell (see [`CellOutlines`]) for a lens whose bounds are the union box:
     /// `cells`² cells over the film square that holds the radii with passing rays, corner
-    /// centroids from a `grid`² trace of the rear plane. None when no ray passes.
+    /// centroids from a `grid`² trace of the rear plane (`near_chief`: from the fine search of
+    /// this spacing (mm) about each film point's chief ray, [`for_each_passing_near_chief`]).
+    /// None when no ray passes.
     fn film_cells(
         &self,
         lens: &Lens,
@@ -560,6 +660,7 @@ impl ExitPupilBounds {
         film_slope: Option<DVec2>,
         cells: usize,
         grid: usize,
+        near_chief: Option<f64>,
     ) -> Option<CellOutlines> {
         // The union box, and the square's half side: the largest radius with passing rays.
         let last = self.boxes.iter().rposition(|b| !b.is_empty())?;
@@ -583,16 +684,28 @@ impl ExitPupilBounds {
         };
         // 1. The passing region's centroid at every cell corner (on the plane, or its middle z).
         let cell = (union.max - union.min) / grid as f64;
+        // (the grid's points, and with `near_chief` the fine search's; the flag says which)
+        let passing = |fp: DVec3, w: f64, take: &mut dyn FnMut(DVec2, bool)| {
+            for_each_passing(lens, w, fp, [rear_z, union.min.x, union.min.y], cell, grid, |q| take(q, true));
+            if let Some(fine) = near_chief {
+                let reach = NEAR_CHIEF_REACH_CELLS * cell.max_element();
+                for_each_passing_near_chief(lens, w, fp, [rear_z, fine, reach], |q| take(q, false));
+            }
+        };
         let corner_centres: Vec<Option<DVec2>> = (0..n * n)
             .into_par_iter()
             .map(|k| {
                 let f = film_xy((k % n) as f64, (k / n) as f64);
                 let fp = DVec3::new(f.x, f.y, film_slope.map_or(self.film_z_mm, |slope| self.film_z_mm + slope.dot(f)));
-                let (mut sum, mut count) = (DVec2::ZERO, 0usize);
-                for_each_passing(lens, wl, fp, [rear_z, union.min.x, union.min.y], cell, grid, |q| {
-                    sum += q;
-                    count += 1;
+                // (the grid's points where they resolve the region, as without the fine search;
+                // else the fine search's)
+                let mut sums = [(DVec2::ZERO, 0usize); 2];
+                passing(fp, wl, &mut |q, on_grid| {
+                    let s = &mut sums[on_grid as usize];
+                    s.0 += q;
+                    s.1 += 1;
                 });
+                let (sum, count) = if sums[1].1 >= NEAR_CHIEF_BELOW || sums[0].1 == 0 { sums[1] } else { sums[0] };
                 (count > 0).then(|| sum / count as f64)
             })
             .collect();
@@ -632,10 +745,15 @@ impl ExitPupilBounds {
                 let mut b = Box2::EMPTY;
                 for &fp in &pts {
                     for &w in std::iter::once(&wl).chain(ends) {
-                        for_each_passing(lens, w, fp, [rear_z, union.min.x, union.min.y], cell, grid, |q| b.grow(q));
+                        passing(fp, w, &mut |q, on_grid| {
+                            // grid points keep two grid cells with the margin below
+                            let grow = near_chief.filter(|_| on_grid).map_or(DVec2::ZERO, |fine| 2.0 * (cell - fine));
+                            b.grow(q - grow);
+                            b.grow(q + grow);
+                        });
                     }
                 }
-                let margin = 2.0 * cell;
+                let margin = near_chief.map_or(2.0 * cell, |fine| DVec2::splat(2.0 * fine));
                 (None, if b.is_empty() { b } else { Box2 { min: b.min - margin, max: b.max + margin } })
             })
             .collect();
@@ -699,6 +817,7 @@ impl ExitPupilBounds {
         let (s, c) = if r > 0.0 { (film.y / r, film.x / r) } else { (0.0, 1.0) };
         let q = DVec2::new(c * p.x + s * p.y, -s * p.x + c * p.y);
         match &self.outlines[k] {
+            Some(o) if o.drift_per_mm != 0.0 => o.contains(q - o.shift(r)),
             Some(o) => o.contains(q),
             None => b.contains(q),
         }
@@ -766,6 +885,7 @@ impl ExitPupilBounds {
             return Some(PupilSample { point: DVec3::new(p.x, p.y, self.rear_z_mm), pdf_area: 1.0 / d.area() });
         }
         let (q, area) = match (&self.outlines[k], self.union_only) {
+            (Some(o), false) if o.drift_per_mm != 0.0 => (o.sample(u) + o.shift(r), o.area),
             (Some(o), false) => (o.sample(u), o.area),
             _ => (b.min + (b.max - b.min) * u, b.area()),
         };
@@ -843,9 +963,50 @@ fn for_each_passing(
     }
 }
 
+/// Film points whose passing region the rear grid cannot resolve (a lens stopped down far,
+/// where the region is a speck of the grid's cell): calls `pass` with every point of a grid of
+/// spacing `fine` centred on the chief ray's aim point (itself a grid point) whose ray from
+/// `fp` passes the lens at `wl`. The grid starts at ±[`NEAR_CHIEF_HALF`] points and doubles
+/// while passing points touch its edge, as long as it stays within `reach_mm` of the aim point
+/// (a larger region the coarse grid resolves itself). Nothing when the chief ray cannot be
+/// aimed.
+fn for_each_passing_near_chief(
+    lens: &Lens,
+    wl: f64,
+    fp: DVec3,
+    [rear_z, fine, reach_mm]: [f64; 3],
+    mut pass: impl FnMut(DVec2),
+) {
+    let Some(aim) = chief_aim_from_film(lens, fp, wl) else { return };
+    let mut h = NEAR_CHIEF_HALF;
+    loop {
+        // 1. The (2h + 1)² grid about the aim point; note whether its rim holds passing points.
+        let mut found = Vec::new();
+        let mut touches_rim = false;
+        for i in 0..=2 * h {
+            for j in 0..=2 * h {
+                let q = aim + fine * DVec2::new(i as f64 - h as f64, j as f64 - h as f64);
+                let ray = Ray::new(fp, DVec3::new(q.x, q.y, rear_z) - fp);
+                if lens.trace_detailed(&ray, wl, TraceDirection::FilmToScene, StopMode::Apply).is_ok() {
+                    found.push(q);
+                    touches_rim |= i == 0 || j == 0 || i == 2 * h || j == 2 * h;
+                }
+            }
+        }
+        // 2. Done when the region lies inside, or the grid has grown as far as it may.
+        if !touches_rim || (2 * h) as f64 * fine > reach_mm {
+            found.into_iter().for_each(&mut pass);
+            return;
+        }
+        h *= 2;
+    }
+}
+
 /// The outline of the passing region over film points `film_pts` (on the +x half-plane's axis),
 /// about `centre`, inside the box `b`; None when the region is not star-shaped about `centre`
-/// for some film point (the centre does not pass), or degenerate.
+/// for some film point (the centre does not pass), or degenerate. `tiny` (a lens stopped down
+/// beyond what the rear grid resolves): about a centre that slides with the film radius, on the
+/// line through the chief rays' aim points of the first and last film points.
 fn outline_of(
     lens: &Lens,
     [wl, rear_z]: [f64; 2],
@@ -853,6 +1014,7 @@ fn outline_of(
     film_pts: &[DVec3],
     centre: DVec2,
     ends: &[f64],
+    tiny: bool,
 ) -> Option<Outline> {
     // Every fourth film point and the last (the interval's ends are first and last): the region
     // moves smoothly with the film radius, and the growth covers the points between.
@@ -860,6 +1022,16 @@ fn outline_of(
     let mut chosen: Vec<DVec3> = film_pts.iter().step_by(stride).copied().collect();
     if !(film_pts.len() - 1).is_multiple_of(stride) {
         chosen.extend(film_pts.last());
+    }
+    if tiny {
+        // The centre at film radius r: a + slope · r, from the chief rays of the interval's ends.
+        let (first, last) = (*chosen.first()?, *chosen.last()?);
+        let (a0, a1) = (chief_aim_from_film(lens, first, wl)?, chief_aim_from_film(lens, last, wl)?);
+        let slope = if last.x > first.x { (a1.x - a0.x) / (last.x - first.x) } else { 0.0 };
+        let at_axis = a0.x - slope * first.x;
+        let centre_of = move |fp: DVec3| Some(DVec2::new(at_axis + slope * fp.x, 0.0));
+        let radii = outline_radii(lens, [wl, rear_z], b, &chosen, &centre_of, true, ends)?;
+        return Outline::new(DVec2::new(at_axis, 0.0), radii).map(|o| Outline { drift_per_mm: slope, ..o });
     }
     // The region is mirror-symmetric about the x axis.
     let radii = outline_radii(lens, [wl, rear_z], b, &chosen, &|_| Some(centre), true, ends)?;
@@ -1031,6 +1203,15 @@ fn with_corners(radii: &[f64]) -> Vec<f64> {
 /// the stop, found by secant iteration on the aim point. Returns the ray leaving the front, or
 /// `None` if the chief ray is vignetted or cannot be aimed.
 pub fn chief_ray_from_film(lens: &Lens, film: DVec3, wavelength_nm: f64) -> Option<Ray> {
+    let aim = chief_aim_from_film(lens, film, wavelength_nm)?;
+    let aim = DVec3::new(aim.x, aim.y, lens.last_vertex_z_mm());
+    lens.trace(&Ray::new(film, aim - film), wavelength_nm, TraceDirection::FilmToScene).map(|t| t.ray)
+}
+
+/// Where the chief ray from film point `film` (the ray through the centre of the stop, element
+/// rims ignored) crosses the plane of the rear vertex; `None` if it cannot be aimed. The ray
+/// itself may still be vignetted by an element.
+pub fn chief_aim_from_film(lens: &Lens, film: DVec3, wavelength_nm: f64) -> Option<DVec2> {
     let rear_z = lens.last_vertex_z_mm();
     let p = lens.paraxial();
     let dz = film.z - rear_z;
@@ -1066,8 +1247,7 @@ pub fn chief_ray_from_film(lens: &Lens, film: DVec3, wavelength_nm: f64) -> Opti
     if f1.abs() > 1e-9 {
         return None;
     }
-    let aim = DVec3::new(dir2.x * s1, dir2.y * s1, rear_z);
-    lens.trace(&Ray::new(film, aim - film), wavelength_nm, TraceDirection::FilmToScene).map(|t| t.ray)
+    Some(dir2 * s1)
 }
 
 /// Real field angle (degrees) seen by film point (x, y) on the film plane at `film_z_mm`: the
