@@ -122,7 +122,7 @@ impl Placement {
 
     /// A lens-frame point in the aligned element's frame.
     #[inline]
-    fn point_to_element(&self, p: DVec3) -> DVec3 {
+    pub(crate) fn point_to_element(&self, p: DVec3) -> DVec3 {
         self.rotation.transpose() * (p - self.pivot - self.offset) + self.pivot
     }
 

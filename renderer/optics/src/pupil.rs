@@ -1212,6 +1212,48 @@ pub fn chief_ray_from_film(lens: &Lens, film: DVec3, wavelength_nm: f64) -> Opti
 /// rims ignored) crosses the plane of the rear vertex; `None` if it cannot be aimed. The ray
 /// itself may still be vignetted by an element.
 pub fn chief_aim_from_film(lens: &Lens, film: DVec3, wavelength_nm: f64) -> Option<DVec2> {
+    let radial = radial_chief_aim(lens, film, wavelength_nm);
+    if lens.is_rotationally_symmetric() {
+        return radial;
+    }
+    // Without rotational symmetry (cylindrical or decentred elements) the chief ray leaves the
+    // film point's radial plane: Newton's method on both coordinates of the aim, from the
+    // radial solution (or the paraxial guess).
+    let start = radial.or_else(|| paraxial_aim(lens, film))?;
+    let rear_z = lens.last_vertex_z_mm();
+    let crossing =
+        |a: DVec2| stop_crossing_from_film(lens, &Ray::new(film, DVec3::new(a.x, a.y, rear_z) - film), wavelength_nm);
+    let h = 1e-6 * lens.rear_semi_diameter_mm().max(1e-3);
+    let (mut a, mut g) = (start, crossing(start)?);
+    for _ in 0..30 {
+        if g.length() < 1e-12 {
+            break;
+        }
+        // 1. The Jacobian by forward differences, 2. the Newton step J·d = −g.
+        let (jx, jy) = ((crossing(a + DVec2::X * h)? - g) / h, (crossing(a + DVec2::Y * h)? - g) / h);
+        let det = jx.x * jy.y - jy.x * jx.y;
+        if !(det.abs() > 1e-300) {
+            return None;
+        }
+        a += DVec2::new((jy.x * g.y - jy.y * g.x) / det, (jx.y * g.x - jx.x * g.y) / det);
+        g = crossing(a)?;
+    }
+    (g.length() <= 1e-9).then_some(a)
+}
+
+/// The paraxial guess at the chief ray's aim point on the rear vertex's plane: toward the exit
+/// pupil's centre.
+fn paraxial_aim(lens: &Lens, film: DVec3) -> Option<DVec2> {
+    let dz = film.z - lens.last_vertex_z_mm();
+    let to_xp = film.z - lens.paraxial().exit_pupil_z_mm;
+    let scale = if to_xp.abs() > 1e-9 { 1.0 - dz / to_xp } else { 0.0 };
+    let aim = DVec2::new(film.x, film.y) * scale;
+    aim.is_finite().then_some(aim)
+}
+
+/// [`chief_aim_from_film`] in the film point's radial plane (the chief ray of a rotationally
+/// symmetric lens lies in it): secant iterations on the aim radius.
+fn radial_chief_aim(lens: &Lens, film: DVec3, wavelength_nm: f64) -> Option<DVec2> {
     let rear_z = lens.last_vertex_z_mm();
     let p = lens.paraxial();
     let dz = film.z - rear_z;
@@ -1288,13 +1330,19 @@ pub fn image_circle_radius_mm(lens: &Lens, film_z_mm: f64, max_mm: f64) -> f64 {
     lo
 }
 
-/// Where a ray from the film crosses the stop surface, ignoring every clear aperture (for
-/// aiming: the rim of an element behind the stop must not stop the search).
+/// Where a ray from the film crosses the stop surface (in the stop's own frame, misaligned
+/// elements placed), ignoring every clear aperture (for aiming: the rim of an element behind
+/// the stop must not stop the search).
 fn stop_crossing_from_film(lens: &Lens, ray: &Ray, wavelength_nm: f64) -> Option<DVec2> {
     let mut o = ray.origin;
     let mut d = ray.direction;
     for i in (lens.stop_index()..lens.surfaces().len()).rev() {
         let s = &lens.surfaces()[i];
+        // (a misaligned element's surfaces in its own frame, as the trace has them)
+        if let Some(pl) = &s.placement {
+            o = pl.point_to_element(o);
+            d = pl.rotation.transpose() * d;
+        }
         let local = DVec3::new(o.x, o.y, o.z - s.z_mm);
         let t = s.shape.intersect(local, d)?;
         let p = local + t * d;
@@ -1306,6 +1354,10 @@ fn stop_crossing_from_film(lens: &Lens, ray: &Ray, wavelength_nm: f64) -> Option
             d = super::surface::refract(d, s.shape.normal(p)?, n1, n2)?;
         }
         o = DVec3::new(p.x, p.y, p.z + s.z_mm);
+        if let Some(pl) = &s.placement {
+            o = pl.point_to_lens(o);
+            d = pl.rotation * d;
+        }
     }
     None
 }
