@@ -424,11 +424,12 @@ impl ExitPupilBounds {
                 near_chief,
             )
         };
-        if lens.is_rotationally_symmetric() && lens.aperture().is_circular() {
+        if radially_outlined(lens, film_dz_mm, film_slope, near_chief.is_some()) {
             compute([64, 16, 48], None)
         } else {
             // No rotational symmetry (the lens, or a bladed, masked or squeezed stop, whose
-            // region does not turn with the film point): one union box serves every film point
+            // region does not turn with the film point; or a small stop on a tilted sensor,
+            // whose region slides with each film point's z): one union box serves every film point
             // (16 intervals of 4 film points at 8 azimuths find it and the radii with passing
             // rays). Outlines per film cell then tighten it (a 5-blade stop at f/4 on
             // double-gauss-50mm: 14 % absorbed, 29 % in the circumscribed circle's radial
@@ -490,7 +491,7 @@ impl ExitPupilBounds {
         let grid_growth = DVec2::splat(2.0 * (grid_cell - cell));
         let reach = NEAR_CHIEF_REACH_CELLS * grid_cell;
         let wl = lens.primary_wavelength_nm();
-        let symmetric = lens.is_rotationally_symmetric() && lens.aperture().is_circular();
+        let symmetric = radially_outlined(lens, film_dz_mm, film_slope, tiny);
         // The union box over a known sensor plane needs its points only; else the z span.
         let on_plane = film_slope.filter(|_| !symmetric);
         let z_levels: Vec<f64> = if film_dz_mm > 0.0 && on_plane.is_none() {
@@ -938,6 +939,16 @@ pub fn defensive_radius_mm(lens: &Lens, film_z_mm: f64, film_dz_mm: f64, max_fil
     let dz = (z_hi - rear_z).abs().max((rear_z - z_lo).abs());
     let radius = r_s + (r_s + max_film_radius_mm) * dz / gap;
     (radius.is_finite() && radius > 0.0).then_some(radius)
+}
+
+/// Whether the bounds are outlined per radial interval (a rotationally symmetric lens with a
+/// round stop) rather than per film cell. A small stop (`near_chief`) on a tilted sensor whose
+/// plane is known goes to the film cells, traced on the plane: its region is a speck that moves
+/// with each film point's z as well as its radius, which one outline per radius cannot follow
+/// (wide-22mm at f/32 tilted 5°: 82 % of the sampled rays absorbed, 11 % per film cell).
+fn radially_outlined(lens: &Lens, film_dz_mm: f64, film_slope: Option<DVec2>, near_chief: bool) -> bool {
+    let tilted = film_dz_mm > 0.0 && film_slope.is_some_and(|s| s != DVec2::ZERO);
+    lens.is_rotationally_symmetric() && lens.aperture().is_circular() && !(near_chief && tilted)
 }
 
 /// Calls `pass` with every point of a `grid`² grid of cells `cell` on the rear plane (z, and the
