@@ -580,21 +580,7 @@ fn exit_pupil_domain_is_sampled_uniformly() {
     for name in ["double-gauss-50mm", "fisheye-10mm", "schneider-anamorphic-31mm"] {
         let l = library_lens(name).unwrap();
         let film_z = l.last_vertex_z_mm() + l.focus_image_distance_mm(None).unwrap();
-        let b = ExitPupilBounds::compute_on_plane(&l, film_z, 0.0, DVec2::ZERO, 21.7, true);
-        let hits = (0..1000)
-            .filter(|i| {
-                let u = DVec2::new((*i % 32) as f64 / 32.0 + 0.01, (*i / 32) as f64 / 32.0 + 0.01);
-                b.sample_bounds(DVec2::ZERO, u).is_some_and(|s| {
-                    l.trace(
-                        &Ray::new(DVec3::new(0.0, 0.0, film_z), s.point - DVec3::new(0.0, 0.0, film_z)),
-                        WL,
-                        TraceDirection::FilmToScene,
-                    )
-                    .is_some()
-                })
-            })
-            .count();
-        eprintln!("centre hits {hits}/1000");
+        let b = ExitPupilBounds::compute(&l, film_z, 0.0, 21.7);
         // the anamorphic lens: outlines per film cell, about centres that move with the point,
         // inside one union box (not rotated with the film point)
         let rotate = !b.union_only;
@@ -643,21 +629,7 @@ fn pupil_samples_mix_in_the_defensive_disc() {
     for name in ["double-gauss-50mm", "fisheye-10mm", "schneider-anamorphic-31mm"] {
         let l = library_lens(name).unwrap();
         let film_z = l.last_vertex_z_mm() + l.focus_image_distance_mm(None).unwrap();
-        let b = ExitPupilBounds::compute_on_plane(&l, film_z, 0.0, DVec2::ZERO, 21.7, true);
-        let hits = (0..1000)
-            .filter(|i| {
-                let u = DVec2::new((*i % 32) as f64 / 32.0 + 0.01, (*i / 32) as f64 / 32.0 + 0.01);
-                b.sample_bounds(DVec2::ZERO, u).is_some_and(|s| {
-                    l.trace(
-                        &Ray::new(DVec3::new(0.0, 0.0, film_z), s.point - DVec3::new(0.0, 0.0, film_z)),
-                        WL,
-                        TraceDirection::FilmToScene,
-                    )
-                    .is_some()
-                })
-            })
-            .count();
-        eprintln!("centre hits {hits}/1000");
+        let b = ExitPupilBounds::compute(&l, film_z, 0.0, 21.7);
         let radius = b.defensive_radius_mm.expect("a defensive disc");
         assert!(radius >= l.rear_semi_diameter_mm(), "{name}: disc {radius} mm inside the rear element");
         for r in [0.0, 7.3, 15.1, 20.9] {
@@ -1023,7 +995,8 @@ fn exit_pupil_bounds_hold_for_lenses_stopped_down_far() {
         }
         let case = format!("{name} at f/{f_number}{}", if bladed { " with 6 blades" } else { "" });
         let film_z = l.last_vertex_z_mm() + l.focus_image_distance_mm(Some(1500.0)).unwrap();
-        let (passed, outside, rejection) = brute_force_near_chief(&l, film_z, window, 200_000);
+        let b = ExitPupilBounds::compute(&l, film_z, 0.0, 21.7);
+        let (passed, outside, rejection) = brute_force_near_chief(&l, &b, (film_z, DVec2::ZERO), window, 200_000);
         eprintln!("{case}: {passed} passing, {outside} outside, {:.1} % of sampled rays absorbed", 100.0 * rejection);
         assert!(passed > 1000, "{case}: too few passing rays ({passed})");
         assert_eq!(outside, 0, "{case}: {outside} of {passed} passing rays fall outside the bounds");
@@ -1046,7 +1019,8 @@ fn exit_pupil_bounds_hold_stopped_down_on_every_library_lens() {
             let l = library_lens(entry.name).unwrap().stopped_down(f_number).unwrap();
             let film_z = l.last_vertex_z_mm() + l.focus_image_distance_mm(Some(1500.0)).unwrap();
             let window = 0.3 * l.rear_semi_diameter_mm();
-            let (passed, outside, rejection) = brute_force_near_chief(&l, film_z, window, 40_000);
+            let b = ExitPupilBounds::compute(&l, film_z, 0.0, 21.7);
+            let (passed, outside, rejection) = brute_force_near_chief(&l, &b, (film_z, DVec2::ZERO), window, 40_000);
             let case = format!("{} at f/{f_number}", entry.name);
             eprintln!(
                 "{case}: {passed} passing, {outside} outside, {:.1} % of sampled rays absorbed",
@@ -1060,19 +1034,24 @@ fn exit_pupil_bounds_hold_stopped_down_on_every_library_lens() {
     }
 }
 
-/// Brute force about the chief ray for film plane `film_z` over a 21.7 mm film radius: `rays`
-/// film points uniform in the disc, each with a rear-plane point uniform in the square of half
-/// side `window` about its chief ray's aim point, and one sampled from the bounds. Returns
-/// (passing rays, passing rays outside the bounds, share of the sampled rays absorbed).
-fn brute_force_near_chief(l: &Lens, film_z: f64, window: f64, rays: usize) -> (usize, usize, f64) {
-    let r_max = 21.7;
-    let b = ExitPupilBounds::compute(l, film_z, 0.0, r_max);
+/// Brute force about the chief ray against bounds `b` for the sensor plane `film_z + slope ·
+/// (x, y)` over a 21.7 mm film radius: `rays` film points uniform in the disc, each with a
+/// rear-plane point uniform in the square of half side `window` about its chief ray's aim
+/// point, and one sampled from the bounds. Returns (passing rays, passing rays outside the
+/// bounds, share of the sampled rays absorbed).
+fn brute_force_near_chief(
+    l: &Lens,
+    b: &ExitPupilBounds,
+    (film_z, slope): (f64, DVec2),
+    window: f64,
+    rays: usize,
+) -> (usize, usize, f64) {
     let mut rnd = uniform(7);
     let (mut passed, mut outside, mut sampled, mut sampled_passing) = (0, 0, 0, 0);
     let passes =
         |film: DVec3, rear: DVec3| l.trace(&Ray::new(film, rear - film), WL, TraceDirection::FilmToScene).is_some();
     for _ in 0..rays {
-        let (f, film, _) = random_ray(&mut rnd, r_max, film_z, DVec2::ZERO, 0.0, l);
+        let (f, film, _) = random_ray(&mut rnd, 21.7, film_z, slope, 0.0, l);
         let Some(aim) = petzval_optics::pupil::chief_aim_from_film(l, film, WL) else { continue };
         let q = aim + window * DVec2::new(2.0 * rnd() - 1.0, 2.0 * rnd() - 1.0);
         let ok = passes(film, DVec3::new(q.x, q.y, l.last_vertex_z_mm()));
@@ -1148,23 +1127,7 @@ fn exit_pupil_bounds_hold_for_small_stops_on_tilted_sensors() {
         let r_max = 21.7;
         let b = ExitPupilBounds::compute_on_plane(&l, film_z, slope.length() * r_max, slope, r_max, false);
         let window = 0.3 * l.rear_semi_diameter_mm();
-        let mut rnd = uniform(3);
-        let (mut passed, mut outside, mut sampled, mut sampled_passing) = (0, 0, 0, 0);
-        let passes =
-            |film: DVec3, rear: DVec3| l.trace(&Ray::new(film, rear - film), WL, TraceDirection::FilmToScene).is_some();
-        for _ in 0..40_000 {
-            let (f, film, _) = random_ray(&mut rnd, r_max, film_z, slope, 0.0, &l);
-            let Some(aim) = petzval_optics::pupil::chief_aim_from_film(&l, film, WL) else { continue };
-            let q = aim + window * DVec2::new(2.0 * rnd() - 1.0, 2.0 * rnd() - 1.0);
-            let ok = passes(film, DVec3::new(q.x, q.y, l.last_vertex_z_mm()));
-            passed += ok as usize;
-            outside += (ok && !b.contains(f, q)) as usize;
-            if let Some(s) = b.sample_bounds(f, DVec2::new(rnd(), rnd())) {
-                sampled += 1;
-                sampled_passing += passes(film, s.point) as usize;
-            }
-        }
-        let rejection = 1.0 - sampled_passing as f64 / sampled.max(1) as f64;
+        let (passed, outside, rejection) = brute_force_near_chief(&l, &b, (film_z, slope), window, 40_000);
         eprintln!("{case}: {passed} passing, {outside} outside, {:.1} % of sampled rays absorbed", 100.0 * rejection);
         assert!(passed > 50, "{case}: too few passing rays ({passed})");
         assert_eq!(outside, 0, "{case}: {outside} of {passed} passing rays fall outside the bounds");
