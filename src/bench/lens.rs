@@ -7,6 +7,9 @@ use petzval_renderer::{load_lens, Error, Ray, Sensor, TraceDirection, LIBRARY};
 use std::time::Instant;
 
 pub(super) fn bench_lens(only: Option<String>, rays: usize, fstop: Option<f64>, json: bool) -> Result<(), Error> {
+    if let Some(f) = fstop.filter(|f| !(f.is_finite() && *f > 0.0)) {
+        return Err(Error::settings("--fstop", format!("must be a positive f-number, got {f}")));
+    }
     let names: Vec<String> = match only {
         Some(n) => vec![n],
         None => LIBRARY.iter().map(|e| e.name.to_string()).collect(),

@@ -186,6 +186,8 @@ def test_corrupt_glb_with_valid_magic_fails_cleanly(petzval, tmp_path):
             ["focus"],
             id="draw-impossible-focus",
         ),
+        pytest.param(["bench", "lens", "--fstop", "0"], ["--fstop"], id="bench-lens-zero-fstop"),
+        pytest.param(["bench", "lens", "--fstop", "nan"], ["--fstop"], id="bench-lens-nan-fstop"),
     ],
 )
 def test_lens_bad_input_fails_cleanly(petzval, tmp_path, args, words):

@@ -44,7 +44,10 @@
 //! reaches its edge; margins are then two fine cells (the grid's own points keep two grid
 //! cells). The radial outlines are taken about a centre that slides with the film radius
 //! ([`Outline::drift_per_mm`], the chief rays' aim points at the interval's ends), since the
-//! region moves further than its own size across an interval.
+//! region moves further than its own size across an interval. On a tilted sensor whose plane
+//! is known, such a lens takes the film cells traced on the plane instead (its region also
+//! moves with each film point's z). The chief ray is aimed in the film point's radial plane,
+//! and by Newton's method in both coordinates where the lens is not rotationally symmetric.
 //!
 //! All of the above is found by tracing samples, so it can miss a sliver of the passing region
 //! (the brute-force stress sweep finds about one passing ray in 40 million outside it on bladed
@@ -397,21 +400,7 @@ impl ExitPupilBounds {
         ends: &[f64],
         film_slope: Option<DVec2>,
     ) -> Self {
-        // A lens stopped down so far that the rear grid finds no ray from the film's centre is
-        // traced by the fine search about each film point's chief ray instead ("tiny stops").
-        let near_chief = {
-            let half = 1.5 * lens.rear_semi_diameter_mm();
-            let (cell, centre) = (2.0 * half / 48.0, DVec3::new(0.0, 0.0, film_z_mm));
-            let mut passing = 0usize;
-            let wl = lens.primary_wavelength_nm();
-            let grid_origin = [lens.last_vertex_z_mm(), -half, -half];
-            for_each_passing(lens, wl, centre, grid_origin, DVec2::splat(cell), 48, |_| passing += 1);
-            match passing {
-                0 => Some(cell * NEAR_CHIEF_REFINE),
-                n if n < NEAR_CHIEF_BELOW => Some(cell * NEAR_CHIEF_REFINE * 4.0),
-                _ => None,
-            }
-        };
+        let near_chief = near_chief_spacing_mm(lens, film_z_mm);
         let compute = |resolution, slope| {
             Self::compute_with_ends(
                 lens,
@@ -465,9 +454,10 @@ impl ExitPupilBounds {
     /// [`ExitPupilBounds::compute_with`] also holding the wavelengths `ends`; `resolution` is
     /// (intervals, film samples per interval, rear grid per side); `film_slope`: the sensor
     /// plane, where known, on which the union box (no rotational symmetry) is traced;
-    /// `near_chief`: each film point's region is found by the fine search of this spacing (mm)
-    /// about its chief ray ([`for_each_passing_near_chief`]) instead of the rear grid, and the
-    /// grid's cell (margins, the rim's trace) is that spacing.
+    /// `near_chief`: each film point's region is also searched at this spacing (mm) about its
+    /// chief ray ([`for_each_passing_near_chief`]) besides the rear grid, the margins become
+    /// two such cells (the grid's own points keep two grid cells), and the radial outlines
+    /// drift with the film radius.
     #[allow(clippy::too_many_arguments)]
     fn compute_with_ends(
         lens: &Lens,
@@ -939,6 +929,23 @@ pub fn defensive_radius_mm(lens: &Lens, film_z_mm: f64, film_dz_mm: f64, max_fil
     let dz = (z_hi - rear_z).abs().max((rear_z - z_lo).abs());
     let radius = r_s + (r_s + max_film_radius_mm) * dz / gap;
     (radius.is_finite() && radius > 0.0).then_some(radius)
+}
+
+/// The fine search's spacing (mm) for a lens whose rear grid (48 cells, as the bounds trace it)
+/// finds fewer than [`NEAR_CHIEF_BELOW`] rays from the film's centre at `film_z_mm`: 1/16 of a
+/// grid cell where it finds none, 1/4 where it finds a few; None where the grid resolves the
+/// region (the module's "Lenses stopped down far").
+fn near_chief_spacing_mm(lens: &Lens, film_z_mm: f64) -> Option<f64> {
+    let half = 1.5 * lens.rear_semi_diameter_mm();
+    let cell = 2.0 * half / 48.0;
+    let (centre, origin) = (DVec3::new(0.0, 0.0, film_z_mm), [lens.last_vertex_z_mm(), -half, -half]);
+    let mut passing = 0usize;
+    for_each_passing(lens, lens.primary_wavelength_nm(), centre, origin, DVec2::splat(cell), 48, |_| passing += 1);
+    match passing {
+        0 => Some(cell * NEAR_CHIEF_REFINE),
+        n if n < NEAR_CHIEF_BELOW => Some(cell * NEAR_CHIEF_REFINE * 4.0),
+        _ => None,
+    }
 }
 
 /// Whether the bounds are outlined per radial interval (a rotationally symmetric lens with a

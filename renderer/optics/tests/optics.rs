@@ -973,11 +973,7 @@ fn image_space_in_glass_scales_the_image_side() {
 /// (only the defensive disc drew them) and 34 % of the sampled rays were absorbed.
 #[test]
 fn exit_pupil_bounds_hold_for_lenses_stopped_down_far() {
-    let blades = petzval_optics::Aperture {
-        shape: petzval_optics::ApertureShape::Blades { count: 6, curvature: 0.0 },
-        rotation_rad: 0.3,
-        anamorphic_ratio: 1.0,
-    };
+    let blades = six_blades(0.3);
     let cases = [
         ("wide-22mm", 22.0, false, 1.5),
         ("wide-22mm", 96.0, false, 0.5),
@@ -1031,6 +1027,15 @@ fn exit_pupil_bounds_hold_stopped_down_on_every_library_lens() {
             let limit = if entry.name.contains("anamorphic") { 0.35 } else { 0.20 };
             assert!(rejection <= limit, "{case}: {:.1} % of the sampled rays are absorbed", 100.0 * rejection);
         }
+    }
+}
+
+/// A stop of 6 straight blades turned by `rotation_rad`.
+fn six_blades(rotation_rad: f64) -> petzval_optics::Aperture {
+    petzval_optics::Aperture {
+        shape: petzval_optics::ApertureShape::Blades { count: 6, curvature: 0.0 },
+        rotation_rad,
+        anamorphic_ratio: 1.0,
     }
 }
 
@@ -1104,11 +1109,7 @@ fn chief_rays_pass_a_tiny_stop_off_the_radial_plane() {
 /// (double-gauss-50mm at f/32) before they went to the film cells.
 #[test]
 fn exit_pupil_bounds_hold_for_small_stops_on_tilted_sensors() {
-    let blades = petzval_optics::Aperture {
-        shape: petzval_optics::ApertureShape::Blades { count: 6, curvature: 0.0 },
-        rotation_rad: 0.0,
-        anamorphic_ratio: 1.0,
-    };
+    let blades = six_blades(0.0);
     let cases = [
         ("wide-22mm", 32.0, false),
         ("wide-22mm", 32.0, true),
