@@ -23,12 +23,17 @@
 //! region's centroid is found at every cell corner, and each film point's region is taken about
 //! its own centre, the corners' centroids interpolated bilinearly. The region mostly slides with
 //! the film point, so one outline about that moving centre (the farthest passing point per angle
-//! over the cell's corners and centre) fits every point of the cell far tighter than the union
-//! box. On a tilted sensor whose plane is known ([`ExitPupilBounds::compute_on_plane`]) each
-//! film point is traced at its own z. A cell without an outline (at the rim of the image
-//! circle, where a corner or a film point's centre is absorbed) gets the box of the rays that
-//! pass from its film points, grown by two grid cells; radii where nothing passes at any traced
-//! azimuth stay empty. Past the last interval with passing rays, where the image circle ends,
+//! over a 3 × 3 lattice of the cell's film points) fits every point of the cell far tighter than
+//! the union box. Where the region changes shape between those film points (element rims and the
+//! stop binding in turn near the rim of the image circle), it can reach past the outline there:
+//! the outline is checked at the 5 × 5 lattice's other 16 film points and, where one's region
+//! reaches [`CELL_OUTLINE_CHECK`] of it, traced again over all 25. On a tilted sensor whose plane
+//! is known ([`ExitPupilBounds::compute_on_plane`]) each film point is traced at its own z. A
+//! cell without an outline (at the rim of the image circle, where a corner or a film point's
+//! centre is absorbed) gets the box of the rays that pass from its film points, grown by two grid
+//! cells, or where smaller the same rays' box about each film point's chief-ray aim, the corners'
+//! aims interpolated (a small region slides across the rear plane further than its own size
+//! within one cell); radii where nothing passes at any traced azimuth stay empty. Past the last interval with passing rays, where the image circle ends,
 //! the regions can be smaller than the grid's cells (at the spectral range's ends above all),
 //! so those intervals are traced again on a grid four times finer until one has none.
 //!
@@ -42,7 +47,8 @@
 //! grid found none, 1/4 where it found a few) about its chief ray's aim point on the rear plane
 //! ([`chief_aim_from_film`]: at a small stop the region lies about it), grown while the region
 //! reaches its edge; margins are then two fine cells (the grid's own points keep two grid
-//! cells). The radial outlines are taken about a centre that slides with the film radius
+//! cells, except in the rim cells' boxes, where grid points inside a fine search that resolved
+//! the region add nothing). The radial outlines are taken about a centre that slides with the film radius
 //! ([`Outline::drift_per_mm`], the chief rays' aim points at the interval's ends), since the
 //! region moves further than its own size across an interval. On a tilted sensor whose plane
 //! is known, such a lens takes the film cells traced on the plane instead (its region also
@@ -50,8 +56,8 @@
 //! and by Newton's method in both coordinates where the lens is not rotationally symmetric.
 //!
 //! All of the above is found by tracing samples, so it can miss a sliver of the passing region
-//! (the brute-force stress sweep finds about one passing ray in 40 million outside it on bladed
-//! stops and tilted sensors). Sampling therefore mixes in a **defensive disc**
+//! (the brute-force stress sweep found about one passing ray in 40 million outside it on bladed
+//! stops and tilted sensors, and none in 83 million since the rim cells' rework of session 37). Sampling therefore mixes in a **defensive disc**
 //! ([`DEFENSIVE_FRACTION`] of the samples, after Hesterberg's defensive importance sampling): a
 //! disc on the rear plane that provably holds every passing ray's crossing, derived from the
 //! last surface's clear aperture, its sag and placement, and the film's extent (no tracing).
@@ -66,11 +72,12 @@
 //! | `grid` | usize, rear-plane grid per side | — | 48 |
 //! | [`NEAR_CHIEF_BELOW`] | usize, rays from the film's centre below which the fine search runs | — | 16 |
 //! | [`FILM_CELLS`] | usize, film cells per side (no rotational symmetry) | — | 16 |
+//! | [`CELL_OUTLINE_CHECK`] | f64, share of a cell's outline that, reached between its film points, has it traced again | — | 0.99 |
 //! | [`SPECTRAL_RANGE_NM`] | wavelengths the outlines of dispersive lenses also hold | nm | 380, 780 |
 //! | [`DEFENSIVE_FRACTION`] | f64, share of samples drawn in the defensive disc | — | 1/128 |
 
 use super::lens::{Lens, Ray, StopMode, TraceDirection};
-use glam::{DVec2, DVec3};
+use glam::{DVec2, DVec3, IVec2};
 use rayon::prelude::*;
 
 /// An axis-aligned box on the rear plane.
@@ -121,6 +128,18 @@ pub const OUTLINE_GROWTH: f64 = 0.03;
 /// raised first (the rest covers film points between the sampled ones and the interpolated
 /// centres' error).
 pub const CELL_OUTLINE_GROWTH: f64 = 0.025;
+
+/// A film cell's outline is traced again over a 5 × 5 lattice of film points when, at a film
+/// point between its 3 × 3 ones, the region reaches this share of the outline's vertices or
+/// chord midpoints (the region slides and changes shape between film points by more than the
+/// growth covers there: the rim of the image circle, where element rims and the stop bind in
+/// turn).
+pub const CELL_OUTLINE_CHECK: f64 = 0.99;
+
+/// A film cell's outline traced again over the 5 × 5 lattice is grown by this share of its
+/// largest radius more (between those film points the region still reached up to 0.4 % past
+/// it: the anamorphic lens with 5 blades at f/8).
+pub const CELL_OUTLINE_REFINED_GROWTH: f64 = 0.025;
 
 /// The ends of the spectral renderer's wavelength range (nm): outlines of dispersive lenses
 /// hold the passing region at these as well as at the primary wavelength.
@@ -251,6 +270,20 @@ pub struct CellOutlines {
     /// Per cell without an outline, the box of the rays from its film points that pass,
     /// grown by two rear-grid cells (empty: nothing passes there); unused where there is one.
     pub boxes: Vec<Box2>,
+    /// The chief ray's aim point on the rear plane at each cell corner (row-major,
+    /// `(cells + 1)²`; rims ignored, so it exists past the image circle too); None where it
+    /// cannot be aimed.
+    pub corner_aims: Vec<Option<DVec2>>,
+    /// Per cell without an outline, where it is smaller than the cell's box: the box of the
+    /// passing rays relative to each film point's interpolated chief-ray aim (the rim of the
+    /// image circle, where a small region slides across the rear plane with the film point
+    /// further than its own size within one cell).
+    pub sliding_boxes: Vec<Option<Box2>>,
+    /// Per cell, the largest film radius among its traced film points with a passing ray (mm;
+    /// −∞ where none passes). Where the radial intervals found no ray (their 4 film points at 8
+    /// azimuths can miss the image circle's rim), a cell serves film points up to this radius
+    /// and half the rim lattice's spacing (an eighth of its side) beyond.
+    pub reach_mm: Vec<f64>,
 }
 
 /// The sampling domain of one film point of a [`CellOutlines`] cell.
@@ -260,6 +293,8 @@ pub enum CellDomain<'a> {
     Outline(&'a Outline, DVec2),
     /// The cell's box (empty when no ray passes there).
     Box(Box2),
+    /// The cell's sliding box, about the film point's interpolated chief-ray aim.
+    SlidingBox(Box2, DVec2),
 }
 
 impl CellDomain<'_> {
@@ -267,7 +302,7 @@ impl CellDomain<'_> {
     pub fn area(&self) -> f64 {
         match self {
             CellDomain::Outline(o, _) => o.area,
-            CellDomain::Box(b) => b.area(),
+            CellDomain::Box(b) | CellDomain::SlidingBox(b, _) => b.area(),
         }
     }
 
@@ -276,6 +311,7 @@ impl CellDomain<'_> {
         match self {
             CellDomain::Outline(o, centre) => o.contains(p - *centre),
             CellDomain::Box(b) => b.contains(p),
+            CellDomain::SlidingBox(b, aim) => b.contains(p - *aim),
         }
     }
 
@@ -284,6 +320,7 @@ impl CellDomain<'_> {
         match self {
             CellDomain::Outline(o, centre) => Some(*centre + o.sample(u)),
             CellDomain::Box(b) => (!b.is_empty()).then(|| b.min + (b.max - b.min) * u),
+            CellDomain::SlidingBox(b, aim) => Some(*aim + b.min + (b.max - b.min) * u),
         }
     }
 }
@@ -301,10 +338,18 @@ impl CellOutlines {
 
     /// The centre of film point `film`'s region: its cell corners' centroids, interpolated.
     fn centre_in(&self, i: usize, j: usize, t: DVec2) -> Option<DVec2> {
-        let n = self.cells + 1;
-        let c = |a: usize, b: usize| self.corner_centres[(j + b) * n + i + a];
-        let (c00, c10, c01, c11) = (c(0, 0)?, c(1, 0)?, c(0, 1)?, c(1, 1)?);
-        Some((c00 * (1.0 - t.x) + c10 * t.x) * (1.0 - t.y) + (c01 * (1.0 - t.x) + c11 * t.x) * t.y)
+        bilinear(&self.corner_centres, self.cells + 1, i, j, t)
+    }
+
+    /// Film point `film`'s chief-ray aim: its cell corners' aims, interpolated.
+    fn aim_in(&self, i: usize, j: usize, t: DVec2) -> Option<DVec2> {
+        bilinear(&self.corner_aims, self.cells + 1, i, j, t)
+    }
+
+    /// Whether film point `film` lies within its cell's reach ([`CellOutlines::reach_mm`]).
+    fn reaches(&self, film: DVec2) -> bool {
+        let side = 2.0 * self.half_side_mm / self.cells as f64;
+        self.cell(film).is_some_and(|(i, j, _)| film.length() <= self.reach_mm[j * self.cells + i] + 0.125 * side)
     }
 
     /// The domain serving film point `film`: its cell's outline about the point's centre, or the
@@ -314,9 +359,20 @@ impl CellOutlines {
         let k = j * self.cells + i;
         Some(match (&self.outlines[k], self.centre_in(i, j, t)) {
             (Some(o), Some(centre)) => CellDomain::Outline(o, centre),
-            _ => CellDomain::Box(self.boxes[k]),
+            _ => match (self.sliding_boxes[k], self.aim_in(i, j, t)) {
+                (Some(b), Some(aim)) => CellDomain::SlidingBox(b, aim),
+                _ => CellDomain::Box(self.boxes[k]),
+            },
         })
     }
+}
+
+/// The bilinear interpolation at `t` ([0, 1]²) in cell (i, j) of corner values `corners`
+/// (row-major, `n` per row); None unless all four corners have one.
+fn bilinear(corners: &[Option<DVec2>], n: usize, i: usize, j: usize, t: DVec2) -> Option<DVec2> {
+    let c = |a: usize, b: usize| corners[(j + b) * n + i + a];
+    let (c00, c10, c01, c11) = (c(0, 0)?, c(1, 0)?, c(0, 1)?, c(1, 1)?);
+    Some((c00 * (1.0 - t.x) + c10 * t.x) * (1.0 - t.y) + (c01 * (1.0 - t.x) + c11 * t.x) * t.y)
 }
 
 /// Per-radius bounds of the rays leaving the film that pass the lens.
@@ -528,7 +584,7 @@ impl ExitPupilBounds {
                                 count += 1;
                             });
                             if tiny {
-                                for_each_passing_near_chief(lens, wl, fp, [rear_z, cell, reach], |q| {
+                                let _ = for_each_passing_near_chief(lens, wl, fp, [rear_z, cell, reach], |q| {
                                     b.grow(q);
                                     sum += q;
                                     count += 1;
@@ -546,7 +602,7 @@ impl ExitPupilBounds {
                                     b.grow(q + grow);
                                 });
                                 if tiny {
-                                    for_each_passing_near_chief(lens, wl_end, fp, [rear_z, cell, reach], |q| {
+                                    let _ = for_each_passing_near_chief(lens, wl_end, fp, [rear_z, cell, reach], |q| {
                                         b.grow(q - DVec2::splat(cell));
                                         b.grow(q + DVec2::splat(cell));
                                     });
@@ -680,7 +736,7 @@ impl ExitPupilBounds {
             for_each_passing(lens, w, fp, [rear_z, union.min.x, union.min.y], cell, grid, |q| take(q, true));
             if let Some(fine) = near_chief {
                 let reach = NEAR_CHIEF_REACH_CELLS * cell.max_element();
-                for_each_passing_near_chief(lens, w, fp, [rear_z, fine, reach], |q| take(q, false));
+                let _ = for_each_passing_near_chief(lens, w, fp, [rear_z, fine, reach], |q| take(q, false));
             }
         };
         let corner_centres: Vec<Option<DVec2>> = (0..n * n)
@@ -700,55 +756,169 @@ impl ExitPupilBounds {
                 (count > 0).then(|| sum / count as f64)
             })
             .collect();
+        // (and the chief ray's aim at every corner, for the rim's sliding boxes)
+        let corner_aims: Vec<Option<DVec2>> = (0..n * n)
+            .into_par_iter()
+            .map(|k| {
+                let f = film_xy((k % n) as f64, (k / n) as f64);
+                let fp = DVec3::new(f.x, f.y, film_slope.map_or(self.film_z_mm, |slope| self.film_z_mm + slope.dot(f)));
+                chief_aim_from_film(lens, fp, wl)
+            })
+            .collect();
         let mut grid_cells = CellOutlines {
             half_side_mm: h,
             cells,
             corner_centres,
             outlines: vec![None; cells * cells],
             boxes: vec![Box2::EMPTY; cells * cells],
+            corner_aims,
+            sliding_boxes: vec![None; cells * cells],
+            reach_mm: vec![f64::NEG_INFINITY; cells * cells],
         };
         // 2. Each cell's outline about its film points' own centres: a 3 × 3 grid of them (its
         //    corners, edge midpoints and centre) per film z. A region bounded by several edges
         //    (blades, element rims) reaches further between two film points than at either when
         //    a different edge binds at each; corners and centre alone let a 5-blade stop on the
         //    anamorphic lens at f/4 lose 1.4 % of one film point's passing rays.
-        let outlines: Vec<(Option<Outline>, Box2)> = (0..cells * cells)
+        let outlines: Vec<(Option<Outline>, Box2, Option<Box2>, f64)> = (0..cells * cells)
             .into_par_iter()
             .map(|k| {
                 let (i, j) = (k % cells, k / cells);
-                let mut pts = Vec::with_capacity(27);
-                for (a, b) in (0..9).map(|m| ((m % 3) as f64 * 0.5, (m / 3) as f64 * 0.5)) {
-                    let f = film_xy(i as f64 + a, j as f64 + b);
-                    pts.extend(z_levels(f).into_iter().map(|z| DVec3::new(f.x, f.y, z)));
+                // (a cell wholly beyond the last radius with passing rays serves no film point)
+                let (lo, hi) = (film_xy(i as f64, j as f64), film_xy(i as f64 + 1.0, j as f64 + 1.0));
+                if DVec2::ZERO.clamp(lo, hi).length() > h {
+                    return (None, Box2::EMPTY, None, f64::NEG_INFINITY);
                 }
+                // (film points at places (a, b) of the cell, at each of their z levels)
+                let points = |places: &mut dyn Iterator<Item = DVec2>| -> (Vec<DVec3>, Vec<DVec2>) {
+                    let (mut pts, mut at) = (Vec::new(), Vec::new());
+                    for t in places {
+                        let f = film_xy(i as f64 + t.x, j as f64 + t.y);
+                        for z in z_levels(f) {
+                            pts.push(DVec3::new(f.x, f.y, z));
+                            at.push(t);
+                        }
+                    }
+                    (pts, at)
+                };
+                let lattice =
+                    |n: usize| (0..n * n).map(move |m| DVec2::new((m % n) as f64, (m / n) as f64) / (n - 1) as f64);
+                let (pts, places) = points(&mut lattice(3));
                 // (the cell's points, those on its upper edges too, are placed in this cell)
                 let centre_of = |fp: DVec3| {
                     let u = (DVec2::new(fp.x, fp.y) + DVec2::splat(h)) / (2.0 * h) * cells as f64;
                     grid_cells.centre_in(i, j, u - DVec2::new(i as f64, j as f64))
                 };
-                if let Some(o) = outline_radii(lens, [wl, rear_z], union, &pts, &centre_of, false, ends)
-                    .and_then(|radii| Outline::new(DVec2::ZERO, radii))
-                {
-                    return (Some(o), Box2::EMPTY);
+                let outline = |pts: &[DVec3], extra_growth: f64| {
+                    outline_radii(lens, [wl, rear_z], union, pts, &centre_of, false, ends).and_then(|radii| {
+                        let largest = radii.iter().cloned().fold(0.0, f64::max);
+                        Outline::new(DVec2::ZERO, radii.iter().map(|r| r + extra_growth * largest).collect())
+                    })
+                };
+                if let Some(o) = outline(&pts, 0.0) {
+                    // 2b. Checked between those film points, at the 5 × 5 lattice's other 16: where
+                    //     one's region reaches [`CELL_OUTLINE_CHECK`] of the outline's vertices or
+                    //     chord midpoints, the outline is traced again over all 25.
+                    let (between, _) = points(&mut lattice(5).filter(|t| (t * 4.0).as_ivec2() % 2 != IVec2::ZERO));
+                    let reaches = between.iter().any(|&fp| {
+                        let Some(centre) = centre_of(fp) else { return true };
+                        (0..2 * OUTLINE_ANGLES).any(|m| {
+                            let (v0, v1) = (o.vertex(m / 2), o.vertex(m / 2 + 1));
+                            let p = if m % 2 == 0 { v0 } else { 0.5 * (v0 + v1) };
+                            let q = centre + CELL_OUTLINE_CHECK * p;
+                            let ray = Ray::new(fp, DVec3::new(q.x, q.y, rear_z) - fp);
+                            lens.trace_detailed(&ray, wl, TraceDirection::FilmToScene, StopMode::Apply).is_ok()
+                        })
+                    });
+                    // (every film point of an outlined cell has passing rays)
+                    let reach =
+                        |pts: &[DVec3]| pts.iter().map(|p| p.truncate().length()).fold(f64::NEG_INFINITY, f64::max);
+                    if !reaches {
+                        return (Some(o), Box2::EMPTY, None, reach(&pts));
+                    }
+                    let (all, _) = points(&mut lattice(5));
+                    if let Some(o) = outline(&all, CELL_OUTLINE_REFINED_GROWTH) {
+                        return (Some(o), Box2::EMPTY, None, reach(&all));
+                    }
                 }
                 // 3. No outline (the rim of the image circle): the box of the passing rays, at
-                //    the bounds' other wavelengths too.
+                //    the bounds' other wavelengths too; and the same rays' box about each film
+                //    point's interpolated chief-ray aim, where every corner has one.
+                //    First the 3 × 3 lattice of film points; then the 5 × 5 lattice's other 16,
+                //    between them (where the region at the rim reaches further than at any of
+                //    them: aspheric-fisheye-10mm with 5 blades lost 2–4 passing rays in 10³),
+                //    traced over the first box grown by half its size (at least 4 grid cells), and
+                //    over the whole grid where a passing point comes within a grid cell of that
+                //    window's edge.
                 let mut b = Box2::EMPTY;
-                for &fp in &pts {
+                let mut sliding = Box2::EMPTY;
+                let mut cell_reach = f64::NEG_INFINITY;
+                let mut trace = |fp: DVec3, t: DVec2, b: &mut Box2, window: Option<Box2>| -> bool {
+                    let aim = grid_cells.aim_in(i, j, t);
+                    let mut near_edge = false;
+                    let radius = fp.truncate().length();
                     for &w in std::iter::once(&wl).chain(ends) {
-                        passing(fp, w, &mut |q, on_grid| {
-                            // grid points keep two grid cells with the margin below
-                            let grow = near_chief.filter(|_| on_grid).map_or(DVec2::ZERO, |fine| 2.0 * (cell - fine));
+                        // (the box's points and the sliding box's, each grown by its own amount)
+                        let mut take = |q: DVec2, grow: DVec2, sliding_grow: Option<DVec2>| {
+                            cell_reach = cell_reach.max(radius);
                             b.grow(q - grow);
                             b.grow(q + grow);
+                            if let (Some(aim), Some(grow)) = (aim, sliding_grow) {
+                                sliding.grow(q - aim - grow);
+                                sliding.grow(q - aim + grow);
+                            }
+                        };
+                        // (with the fine search, the grid's points keep two grid cells with the
+                        // margin below; in the sliding box, those inside a fine window that
+                        // resolved the region add nothing)
+                        let resolved = near_chief.and_then(|fine| {
+                            let reach = NEAR_CHIEF_REACH_CELLS * cell.max_element();
+                            let fine_point = |q| take(q, DVec2::ZERO, Some(DVec2::ZERO));
+                            for_each_passing_near_chief(lens, w, fp, [rear_z, fine, reach], fine_point)
                         });
+                        let grow = near_chief.map_or(DVec2::ZERO, |fine| 2.0 * (cell - fine));
+                        let origin = [rear_z, union.min.x, union.min.y];
+                        for_each_passing_in(lens, w, fp, origin, cell, grid, window, |q| {
+                            near_edge |= window.is_some_and(|w| {
+                                let inner = Box2 { min: w.min + cell, max: w.max - cell };
+                                !inner.contains(q)
+                            });
+                            take(q, grow, (!resolved.is_some_and(|r| r.contains(q))).then_some(grow));
+                        });
+                    }
+                    near_edge
+                };
+                for (&fp, &t) in pts.iter().zip(&places) {
+                    trace(fp, t, &mut b, None);
+                }
+                let first = b;
+                let reach = (0.5 * (first.max - first.min)).max(DVec2::splat(4.0 * cell.max_element()));
+                let window = (!first.is_empty()).then(|| Box2 { min: first.min - reach, max: first.max + reach });
+                let (between, between_places) =
+                    points(&mut lattice(5).filter(|t| (t * 4.0).as_ivec2() % 2 != IVec2::ZERO));
+                for (&fp, &t) in between.iter().zip(&between_places) {
+                    let mut found = Box2::EMPTY;
+                    if window.is_none() || trace(fp, t, &mut found, window) {
+                        found = Box2::EMPTY;
+                        trace(fp, t, &mut found, None);
+                    }
+                    if !found.is_empty() {
+                        b = if b.is_empty() { found } else { Box2::union(b, found) };
                     }
                 }
                 let margin = near_chief.map_or(2.0 * cell, |fine| DVec2::splat(2.0 * fine));
-                (None, if b.is_empty() { b } else { Box2 { min: b.min - margin, max: b.max + margin } })
+                let grown = |b: Box2| if b.is_empty() { b } else { Box2 { min: b.min - margin, max: b.max + margin } };
+                let (b, sliding) = (grown(b), grown(sliding));
+                // (the sliding box where every film point has an aim and it is the smaller)
+                let every_aim = grid_cells.aim_in(i, j, DVec2::ZERO).is_some();
+                let sliding = (every_aim && !sliding.is_empty() && sliding.area() < b.area()).then_some(sliding);
+                (None, b, sliding, cell_reach)
             })
             .collect();
-        (grid_cells.outlines, grid_cells.boxes) = outlines.into_iter().unzip();
+        for (k, (outline, b, sliding, reach)) in outlines.into_iter().enumerate() {
+            (grid_cells.outlines[k], grid_cells.boxes[k], grid_cells.sliding_boxes[k]) = (outline, b, sliding);
+            grid_cells.reach_mm[k] = reach;
+        }
         Some(grid_cells)
     }
 
@@ -770,19 +940,26 @@ impl ExitPupilBounds {
     /// The sampling domain's area for film point `film` (mm²; 0 outside the bounds).
     pub fn domain_area_at(&self, film: DVec2) -> f64 {
         let Some(k) = self.interval(film.length()) else { return 0.0 };
-        if self.boxes[k].is_empty() {
-            return 0.0;
-        }
+        // (a film cell's domain stands where there is one, within its reach where the radial
+        // interval found no ray: `cell_domain`)
         if let Some(d) = self.cell_domain(film) {
             return d.area();
+        }
+        if self.boxes[k].is_empty() {
+            return 0.0;
         }
         self.outlines[k].as_ref().filter(|_| !self.union_only).map_or(self.boxes[k].area(), |o| o.area)
     }
 
     /// The film cell's domain serving `film` (lenses without rotational symmetry), inside the
     /// cells' square.
+    /// Where the film point's radial interval found no ray, only within the cell's reach
+    /// (beyond it: an empty box).
     fn cell_domain(&self, film: DVec2) -> Option<CellDomain<'_>> {
-        self.cells.as_ref().filter(|_| self.union_only)?.at(film)
+        let cells = self.cells.as_ref().filter(|_| self.union_only)?;
+        let domain = cells.at(film)?;
+        let unseen = self.interval(film.length()).is_none_or(|k| self.boxes[k].is_empty());
+        Some(if unseen && !cells.reaches(film) { CellDomain::Box(Box2::EMPTY) } else { domain })
     }
 
     /// The box for a film point at radius `r` on +x (empty beyond the covered radius).
@@ -796,12 +973,9 @@ impl ExitPupilBounds {
         let Some(k) = self.interval(r) else { return false };
         let b = self.boxes[k];
         if self.union_only {
-            if b.is_empty() {
-                return false;
-            }
             return match self.cell_domain(film) {
                 Some(d) => d.contains(p),
-                None => b.contains(p),
+                None => !b.is_empty() && b.contains(p),
             };
         }
         // rotate p into the frame where the film point lies on +x
@@ -867,13 +1041,13 @@ impl ExitPupilBounds {
     pub fn sample_bounds(&self, film: DVec2, u: DVec2) -> Option<PupilSample> {
         let r = film.length();
         let k = self.interval(r)?;
-        let b = self.boxes[k];
-        if b.is_empty() {
-            return None;
-        }
         if let Some(d) = self.cell_domain(film) {
             let p = d.sample(u)?;
             return Some(PupilSample { point: DVec3::new(p.x, p.y, self.rear_z_mm), pdf_area: 1.0 / d.area() });
+        }
+        let b = self.boxes[k];
+        if b.is_empty() {
+            return None;
         }
         let (q, area) = match (&self.outlines[k], self.union_only) {
             (Some(o), false) if o.drift_per_mm != 0.0 => (o.sample(u) + o.shift(r), o.area),
@@ -965,14 +1139,32 @@ fn for_each_passing(
     lens: &Lens,
     wl: f64,
     fp: DVec3,
+    origin: [f64; 3],
+    cell: DVec2,
+    grid: usize,
+    pass: impl FnMut(DVec2),
+) {
+    for_each_passing_in(lens, wl, fp, origin, cell, grid, None, pass);
+}
+
+/// [`for_each_passing`] over the grid's points inside `window` only (all where None).
+#[allow(clippy::too_many_arguments)]
+fn for_each_passing_in(
+    lens: &Lens,
+    wl: f64,
+    fp: DVec3,
     [rear_z, x0, y0]: [f64; 3],
     cell: DVec2,
     grid: usize,
+    window: Option<Box2>,
     mut pass: impl FnMut(DVec2),
 ) {
     for i in 0..grid {
         for j in 0..grid {
             let q = DVec2::new(x0, y0) + cell * DVec2::new(i as f64 + 0.5, j as f64 + 0.5);
+            if window.is_some_and(|w| !w.contains(q)) {
+                continue;
+            }
             let ray = Ray::new(fp, DVec3::new(q.x, q.y, rear_z) - fp);
             if lens.trace_detailed(&ray, wl, TraceDirection::FilmToScene, StopMode::Apply).is_ok() {
                 pass(q);
@@ -987,15 +1179,16 @@ fn for_each_passing(
 /// `fp` passes the lens at `wl`. The grid starts at ±[`NEAR_CHIEF_HALF`] points and doubles
 /// while passing points touch its edge, as long as it stays within `reach_mm` of the aim point
 /// (a larger region the coarse grid resolves itself). Nothing when the chief ray cannot be
-/// aimed.
+/// aimed. Returns the grid's window (the box of its points) when the passing region lies
+/// inside it (none of its rim points passes), else None.
 fn for_each_passing_near_chief(
     lens: &Lens,
     wl: f64,
     fp: DVec3,
     [rear_z, fine, reach_mm]: [f64; 3],
     mut pass: impl FnMut(DVec2),
-) {
-    let Some(aim) = chief_aim_from_film(lens, fp, wl) else { return };
+) -> Option<Box2> {
+    let aim = chief_aim_from_film(lens, fp, wl)?;
     let mut h = NEAR_CHIEF_HALF;
     loop {
         // 1. The (2h + 1)² grid about the aim point; note whether its rim holds passing points.
@@ -1014,7 +1207,8 @@ fn for_each_passing_near_chief(
         // 2. Done when the region lies inside, or the grid has grown as far as it may.
         if !touches_rim || (2 * h) as f64 * fine > reach_mm {
             found.into_iter().for_each(&mut pass);
-            return;
+            let half = DVec2::splat(h as f64 * fine);
+            return (!touches_rim).then_some(Box2 { min: aim - half, max: aim + half });
         }
         h *= 2;
     }
