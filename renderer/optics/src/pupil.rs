@@ -30,10 +30,13 @@
 //! reaches [`CELL_OUTLINE_CHECK`] of it, traced again over all 25. On a tilted sensor whose plane
 //! is known ([`ExitPupilBounds::compute_on_plane`]) each film point is traced at its own z. A
 //! cell without an outline (at the rim of the image circle, where a corner or a film point's
-//! centre is absorbed) gets the box of the rays that pass from its film points, grown by two grid
-//! cells, or where smaller the same rays' box about each film point's chief-ray aim, the corners'
-//! aims interpolated (a small region slides across the rear plane further than its own size
-//! within one cell); radii where nothing passes at any traced azimuth stay empty. Past the last interval with passing rays, where the image circle ends,
+//! centre is absorbed) gets the smallest of three domains: the box of the rays that pass from
+//! its film points (3 × 3, then the 5 × 5 lattice's other 16), grown by two grid cells; the same
+//! rays' box about each film point's chief-ray aim, the corners' aims interpolated (a small
+//! region slides across the rear plane further than its own size within one cell); and the
+//! outline, about that aim, of the region that passes the stop with the elements' rims ignored,
+//! which holds the passing region (the rims only cut it). Radii where nothing passes at any
+//! traced azimuth stay empty, except within a cell's reach ([`CellOutlines::reach_mm`]). Past the last interval with passing rays, where the image circle ends,
 //! the regions can be smaller than the grid's cells (at the spectral range's ends above all),
 //! so those intervals are traced again on a grid four times finer until one has none.
 //!
@@ -279,6 +282,10 @@ pub struct CellOutlines {
     /// image circle, where a small region slides across the rear plane with the film point
     /// further than its own size within one cell).
     pub sliding_boxes: Vec<Option<Box2>>,
+    /// Per cell without an outline, where it is smaller than the boxes: the outline of the
+    /// region that passes the stop with the elements' rims ignored (which holds the passing
+    /// region), about each film point's interpolated chief-ray aim.
+    pub stop_outlines: Vec<Option<Outline>>,
     /// Per cell, the largest film radius among its traced film points with a passing ray (mm;
     /// −∞ where none passes). Where the radial intervals found no ray (their 4 film points at 8
     /// azimuths can miss the image circle's rim), a cell serves film points up to this radius
@@ -359,13 +366,18 @@ impl CellOutlines {
         let k = j * self.cells + i;
         Some(match (&self.outlines[k], self.centre_in(i, j, t)) {
             (Some(o), Some(centre)) => CellDomain::Outline(o, centre),
-            _ => match (self.sliding_boxes[k], self.aim_in(i, j, t)) {
-                (Some(b), Some(aim)) => CellDomain::SlidingBox(b, aim),
+            _ => match (&self.stop_outlines[k], self.sliding_boxes[k], self.aim_in(i, j, t)) {
+                (Some(o), _, Some(aim)) => CellDomain::Outline(o, aim),
+                (None, Some(b), Some(aim)) => CellDomain::SlidingBox(b, aim),
                 _ => CellDomain::Box(self.boxes[k]),
             },
         })
     }
 }
+
+/// One film cell's domains as [`ExitPupilBounds::film_cells`] finds them: the outline, the box,
+/// the sliding box, the stop's outline and the reach (mm) of [`CellOutlines`].
+type CellParts = (Option<Outline>, Box2, Option<Box2>, Option<Outline>, f64);
 
 /// The bilinear interpolation at `t` ([0, 1]²) in cell (i, j) of corner values `corners`
 /// (row-major, `n` per row); None unless all four corners have one.
@@ -773,6 +785,7 @@ impl ExitPupilBounds {
             boxes: vec![Box2::EMPTY; cells * cells],
             corner_aims,
             sliding_boxes: vec![None; cells * cells],
+            stop_outlines: vec![None; cells * cells],
             reach_mm: vec![f64::NEG_INFINITY; cells * cells],
         };
         // 2. Each cell's outline about its film points' own centres: a 3 × 3 grid of them (its
@@ -780,14 +793,14 @@ impl ExitPupilBounds {
         //    (blades, element rims) reaches further between two film points than at either when
         //    a different edge binds at each; corners and centre alone let a 5-blade stop on the
         //    anamorphic lens at f/4 lose 1.4 % of one film point's passing rays.
-        let outlines: Vec<(Option<Outline>, Box2, Option<Box2>, f64)> = (0..cells * cells)
+        let outlines: Vec<CellParts> = (0..cells * cells)
             .into_par_iter()
             .map(|k| {
                 let (i, j) = (k % cells, k / cells);
                 // (a cell wholly beyond the last radius with passing rays serves no film point)
                 let (lo, hi) = (film_xy(i as f64, j as f64), film_xy(i as f64 + 1.0, j as f64 + 1.0));
                 if DVec2::ZERO.clamp(lo, hi).length() > h {
-                    return (None, Box2::EMPTY, None, f64::NEG_INFINITY);
+                    return (None, Box2::EMPTY, None, None, f64::NEG_INFINITY);
                 }
                 // (film points at places (a, b) of the cell, at each of their z levels)
                 let points = |places: &mut dyn Iterator<Item = DVec2>| -> (Vec<DVec3>, Vec<DVec2>) {
@@ -809,37 +822,51 @@ impl ExitPupilBounds {
                     let u = (DVec2::new(fp.x, fp.y) + DVec2::splat(h)) / (2.0 * h) * cells as f64;
                     grid_cells.centre_in(i, j, u - DVec2::new(i as f64, j as f64))
                 };
-                let outline = |pts: &[DVec3], extra_growth: f64| {
-                    outline_radii(lens, [wl, rear_z], union, pts, &centre_of, false, ends).and_then(|radii| {
-                        let largest = radii.iter().cloned().fold(0.0, f64::max);
-                        Outline::new(DVec2::ZERO, radii.iter().map(|r| r + extra_growth * largest).collect())
-                    })
-                };
-                if let Some(o) = outline(&pts, 0.0) {
-                    // 2b. Checked between those film points, at the 5 × 5 lattice's other 16: where
-                    //     one's region reaches [`CELL_OUTLINE_CHECK`] of the outline's vertices or
-                    //     chord midpoints, the outline is traced again over all 25.
-                    let (between, _) = points(&mut lattice(5).filter(|t| (t * 4.0).as_ivec2() % 2 != IVec2::ZERO));
+                let (between, _) = points(&mut lattice(5).filter(|t| (t * 4.0).as_ivec2() % 2 != IVec2::ZERO));
+                // The outline about `centre_of` over the 3 × 3 film points; `stop_only`: of the
+                // region that passes the stop (rims ignored). 2b. Checked between those film
+                // points, at the 5 × 5 lattice's other 16: where one's region reaches
+                // [`CELL_OUTLINE_CHECK`] of the outline's vertices or chord midpoints, the outline
+                // is traced again over all 25 (and grown by [`CELL_OUTLINE_REFINED_GROWTH`]).
+                let checked_outline = |centre_of: &(dyn Fn(DVec3) -> Option<DVec2> + Sync), stop_only: bool| {
+                    let outline = |pts: &[DVec3], extra_growth: f64| {
+                        outline_radii(lens, [wl, rear_z], union, pts, centre_of, false, ends, stop_only).and_then(
+                            |radii| {
+                                let largest = radii.iter().cloned().fold(0.0, f64::max);
+                                Outline::new(DVec2::ZERO, radii.iter().map(|r| r + extra_growth * largest).collect())
+                            },
+                        )
+                    };
+                    let weights: Vec<f64> =
+                        (0..lens.surfaces().len()).map(|i| if i == lens.stop_index() { 1.0 } else { 0.0 }).collect();
+                    let passes = |ray: &Ray| {
+                        if stop_only {
+                            lens.trace_soft(ray, wl, TraceDirection::FilmToScene, &weights).is_ok_and(|(_, c)| c >= 0.0)
+                        } else {
+                            lens.trace_detailed(ray, wl, TraceDirection::FilmToScene, StopMode::Apply).is_ok()
+                        }
+                    };
+                    let o = outline(&pts, 0.0)?;
                     let reaches = between.iter().any(|&fp| {
                         let Some(centre) = centre_of(fp) else { return true };
                         (0..2 * OUTLINE_ANGLES).any(|m| {
                             let (v0, v1) = (o.vertex(m / 2), o.vertex(m / 2 + 1));
                             let p = if m % 2 == 0 { v0 } else { 0.5 * (v0 + v1) };
                             let q = centre + CELL_OUTLINE_CHECK * p;
-                            let ray = Ray::new(fp, DVec3::new(q.x, q.y, rear_z) - fp);
-                            lens.trace_detailed(&ray, wl, TraceDirection::FilmToScene, StopMode::Apply).is_ok()
+                            passes(&Ray::new(fp, DVec3::new(q.x, q.y, rear_z) - fp))
                         })
                     });
-                    // (every film point of an outlined cell has passing rays)
-                    let reach =
-                        |pts: &[DVec3]| pts.iter().map(|p| p.truncate().length()).fold(f64::NEG_INFINITY, f64::max);
                     if !reaches {
-                        return (Some(o), Box2::EMPTY, None, reach(&pts));
+                        return Some((o, false));
                     }
                     let (all, _) = points(&mut lattice(5));
-                    if let Some(o) = outline(&all, CELL_OUTLINE_REFINED_GROWTH) {
-                        return (Some(o), Box2::EMPTY, None, reach(&all));
-                    }
+                    outline(&all, CELL_OUTLINE_REFINED_GROWTH).map(|o| (o, true))
+                };
+                if let Some((o, refined)) = checked_outline(&centre_of, false) {
+                    // (every film point of an outlined cell has passing rays)
+                    let (all, _) = if refined { points(&mut lattice(5)) } else { (pts.clone(), Vec::new()) };
+                    let reach = all.iter().map(|p| p.truncate().length()).fold(f64::NEG_INFINITY, f64::max);
+                    return (Some(o), Box2::EMPTY, None, None, reach);
                 }
                 // 3. No outline (the rim of the image circle): the box of the passing rays, at
                 //    the bounds' other wavelengths too; and the same rays' box about each film
@@ -912,12 +939,25 @@ impl ExitPupilBounds {
                 // (the sliding box where every film point has an aim and it is the smaller)
                 let every_aim = grid_cells.aim_in(i, j, DVec2::ZERO).is_some();
                 let sliding = (every_aim && !sliding.is_empty() && sliding.area() < b.area()).then_some(sliding);
-                (None, b, sliding, cell_reach)
+                // 4. The region that passes the stop, the elements' rims ignored (the passing
+                //    region is that one cut by rims), outlined about each film point's
+                //    interpolated aim, where smaller than the boxes.
+                let aim_of = |fp: DVec3| {
+                    let u = (DVec2::new(fp.x, fp.y) + DVec2::splat(h)) / (2.0 * h) * cells as f64;
+                    grid_cells.aim_in(i, j, u - DVec2::new(i as f64, j as f64))
+                };
+                let smallest = sliding.map_or(b.area(), |s| s.area());
+                let speck = (every_aim && !b.is_empty())
+                    .then(|| checked_outline(&aim_of, true))
+                    .flatten()
+                    .map(|(o, _)| o)
+                    .filter(|o| o.area < smallest);
+                (None, b, sliding, speck, cell_reach)
             })
             .collect();
-        for (k, (outline, b, sliding, reach)) in outlines.into_iter().enumerate() {
+        for (k, (outline, b, sliding, speck, reach)) in outlines.into_iter().enumerate() {
             (grid_cells.outlines[k], grid_cells.boxes[k], grid_cells.sliding_boxes[k]) = (outline, b, sliding);
-            grid_cells.reach_mm[k] = reach;
+            (grid_cells.stop_outlines[k], grid_cells.reach_mm[k]) = (speck, reach);
         }
         Some(grid_cells)
     }
@@ -1242,11 +1282,11 @@ fn outline_of(
         let slope = if last.x > first.x { (a1.x - a0.x) / (last.x - first.x) } else { 0.0 };
         let at_axis = a0.x - slope * first.x;
         let centre_of = move |fp: DVec3| Some(DVec2::new(at_axis + slope * fp.x, 0.0));
-        let radii = outline_radii(lens, [wl, rear_z], b, &chosen, &centre_of, true, ends)?;
+        let radii = outline_radii(lens, [wl, rear_z], b, &chosen, &centre_of, true, ends, false)?;
         return Outline::new(DVec2::new(at_axis, 0.0), radii).map(|o| Outline { drift_per_mm: slope, ..o });
     }
     // The region is mirror-symmetric about the x axis.
-    let radii = outline_radii(lens, [wl, rear_z], b, &chosen, &|_| Some(centre), true, ends)?;
+    let radii = outline_radii(lens, [wl, rear_z], b, &chosen, &|_| Some(centre), true, ends, false)?;
     Outline::new(centre, radii)
 }
 
@@ -1254,7 +1294,9 @@ fn outline_of(
 /// region taken about its own centre `centre_of(point)`, inside the box `b`, at
 /// [`OUTLINE_ANGLES`] angles (only the upper half traced when `mirror`: the region is symmetric
 /// about the x axis). None when some film point's centre is missing or absorbed (the region is
-/// not star-shaped about it).
+/// not star-shaped about it). `stop_only`: of the region that passes the stop, the elements'
+/// rims ignored (at the rim of the image circle the passing region is that one, cut by rims).
+#[allow(clippy::too_many_arguments)]
 fn outline_radii(
     lens: &Lens,
     [wl, rear_z]: [f64; 2],
@@ -1263,14 +1305,23 @@ fn outline_radii(
     centre_of: &(dyn Fn(DVec3) -> Option<DVec2> + Sync),
     mirror: bool,
     extra_wavelengths: &[f64],
+    stop_only: bool,
 ) -> Option<Vec<f64>> {
     const MARCH: usize = 8;
     const BISECT: usize = 10;
     /// Strides past the primary wavelength's radius, as shares of the way to the box's edge.
     const SPECTRAL_STEPS: [f64; 5] = [0.015, 0.03, 0.06, 0.12, 0.24];
+    // (`stop_only`: the rims of the elements do not clip; a soft trace weighting only the
+    // stop's clearance is non-negative exactly where the ray passes the stop)
+    let weights: Vec<f64> =
+        (0..lens.surfaces().len()).map(|i| if i == lens.stop_index() { 1.0 } else { 0.0 }).collect();
     let passes_at = |fp: DVec3, q: DVec2, wl: f64| {
-        let p = DVec3::new(q.x, q.y, rear_z);
-        lens.trace_detailed(&Ray::new(fp, p - fp), wl, TraceDirection::FilmToScene, StopMode::Apply).is_ok()
+        let ray = Ray::new(fp, DVec3::new(q.x, q.y, rear_z) - fp);
+        if stop_only {
+            lens.trace_soft(&ray, wl, TraceDirection::FilmToScene, &weights).is_ok_and(|(_, c)| c >= 0.0)
+        } else {
+            lens.trace_detailed(&ray, wl, TraceDirection::FilmToScene, StopMode::Apply).is_ok()
+        }
     };
     let passes = |fp: DVec3, q: DVec2| passes_at(fp, q, wl);
     let centres: Vec<DVec2> = film_pts.iter().map(|&fp| centre_of(fp)).collect::<Option<_>>()?;

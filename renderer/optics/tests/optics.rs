@@ -1232,9 +1232,10 @@ fn exit_pupil_bounds_hold_at_the_rim_of_the_image_circle() {
 /// A lens without rotational symmetry stopped down far: at the rim of the image circle the film
 /// cells have no outline, and their box spans the small region's slide across the cell, so
 /// samples from film points that receive light mostly missed it (70–100 % absorbed per cell on
-/// the anamorphic lens at f/96, rendered as blocks of speckle). Boxes about each film point's
-/// interpolated chief-ray aim, from the fine search's points, follow the region: at most 65 %
-/// of the samples there are absorbed, and no passing ray falls outside.
+/// the anamorphic lens at f/96, rendered as blocks of speckle). The outline of the region that
+/// passes the stop (the elements' rims ignored), about each film point's interpolated chief-ray
+/// aim, follows the region: at most 20 % of the samples there are absorbed (13.0 % measured;
+/// 56.4 % with boxes about the aims alone), and the chief ray lies in the bounds.
 #[test]
 fn rim_cells_of_a_small_stop_follow_the_region() {
     let l = library_lens("schneider-anamorphic-31mm").unwrap().stopped_down(96.0).unwrap();
@@ -1245,8 +1246,10 @@ fn rim_cells_of_a_small_stop_follow_the_region() {
     let (mut sampled, mut passing, mut film_points) = (0usize, 0usize, 0usize);
     for _ in 0..400_000 {
         let (f, film, _) = random_ray(&mut rnd, 21.7, film_z, DVec2::ZERO, 0.0, &l);
-        // (film points that receive light, served by a cell without an outline)
-        let rim = !matches!(cells.at(f), Some(petzval_optics::pupil::CellDomain::Outline(..)) | None);
+        // (film points that receive light, in a cell without an outline of the passing region)
+        let u = (f + DVec2::splat(cells.half_side_mm)) / (2.0 * cells.half_side_mm) * cells.cells as f64;
+        let k = (u.y as usize).min(cells.cells - 1) * cells.cells + (u.x as usize).min(cells.cells - 1);
+        let rim = cells.outlines[k].is_none() && !cells.boxes[k].is_empty();
         if !rim || petzval_optics::pupil::chief_ray_from_film(&l, film, WL).is_none() {
             continue;
         }
@@ -1262,5 +1265,5 @@ fn rim_cells_of_a_small_stop_follow_the_region() {
     let rejection = 1.0 - passing as f64 / sampled as f64;
     eprintln!("{film_points} lit film points in rim cells: {:.1} % of their samples absorbed", 100.0 * rejection);
     assert!(film_points > 10_000, "too few film points in rim cells ({film_points})");
-    assert!(rejection <= 0.65, "{:.1} % of the rim cells' samples are absorbed", 100.0 * rejection);
+    assert!(rejection <= 0.20, "{:.1} % of the rim cells' samples are absorbed", 100.0 * rejection);
 }
