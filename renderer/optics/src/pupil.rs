@@ -36,9 +36,10 @@
 //! region slides across the rear plane further than its own size within one cell); and the
 //! outline, about that aim, of the region that passes the stop with the elements' rims ignored,
 //! which holds the passing region (the rims only cut it). Radii where nothing passes at any
-//! traced azimuth stay empty, except within a cell's reach ([`CellOutlines::reach_mm`]). Past the last interval with passing rays, where the image circle ends,
-//! the regions can be smaller than the grid's cells (at the spectral range's ends above all),
-//! so those intervals are traced again on a grid four times finer until one has none.
+//! traced azimuth stay empty, except within a cell's reach ([`CellOutlines::reach_mm`]). Past
+//! the last interval with passing rays, where the image circle ends, the regions can be smaller
+//! than the grid's cells (at the spectral range's ends above all), so those intervals are traced
+//! again on a grid four times finer until one has none.
 //!
 //! **Lenses stopped down far.** The rear grid's cells (1/16 of three rear semi-diameters: 0.56 mm
 //! on wide-22mm) are larger than the passing region of a small stop (wide-22mm: about 0.6 mm
@@ -50,17 +51,19 @@
 //! grid found none, 1/4 where it found a few) about its chief ray's aim point on the rear plane
 //! ([`chief_aim_from_film`]: at a small stop the region lies about it), grown while the region
 //! reaches its edge; margins are then two fine cells (the grid's own points keep two grid
-//! cells, except in the rim cells' boxes, where grid points inside a fine search that resolved
-//! the region add nothing). The radial outlines are taken about a centre that slides with the film radius
-//! ([`Outline::drift_per_mm`], the chief rays' aim points at the interval's ends), since the
-//! region moves further than its own size across an interval. On a tilted sensor whose plane
-//! is known, such a lens takes the film cells traced on the plane instead (its region also
-//! moves with each film point's z). The chief ray is aimed in the film point's radial plane,
-//! and by Newton's method in both coordinates where the lens is not rotationally symmetric.
+//! cells, except in the rim cells' sliding boxes, where grid points inside a fine search that
+//! resolved the region add nothing). The radial outlines are taken about a centre that slides
+//! with the film radius ([`Outline::drift_per_mm`], the chief rays' aim points at the interval's
+//! ends), since the region moves further than its own size across an interval. On a tilted
+//! sensor whose plane is known, such a lens takes the film cells traced on the plane instead
+//! (its region also moves with each film point's z). The chief ray is aimed in the film
+//! point's radial plane, and by Newton's method in both coordinates where the lens is not
+//! rotationally symmetric.
 //!
 //! All of the above is found by tracing samples, so it can miss a sliver of the passing region
 //! (the brute-force stress sweep found about one passing ray in 40 million outside it on bladed
-//! stops and tilted sensors, and none in 83 million since the rim cells' rework of session 37). Sampling therefore mixes in a **defensive disc**
+//! stops and tilted sensors, and none in 83 million since the rim cells' rework of session 37).
+//! Sampling therefore mixes in a **defensive disc**
 //! ([`DEFENSIVE_FRACTION`] of the samples, after Hesterberg's defensive importance sampling): a
 //! disc on the rear plane that provably holds every passing ray's crossing, derived from the
 //! last surface's clear aperture, its sag and placement, and the film's extent (no tracing).
@@ -140,7 +143,7 @@ pub const CELL_OUTLINE_GROWTH: f64 = 0.025;
 pub const CELL_OUTLINE_CHECK: f64 = 0.99;
 
 /// A film cell's outline traced again over the 5 × 5 lattice is grown by this share of its
-/// largest radius more (between those film points the region still reached up to 0.4 % past
+/// largest radius more (between those film points the region still reached up to 1.1 % past
 /// it: the anamorphic lens with 5 blades at f/8).
 pub const CELL_OUTLINE_REFINED_GROWTH: f64 = 0.025;
 
@@ -837,15 +840,7 @@ impl ExitPupilBounds {
                             },
                         )
                     };
-                    let weights: Vec<f64> =
-                        (0..lens.surfaces().len()).map(|i| if i == lens.stop_index() { 1.0 } else { 0.0 }).collect();
-                    let passes = |ray: &Ray| {
-                        if stop_only {
-                            lens.trace_soft(ray, wl, TraceDirection::FilmToScene, &weights).is_ok_and(|(_, c)| c >= 0.0)
-                        } else {
-                            lens.trace_detailed(ray, wl, TraceDirection::FilmToScene, StopMode::Apply).is_ok()
-                        }
-                    };
+                    let weights = stop_only.then(|| stop_only_weights(lens));
                     let o = outline(&pts, 0.0)?;
                     let reaches = between.iter().any(|&fp| {
                         let Some(centre) = centre_of(fp) else { return true };
@@ -853,19 +848,19 @@ impl ExitPupilBounds {
                             let (v0, v1) = (o.vertex(m / 2), o.vertex(m / 2 + 1));
                             let p = if m % 2 == 0 { v0 } else { 0.5 * (v0 + v1) };
                             let q = centre + CELL_OUTLINE_CHECK * p;
-                            passes(&Ray::new(fp, DVec3::new(q.x, q.y, rear_z) - fp))
+                            passes_lens(lens, &Ray::new(fp, DVec3::new(q.x, q.y, rear_z) - fp), wl, weights.as_deref())
                         })
                     });
                     if !reaches {
-                        return Some((o, false));
+                        return Some(o);
                     }
                     let (all, _) = points(&mut lattice(5));
-                    outline(&all, CELL_OUTLINE_REFINED_GROWTH).map(|o| (o, true))
+                    outline(&all, CELL_OUTLINE_REFINED_GROWTH)
                 };
-                if let Some((o, refined)) = checked_outline(&centre_of, false) {
-                    // (every film point of an outlined cell has passing rays)
-                    let (all, _) = if refined { points(&mut lattice(5)) } else { (pts.clone(), Vec::new()) };
-                    let reach = all.iter().map(|p| p.truncate().length()).fold(f64::NEG_INFINITY, f64::max);
+                if let Some(o) = checked_outline(&centre_of, false) {
+                    // (every film point of an outlined cell has passing rays; the farthest is a
+                    // corner, in either lattice)
+                    let reach = pts.iter().map(|p| p.truncate().length()).fold(f64::NEG_INFINITY, f64::max);
                     return (Some(o), Box2::EMPTY, None, None, reach);
                 }
                 // 3. No outline (the rim of the image circle): the box of the passing rays, at
@@ -950,7 +945,6 @@ impl ExitPupilBounds {
                 let speck = (every_aim && !b.is_empty())
                     .then(|| checked_outline(&aim_of, true))
                     .flatten()
-                    .map(|(o, _)| o)
                     .filter(|o| o.area < smallest);
                 (None, b, sliding, speck, cell_reach)
             })
@@ -992,9 +986,8 @@ impl ExitPupilBounds {
     }
 
     /// The film cell's domain serving `film` (lenses without rotational symmetry), inside the
-    /// cells' square.
-    /// Where the film point's radial interval found no ray, only within the cell's reach
-    /// (beyond it: an empty box).
+    /// cells' square; where the film point's radial interval found no ray, only within the
+    /// cell's reach (beyond it: an empty box).
     fn cell_domain(&self, film: DVec2) -> Option<CellDomain<'_>> {
         let cells = self.cells.as_ref().filter(|_| self.union_only)?;
         let domain = cells.at(film)?;
@@ -1172,6 +1165,22 @@ fn radially_outlined(lens: &Lens, film_dz_mm: f64, film_slope: Option<DVec2>, ne
     lens.is_rotationally_symmetric() && lens.aperture().is_circular() && !(near_chief && tilted)
 }
 
+/// The weights of [`Lens::trace_soft`] that count the stop's clearance only, for
+/// [`passes_lens`]'s `stop_only`.
+fn stop_only_weights(lens: &Lens) -> Vec<f64> {
+    (0..lens.surfaces().len()).map(|i| if i == lens.stop_index() { 1.0 } else { 0.0 }).collect()
+}
+
+/// Whether `ray` from the film passes `lens` at `wl`; with `stop_only` ([`stop_only_weights`])
+/// whether it passes the stop, the elements' rims ignored (the soft trace's clearance, weighting
+/// the stop only, is non-negative exactly there).
+fn passes_lens(lens: &Lens, ray: &Ray, wl: f64, stop_only: Option<&[f64]>) -> bool {
+    match stop_only {
+        Some(weights) => lens.trace_soft(ray, wl, TraceDirection::FilmToScene, weights).is_ok_and(|(_, c)| c >= 0.0),
+        None => lens.trace_detailed(ray, wl, TraceDirection::FilmToScene, StopMode::Apply).is_ok(),
+    }
+}
+
 /// Calls `pass` with every point of a `grid`² grid of cells `cell` on the rear plane (z, and the
 /// grid's lower corner: `[rear_z, x0, y0]`; points at the cells' centres) whose ray from film
 /// point `fp` passes the lens at `wl`.
@@ -1311,17 +1320,9 @@ fn outline_radii(
     const BISECT: usize = 10;
     /// Strides past the primary wavelength's radius, as shares of the way to the box's edge.
     const SPECTRAL_STEPS: [f64; 5] = [0.015, 0.03, 0.06, 0.12, 0.24];
-    // (`stop_only`: the rims of the elements do not clip; a soft trace weighting only the
-    // stop's clearance is non-negative exactly where the ray passes the stop)
-    let weights: Vec<f64> =
-        (0..lens.surfaces().len()).map(|i| if i == lens.stop_index() { 1.0 } else { 0.0 }).collect();
+    let weights = stop_only.then(|| stop_only_weights(lens));
     let passes_at = |fp: DVec3, q: DVec2, wl: f64| {
-        let ray = Ray::new(fp, DVec3::new(q.x, q.y, rear_z) - fp);
-        if stop_only {
-            lens.trace_soft(&ray, wl, TraceDirection::FilmToScene, &weights).is_ok_and(|(_, c)| c >= 0.0)
-        } else {
-            lens.trace_detailed(&ray, wl, TraceDirection::FilmToScene, StopMode::Apply).is_ok()
-        }
+        passes_lens(lens, &Ray::new(fp, DVec3::new(q.x, q.y, rear_z) - fp), wl, weights.as_deref())
     };
     let passes = |fp: DVec3, q: DVec2| passes_at(fp, q, wl);
     let centres: Vec<DVec2> = film_pts.iter().map(|&fp| centre_of(fp)).collect::<Option<_>>()?;
