@@ -730,14 +730,23 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
             built.choice.reason
         );
         for c in &built.choice.candidates {
+            // A candidate never built (an LRTF whose bake would cost more than it saves) has no
+            // measured error or speed: dashes, not inf/NaN.
+            let num = |v: f64, width: usize, prec: usize| {
+                if v.is_finite() {
+                    format!("{v:>width$.prec$}")
+                } else {
+                    format!("{:>width$}", "—")
+                }
+            };
             eprintln!(
-                "  {:<9} max {:>9.3} px  mean {:>9.3} px  vignetting {:>6.2} %  {:>7.1} ns/ray  est. {:>8.2} s  {}",
+                "  {:<9} max {} px  mean {} px  vignetting {} %  {} ns/ray  est. {} s  {}",
                 c.model.to_string(),
-                c.max_error_px,
-                c.mean_error_px,
-                c.irradiance_error * 100.0,
-                c.ns_per_ray,
-                c.estimated_seconds,
+                num(c.max_error_px, 9, 3),
+                num(c.mean_error_px, 9, 3),
+                num(c.irradiance_error * 100.0, 6, 2),
+                num(c.ns_per_ray, 7, 1),
+                num(c.estimated_seconds, 8, 2),
                 if c.meets { "meets".to_string() } else { c.note.clone() }
             );
         }
