@@ -700,6 +700,7 @@ impl<'a> Bsdf<'a> {
     /// interface of the BSDF's roughness and ior whose refracted light is tinted by the square
     /// root of the base colour at each crossing, the base colour through a solid object). Metals do not transmit: the glass lobe weighs (1 − metallic)·transmission, and
     /// every opaque lobe the rest (exact for metallic 0 or 1).
+    #[inline(always)]
     pub fn with_transmission(self, transmission: f32, ior: f32) -> Self {
         let t = if transmission.is_finite() { transmission.clamp(0.0, 1.0) } else { 0.0 };
         let weight = (1.0 - self.metallic) * t;
@@ -715,6 +716,7 @@ impl<'a> Bsdf<'a> {
 
     /// The same BSDF under a clear coat ([`Coat`], Blender's Principled Coat); None leaves it
     /// uncoated.
+    #[inline(always)]
     pub fn with_coat(self, coat: Option<&'a Coat>) -> Self {
         Bsdf { coat, ..self }
     }
@@ -734,6 +736,7 @@ impl<'a> Bsdf<'a> {
 
     /// The BSDF seen from inside its object (`inside`: the outgoing direction is on the back of
     /// the surface), for the glass lobe's relative index of refraction.
+    #[inline(always)]
     pub fn seen_from_inside(self, inside: bool) -> Self {
         match self.glass {
             Some((w, g)) => Bsdf { glass: Some((w, g.facing(inside))), ..self },
@@ -1595,6 +1598,7 @@ pub struct SurfaceBsdf<'a> {
 impl<'a> SurfaceBsdf<'a> {
     /// Places `bsdf` with the given normals for outgoing direction `wo` (unit, world, pointing
     /// away from the surface). Normals may face either way.
+    #[inline(always)]
     pub fn new(bsdf: Bsdf<'a>, geometric_normal: Vec3, shading_normal: Vec3, wo: Vec3) -> Self {
         let inside = geometric_normal.dot(wo) < 0.0;
         let bsdf = bsdf.seen_from_inside(inside);

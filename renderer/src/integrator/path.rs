@@ -202,6 +202,7 @@ pub fn material_bsdf<'s>(scene: &'s RenderScene, hit: &SurfaceHit) -> (Bsdf<'s>,
 }
 
 /// The BSDF of material `id` at a hit (and its base colour).
+#[inline(always)]
 fn material_bsdf_of<'s>(scene: &'s RenderScene, hit: &SurfaceHit, id: u32) -> (Bsdf<'s>, Vec3) {
     let mat = &scene.scene().materials[id as usize];
     let base = base_color_of(scene, hit, id);
