@@ -196,6 +196,25 @@ fn gltf_textured_quad_material_and_texel_lookup() {
     assert!((a.rotation_turns - 0.125).abs() < 1e-6, "{a:?}");
 }
 
+/// A spot in a file Blender's exporter wrote falls off as Cycles renders Blender's Spot Blend
+/// (smoothstep), in any other file as KHR_lights_punctual's ramp.
+#[test]
+fn spots_in_files_blender_wrote_fall_off_as_blender_renders_them() {
+    let text = std::fs::read_to_string(data("lights.gltf")).unwrap();
+    let old = "\"version\": \"2.0\"";
+    assert_eq!(text.matches(old).count(), 1);
+    let blender = text.replace(old, "\"generator\": \"Khronos glTF Blender I/O v5.0.21\", \"version\": \"2.0\"");
+    let falloff_of = |s: &Scene| match s.lights[1] {
+        Light::Spot { falloff, .. } => falloff,
+        ref other => panic!("{other:?}"),
+    };
+    let base = data("");
+    let b = load_gltf_slice(blender.as_bytes(), Some(&base), "lights.gltf").unwrap();
+    assert_eq!(falloff_of(&b), SpotFalloff::Blender);
+    let other = load_gltf_slice(text.as_bytes(), Some(&base), "lights.gltf").unwrap();
+    assert_eq!(falloff_of(&other), SpotFalloff::Gltf);
+}
+
 #[test]
 fn gltf_lights_convert_to_blender_radiometric_units() {
     let s = load("lights.gltf");

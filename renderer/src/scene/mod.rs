@@ -363,12 +363,12 @@ impl Material {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum SpotFalloff {
     /// KHR_lights_punctual's: a squared ramp in cos θ from 0 at the outer cone to 1 at the
-    /// inner one (glTF files).
+    /// inner one (glTF files other exporters wrote).
     #[default]
     Gltf,
     /// Blender's (Cycles' `spot_light_attenuation`): a smoothstep in cos θ from 0 at the outer
     /// cone θo over (1 − cos θo)·blend, with blend = 1 − inner/outer (how the inner cone carries
-    /// Blender's Spot Blend: inner = outer·(1 − blend)). Live Blender scenes and USD.
+    /// Blender's Spot Blend: inner = outer·(1 − blend)). Live Blender scenes, USD, and glTF files Blender wrote.
     Blender,
 }
 

@@ -49,10 +49,12 @@
 //! `outerConeAngle = spot_size / 2` and `innerConeAngle = outer × (1 − spot_blend)`
 //! (`blender/exp/light_spots.py`, lines 28–47); they are kept as glTF angles. So a hard spot
 //! (blend 0) arrives as inner = outer, which the spec excludes (inner < outer); it is taken as a
-//! hard edge without a warning. A soft spot's fade follows KHR_lights_punctual (squared ramp in
-//! cos θ from the outer to the inner cone), not Blender's smoothstep in cos θ over
-//! `[cos θo, cos θo + (1 − cos θo)·blend]`: both are 1 inside `min(inner, Blender's)` and 0
-//! beyond the outer cone, and differ in between (tests/blender/test_spot_lights_cycles.py).
+//! hard edge without a warning. A soft spot in a file Blender wrote (`asset.generator` "Khronos
+//! glTF Blender I/O") fades as Cycles renders Blender's Spot Blend, blend = 1 − inner/outer: a
+//! smoothstep in cos θ over `[cos θo, cos θo + (1 − cos θo)·blend]`
+//! ([`SpotFalloff::Blender`](crate::scene::SpotFalloff)); in other files it follows
+//! KHR_lights_punctual (squared ramp in cos θ from the outer to the inner cone)
+//! (tests/blender/test_spot_lights_cycles.py).
 
 //!
 //! | file | contents |

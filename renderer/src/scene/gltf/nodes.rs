@@ -288,7 +288,9 @@ impl Loader<'_> {
                     inner_cone_rad: inner,
                     outer_cone_rad: outer,
                     range,
-                    falloff: SpotFalloff::Gltf,
+                    // Blender's exporter writes Spot Blend as inner = outer·(1 − blend); its
+                    // files get Cycles' smoothstep (what Blender renders), others the spec's ramp.
+                    falloff: if self.blender_written { SpotFalloff::Blender } else { SpotFalloff::Gltf },
                     radius_m: 0.0,
                     sphere: false,
                 }
