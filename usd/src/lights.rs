@@ -12,11 +12,12 @@
 //! | `SphereLight` | point light (spot with `shaping:cone:angle`) of radius r: a sphere (0 with `treatAsPoint`; in stages Blender wrote, Blender's default Soft Falloff, a disc facing each point, since its USD does not record the setting) | radiant intensity = L · π r² (normalize: intensity/4 · 2^E · color) W/sr; cone: outer = angle, fading as Blender's Spot Blend = softness ([`SpotFalloff::Blender`](petzval_renderer::scene::SpotFalloff)) | radius 0.5, normalize off |
 //! | `RectLight` | a one-sided emissive quad facing −z, a light's emitter (no shadow, not there from behind: `Material::light_emitter`) | radiance L | width 1, height 1 |
 //! | `DiskLight` | a one-sided emissive 32-gon facing −z | radiance L | radius 0.5 |
-//! | `DistantLight` | directional light along −z, directions spread over its `angle` (angular diameter, degrees; twice the value in stages Blender wrote, whose exporter writes half the diameter) | irradiance = 4 · intensity · 2^E · color W/m² (Blender's factor) | angle 0.53 |
+//! | `DistantLight` | directional light along −z, directions spread over its `angle` (angular diameter, degrees; twice the value in stages Blender wrote, whose exporter writes half the diameter) | irradiance = 4 · intensity · 2^E · color W/m² (Blender's factor) with `normalize`; without it intensity is the disc's radiance, so the irradiance is that times π tan²(angle/2) (Cycles' unnormalized sun), except at angle 0 | angle 0.53, normalize off |
 //! | `DomeLight` | environment: `texture:file` (EXR, latlong) × intensity · 2^E · color, or the constant colour; turned about +y by the light's yaw | — | — |
 //! | `CylinderLight` | the side of a one-sided emissive cylinder along x (48 sides), radiance L | radius 0.5, length 1 |
 //!
-//! Colour temperature uses the CIE 1931 blackbody approximation normalised to luminance 1.
+//! Colour temperature is UsdLux's blackbody colour (luminance 1, [`blackbody_rgb`]): pxr's and
+//! Blender's, so 6500 K is slightly blue-magenta, not white.
 //! A sphere light with radius 0 and normalize off is treated as normalized (it has no area).
 
 use crate::value::{layer_of_prim, Reader};
@@ -39,29 +40,53 @@ pub struct LightInfo {
     pub value: [f32; 3],
 }
 
-/// A blackbody's linear Rec.709 colour at `kelvin`, luminance 1 (Tanner Helland's fit of
-/// the CIE data, good to a few per cent in 1000–40000 K).
+/// Blackbody colours (linear Rec.709, brightest channel 1) from 1000 K to 10 000 K in steps of
+/// 500 K: John Walker's "Colour Rendering of Spectra" (specrend.c), the table UsdLux's
+/// `colorTemperature` is defined by.
+const BLACKBODY_KNOTS: [[f32; 3]; 19] = [
+    [1.000000, 0.027490, 0.000000],
+    [1.000000, 0.149664, 0.000000],
+    [1.000000, 0.256644, 0.008095],
+    [1.000000, 0.372033, 0.067450],
+    [1.000000, 0.476725, 0.153601],
+    [1.000000, 0.570376, 0.259196],
+    [1.000000, 0.653480, 0.377155],
+    [1.000000, 0.726878, 0.501606],
+    [1.000000, 0.791543, 0.628050],
+    [1.000000, 0.848462, 0.753228],
+    [1.000000, 0.898581, 0.874905],
+    [1.000000, 0.942771, 0.991642],
+    [0.906947, 0.890456, 1.000000],
+    [0.828247, 0.841838, 1.000000],
+    [0.765791, 0.801896, 1.000000],
+    [0.715255, 0.768579, 1.000000],
+    [0.673683, 0.740423, 1.000000],
+    [0.638992, 0.716359, 1.000000],
+    [0.609681, 0.695588, 1.000000],
+];
+
+/// A blackbody's linear Rec.709 colour at `kelvin` (clamped to 1000–10 000 K), luminance 1: a
+/// Catmull-Rom spline through [`BLACKBODY_KNOTS`] (end knots repeated), as pxr's
+/// `UsdLuxBlackbodyTemperatureAsRgb` and Blender's Blackbody give it. 6500 K is not white
+/// ((1.043, 0.984, 1.035)): D65 is off the Planckian locus.
 pub fn blackbody_rgb(kelvin: f64) -> Vec3 {
-    let t = (kelvin.clamp(1000.0, 40000.0)) / 100.0;
-    let r = if t <= 66.0 { 255.0 } else { 329.698_727_446 * (t - 60.0).powf(-0.133_204_759_2) };
-    let g = if t <= 66.0 {
-        99.470_802_586_1 * t.ln() - 161.119_568_166_1
-    } else {
-        288.122_169_528_3 * (t - 60.0).powf(-0.075_514_849_2)
-    };
-    let b = if t >= 66.0 {
-        255.0
-    } else if t <= 19.0 {
-        0.0
-    } else {
-        138.517_731_223_1 * (t - 10.0).ln() - 305.044_792_730_7
-    };
-    let srgb = Vec3::new(r as f32, g as f32, b as f32).clamp(Vec3::ZERO, Vec3::splat(255.0)) / 255.0;
-    let lin = srgb.to_array().map(petzval_renderer::scene::texture::srgb_to_linear);
-    let c = Vec3::from(lin);
-    let y = 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z;
+    // 1. The segment and the parameter within it.
+    let last = BLACKBODY_KNOTS.len() - 1;
+    let x = ((kelvin as f32 - 1000.0) / 9000.0).clamp(0.0, 1.0) * last as f32;
+    let seg = (x.floor() as usize).min(last);
+    let t = x - seg as f32;
+    let knot = |i: isize| Vec3::from(BLACKBODY_KNOTS[i.clamp(0, last as isize) as usize]);
+    let s = seg as isize;
+    let (p0, p1, p2, p3) = (knot(s - 1), knot(s), knot(s + 1), knot(s + 2));
+    // 2. The Catmull-Rom cubic between p1 and p2.
+    let a = -0.5 * p0 + 1.5 * p1 - 1.5 * p2 + 0.5 * p3;
+    let b = p0 - 2.5 * p1 + 2.0 * p2 - 0.5 * p3;
+    let c = -0.5 * p0 + 0.5 * p2;
+    let rgb = ((a * t + b) * t + c) * t + p1;
+    // 3. Luminance 1, and no negative overshoot.
+    let y = 0.2126 * rgb.x + 0.7152 * rgb.y + 0.0722 * rgb.z;
     if y > 0.0 {
-        c / y
+        (rgb / y).max(Vec3::ZERO)
     } else {
         Vec3::ONE
     }
@@ -97,7 +122,7 @@ pub fn read_light(
     let mut tint = Vec3::ONE;
     if r.bool(prim, "inputs:enableColorTemperature")?.unwrap_or(false) {
         let k = r.f64_or(prim, "inputs:colorTemperature", 6500.0)?;
-        tint = blackbody_rgb(k) / blackbody_rgb(6500.0);
+        tint = blackbody_rgb(k);
     }
     if intensity < 0.0 || !color.is_finite() || color.min_element() < 0.0 {
         return Err(crate::value::attr_error(prim, "inputs:intensity", "intensity and color must be non-negative"));
@@ -190,6 +215,15 @@ pub fn read_light(
             }
             // Blender writes half its sun's angular diameter (and reads it back doubled)
             let diameter = if units.blender_authored { 2.0 * angle } else { angle };
+            // Unnormalized, intensity is the disc's radiance (UsdLux), so the irradiance is
+            // that over the disc's solid angle, as Cycles' unnormalized sun takes it (π tan² of
+            // the half angle); a sun without an angle has no disc and stays normalized.
+            let half_rad = (diameter.min(179.0) / 2.0).to_radians();
+            let e = if normalize || diameter <= 0.0 {
+                e
+            } else {
+                e * (std::f64::consts::PI * half_rad.tan().powi(2)) as f32
+            };
             w.scene.lights.push(Light::Directional {
                 direction: dir,
                 irradiance: e,

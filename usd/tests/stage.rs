@@ -662,3 +662,66 @@ fn render_settings_base_attributes_and_their_errors() {
         assert!(e.contains(name) && e.contains(attr), "{name}: {e}");
     }
 }
+
+/// `colorTemperature`'s tint is UsdLux's blackbody colour: pxr's
+/// `UsdLux.BlackbodyTemperatureAsRgb` (usd-core 0.26.11) at these temperatures, to 10⁻⁵,
+/// clamped outside 1000–10 000 K. (Before: Tanner Helland's fit divided by its 6500 K colour,
+/// (1.839, 0.817, 0.299) at 3000 K, up to 10 % off per channel.)
+#[test]
+fn colour_temperature_is_usdlux_blackbody() {
+    let pxr: [(f64, [f32; 3]); 12] = [
+        (800.0, [4.305504, 0.118358, 0.0]),
+        (1000.0, [4.305504, 0.118358, 0.0]),
+        (1300.0, [3.555754, 0.341438, 0.0]),
+        (2700.0, [1.935324, 0.803566, 0.191690]),
+        (3000.0, [1.771028, 0.844294, 0.272032]),
+        (4000.0, [1.414028, 0.924039, 0.533308]),
+        (5250.0, [1.177022, 0.966231, 0.813248]),
+        (6500.0, [1.043333, 0.983624, 1.034613]),
+        (7777.0, [0.958579, 0.991070, 1.210425]),
+        (9000.0, [0.904302, 0.993889, 1.342326]),
+        (10000.0, [0.871841, 0.994688, 1.429996]),
+        (12000.0, [0.871841, 0.994688, 1.429996]),
+    ];
+    for (kelvin, want) in pxr {
+        let got = petzval_usd::lights::blackbody_rgb(kelvin).to_array();
+        for c in 0..3 {
+            assert!((got[c] - want[c]).abs() < 1e-5, "{kelvin} K: {got:?} against pxr's {want:?}");
+        }
+    }
+}
+
+/// A `DistantLight` without `normalize` (UsdLux's fallback) gives its intensity as the disc's
+/// radiance: the irradiance is that over the disc, π tan²(angle/2) of the normalized light's, as
+/// Cycles renders Blender's import of it (measured: unnormalized / normalized 0.00383 for
+/// Blender's 4° sun, π tan²(2°) = 0.00383). A sun without an angle stays normalized. (Before,
+/// every distant light was taken as normalized: 261× too bright against Cycles at 2°.)
+#[test]
+fn unnormalized_distant_lights_give_the_radiance_of_their_disc() {
+    use petzval_renderer::scene::Light;
+    let p = write(
+        "distant_normalize.usda",
+        &format!(
+            "#usda 1.0\n\
+             def DistantLight \"Off\"\n{{\n float inputs:angle = 2\n float inputs:exposure = 1\n}}\n\
+             def DistantLight \"On\"\n{{\n float inputs:angle = 2\n float inputs:exposure = 1\n bool inputs:normalize = 1\n}}\n\
+             def DistantLight \"Point\"\n{{\n float inputs:angle = 0\n}}\n\
+             def Mesh \"M\"\n{{\n {TRI}\n}}\n"
+        ),
+    );
+    let shot = load(&p, None).unwrap();
+    let e: Vec<f32> = shot
+        .scene
+        .lights
+        .iter()
+        .filter_map(|l| match l {
+            Light::Directional { irradiance, .. } => Some(irradiance.x),
+            _ => None,
+        })
+        .collect();
+    let disc = std::f32::consts::PI * 1f32.to_radians().tan().powi(2);
+    assert_eq!(e.len(), 3);
+    assert!((e[0] - 8.0 * disc).abs() < 1e-6 * 8.0, "{e:?}");
+    assert!((e[1] - 8.0).abs() < 1e-5, "{e:?}");
+    assert!((e[2] - 4.0).abs() < 1e-5, "{e:?}");
+}
