@@ -162,6 +162,10 @@ pub const NEAR_CHIEF_HALF: usize = 16;
 /// the film's centre (four times that where it finds a few).
 pub const NEAR_CHIEF_REFINE: f64 = 1.0 / 16.0;
 
+/// Fine-search points at least across the passing region's paraxial diameter on the rear plane
+/// (a stop far smaller than the rear grid's cell: the fine spacing follows it down).
+pub const NEAR_CHIEF_POINTS_ACROSS: f64 = 8.0;
+
 /// How far (in rear-grid cells) the fine search about the chief ray may grow: a larger region
 /// has enough grid points of its own.
 pub const NEAR_CHIEF_REACH_CELLS: f64 = 4.0;
@@ -1145,14 +1149,22 @@ pub fn defensive_radius_mm(lens: &Lens, film_z_mm: f64, film_dz_mm: f64, max_fil
 fn near_chief_spacing_mm(lens: &Lens, film_z_mm: f64) -> Option<f64> {
     let half = 1.5 * lens.rear_semi_diameter_mm();
     let cell = 2.0 * half / 48.0;
-    let (centre, origin) = (DVec3::new(0.0, 0.0, film_z_mm), [lens.last_vertex_z_mm(), -half, -half]);
+    let rear_z = lens.last_vertex_z_mm();
+    let (centre, origin) = (DVec3::new(0.0, 0.0, film_z_mm), [rear_z, -half, -half]);
     let mut passing = 0usize;
     for_each_passing(lens, lens.primary_wavelength_nm(), centre, origin, DVec2::splat(cell), 48, |_| passing += 1);
-    match passing {
-        0 => Some(cell * NEAR_CHIEF_REFINE),
-        n if n < NEAR_CHIEF_BELOW => Some(cell * NEAR_CHIEF_REFINE * 4.0),
-        _ => None,
-    }
+    let spacing = match passing {
+        0 => cell * NEAR_CHIEF_REFINE,
+        n if n < NEAR_CHIEF_BELOW => cell * NEAR_CHIEF_REFINE * 4.0,
+        _ => return None,
+    };
+    // The region's paraxial size on the rear plane (the exit pupil's cone from the film's
+    // centre, cut by the plane) sets the spacing where that is finer: a stop far smaller than
+    // the grid's cell (f/2000 and beyond on double-gauss-50mm) keeps its points across.
+    let p = lens.paraxial();
+    let across_mm = p.exit_pupil_diameter_mm * ((film_z_mm - rear_z) / (film_z_mm - p.exit_pupil_z_mm)).abs();
+    let scaled = across_mm / NEAR_CHIEF_POINTS_ACROSS;
+    Some(if scaled.is_finite() && scaled > 0.0 { spacing.min(scaled) } else { spacing })
 }
 
 /// Whether the bounds are outlined per radial interval (a rotationally symmetric lens with a

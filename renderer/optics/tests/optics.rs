@@ -998,6 +998,9 @@ fn exit_pupil_bounds_hold_for_lenses_stopped_down_far() {
         ("double-gauss-50mm", 256.0, false, 0.5),
         ("double-gauss-50mm", 256.0, true, 0.5),
         ("double-gauss-50mm", 1000.0, false, 0.2),
+        // stops far below the rear grid's cell: the fine search's spacing follows the
+        // paraxial size of the region (before: 57 % absorbed at f/8000, 99.6 % at f/100 000)
+        ("double-gauss-50mm", 8000.0, false, 0.01),
     ];
     for (name, f_number, bladed, window) in cases {
         let mut l = library_lens(name).unwrap().stopped_down(f_number).unwrap();
@@ -1013,6 +1016,43 @@ fn exit_pupil_bounds_hold_for_lenses_stopped_down_far() {
         assert_eq!(outside, 0, "{case}: {outside} of {passed} passing rays fall outside the bounds");
         let limit = if bladed { 0.25 } else { 0.10 };
         assert!(rejection <= limit, "{case}: {:.1} % of the sampled rays are absorbed", 100.0 * rejection);
+    }
+}
+
+/// Stops far below the rear grid's cell (double-gauss-50mm with 6 blades, the demo's sensor
+/// tilted 6°, focused at 0.55 m): over a 17 × 17 lattice of the film, the share of samples drawn
+/// in the bounds that pass (4 × 4 stratified per film point): 59.3 % at f/2000, 17.3 % at
+/// f/8000. Before the fine search's spacing followed the region's paraxial size, the bounds were
+/// far larger than the speck of a region: 56.1 % and 3.4 % (the demo at 16 spp rendered 7 % of its
+/// pixels black at f/2000, 84 % at f/8000; now 0 % and 3 %).
+#[test]
+fn bounds_of_tiny_stops_keep_their_samples() {
+    let blades = six_blades(0.3);
+    for (f_number, at_least) in [(2000.0, 0.5), (8000.0, 0.12)] {
+        let l =
+            library_lens("double-gauss-50mm").unwrap().stopped_down(f_number).unwrap().with_aperture(blades.clone());
+        let wl = l.primary_wavelength_nm();
+        let film_z = l.last_vertex_z_mm() + l.focus_image_distance_mm(Some(550.0)).unwrap();
+        // The sensor plane tilted 6° about x: z = film_z + slope.y · y.
+        let slope = DVec2::new(0.0, 6f64.to_radians().tan());
+        let b = ExitPupilBounds::compute_on_plane(&l, film_z, 12.0 * slope.y, slope, 21.7, false);
+        let (mut drawn, mut passed) = (0usize, 0usize);
+        for i in 0..=16 {
+            for j in 0..=16 {
+                let (x, y) = (-18.0 + 36.0 * i as f64 / 16.0, -12.0 + 24.0 * j as f64 / 16.0);
+                let fp = DVec3::new(x, y, film_z + slope.y * y);
+                for k in 0..16 {
+                    let u = DVec2::new((k % 4) as f64 + 0.5, (k / 4) as f64 + 0.5) / 4.0;
+                    let Some(s) = b.sample_bounds(DVec2::new(x, y), u) else { continue };
+                    drawn += 1;
+                    let ray = Ray::new(fp, s.point - fp);
+                    passed += usize::from(l.trace(&ray, wl, TraceDirection::FilmToScene).is_some());
+                }
+            }
+        }
+        let share = passed as f64 / drawn.max(1) as f64;
+        eprintln!("f/{f_number}: {passed} of {drawn} samples pass ({:.1} %)", 100.0 * share);
+        assert!(share >= at_least, "f/{f_number}: only {:.1} % of the samples pass", 100.0 * share);
     }
 }
 

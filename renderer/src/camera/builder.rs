@@ -104,6 +104,25 @@ impl CameraSpec {
                 ));
             }
         }
+        // A stop too small for the pupil sampling to follow renders nearly black: say so.
+        let exact = match &camera {
+            Camera::Exact(c) => Some(c),
+            Camera::Lrtf(c) => Some(c.exact()),
+            _ => None,
+        };
+        if let Some(c) = exact {
+            let acceptance = c.pupil_acceptance();
+            if acceptance < LOW_PUPIL_ACCEPTANCE {
+                warnings.push(format!(
+                    "lens '{lens_label}' at f/{f_number:.4}: only {:.2} % of the pupil samples pass the lens (its exit pupil is {:.3} µm across, a speck the pupil sampling cannot follow); the image is unbiased but will be very noisy: open the aperture",
+                    acceptance * 100.0,
+                    c.lens().paraxial().exit_pupil_diameter_mm * 1e3
+                ));
+            }
+        }
         Ok(BuiltCamera { camera, lens_label, focal_length_mm, f_number, choice, warnings })
     }
 }
+
+/// Share of passing pupil samples ([`ExactCamera::pupil_acceptance`]) below which a build warns.
+const LOW_PUPIL_ACCEPTANCE: f64 = 0.05;

@@ -102,6 +102,36 @@ impl ExactCamera {
         Ok(film_z_mm)
     }
 
+    /// The share of pupil samples drawn in the exit-pupil bounds that pass the lens, over a
+    /// lattice of film points (those the bounds cover; 4 × 4 stratified samples each). Near 1
+    /// for tight bounds; tiny where the stop is so small that its region is a speck the bounds
+    /// cannot follow (the image is still unbiased, but nearly all its samples are lost).
+    pub fn pupil_acceptance(&self) -> f64 {
+        const LATTICE: usize = 16;
+        let wl = self.lens.primary_wavelength_nm();
+        let (mut drawn, mut passed) = (0usize, 0usize);
+        for i in 0..=LATTICE {
+            for j in 0..=LATTICE {
+                // 1. The film point, and each stratified sample of its bounds.
+                let uv = DVec2::new(i as f64, j as f64) / LATTICE as f64;
+                let p = self.sensor.film_point(uv, self.film_z_mm);
+                for k in 0..16 {
+                    let u = DVec2::new((k % 4) as f64 + 0.5, (k / 4) as f64 + 0.5) / 4.0;
+                    let Some(s) = self.pupil.sample_bounds(DVec2::new(p.x, p.y), u) else { continue };
+                    // 2. Whether its ray passes.
+                    drawn += 1;
+                    let ray = Ray::new(p, s.point - p);
+                    passed += usize::from(self.lens.trace(&ray, wl, TraceDirection::FilmToScene).is_some());
+                }
+            }
+        }
+        if drawn == 0 {
+            0.0
+        } else {
+            passed as f64 / drawn as f64
+        }
+    }
+
     /// Sensor.
     pub fn sensor(&self) -> &Sensor {
         self.sensor.sensor()
