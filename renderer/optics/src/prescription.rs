@@ -382,11 +382,6 @@ impl SourceMap {
         Error::lens_file(&self.file, self.field_line(self.aperture_line, field), format!("aperture.{field}"), message)
     }
 
-    /// An error about the lens file as a whole (no one line or field: it is diverging, ...).
-    pub fn file_error(&self, message: impl Into<String>) -> Error {
-        Error::lens_file(&self.file, 0, "lens", message)
-    }
-
     /// An error about field `field` of surface `index`.
     pub fn surface_error(&self, index: usize, field: &str, message: impl Into<String>) -> Error {
         let name = match self.keyword(index, field) {
