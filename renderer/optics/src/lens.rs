@@ -231,7 +231,14 @@ impl Lens {
                     Some(d) => d.join(&rel),
                     None => rel.into(),
                 };
-                ApertureShape::Mask(Arc::new(ApertureMask::load(&path)?))
+                // named as the lens file's field, with the path it resolved to
+                let mask = ApertureMask::load(&path).map_err(|e| match e {
+                    Error::ApertureImage { path, message } => {
+                        map.aperture_error("image", format!("{}: {message}", path.display()))
+                    }
+                    other => other,
+                })?;
+                ApertureShape::Mask(Arc::new(mask))
             }
         };
         let aperture =
@@ -669,7 +676,8 @@ impl Lens {
         let px = self.paraxial();
         if px.efl_mm < 0.0 && !(px.efl_x_mm > 0.0) {
             return Err(Error::Optics(format!(
-                "'{}' is a diverging lens (focal length {:.3} mm): it forms no real image to focus on a sensor",
+                "{}: '{}' is a diverging lens (focal length {:.3} mm): it forms no real image to focus on a sensor",
+                self.source_label,
                 self.name(),
                 px.efl_mm
             )));

@@ -53,6 +53,7 @@
 
 use super::glass::Material;
 use crate::error::{Error, Result};
+use serde::de::Error as _;
 use serde::{Deserialize, Serialize};
 
 /// Default design wavelengths: F, d, C.
@@ -166,8 +167,9 @@ pub enum CylinderAxis {
     Y,
 }
 
-/// The medium after a surface.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+/// The medium after a surface: written as a glass name or as `{ nd = .., vd = .. }`
+/// (deserialised by hand, so a wrong form gets a message that says which forms are accepted).
+#[derive(Debug, Clone, Serialize, PartialEq)]
 #[serde(untagged)]
 pub enum MaterialSpec {
     /// `"air"` or a catalogue name.
@@ -185,6 +187,38 @@ pub struct ModelGlass {
     /// Abbe number; 0 = no dispersion.
     #[serde(default)]
     pub vd: f64,
+}
+
+/// What a `material` may be, for serde's "expected ..." messages.
+const MATERIAL_FORMS: &str =
+    "a glass name (\"air\", a catalogue name such as \"N-BK7\") or a model glass { nd = .., vd = .. }";
+
+impl<'de> Deserialize<'de> for MaterialSpec {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> std::result::Result<Self, D::Error> {
+        struct Visitor;
+        impl<'de> serde::de::Visitor<'de> for Visitor {
+            type Value = MaterialSpec;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str(MATERIAL_FORMS)
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> std::result::Result<MaterialSpec, E> {
+                Ok(MaterialSpec::Name(v.to_string()))
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(self, map: A) -> std::result::Result<MaterialSpec, A::Error> {
+                // the model glass's own (deny_unknown_fields) errors: "unknown field `ng`,
+                // expected `nd` or `vd`", "missing field `nd`"
+                ModelGlass::deserialize(serde::de::value::MapAccessDeserializer::new(map))
+                    .map(MaterialSpec::Model)
+                    .map_err(|e| {
+                        // the message only (a toml error's display adds lines of context)
+                        let e = e.to_string();
+                        let first = e.lines().next().unwrap_or_default();
+                        A::Error::custom(format!("{first} (a material is {MATERIAL_FORMS})"))
+                    })
+            }
+        }
+        deserializer.deserialize_any(Visitor)
+    }
 }
 
 impl Default for MaterialSpec {
@@ -319,7 +353,11 @@ impl SourceMap {
         if let Some((line, _)) = self.keyword(index, field) {
             return line;
         }
-        let start = self.surface_lines.get(index).copied().unwrap_or(0);
+        self.field_line(self.surface_lines.get(index).copied().unwrap_or(0), field)
+    }
+
+    /// Line of `field` in the table whose header is on line `start` (falls back to `start`).
+    fn field_line(&self, start: usize, field: &str) -> usize {
         if let (Some(text), true) = (&self.text, start > 0) {
             for (i, line) in text.lines().enumerate().skip(start) {
                 let t = line.trim_start();
@@ -334,6 +372,16 @@ impl SourceMap {
         start
     }
 
+    /// An error about field `field` of the `[lens]` table, on the field's own line.
+    pub fn lens_error(&self, field: &str, message: impl Into<String>) -> Error {
+        Error::lens_file(&self.file, self.field_line(self.lens_line, field), format!("lens.{field}"), message)
+    }
+
+    /// An error about field `field` of the `[aperture]` table, on the field's own line.
+    pub fn aperture_error(&self, field: &str, message: impl Into<String>) -> Error {
+        Error::lens_file(&self.file, self.field_line(self.aperture_line, field), format!("aperture.{field}"), message)
+    }
+
     /// An error about field `field` of surface `index`.
     pub fn surface_error(&self, index: usize, field: &str, message: impl Into<String>) -> Error {
         let name = match self.keyword(index, field) {
@@ -346,13 +394,8 @@ impl SourceMap {
 
 /// Parses our TOML lens format. `file` names the file in error messages.
 pub fn parse_toml(text: &str, file: &str) -> Result<(Prescription, SourceMap)> {
-    // 1. Typed parse: serde reports unknown or missing fields with a byte span.
-    let p: Prescription = toml::from_str(text).map_err(|e| {
-        let line = e.span().map(|s| line_of(text, s.start)).unwrap_or(0);
-        let msg = e.message().to_string();
-        let field = field_from_message(&msg).or_else(|| key_on_line(text, line)).unwrap_or_else(|| "toml".into());
-        Error::lens_file(file, line, field, msg)
-    })?;
+    // 1. Typed parse: serde reports unknown or missing fields and wrong values with a byte span.
+    let p: Prescription = toml::from_str(text).map_err(|e| toml_error(text, file, &e))?;
     // 2. Remember where each table starts, for validation errors.
     let mut surface_lines = Vec::new();
     let mut aperture_line = 0;
@@ -378,29 +421,106 @@ pub fn parse_toml(text: &str, file: &str) -> Result<(Prescription, SourceMap)> {
     Ok((p, map))
 }
 
+/// A TOML or serde error as a [`Error::LensFile`] naming the line and the field's full path
+/// (`surface[2].thickness_mm`, `lens.name`, `aperture.image`).
+fn toml_error(text: &str, file: &str, e: &toml::de::Error) -> Error {
+    let line = e.span().map(|s| line_of(text, s.start)).unwrap_or(0);
+    let msg = e.message().trim_end().to_string();
+    // the key assigned on the error's line (a value of the wrong type or variant, an unknown
+    // key; a key inside an inline table is named by the message); on a table's header line
+    // (a missing field), the field serde names
+    let key = key_at_line(text, line).or_else(|| named_field(&msg));
+    let table = table_at_line(text, line);
+    let field = match (table, key) {
+        (Some(t), Some(k)) => format!("{t}.{k}"),
+        (Some(t), None) => t,
+        (None, Some(k)) => k,
+        (None, None) => "toml".into(),
+    };
+    Error::lens_file(file, line, field, friendlier(&msg))
+}
+
+/// serde's wording in terms of a lens file: a "sequence" is a list, an "f64" a number.
+fn friendlier(msg: &str) -> String {
+    msg.replace("expected a sequence", "expected a list of numbers, e.g. [1.0e-5, -2.0e-8]")
+        .replace("expected f64", "expected a number")
+        .replace("expected u32", "expected a whole number")
+}
+
 fn line_of(text: &str, byte: usize) -> usize {
     text[..byte.min(text.len())].bytes().filter(|&b| b == b'\n').count() + 1
 }
 
-/// The key assigned on 1-based line `line` (`key = value`), for errors whose message names none
-/// (a value of the wrong type).
-fn key_on_line(text: &str, line: usize) -> Option<String> {
-    let l = text.lines().nth(line.checked_sub(1)?)?;
-    let key = l.split_once('=')?.0.trim();
-    (!key.is_empty() && key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '.' || c == '-'))
-        .then(|| key.to_string())
+/// The table that 1-based line `line` belongs to, as a field-path prefix: `lens`, `aperture`,
+/// `surface[N]` (1-based, counting `[[surface]]` headers up to and including that line), any
+/// other header's name; `None` before the first header.
+fn table_at_line(text: &str, line: usize) -> Option<String> {
+    let mut table = None;
+    let mut surfaces = 0;
+    for l in text.lines().take(line) {
+        let t = l.trim();
+        if let Some(rest) = t.strip_prefix("[[") {
+            let name = rest.split("]]").next().unwrap_or("").trim();
+            if name == "surface" {
+                surfaces += 1;
+                table = Some(format!("surface[{surfaces}]"));
+            } else {
+                table = Some(format!("{name}[]"));
+            }
+        } else if let Some(rest) = t.strip_prefix('[') {
+            table = Some(rest.split(']').next().unwrap_or("").trim().to_string());
+        }
+    }
+    table.filter(|t| !t.is_empty())
 }
 
-fn field_from_message(msg: &str) -> Option<String> {
-    // serde: "missing field `thickness_mm`" / "unknown field `foo`, expected ..."
-    let start = msg.find('`')? + 1;
-    let end = start + msg[start..].find('`')?;
-    Some(msg[start..end].to_string())
+/// The key assigned on 1-based line `line` (`key = value`), or, when that line continues a value
+/// (a list over several lines), on the nearest line above it in the same table.
+fn key_at_line(text: &str, line: usize) -> Option<String> {
+    let lines: Vec<&str> = text.lines().take(line).collect();
+    for l in lines.iter().rev() {
+        let t = l.trim_start();
+        if t.starts_with('[') {
+            return None;
+        }
+        if let Some((key, _)) = t.split_once('=') {
+            let key = key.trim();
+            let is_key =
+                |k: &str| !k.is_empty() && k.chars().all(|c| c.is_ascii_alphanumeric() || "_.-\"'".contains(c));
+            if is_key(key) {
+                return Some(key.to_string());
+            }
+        }
+    }
+    None
+}
+
+/// The field a serde message names: "missing field `thickness_mm`", "unknown field `foo`, ...".
+/// Other back-quoted text in serde's messages is a value (`invalid type: floating point
+/// `0.00001``, `unknown variant `z``), not a field.
+fn named_field(msg: &str) -> Option<String> {
+    let rest = msg.strip_prefix("missing field `").or_else(|| msg.strip_prefix("unknown field `"))?;
+    Some(rest[..rest.find('`')?].to_string())
 }
 
 /// Serialises a prescription to our TOML format.
 pub fn to_toml(p: &Prescription) -> String {
     toml::to_string(p).unwrap_or_default()
+}
+
+/// A number as error messages show it: as written for ordinary magnitudes, in exponent form
+/// (`1e300`, `1e-300`) past 1e9 or below 1e-6, where plain digits would run to hundreds.
+pub(crate) struct Num(pub f64);
+
+impl std::fmt::Display for Num {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let a = self.0.abs();
+        if a.is_finite() && a != 0.0 && !(1e-6..1e9).contains(&a) {
+            write!(f, "{:e}", self.0)
+        } else {
+            write!(f, "{}", self.0)
+        }
+    }
 }
 
 /// A validated, resolved surface (materials looked up).
@@ -421,11 +541,11 @@ fn check_misalignment(p: &Prescription, i: usize, map: &SourceMap) -> Result<()>
         ("tilt_y_deg", s.tilt_y_deg, 45.0),
     ] {
         if !v.is_finite() {
-            return Err(map.surface_error(i, field, format!("must be a finite number, got {v}")));
+            return Err(map.surface_error(i, field, format!("must be a finite number, got {}", Num(v))));
         }
         if v.abs() > limit {
             let unit = if field.ends_with("_deg") { "°" } else { " mm (the surface's semi-diameter)" };
-            return Err(map.surface_error(i, field, format!("{v} is outside ±{limit}{unit}")));
+            return Err(map.surface_error(i, field, format!("{} is outside ±{}{unit}", Num(v), Num(limit))));
         }
     }
     if !s.is_misaligned() {
@@ -472,7 +592,7 @@ pub const MAX_ABBE: f64 = 1000.0;
 /// Checks every field and resolves materials. Geometry checks (intersecting elements) happen
 /// in [`super::lens::Lens::new`], where surface shapes exist.
 pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedSurface>> {
-    let lens_err = |field: &str, msg: String| Error::lens_file(&map.file, map.lens_line, format!("lens.{field}"), msg);
+    let lens_err = |field: &str, msg: String| map.lens_error(field, msg);
     if p.lens.name.trim().is_empty() {
         return Err(lens_err("name", "must not be empty".into()));
     }
@@ -490,12 +610,12 @@ pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedS
     }
     if let Some(w) = p.lens.primary_wavelength_nm {
         if !(380.0..=780.0).contains(&w) {
-            return Err(lens_err("primary_wavelength_nm", format!("{w} nm is outside 380..780 nm")));
+            return Err(lens_err("primary_wavelength_nm", format!("{} nm is outside 380..780 nm", Num(w))));
         }
     }
     if let Some(ws) = &p.lens.wavelengths_nm {
         if let Some(w) = ws.iter().find(|w| !(380.0..=780.0).contains(*w)) {
-            return Err(lens_err("wavelengths_nm", format!("{w} nm is outside 380..780 nm")));
+            return Err(lens_err("wavelengths_nm", format!("{} nm is outside 380..780 nm", Num(*w))));
         }
     }
     if p.surfaces.len() < 2 {
@@ -537,7 +657,7 @@ pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedS
             finite("aspheric_odd", *b)?;
         }
         if s.thickness_mm < 0.0 {
-            return Err(map.surface_error(i, "thickness_mm", format!("negative thickness {}", s.thickness_mm)));
+            return Err(map.surface_error(i, "thickness_mm", format!("negative thickness {}", Num(s.thickness_mm))));
         }
         // the same plausibility limit as the .dat, .zmx and lentil importers
         for (field, v) in [("thickness_mm", s.thickness_mm), ("semi_diameter_mm", s.semi_diameter_mm)] {
@@ -545,7 +665,7 @@ pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedS
                 return Err(map.surface_error(
                     i,
                     field,
-                    format!("{v} mm is implausibly large (limit {} mm)", MAX_LENGTH_MM),
+                    format!("{} mm is implausibly large (limit {} mm)", Num(v), Num(MAX_LENGTH_MM)),
                 ));
             }
         }
@@ -553,7 +673,7 @@ pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedS
             return Err(map.surface_error(
                 i,
                 "semi_diameter_mm",
-                format!("must be positive, got {}", s.semi_diameter_mm),
+                format!("must be positive, got {}", Num(s.semi_diameter_mm)),
             ));
         }
         if s.stop {
@@ -563,14 +683,22 @@ pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedS
                 return Err(map.surface_error(
                     i,
                     "semi_diameter_mm",
-                    format!("stop opening {} mm is larger than its housing {} mm", s.semi_diameter_mm, housing),
+                    format!(
+                        "stop opening {} mm is larger than its housing {} mm",
+                        Num(s.semi_diameter_mm),
+                        Num(housing)
+                    ),
                 ));
             }
             if let Some(open) = p.lens.stop_semi_diameter_mm {
                 if open <= 0.0 || open > s.semi_diameter_mm {
                     return Err(lens_err(
                         "stop_semi_diameter_mm",
-                        format!("{open} mm must be in (0, {}] (the stop's widest opening)", s.semi_diameter_mm),
+                        format!(
+                            "{} mm must be in (0, {}] (the stop's widest opening)",
+                            Num(open),
+                            Num(s.semi_diameter_mm)
+                        ),
                     ));
                 }
             }
@@ -584,7 +712,7 @@ pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedS
             }
             MaterialSpec::Model(m) => {
                 if !(m.nd.is_finite() && (1.0..=3.0).contains(&m.nd)) {
-                    return Err(map.surface_error(i, "material", format!("nd = {} must be in [1, 3]", m.nd)));
+                    return Err(map.surface_error(i, "material", format!("nd = {} must be in [1, 3]", Num(m.nd))));
                 }
                 // 0 = no dispersion; real glasses have Abbe numbers of about 15–100, and a tiny
                 // vd would spread the index over the visible range without bound
@@ -592,7 +720,7 @@ pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedS
                     return Err(map.surface_error(
                         i,
                         "material",
-                        format!("vd = {} must be 0 (no dispersion) or in [{MIN_ABBE}, {MAX_ABBE}]", m.vd),
+                        format!("vd = {} must be 0 (no dispersion) or in [{MIN_ABBE}, {MAX_ABBE}]", Num(m.vd)),
                     ));
                 }
                 if m.nd == 1.0 {
@@ -606,13 +734,12 @@ pub(crate) fn resolve(p: &Prescription, map: &SourceMap) -> Result<Vec<ResolvedS
     }
     // Aperture table.
     let a = &p.aperture;
-    let ap_err =
-        |field: &str, msg: String| Error::lens_file(&map.file, map.aperture_line, format!("aperture.{field}"), msg);
+    let ap_err = |field: &str, msg: String| map.aperture_error(field, msg);
     if !(a.anamorphic_ratio.is_finite() && a.anamorphic_ratio > 0.0) {
-        return Err(ap_err("anamorphic_ratio", format!("must be positive, got {}", a.anamorphic_ratio)));
+        return Err(ap_err("anamorphic_ratio", format!("must be positive, got {}", Num(a.anamorphic_ratio))));
     }
     if !(0.0..=1.0).contains(&a.blade_curvature) {
-        return Err(ap_err("blade_curvature", format!("must be in [0, 1], got {}", a.blade_curvature)));
+        return Err(ap_err("blade_curvature", format!("must be in [0, 1], got {}", Num(a.blade_curvature))));
     }
     if !a.rotation_deg.is_finite() {
         return Err(ap_err("rotation_deg", "must be finite".into()));

@@ -747,10 +747,10 @@ fn toml_bad_input_names_file_line_and_field() {
     let good = "[lens]\nname = \"t\"\nsource = \"test\"\n\n[[surface]]\nthickness_mm = 2.0\nsemi_diameter_mm = 3.0\nstop = true\n\n[[surface]]\nradius_mm = 51.0\nthickness_mm = 4.0\nmaterial = \"N-BK7\"\nsemi_diameter_mm = 8.0\n\n[[surface]]\nradius_mm = -51.0\nthickness_mm = 48.0\nsemi_diameter_mm = 8.0\n";
     Lens::from_toml(good, "good.toml", None).unwrap();
     let cases: Vec<(String, usize, &str, &str)> = vec![
-        // missing field: serde names it and the table's line
-        (good.replace("thickness_mm = 4.0\n", ""), 10, "thickness_mm", "missing"),
+        // missing field: serde names it, on the table's line, with the surface's index
+        (good.replace("thickness_mm = 4.0\n", ""), 10, "surface[2].thickness_mm", "missing"),
         // unknown field
-        (good.replace("radius_mm = 51.0", "radius_mm = 51.0\ncolour = 3"), 12, "colour", "unknown"),
+        (good.replace("radius_mm = 51.0", "radius_mm = 51.0\ncolour = 3"), 12, "surface[2].colour", "unknown"),
         // unknown glass, with a suggestion
         (good.replace("\"N-BK7\"", "\"N-BK8\""), 13, "surface[2].material", "N-BK8"),
         // NaN
@@ -777,7 +777,7 @@ fn toml_bad_input_names_file_line_and_field() {
         // no stop
         (good.replace("stop = true\n", ""), 0, "surface.stop", "no aperture stop"),
         // wrong type
-        (good.replace("thickness_mm = 48.0", "thickness_mm = \"far\""), 18, "thickness_mm", "invalid type"),
+        (good.replace("thickness_mm = 48.0", "thickness_mm = \"far\""), 18, "surface[3].thickness_mm", "invalid type"),
     ];
     for (text, line, field, needle) in cases {
         let err = Lens::from_toml(&text, "bad.toml", None).unwrap_err();

@@ -2,6 +2,7 @@
 
 mod aperture;
 mod import;
+mod lens_errors;
 mod lrtf;
 mod lrtf_cases;
 mod optics;

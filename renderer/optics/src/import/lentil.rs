@@ -42,7 +42,9 @@ use super::pbrt::{fit_semi_diameters, join_sentences, short, MAX_LENGTH_MM};
 use crate::error::{Error, Result};
 use crate::glass::Material;
 use crate::lens::Lens;
-use crate::prescription::{CylinderAxis, LensMeta, MaterialSpec, ModelGlass, Prescription, SourceMap, SurfaceSpec};
+use crate::prescription::{
+    CylinderAxis, LensMeta, MaterialSpec, ModelGlass, Num, Prescription, SourceMap, SurfaceSpec,
+};
 use serde_json::Value;
 
 /// lentil writes 99999, 100000 or 999999 for a flat surface.
@@ -121,7 +123,7 @@ pub fn import_lentil(text: &str, file: &str, id: &str) -> Result<(Prescription, 
         }
         for (f, v) in [("radius", radius), ("thickness", thickness), ("housing-radius", housing)] {
             if v.abs() > MAX_LENGTH_MM {
-                return Err(err(f, format!("{v} mm is implausibly large (limit {MAX_LENGTH_MM} mm)")));
+                return Err(err(f, format!("{} mm is implausibly large (limit {} mm)", Num(v), Num(MAX_LENGTH_MM))));
             }
         }
         if housing <= 0.0 {

@@ -28,7 +28,7 @@
 //! which they do not cross, and `notes` says so (see [`fit_semi_diameters`]).
 
 use crate::error::{Error, Result};
-use crate::prescription::{LensMeta, MaterialSpec, ModelGlass, Prescription, SourceMap, SurfaceSpec};
+use crate::prescription::{LensMeta, MaterialSpec, ModelGlass, Num, Prescription, SourceMap, SurfaceSpec};
 use crate::surface::Shape;
 
 // Largest accepted length (radius, thickness, aperture) in a lens table, mm: anything larger is
@@ -129,7 +129,7 @@ fn parse(text: &str, file: &str) -> Result<(Header, Vec<Row>)> {
                     file,
                     line,
                     COLUMNS[k],
-                    format!("{x} mm is implausibly large (limit {MAX_LENGTH_MM} mm)"),
+                    format!("{} mm is implausibly large (limit {} mm)", Num(x), Num(MAX_LENGTH_MM)),
                 ));
             }
             v[k] = x;

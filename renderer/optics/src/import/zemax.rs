@@ -47,7 +47,9 @@
 use super::pbrt::{join_sentences, short, MAX_LENGTH_MM};
 use crate::error::{Error, Result};
 use crate::glass::Material;
-use crate::prescription::{CylinderAxis, LensMeta, MaterialSpec, ModelGlass, Prescription, SourceMap, SurfaceSpec};
+use crate::prescription::{
+    CylinderAxis, LensMeta, MaterialSpec, ModelGlass, Num, Prescription, SourceMap, SurfaceSpec,
+};
 
 /// Whether a surface has aspheric terms (r², even or odd).
 fn spec_has_polynomial(s: &SurfaceSpec) -> bool {
@@ -110,7 +112,7 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
                 file,
                 line,
                 field,
-                format!("{v} is implausibly large (limit {MAX_LENGTH_MM} mm)"),
+                format!("{} is implausibly large (limit {} mm)", Num(v), Num(MAX_LENGTH_MM)),
             ));
         }
         Ok(mm)
