@@ -1,6 +1,6 @@
 //! What pxr traverses and resolves, on small usda stages written here: prim specifiers,
 //! material bindings on native instances, point-instancer orientations, typeless prims. Each
-//! test's expected values are usd-core's (25.x) on the same text.
+//! test's expected values are usd-core's (26.11) on the same text.
 
 use glam::DVec3;
 use petzval_usd::load;
@@ -380,6 +380,47 @@ def Xform "T"
             uniform token[] xformOpOrder = ["!resetXformStack!", "xformOp:translate"]
         }
         def Cube "Geo2"
+        {
+        }
+    }
+}
+"#;
+
+/// PointInstancer `orientations` are used normalised (a zero quaternion as the identity), so
+/// an instance is its prototype rotated and scaled by `scales` alone. This is where petzval
+/// and pxr differ on purpose: usd-core's `ComputeInstanceTransformsAtTime` builds the matrix
+/// from the quaternion as authored (`GfMatrix4d.SetRotate(GfQuatd)`), so the half-precision
+/// (0.7071, 0, 0.7071, 0) below (length 0.99989) leaves 4.27·10⁻⁴ on the diagonal of its
+/// scale-2 instance, and a quaternion of length 2 would scale by −7.
+#[test]
+fn point_instancer_orientations_are_normalised() {
+    let p = write("orientations.usda", ORIENTATIONS);
+    let shot = load(&p, None).unwrap();
+    let xf = &shot.info.instance_stage_xf;
+    assert_eq!(xf.len(), 3);
+    // 90° about +y at scale 2: x → −z, z → +x
+    let m = xf[0];
+    assert!(m.transform_vector3(DVec3::X).abs_diff_eq(DVec3::new(0.0, 0.0, -2.0), 1e-12), "{m}");
+    assert!(m.transform_vector3(DVec3::Z).abs_diff_eq(DVec3::new(2.0, 0.0, 0.0), 1e-12), "{m}");
+    assert!(m.transform_vector3(DVec3::Y).abs_diff_eq(DVec3::new(0.0, 2.0, 0.0), 1e-12), "{m}");
+    // zero → identity; (2, 0, 0, 0) → identity, not a scale
+    for k in [1, 2] {
+        let expect = glam::DMat4::from_translation(DVec3::new(k as f64, 0.0, 0.0));
+        assert!(xf[k].abs_diff_eq(expect, 1e-12), "{k}: {}", xf[k]);
+    }
+}
+
+const ORIENTATIONS: &str = r#"#usda 1.0
+def PointInstancer "PI"
+{
+    rel prototypes = </PI/Protos/C>
+    int[] protoIndices = [0, 0, 0]
+    point3f[] positions = [(0, 0, 0), (1, 0, 0), (2, 0, 0)]
+    quath[] orientations = [(0.7071, 0, 0.7071, 0), (0, 0, 0, 0), (2, 0, 0, 0)]
+    float3[] scales = [(2, 2, 2), (1, 1, 1), (1,1,1)]
+    def Scope "Protos"
+    {
+        def Cube "C"
         {
         }
     }
