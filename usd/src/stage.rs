@@ -5,8 +5,10 @@
 //! | prim | result |
 //! |---|---|
 //! | inactive, `visibility = invisible`, a `purpose` not included (guide and proxy by default; [`crate::Purposes`]) | skipped with its subtree |
+//! | `class` or `over` (after composition; a point-instancer prototype excepted) | skipped with its subtree (still read as a composition source) |
+//! | typeless (`def "X"`) | its xform ops, `visibility` and `purpose` ignored (a `Scope`'s xform ops too), as pxr |
 //! | `Mesh` | one mesh, one instance |
-//! | native instance (`instanceable`) | the prototype's meshes built once, one instance each per instance prim |
+//! | native instance (`instanceable`) | the prototype's meshes built once (per distinct material binding the instance prim and its ancestors pass down), one instance each per instance prim |
 //! | `PointInstancer` | the prototypes' meshes built once; instance i = instancer · T(positions[i]) · R(orientations[i]) · S(scales[i]) · prototype root; `invisibleIds` (against `ids`, else the index) skipped; the instancer's children are not rendered directly |
 //! | `Camera` | a [`UsdCamera`] (cameras in prototypes are ignored) |
 //! | UsdLux lights | see [`crate::lights`] |
@@ -19,7 +21,7 @@
 use crate::camera::{read_camera, UsdCamera};
 use crate::lights;
 use crate::mesh::{build_mesh, Subset};
-use crate::shading::Materials;
+use crate::shading::{InheritedBinding, Materials};
 use crate::skel::{skinned_points, Skinned};
 use crate::value::{attr_error, layer_of_prim, Reader};
 use crate::xform::{local_xform, StageUnits};
@@ -110,8 +112,13 @@ pub struct Walker<'a> {
     pub purposes: crate::Purposes,
     /// The purpose an ancestor other than `default` passes down (None: none did).
     inherited_purpose: Option<String>,
+    /// Walking a point-instancer prototype, whose prims render whatever their specifier.
+    in_point_prototype: bool,
+    /// The material bindings the native instances being expanded pass down.
+    binding: InheritedBinding,
     materials: Materials,
-    meshes_by_prim: HashMap<String, u32>,
+    /// Meshes built, by prim and the instance bindings they were built with.
+    meshes_by_prim: HashMap<(String, InheritedBinding), u32>,
     /// Skinned meshes, whose points are in world space already (their prims' transforms do
     /// not apply).
     world_space_meshes: BTreeSet<String>,
@@ -148,6 +155,8 @@ impl<'a> Walker<'a> {
             subdivision_level: crate::subdiv::DEFAULT_LEVEL,
             purposes: crate::Purposes::default(),
             inherited_purpose: None,
+            in_point_prototype: false,
+            binding: InheritedBinding::default(),
             reader: Reader { stage, time },
             units,
             scene: Scene::default(),
@@ -219,16 +228,28 @@ impl<'a> Walker<'a> {
         if !prim.is_active().map_err(err)? {
             return Ok(());
         }
+        // pxr's default predicate: a prim is scene content only when it and its ancestors are
+        // `def` (an `over` is undefined, a `class` abstract). They stay composition sources:
+        // inherits, references and native prototypes read them through openusd. A
+        // point-instancer prototype is drawn whatever its specifier (Blender writes its
+        // prototypes under `over "Prototypes"`, as Hydra draws them).
+        if !self.in_point_prototype && prim.specifier().map_err(err)? != Some(sdf::Specifier::Def) {
+            return Ok(());
+        }
         let ty = prim.type_name().map_err(err)?.map(|t| t.as_str().to_string()).unwrap_or_default();
         if matches!(ty.as_str(), "Material" | "Shader" | "NodeGraph" | "GeomSubset") || ty.starts_with("Render") {
             return Ok(());
         }
-        if self.reader.token(prim, "visibility")?.as_deref() == Some("invisible") {
+        // A typeless prim is neither Imageable nor Xformable (a Scope is Imageable only): pxr
+        // ignores the visibility, purpose ([`local_xform`]: and xform ops) they author.
+        let imageable = !ty.is_empty();
+        if imageable && self.reader.token(prim, "visibility")?.as_deref() == Some("invisible") {
             return Ok(());
         }
         // The prim's purpose (an ancestor's other than default wins); a subtree of a purpose
         // not rendered is skipped, default-purpose geometry only where `default` is not.
-        let purpose = match (&self.inherited_purpose, self.reader.token(prim, "purpose")?) {
+        let own_purpose = if imageable { self.reader.token(prim, "purpose")? } else { None };
+        let purpose = match (&self.inherited_purpose, own_purpose) {
             (Some(p), _) => p.clone(),
             (None, Some(p)) => p,
             (None, None) => "default".to_string(),
@@ -243,7 +264,12 @@ impl<'a> Walker<'a> {
             if let Some(proto) = prim.prototype().map_err(err)? {
                 let proto_s = proto.to_string();
                 self.info.native_instances.push((path.clone(), proto_s.clone()));
-                let placements = self.prototype_placements(&proto, false)?;
+                // the instance prim's and its ancestors' bindings reach the proxies
+                let inner = self.binding.enter(prim);
+                let outer = std::mem::replace(&mut self.binding, inner);
+                let placements = self.prototype_placements(&proto, false);
+                self.binding = outer;
+                let placements = placements?;
                 check_expansion(prim, "instanceable", out.len() + placements.len())?;
                 for (m, rel, sub) in placements {
                     out.push((m, world * rel, format!("{path}{sub}")));
@@ -304,39 +330,67 @@ impl<'a> Walker<'a> {
     /// (`/__Prototype_N`) contributes its descendants; a point-instancer prototype also its
     /// own root transform (`include_root`).
     fn prototype_placements(&mut self, proto: &sdf::Path, include_root: bool) -> Result<Vec<Placement>, Error> {
-        let key = format!("{proto}#{include_root}");
+        let key = format!("{proto}#{include_root}#{:?}", self.binding);
         if let Some(p) = self.prototypes.get(&key) {
             return Ok(p.clone());
         }
         let prim = self.reader.stage.prim(proto.clone());
         let mut out = Vec::new();
-        if include_root {
-            self.walk(&prim, DMat4::IDENTITY, &mut out, true)?;
-            let root = proto.to_string();
-            for p in &mut out {
-                p.2 = p.2.strip_prefix(&root).unwrap_or(&p.2).to_string();
-            }
-        } else {
-            for child in children(&prim)? {
-                self.walk(&child, DMat4::IDENTITY, &mut out, true)?;
-            }
-            let root = proto.to_string();
-            for p in &mut out {
-                p.2 = p.2.strip_prefix(&root).unwrap_or(&p.2).to_string();
-            }
-        }
+        let outer = std::mem::replace(&mut self.in_point_prototype, include_root);
+        let walked = self.prototype_walk(&prim, proto, include_root, &mut out);
+        self.in_point_prototype = outer;
+        walked?;
         self.prototypes.insert(key, out.clone());
         Ok(out)
     }
 
+    fn prototype_walk(
+        &mut self,
+        prim: &usd::Prim,
+        proto: &sdf::Path,
+        include_root: bool,
+        out: &mut Vec<Placement>,
+    ) -> Result<(), Error> {
+        if include_root {
+            self.walk(prim, DMat4::IDENTITY, out, true)?;
+            let root = proto.to_string();
+            for p in out.iter_mut() {
+                p.2 = p.2.strip_prefix(&root).unwrap_or(&p.2).to_string();
+            }
+        } else {
+            for child in children(prim)? {
+                self.walk(&child, DMat4::IDENTITY, out, true)?;
+            }
+            let root = proto.to_string();
+            for p in out.iter_mut() {
+                p.2 = p.2.strip_prefix(&root).unwrap_or(&p.2).to_string();
+            }
+        }
+        Ok(())
+    }
+
     fn mesh(&mut self, prim: &usd::Prim, ty: &str) -> Result<u32, Error> {
         let path = prim.path().to_string();
-        if let Some(&m) = self.meshes_by_prim.get(&path) {
+        // An instance's bindings matter only where the mesh has none of its own nearer, or
+        // one of them is stronger than descendants.
+        let outer = if self.binding.stronger.is_none() && crate::shading::bound_material(prim).is_some() {
+            InheritedBinding::default()
+        } else {
+            self.binding.clone()
+        };
+        let cache_key = (path.clone(), outer.clone());
+        if let Some(&m) = self.meshes_by_prim.get(&cache_key) {
             return Ok(m);
         }
         let double_sided = self.reader.bool(prim, "doubleSided")?.unwrap_or(false);
-        let material =
-            self.materials.material_for(&self.reader, &mut self.scene, prim, double_sided, &mut self.warnings)?;
+        let material = self.materials.material_for(
+            &self.reader,
+            &mut self.scene,
+            prim,
+            &outer,
+            double_sided,
+            &mut self.warnings,
+        )?;
         let mut subsets = Vec::new();
         for child in children(prim)? {
             let ty = child.type_name().ok().flatten().map(|t| t.as_str().to_string()).unwrap_or_default();
@@ -347,14 +401,19 @@ impl<'a> Walker<'a> {
             if et != "face" {
                 continue;
             }
-            if crate::shading::bound_material(&child).is_none()
-                || crate::shading::bound_material(&child) == crate::shading::bound_material(prim)
-            {
+            let bound = crate::shading::bound_material_in(&child, &outer);
+            if bound.is_none() || bound == crate::shading::bound_material_in(prim, &outer) {
                 continue;
             }
             let faces = self.reader.ints(&child, "indices")?.unwrap_or_default();
-            let m =
-                self.materials.material_for(&self.reader, &mut self.scene, &child, double_sided, &mut self.warnings)?;
+            let m = self.materials.material_for(
+                &self.reader,
+                &mut self.scene,
+                &child,
+                &outer,
+                double_sided,
+                &mut self.warnings,
+            )?;
             subsets.push(Subset { faces, material: m, path: child.path().to_string() });
         }
         // A subdivision surface (Blender writes its Subdivision modifier's cage with the scheme
@@ -449,7 +508,7 @@ impl<'a> Walker<'a> {
             color_primvar: report.color_primvar.clone(),
         });
         let id = self.scene.add_mesh(mesh);
-        self.meshes_by_prim.insert(path, id);
+        self.meshes_by_prim.insert(cache_key, id);
         Ok(id)
     }
 

@@ -52,8 +52,19 @@ fn axis_rot(axis: char, deg: f64) -> DMat4 {
     }
 }
 
-/// The local transform of `prim` at the reader's time.
+/// Whether pxr reads xform ops on a prim of type `ty`: a typeless prim and a `Scope` are not
+/// `UsdGeomXformable`, and the ops they author are ignored (identity, no reset).
+pub fn is_xformable(ty: &str) -> bool {
+    !matches!(ty, "" | "Scope")
+}
+
+/// The local transform of `prim` at the reader's time (identity for a prim that is not
+/// [`is_xformable`]).
 pub fn local_xform(reader: &Reader, prim: &usd::Prim) -> Result<LocalXform, Error> {
+    let ty = prim.type_name().ok().flatten();
+    if !is_xformable(ty.as_ref().map_or("", |t| t.as_str())) {
+        return Ok(LocalXform { matrix: DMat4::IDENTITY, resets: false });
+    }
     let order = op_order(prim)?;
     let mut m = DMat4::IDENTITY;
     let mut resets = false;

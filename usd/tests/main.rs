@@ -3,3 +3,4 @@
 mod fuzz;
 mod stage;
 mod subdiv;
+mod traversal;
