@@ -17,7 +17,9 @@
 //! | `CylinderLight` | the side of a one-sided emissive cylinder along x (48 sides), radiance L | radius 0.5, length 1 |
 //!
 //! Colour temperature is UsdLux's blackbody colour (luminance 1, [`blackbody_rgb`]): pxr's and
-//! Blender's, so 6500 K is slightly blue-magenta, not white.
+//! Blender's, so 6500 K is slightly blue-magenta, not white. Blender 5.0 writes
+//! `enableColorTemperature = 1` on every light and `colorTemperature` only away from 6500 K, so
+//! on a stage it wrote an enabled light without an authored temperature keeps its colour.
 //! A sphere light with radius 0 and normalize off is treated as normalized (it has no area).
 
 use crate::value::{layer_of_prim, Reader};
@@ -121,8 +123,14 @@ pub fn read_light(
     let normalize = r.bool(prim, "inputs:normalize")?.unwrap_or(false);
     let mut tint = Vec3::ONE;
     if r.bool(prim, "inputs:enableColorTemperature")?.unwrap_or(false) {
-        let k = r.f64_or(prim, "inputs:colorTemperature", 6500.0)?;
-        tint = blackbody_rgb(k);
+        // Blender 5.0's exporter writes enableColorTemperature = 1 on every light, whether its
+        // Temperature is in use or not, and colorTemperature only when it is not 6500 K: on a
+        // stage it wrote, an unauthored temperature is Blender's default light (Temperature off,
+        // white in Cycles), an authored one a temperature the user set.
+        let k = r.f64(prim, "inputs:colorTemperature")?;
+        if k.is_some() || !units.blender_authored {
+            tint = blackbody_rgb(k.unwrap_or(6500.0));
+        }
     }
     if intensity < 0.0 || !color.is_finite() || color.min_element() < 0.0 {
         return Err(crate::value::attr_error(prim, "inputs:intensity", "intensity and color must be non-negative"));

@@ -725,3 +725,42 @@ fn unnormalized_distant_lights_give_the_radiance_of_their_disc() {
     assert!((e[1] - 8.0).abs() < 1e-5, "{e:?}");
     assert!((e[2] - 4.0).abs() < 1e-5, "{e:?}");
 }
+
+/// Blender 5.0's exporter writes `enableColorTemperature = 1` on every light, and
+/// `colorTemperature` only away from 6500 K: on a stage Blender wrote, an enabled light without
+/// an authored temperature keeps its colour (Blender's default light, Temperature off), one with
+/// a temperature takes its blackbody colour; on other stages UsdLux's fallback 6500 K applies.
+#[test]
+fn blender_stages_enable_colour_temperature_on_every_light() {
+    use petzval_renderer::scene::Light;
+    let stage = |name: &str, doc: &str| {
+        write(
+            name,
+            &format!(
+                "#usda 1.0\n(\n doc = \"{doc}\"\n)\n\
+                 def SphereLight \"Default\"\n{{\n bool inputs:enableColorTemperature = 1\n bool inputs:normalize = 1\n float inputs:radius = 0\n}}\n\
+                 def SphereLight \"Warm\"\n{{\n bool inputs:enableColorTemperature = 1\n float inputs:colorTemperature = 3000\n bool inputs:normalize = 1\n float inputs:radius = 0\n}}\n\
+                 def Mesh \"M\"\n{{\n {TRI}\n}}\n"
+            ),
+        )
+    };
+    let tints = |p: &PathBuf| -> Vec<[f32; 3]> {
+        load(p, None)
+            .unwrap()
+            .scene
+            .lights
+            .iter()
+            .filter_map(|l| match l {
+                Light::Point { intensity, .. } => Some((*intensity * 4.0).to_array()),
+                _ => None,
+            })
+            .collect()
+    };
+    let warm = petzval_usd::lights::blackbody_rgb(3000.0).to_array();
+    let d65 = petzval_usd::lights::blackbody_rgb(6500.0).to_array();
+    let close = |a: [f32; 3], b: [f32; 3]| (0..3).all(|c| (a[c] - b[c]).abs() < 1e-5);
+    let blender = tints(&stage("temperature_blender.usda", "Blender v5.0.1"));
+    assert!(close(blender[0], [1.0; 3]) && close(blender[1], warm), "{blender:?}");
+    let other = tints(&stage("temperature_other.usda", "made by hand"));
+    assert!(close(other[0], d65) && close(other[1], warm), "{other:?}");
+}
