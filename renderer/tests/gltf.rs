@@ -786,6 +786,17 @@ fn placements(s: &Scene) -> Vec<f32> {
     v
 }
 
+/// A frame asked of a file without animations renders its nodes as they are, with a warning
+/// (before, silently); a file with animations says nothing.
+#[test]
+fn a_frame_of_a_file_without_animations_is_reported() {
+    let still = load_gltf_at(&data("lights.gltf"), Some(1.0)).unwrap();
+    assert!(still.warnings.iter().any(|w| w.contains("has no animations")), "{:?}", still.warnings);
+    assert!(load_gltf(&data("lights.gltf")).unwrap().warnings.is_empty());
+    let animated = load_gltf_at(&data("animation/animated.glb"), Some(0.5)).unwrap();
+    assert!(!animated.warnings.iter().any(|w| w.contains("has no animations")), "{:?}", animated.warnings);
+}
+
 /// Node animation: Blender's export of an animated scene (a cube moving, turning and scaling
 /// under a turning empty, a flying camera with linear keys, a lamp with two Bezier keys; 24
 /// fps), evaluated at frame F / 24 s, places everything where Blender's static export at frame

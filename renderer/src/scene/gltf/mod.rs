@@ -298,6 +298,10 @@ impl<'a> Loader<'a> {
         }
         loader.load_buffers(blob)?;
         loader.timed = time_s.is_some();
+        if time_s.is_some() && doc.animations().len() == 0 {
+            loader
+                .warn("", "a frame was asked for, but the file has no animations: its nodes are rendered as they are");
+        }
         if let Some(t) = time_s {
             loader.animated = loader.animated_nodes(t as f32)?;
         }
