@@ -786,6 +786,55 @@ fn placements(s: &Scene) -> Vec<f32> {
     v
 }
 
+/// KHR_animation_pointer channels of lights and cameras (`pointer_lights.glb`, Blender 5.0's
+/// export in Scene mode, `tests/scene/make_gltf_pointer_light_fixture.py`; 30 fps, linear keys
+/// from frame 10 to 40): a point light 20 → 200 W, a sun 1 → 4 W/m², a spot 40° → 80° in size with
+/// blend 0 → 0.5, the camera 35 → 50 mm. At each frame petzval reads Blender's values (its
+/// exporter writes animated point and spot intensities without their 1/4π and suns' without
+/// ·683, and version 5.0 the Spot Blend as the animated innerConeAngle: compensated for files
+/// Blender wrote). Before session 38 every such channel was dropped
+/// (helper's scene against Cycles: 0.54 of the light at frame 25; now 1.000).
+#[test]
+fn pointer_animations_of_lights_and_cameras_follow_blender() {
+    for frame in [10.0f32, 25.0, 40.0] {
+        let s = load_gltf_at(&data("animation/pointer_lights.glb"), Some(frame as f64 / 30.0)).unwrap();
+        assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+        let k = (frame - 10.0) / 30.0;
+        let lerp = |a: f32, b: f32| a + (b - a) * k;
+        let rel = |a: f32, b: f32| (a - b).abs() <= 1e-4 * b.abs().max(1e-6);
+        for l in &s.lights {
+            match *l {
+                Light::Point { intensity, .. } => {
+                    let want = lerp(20.0, 200.0) / (4.0 * PI);
+                    assert!(rel(intensity.x, want), "frame {frame}: point {intensity} W/sr, Blender {want}");
+                }
+                Light::Directional { irradiance, .. } => {
+                    assert!(rel(irradiance.x, lerp(1.0, 4.0)), "frame {frame}: sun {irradiance}")
+                }
+                Light::Spot { intensity, inner_cone_rad, outer_cone_rad, falloff, .. } => {
+                    let outer = lerp(40.0, 80.0).to_radians() / 2.0;
+                    let inner = outer * (1.0 - lerp(0.0, 0.5));
+                    assert!(rel(intensity.x, 10.0 / (4.0 * PI)), "frame {frame}: spot {intensity}");
+                    assert!(rel(outer_cone_rad, outer), "frame {frame}: outer {outer_cone_rad} against {outer}");
+                    assert!(
+                        (inner_cone_rad - inner).abs() < 1e-4,
+                        "frame {frame}: inner {inner_cone_rad} against {inner}"
+                    );
+                    assert_eq!(falloff, SpotFalloff::Blender);
+                }
+            }
+        }
+        // Blender's camera: 36 mm across a 16:9 frame, so 20.25 mm high
+        let yfov = 2.0 * (10.125f32 / lerp(35.0, 50.0)).atan();
+        assert!(rel(s.cameras[0].yfov_rad, yfov), "frame {frame}: yfov {} against {yfov}", s.cameras[0].yfov_rad);
+    }
+    // without a time, the file's own values
+    let still = load_gltf(&data("animation/pointer_lights.glb")).unwrap();
+    assert!(
+        matches!(still.lights[0], Light::Point { intensity, .. } if (intensity.x - 20.0 / (4.0 * PI)).abs() < 1e-4)
+    );
+}
+
 /// A frame asked of a file without animations renders its nodes as they are, with a warning
 /// (before, silently); a file with animations says nothing.
 #[test]
@@ -802,7 +851,7 @@ fn a_frame_of_a_file_without_animations_is_reported() {
 /// fps), evaluated at frame F / 24 s, places everything where Blender's static export at frame
 /// F does (`tests/scene/make_gltf_animation_fixtures.py`). Sampled at every frame (LINEAR):
 /// everything within 10⁻⁵, also from one scene animation whose focal-length channel is a
-/// KHR_animation_pointer (dropped with a warning). With Bezier keys written as CUBICSPLINE: the camera and the lamp
+/// KHR_animation_pointer (the camera's yfov within 10⁻⁵ of the static export's). With Bezier keys written as CUBICSPLINE: the camera and the lamp
 /// (a two-key Bezier is a cubic in time) within 10⁻⁵; the cube's matrix within 0.1 (0.057 at
 /// frame 13), since the exporter approximates its Euler-angle curves by quaternion splines and
 /// its three unevenly spaced keys' Bezier handles by Hermite tangents. Without a time the nodes' own transforms are used.
@@ -821,13 +870,16 @@ fn gltf_node_animation_matches_blenders_frames() {
         assert!(sampled.warnings.is_empty(), "{:?}", sampled.warnings);
         let d = worst(&placements(&sampled), &placements(&want));
         assert!(d <= 1e-5, "sampled export at frame {f}: worst difference {d}");
-        // one scene animation with the focal length as a KHR_animation_pointer channel: that
-        // channel is dropped (a warning), the node channels still play
+        // one scene animation with the focal length as a KHR_animation_pointer channel: the
+        // camera's field of view at the frame is the static export's (before session 38 the
+        // channel was dropped with a warning: frame 24's 70 mm rendered at frame 1's 35 mm),
+        // and the node channels play
         let pointer = at("animation/pointer.glb");
-        assert_eq!(pointer.warnings.len(), 1, "{:?}", pointer.warnings);
-        assert!(pointer.warnings[0].contains("KHR_animation_pointer"), "{:?}", pointer.warnings);
+        assert!(pointer.warnings.is_empty(), "{:?}", pointer.warnings);
         let d = worst(&placements(&pointer), &placements(&want));
         assert!(d <= 1e-5, "scene-animation export at frame {f}: worst difference {d}");
+        let (got, exported) = (pointer.cameras[0].yfov_rad, want.cameras[0].yfov_rad);
+        assert!((got - exported).abs() <= 1e-5 * exported, "frame {f}: yfov {got} against the export's {exported}");
         let cubic = at("animation/animated_cubic.glb");
         let d = worst(&rigs(&cubic), &rigs(&want));
         assert!(d <= 1e-5, "cubic export at frame {f}: camera and lamp off by {d}");

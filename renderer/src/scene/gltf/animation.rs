@@ -7,7 +7,7 @@
 //! | sampler `STEP`, `LINEAR` (rotation: shortest-path slerp), `CUBICSPLINE` (Hermite, tangents × the key interval) | as the glTF spec defines them; before the first key the first value, after the last the last |
 //! | several animations | all applied at the same time (Blender writes one per object's action); where two target the same node and path, the later one wins, with a warning |
 //! | channel `weights` | the node's morph target weights at the time (as many per key as the sampler holds; see `deform.rs`) |
-//! | `KHR_animation_pointer` | ignored with a warning |
+//! | `KHR_animation_pointer` (a channel whose target is a JSON pointer, no node) | cameras' `perspective/yfov`, `znear`, `zfar` and `orthographic/xmag`, `ymag`; `KHR_lights_punctual` lights' `color`, `intensity`, `range`, `spot.innerConeAngle`, `spot.outerConeAngle` (the extension's spelling; `spot/…` read as well): their values at the time (Blender's exporter writes the focal length, a light's power and colour and a spot's size and blend so, with "Export Pointer Animation" in Scene mode; in files it wrote, its animated point and spot intensities are divided by 4π and suns' multiplied by 683, the conversions its static values have and its animated ones lack, and version 5.0's animated innerConeAngle, which holds the Spot Blend, is read as that). Other pointers (materials, textures) are ignored with a warning |
 //! | an animated node with a `matrix` | the matrix kept, with a warning (the spec allows TRS only) |
 //! | malformed sampler (input not scalar floats, counts that differ, times not increasing) | error naming the animation and channel |
 //!
@@ -41,6 +41,78 @@ pub(super) struct Animated {
     pub trs: HashMap<usize, AnimatedTrs>,
     /// Node index → its morph target weights.
     pub weights: HashMap<usize, Vec<f32>>,
+    /// JSON pointer (`KHR_animation_pointer`) → the value there.
+    pub pointers: HashMap<String, Vec<f32>>,
+}
+
+/// One `KHR_animation_pointer` channel as the file states it (read from the JSON before the
+/// gltf crate parses the file, which cannot hold such a channel).
+#[derive(Debug, Clone)]
+pub(super) struct PointerChannel {
+    /// Where it is: "animation N 'name', channel C".
+    loc: String,
+    /// The JSON pointer it animates.
+    pointer: Option<String>,
+    /// The sampler's input (times) and output (values) accessors.
+    input: Option<usize>,
+    output: Option<usize>,
+    /// The sampler's interpolation (LINEAR when not given).
+    interpolation: String,
+}
+
+impl PointerChannel {
+    /// Channel `channel` of animation `anim` (`samplers`: that animation's sampler list).
+    pub(super) fn from_json(
+        anim: usize,
+        name: Option<&str>,
+        channel: usize,
+        c: &serde_json::Value,
+        samplers: &serde_json::Value,
+    ) -> Self {
+        let sampler = c.get("sampler").and_then(|s| s.as_u64()).and_then(|i| samplers.get(i as usize));
+        let index = |key: &str| sampler.and_then(|s| s.get(key)).and_then(|v| v.as_u64()).map(|v| v as usize);
+        PointerChannel {
+            loc: format!("{}, channel {channel}", named("animation", anim, name)),
+            pointer: c
+                .pointer("/target/extensions/KHR_animation_pointer/pointer")
+                .and_then(|p| p.as_str())
+                .map(str::to_string),
+            input: index("input"),
+            output: index("output"),
+            interpolation: sampler
+                .and_then(|s| s.get("interpolation"))
+                .and_then(|v| v.as_str())
+                .unwrap_or("LINEAR")
+                .to_string(),
+        }
+    }
+}
+
+/// How many floats the property at a JSON `pointer` holds, where this loader applies it
+/// (cameras' and punctual lights' properties); None for any other pointer.
+fn pointer_width(pointer: &str) -> Option<usize> {
+    let parts: Vec<&str> = pointer.trim_start_matches('/').split('/').collect();
+    let index_ok = |s: &str| s.parse::<usize>().is_ok();
+    match parts.as_slice() {
+        ["cameras", i, "perspective", "yfov" | "znear" | "zfar"] if index_ok(i) => Some(1),
+        ["cameras", i, "orthographic", "xmag" | "ymag" | "znear" | "zfar"] if index_ok(i) => Some(1),
+        ["extensions", "KHR_lights_punctual", "lights", i, "intensity" | "range"] if index_ok(i) => Some(1),
+        ["extensions", "KHR_lights_punctual", "lights", i, "color"] if index_ok(i) => Some(3),
+        ["extensions", "KHR_lights_punctual", "lights", i, "spot.innerConeAngle" | "spot.outerConeAngle"]
+            if index_ok(i) =>
+        {
+            Some(1)
+        }
+        _ => None,
+    }
+}
+
+/// The pointer as this loader keys it: the extension's own spelling of a spot's cone angles
+/// (`…/spot.innerConeAngle`, which Blender writes) for the JSON-pointer one (`…/spot/…`).
+fn canonical_pointer(pointer: &str) -> String {
+    pointer
+        .replace("/spot/innerConeAngle", "/spot.innerConeAngle")
+        .replace("/spot/outerConeAngle", "/spot.outerConeAngle")
 }
 
 /// A sampler's keys: times (s) and values (`n` floats per key; CUBICSPLINE: in-tangent,
@@ -186,6 +258,68 @@ impl Loader<'_> {
                     );
                 }
             }
+        }
+        Ok(out)
+    }
+
+    /// The values of the `KHR_animation_pointer` channels this loader applies at `time_s`, by
+    /// pointer; the others are reported once.
+    pub(super) fn animated_pointers(
+        &mut self,
+        channels: &[PointerChannel],
+        time_s: f32,
+    ) -> Result<HashMap<String, Vec<f32>>> {
+        let mut out = HashMap::new();
+        let mut ignored = Vec::new();
+        for ch in channels {
+            let loc = &ch.loc;
+            let canonical = ch.pointer.as_deref().map(canonical_pointer);
+            let Some((pointer, n)) = canonical.as_deref().and_then(|p| Some((p, pointer_width(p)?))) else {
+                ignored.push(ch.pointer.clone().unwrap_or_else(|| format!("{loc} (no pointer)")));
+                continue;
+            };
+            // 1. The sampler's keys, checked.
+            let interpolation = match ch.interpolation.as_str() {
+                "LINEAR" => Interpolation::Linear,
+                "STEP" => Interpolation::Step,
+                "CUBICSPLINE" => Interpolation::CubicSpline,
+                other => return Err(self.error(loc, format!("sampler interpolation '{other}' is not a glTF one"))),
+            };
+            let accessor = |i: Option<usize>, what: &str| {
+                i.and_then(|i| self.doc.accessors().nth(i))
+                    .ok_or_else(|| self.error(loc, format!("sampler {what} accessor is missing or does not exist")))
+            };
+            let (input, output) = (accessor(ch.input, "input")?, accessor(ch.output, "output")?);
+            let times = read_accessor(self, &input).map_err(|e| self.error(loc, format!("sampler input: {e}")))?;
+            let values = read_accessor(self, &output).map_err(|e| self.error(loc, format!("sampler output: {e}")))?;
+            let per_key = n * if interpolation == Interpolation::CubicSpline { 3 } else { 1 };
+            if input.dimensions() != Dimensions::Scalar || times.is_empty() || values.len() != times.len() * per_key {
+                return Err(self.error(
+                    loc,
+                    format!(
+                        "{} key times but {} output floats ({per_key} per key for {pointer})",
+                        times.len(),
+                        values.len()
+                    ),
+                ));
+            }
+            if times.windows(2).any(|w| !(w[1] > w[0])) || !times.iter().all(|t| t.is_finite()) {
+                return Err(self.error(loc, "key times are not finite and strictly increasing"));
+            }
+            // 2. The value at the time.
+            let keys = Keys { times, values, n, interpolation };
+            if out.insert(pointer.to_string(), keys.at(time_s)).is_some() {
+                self.warn(loc, format!("{pointer} is animated again; this animation's value is used"));
+            }
+        }
+        if !ignored.is_empty() {
+            self.warn(
+                "",
+                format!(
+                    "KHR_animation_pointer: {} not supported (cameras' and punctual lights' properties are); ignored",
+                    ignored.join(", ")
+                ),
+            );
         }
         Ok(out)
     }

@@ -186,6 +186,10 @@ struct Loader<'a> {
     /// Blender's exporter wrote the file (`asset.generator` "Khronos glTF Blender I/O …"):
     /// its colour images are filtered as Cycles filters them (see `Loader::texture`).
     blender_written: bool,
+    /// Blender 5.0's exporter (`… I/O v5.0.…`) wrote it: its animated `spot.innerConeAngle`
+    /// holds the Spot Blend, not the angle (`exp/animation/sampled/sampling_cache.py` stores
+    /// the angle where the keyframes do not read it).
+    blender_5_0: bool,
     /// The animated nodes' TRS parts and morph weights at the time asked (empty without a time).
     animated: animation::Animated,
     /// Every node's world matrix along its parent chain, once a skin needs them.
@@ -281,29 +285,27 @@ impl<'a> Loader<'a> {
                 .generator
                 .as_deref()
                 .is_some_and(|g| g.starts_with("Khronos glTF Blender I/O")),
+            blender_5_0: doc
+                .as_json()
+                .asset
+                .generator
+                .as_deref()
+                .is_some_and(|g| g.starts_with("Khronos glTF Blender I/O v5.0.")),
             animated: animation::Animated::default(),
             node_worlds: None,
             deformed_bytes: 0,
             timed: false,
         };
         loader.warn_extensions();
-        if pointer_channels > 0 {
-            loader.warn(
-                "",
-                format!(
-                    "{pointer_channels} KHR_animation_pointer channel(s) (material, light or camera properties) are not \
-                     supported and are ignored"
-                ),
-            );
-        }
         loader.load_buffers(blob)?;
         loader.timed = time_s.is_some();
-        if time_s.is_some() && doc.animations().len() == 0 {
+        if time_s.is_some() && doc.animations().len() == 0 && pointer_channels.is_empty() {
             loader
                 .warn("", "a frame was asked for, but the file has no animations: its nodes are rendered as they are");
         }
         if let Some(t) = time_s {
             loader.animated = loader.animated_nodes(t as f32)?;
+            loader.animated.pointers = loader.animated_pointers(&pointer_channels, t as f32)?;
         }
         loader.load_materials();
         loader.walk_nodes()?;
@@ -348,7 +350,7 @@ impl<'a> Loader<'a> {
             "EXT_texture_webp",
             "KHR_draco_mesh_compression",
             "EXT_mesh_gpu_instancing",
-            // its channels are removed with their own warning (`without_pointer_channels`)
+            // its channels are read apart (`without_pointer_channels`, `animation.rs`)
             "KHR_animation_pointer",
         ];
         let used: Vec<String> = self.doc.extensions_used().map(|s| s.to_string()).collect();
@@ -360,11 +362,11 @@ impl<'a> Loader<'a> {
     }
 }
 
-/// The file without its `KHR_animation_pointer` channels (those with no target node, which the
-/// gltf crate's JSON types require), and how many were removed; animations left without a
-/// channel go too. The bytes are returned as they are when there is none (or the JSON does not
-/// parse: the gltf crate reports that).
-fn without_pointer_channels(bytes: &[u8]) -> (std::borrow::Cow<'_, [u8]>, usize) {
+/// `KHR_animation_pointer` channels (a property of a camera, light or material as the target,
+/// no node), which the gltf crate cannot parse: removed from the JSON (an animation left without
+/// channels goes too) and returned, for `animation` to evaluate. The bytes are returned as they
+/// are when there is none (or the JSON does not parse: the gltf crate then reports it).
+fn without_pointer_channels(bytes: &[u8]) -> (std::borrow::Cow<'_, [u8]>, Vec<animation::PointerChannel>) {
     use std::borrow::Cow;
     const NAME: &[u8] = b"KHR_animation_pointer";
     let glb = bytes.starts_with(b"glTF").then(|| gltf::binary::Glb::from_slice(bytes).ok()).flatten();
@@ -373,30 +375,37 @@ fn without_pointer_channels(bytes: &[u8]) -> (std::borrow::Cow<'_, [u8]>, usize)
         None => bytes,
     };
     if !json.windows(NAME.len()).any(|w| w == NAME) {
-        return (Cow::Borrowed(bytes), 0);
+        return (Cow::Borrowed(bytes), Vec::new());
     }
-    let Ok(mut root) = serde_json::from_slice::<serde_json::Value>(json) else { return (Cow::Borrowed(bytes), 0) };
-    let mut removed = 0;
+    let Ok(mut root) = serde_json::from_slice::<serde_json::Value>(json) else {
+        return (Cow::Borrowed(bytes), Vec::new());
+    };
+    let mut removed = Vec::new();
     if let Some(animations) = root.get_mut("animations").and_then(|a| a.as_array_mut()) {
-        for anim in animations.iter_mut() {
+        for (ai, anim) in animations.iter_mut().enumerate() {
+            let samplers = anim.get("samplers").cloned().unwrap_or_default();
+            let name = anim.get("name").and_then(|n| n.as_str()).map(str::to_string);
             if let Some(channels) = anim.get_mut("channels").and_then(|c| c.as_array_mut()) {
-                let before = channels.len();
+                for (ci, c) in channels.iter().enumerate() {
+                    if c.get("target").and_then(|t| t.get("node")).is_none() {
+                        removed.push(animation::PointerChannel::from_json(ai, name.as_deref(), ci, c, &samplers));
+                    }
+                }
                 channels.retain(|c| c.get("target").and_then(|t| t.get("node")).is_some());
-                removed += before - channels.len();
             }
         }
         animations.retain(|a| a.get("channels").and_then(|c| c.as_array()).is_none_or(|c| !c.is_empty()));
     }
-    if removed == 0 {
-        return (Cow::Borrowed(bytes), 0);
+    if removed.is_empty() {
+        return (Cow::Borrowed(bytes), removed);
     }
-    let Ok(new_json) = serde_json::to_vec(&root) else { return (Cow::Borrowed(bytes), 0) };
+    let Ok(new_json) = serde_json::to_vec(&root) else { return (Cow::Borrowed(bytes), Vec::new()) };
     match glb {
         Some(g) => {
             let glb = gltf::binary::Glb { header: g.header, json: Cow::Owned(new_json), bin: g.bin };
             match glb.to_vec() {
                 Ok(v) => (Cow::Owned(v), removed),
-                Err(_) => (Cow::Borrowed(bytes), 0),
+                Err(_) => (Cow::Borrowed(bytes), Vec::new()),
             }
         }
         None => (Cow::Owned(new_json), removed),

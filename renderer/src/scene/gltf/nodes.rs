@@ -233,10 +233,39 @@ impl Loader<'_> {
 
     // ---------------------------------------------------------------- lights and cameras
 
+    /// The value of the one-float property at JSON `pointer` at the time asked, where a
+    /// KHR_animation_pointer channel animates it; else `own`.
+    fn pointer_value(&self, pointer: &str, own: f32) -> f32 {
+        match self.animated.pointers.get(pointer) {
+            Some(v) if v.len() == 1 => v[0],
+            _ => own,
+        }
+    }
+
     pub(super) fn add_light(&mut self, light: &gltf::khr_lights_punctual::Light, world: &Mat4, node_loc: &str) {
         let loc = format!("{node_loc}, {}", named("light", light.index(), light.name()));
-        let color = Vec3::from_array(light.color());
-        let intensity = light.intensity();
+        // A property animated through KHR_animation_pointer takes its value at the time asked.
+        let key = |prop: &str| format!("/extensions/KHR_lights_punctual/lights/{}/{prop}", light.index());
+        let animated = |prop: &str, v: f32| self.pointer_value(&key(prop), v);
+        let color = match self.animated.pointers.get(&key("color")) {
+            Some(c) if c.len() == 3 => Vec3::from_slice(c),
+            _ => Vec3::from_array(light.color()),
+        };
+        let intensity = match self.animated.pointers.get(&key("intensity")) {
+            Some(v) if v.len() == 1 => {
+                // Blender 5.0's exporter writes animated intensities without part of the
+                // conversion its static ones have (`exp/animation/sampled/data/keyframes.py`
+                // against `exp/lights.py`): point and spot lights as W·683 (no 1/4π), suns as
+                // W/m² (no ·683); other files as the spec's units.
+                let blender = match light.kind() {
+                    _ if !self.blender_written => 1.0,
+                    gltf::khr_lights_punctual::Kind::Directional => WATTS_TO_LUMENS,
+                    _ => 1.0 / (4.0 * std::f32::consts::PI),
+                };
+                v[0] * blender
+            }
+            _ => light.intensity(),
+        };
         if !color.is_finite() || !intensity.is_finite() || color.min_element() < 0.0 || intensity < 0.0 {
             self.warn(&loc, "colour or intensity is negative or not finite; light skipped");
             return;
@@ -249,7 +278,7 @@ impl Loader<'_> {
         }
         let position = world.w_axis.truncate();
         let dir = world.transform_vector3(Vec3::NEG_Z);
-        let range = light.range().filter(|r| r.is_finite() && *r > 0.0);
+        let range = light.range().map(|r| animated("range", r)).filter(|r| r.is_finite() && *r > 0.0);
         let needs_dir = !matches!(light.kind(), gltf::khr_lights_punctual::Kind::Point);
         if !position.is_finite() || (needs_dir && !(dir.is_finite() && dir.length_squared() > 0.0)) {
             self.warn(&loc, "node transform is degenerate or not finite; light skipped");
@@ -264,8 +293,13 @@ impl Loader<'_> {
                 Light::Directional { direction, irradiance: radiometric, angle_rad: 0.0 }
             }
             gltf::khr_lights_punctual::Kind::Spot { inner_cone_angle, outer_cone_angle } => {
-                let mut outer = outer_cone_angle;
-                let mut inner = inner_cone_angle;
+                let mut outer = animated("spot.outerConeAngle", outer_cone_angle);
+                let mut inner = match self.animated.pointers.get(&key("spot.innerConeAngle")) {
+                    // Blender 5.0 writes the animated Spot Blend there (see `blender_5_0`)
+                    Some(v) if v.len() == 1 && self.blender_5_0 => outer * (1.0 - v[0].clamp(0.0, 1.0)),
+                    Some(v) if v.len() == 1 => v[0],
+                    _ => inner_cone_angle,
+                };
                 if !outer.is_finite() || outer <= 0.0 || outer > std::f32::consts::FRAC_PI_2 {
                     self.warn(&loc, format!("outerConeAngle {outer} is outside (0, π/2]; clamped"));
                     outer = if outer.is_finite() {
@@ -303,17 +337,22 @@ impl Loader<'_> {
         let loc = format!("{node_loc}, {}", named("camera", camera.index(), camera.name()));
         // Perspective: the vertical field of view; orthographic: the larger side's extent,
         // 2·max(xmag, ymag), as Blender's importer reads it back into its Orthographic Scale.
+        // A property animated through KHR_animation_pointer takes its value at the time asked.
+        let animated = |prop: &str, v: f32| self.pointer_value(&format!("/cameras/{}/{prop}", camera.index()), v);
         let (yfov, ortho_scale_m, aspect_ratio, znear, zfar) = match camera.projection() {
             gltf::camera::Projection::Perspective(p) => {
-                let yfov = p.yfov();
+                let yfov = animated("perspective/yfov", p.yfov());
+                let (znear, zfar) =
+                    (animated("perspective/znear", p.znear()), p.zfar().map(|z| animated("perspective/zfar", z)));
                 if !yfov.is_finite() || yfov <= 0.0 || yfov >= std::f32::consts::PI {
                     self.warn(&loc, format!("yfov {yfov} is outside (0, π); camera skipped"));
                     return;
                 }
-                (yfov, None, p.aspect_ratio().filter(|a| a.is_finite() && *a > 0.0), p.znear(), p.zfar())
+                (yfov, None, p.aspect_ratio().filter(|a| a.is_finite() && *a > 0.0), znear, zfar)
             }
             gltf::camera::Projection::Orthographic(o) => {
-                let (xmag, ymag) = (o.xmag().abs(), o.ymag().abs());
+                let (xmag, ymag) =
+                    (animated("orthographic/xmag", o.xmag()).abs(), animated("orthographic/ymag", o.ymag()).abs());
                 if !(xmag.is_finite() && ymag.is_finite() && xmag > 0.0 && ymag > 0.0) {
                     self.warn(
                         &loc,
@@ -321,7 +360,9 @@ impl Loader<'_> {
                     );
                     return;
                 }
-                (0.5, Some(2.0 * xmag.max(ymag)), Some(xmag / ymag), o.znear(), Some(o.zfar()))
+                let (znear, zfar) =
+                    (animated("orthographic/znear", o.znear()), animated("orthographic/zfar", o.zfar()));
+                (0.5, Some(2.0 * xmag.max(ymag)), Some(xmag / ymag), znear, Some(zfar))
             }
         };
         // Rigid part: keep the viewing direction (−z) exactly, make +y orthogonal to it.
