@@ -279,13 +279,42 @@ const CLEAR_OF_EDGE: f64 = 1e-6;
 /// An [`Aperture`] with its per-blade constants computed once (edge normals, triangle vertices,
 /// polygon area, a mask's rotation), for the cameras' and the lens's per-ray tests. Its
 /// [`PreparedAperture::transmission`] and [`PreparedAperture::sample_unit`] return the same
-/// bits as [`Aperture`]'s.
+/// bits as [`Aperture`]'s, except that a mask's points are drawn in proportion to its
+/// transmission ([`PreparedAperture::pdf_unit_at`] gives their density).
 #[derive(Debug, Clone, PartialEq)]
 pub struct PreparedAperture {
     aperture: Aperture,
     blades: Option<BladeTables>,
     /// A mask's rotation as (sin, cos).
     mask_rotation: (f64, f64),
+    /// A mask's pixels as a sampling distribution (points drawn in proportion to transmission).
+    mask_cdf: Option<MaskCdf>,
+}
+
+/// A mask's transmission as a discrete distribution over its pixels: points are drawn in a
+/// pixel with probability proportional to its transmission, uniformly within it, so a lens
+/// sample's weight (transmission over density) is the same everywhere in the opening.
+#[derive(Debug, Clone, PartialEq)]
+struct MaskCdf {
+    /// Cumulative transmission over the pixels, row-major from the top (`cdf[i]`: pixels < i + 1).
+    cdf: Vec<f64>,
+    /// The sum of all pixels' transmission (> 0).
+    total: f64,
+}
+
+impl MaskCdf {
+    fn new(mask: &ApertureMask) -> Option<Self> {
+        let mut acc = 0.0f64;
+        let cdf: Vec<f64> = mask
+            .transmission
+            .iter()
+            .map(|&t| {
+                acc += f64::from(t.max(0.0));
+                acc
+            })
+            .collect();
+        (acc > 0.0 && acc.is_finite()).then_some(MaskCdf { cdf, total: acc })
+    }
 }
 
 /// Per-blade constants of a regular polygon (edge middles at `rotation + k·2π/N`).
@@ -338,7 +367,11 @@ impl PreparedAperture {
             _ => None,
         };
         let mask_rotation = aperture.rotation_rad.sin_cos();
-        PreparedAperture { aperture, blades, mask_rotation }
+        let mask_cdf = match &aperture.shape {
+            ApertureShape::Mask(m) => MaskCdf::new(m),
+            _ => None,
+        };
+        PreparedAperture { aperture, blades, mask_rotation, mask_cdf }
     }
 
     /// The aperture it was made from.
@@ -435,6 +468,24 @@ impl PreparedAperture {
                 let clear = su <= 1.0 - CLEAR_OF_EDGE && u.y >= 0.0 && u.y <= 1.0;
                 (glam::DVec2::new(p.x / ratio, p.y), (1.0 / t.area) * ratio, clear)
             }
+            (ApertureShape::Mask(mask), _) if let Some(cdf) = &self.mask_cdf => {
+                // 1. The pixel, in proportion to its transmission (u.x), and the remainder of
+                //    u.x across it, u.y down it.
+                let target = u.x.clamp(0.0, 1.0) * cdf.total;
+                let i = cdf.cdf.partition_point(|&c| c <= target).min(cdf.cdf.len() - 1);
+                let before = if i == 0 { 0.0 } else { cdf.cdf[i - 1] };
+                let t_i = cdf.cdf[i] - before;
+                let fx = if t_i > 0.0 { ((target - before) / t_i).clamp(0.0, 1.0) } else { 0.5 };
+                let (px, py) = ((i % mask.width) as f64 + fx, (i / mask.width) as f64 + u.y.clamp(0.0, 1.0));
+                // 2. Mask coordinates ([−1, 1]², v up), then the stop's: the mask's rotation undone
+                //    (`transmission` turns the stop's point by it), then the squeeze.
+                let (mu, mv) = (2.0 * px / mask.width as f64 - 1.0, 1.0 - 2.0 * py / mask.height as f64);
+                let (s, c) = self.mask_rotation;
+                let (x, y) = (c * mu - s * mv, s * mu + c * mv);
+                let ratio = self.aperture.anamorphic_ratio;
+                let pixel_area = 4.0 / (mask.width * mask.height) as f64;
+                (glam::DVec2::new(x / ratio, y), t_i / (cdf.total * pixel_area) * ratio, false)
+            }
             _ => {
                 let (p, pdf) = self.aperture.sample_unit(u);
                 (p, pdf, false)
@@ -442,11 +493,18 @@ impl PreparedAperture {
         }
     }
 
-    /// The density of [`PreparedAperture::sample_unit`]'s points, per unit area of the unit
-    /// aperture: uniform over its sampling domain (the polygon, the disc, or a mask's square,
-    /// squeezed), which holds every point the stop transmits.
-    pub fn sample_pdf_unit(&self) -> f64 {
-        self.sample_unit(glam::DVec2::splat(0.5)).1
+    /// The density of [`PreparedAperture::sample_unit`]'s point `q` (unit aperture, squeezed),
+    /// per unit area of the unit aperture: uniform over the sampling domain (the polygon, the
+    /// disc, or the square of a clear mask), which holds every point the stop transmits; for a
+    /// mask, in proportion to its transmission at `q`.
+    pub fn pdf_unit_at(&self, q: glam::DVec2) -> f64 {
+        match (&self.aperture.shape, &self.mask_cdf) {
+            (ApertureShape::Mask(mask), Some(cdf)) => {
+                let pixel_area = 4.0 / (mask.width * mask.height) as f64;
+                self.transmission(q.x, q.y, 1.0) / (cdf.total * pixel_area) * self.aperture.anamorphic_ratio
+            }
+            _ => self.sample_unit(glam::DVec2::splat(0.5)).1,
+        }
     }
 
     /// [`Aperture::clearance_mm`].

@@ -49,10 +49,11 @@ fn etendue_factor(s_object: DVec2, s_film: DVec2) -> f64 {
 }
 
 impl IdealLens<'_> {
-    /// Density (per unit lens area, mm⁻²) of the camera's lens samples: uniform over the
-    /// aperture's sampling domain, which holds every point the stop transmits.
-    fn lens_pdf_mm2(&self) -> f64 {
-        self.aperture.sample_pdf_unit() / (self.radius_mm * self.radius_mm)
+    /// Density (per unit lens area, mm⁻²) of the camera's lens samples at lens point `l` (mm):
+    /// uniform over the aperture's sampling domain, which holds every point the stop transmits,
+    /// or a mask's transmission there ([`crate::optics::aperture::PreparedAperture::pdf_unit_at`]).
+    fn lens_pdf_mm2(&self, l: DVec2) -> f64 {
+        self.aperture.pdf_unit_at(l / self.radius_mm) / (self.radius_mm * self.radius_mm)
     }
 
     /// The camera strategy's density for sample (`film`, `lens_u`) in the object-side ray
@@ -71,7 +72,7 @@ impl IdealLens<'_> {
         let d = thin_lens_direction(p, l, self.focal_mm);
         let s_object = DVec2::new(d.x, d.y) / d.z.abs();
         let s_film = DVec2::new(l.x - p.x, l.y - p.y) / p.z.abs();
-        (g > 0.0 && d.z != 0.0 && p.z != 0.0).then(|| self.lens_pdf_mm2() / g * etendue_factor(s_object, s_film))
+        (g > 0.0 && d.z != 0.0 && p.z != 0.0).then(|| self.lens_pdf_mm2(q) / g * etendue_factor(s_object, s_film))
     }
 
     /// The disc light paths aim at (see [`super::Camera::light_path_disc`]): the stop at the
@@ -127,7 +128,7 @@ impl IdealLens<'_> {
         Some(FilmConnection {
             film: self.sensor.film_coord(x + DVec3::new(0.0, 0.0, self.rear_z_mm), self.film_z_mm),
             importance: transmission * self.exposure * j * vignetting,
-            camera_density: self.lens_pdf_mm2() / g * j,
+            camera_density: self.lens_pdf_mm2(DVec2::new(l.x, l.y)) / g * j,
             entry_m,
         })
     }
