@@ -759,22 +759,6 @@ fn run_frame(mut args: RenderArgs) -> Result<(), Error> {
     let (camera, lens_label, focal_mm, f_number) =
         (built.camera, built.lens_label, built.focal_length_mm, built.f_number);
     let rig = CameraRig { camera, to_world };
-    // A real lens whose image circle leaves most of the sensor black is worth a word.
-    let traced = match &rig.camera {
-        Camera::Exact(c) => Some((c.lens(), c.film_z_mm(), c.sensor().extent().0)),
-        Camera::Lrtf(c) => Some((c.exact().lens(), c.exact().film_z_mm(), c.exact().sensor().extent().0)),
-        _ => None,
-    };
-    if let Some((lens, film_z_mm, r_sensor)) = traced {
-        let r = petzval_renderer::optics::pupil::image_circle_radius_mm(lens, film_z_mm, r_sensor);
-        if r < 0.5 * r_sensor {
-            eprintln!(
-                "warning: '{}' covers a circle of radius {r:.2} mm, {:.0} % of the sensor's half-diagonal ({r_sensor:.1} mm): the rest of the frame is black (a smaller --sensor-width frames it)",
-                lens.name(),
-                100.0 * r / r_sensor
-            );
-        }
-    }
     if let Some(p) = rig.camera.focus_plane() {
         if let Some(j) = p.hinge_distance_m {
             eprintln!(

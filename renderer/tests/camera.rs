@@ -345,7 +345,7 @@ fn pupil_acceptance_flags_stops_too_small_to_sample() {
         };
         let lens = library_lens("double-gauss-50mm").unwrap().stopped_down(f_number).unwrap().with_aperture(blades);
         let sensor = Sensor { tilt_x_deg: -6.0, ..Sensor::default() };
-        ExactCamera::new(sensor, lens, Some(0.55)).unwrap().pupil_acceptance()
+        ExactCamera::new(sensor, lens, Some(0.55)).unwrap().pupil_acceptance().unwrap()
     };
     let (open, small, speck) = (acceptance(2.8), acceptance(8000.0), acceptance(100_000.0));
     eprintln!("pupil acceptance: f/2.8 {open:.3}, f/8000 {small:.3}, f/100000 {speck:.3}");

@@ -111,7 +111,23 @@ impl CameraSpec {
             _ => None,
         };
         if let Some(c) = exact {
-            let acceptance = c.pupil_acceptance();
+            // Most of the frame off the lens's image (a large shift, a sensor far beyond the
+            // image circle): black, which is right, but say why.
+            let r_sensor = c.sensor().extent().0;
+            let r = crate::optics::pupil::image_circle_radius_mm(c.lens(), c.film_z_mm(), r_sensor);
+            let outside = c.share_outside_image();
+            if r < 0.5 * r_sensor {
+                warnings.push(format!(
+                    "'{lens_label}' covers a circle of radius {r:.2} mm, {:.0} % of the sensor's half-diagonal ({r_sensor:.1} mm): the rest of the frame is black (a smaller sensor, or less shift, frames it)",
+                    100.0 * r / r_sensor
+                ));
+            } else if outside >= FRAME_OUTSIDE_WARNING {
+                warnings.push(format!(
+                    "{:.0} % of the frame lies outside the image of lens '{lens_label}' (no light passes the lens there, so those pixels are black): check the sensor shift and size",
+                    outside * 100.0
+                ));
+            }
+            let acceptance = c.pupil_acceptance().unwrap_or(1.0);
             if acceptance < LOW_PUPIL_ACCEPTANCE {
                 warnings.push(format!(
                     "lens '{lens_label}' at f/{f_number:.4}: only {:.2} % of the pupil samples pass the lens (its exit pupil is {:.3} µm across, a speck the pupil sampling cannot follow); the image is unbiased but will be very noisy: open the aperture",
@@ -126,3 +142,7 @@ impl CameraSpec {
 
 /// Share of passing pupil samples ([`ExactCamera::pupil_acceptance`]) below which a build warns.
 const LOW_PUPIL_ACCEPTANCE: f64 = 0.05;
+
+/// Share of the frame outside the lens's image ([`ExactCamera::share_outside_image`]) from which
+/// a build warns (a circular fisheye's frame corners stay below it).
+const FRAME_OUTSIDE_WARNING: f64 = 0.5;

@@ -103,10 +103,11 @@ impl ExactCamera {
     }
 
     /// The share of pupil samples drawn in the exit-pupil bounds that pass the lens, over a
-    /// lattice of film points (those the bounds cover; 4 × 4 stratified samples each). Near 1
+    /// lattice of film points (those the bounds cover; 4 × 4 stratified samples each; None when
+    /// they cover none). Near 1
     /// for tight bounds; tiny where the stop is so small that its region is a speck the bounds
     /// cannot follow (the image is still unbiased, but nearly all its samples are lost).
-    pub fn pupil_acceptance(&self) -> f64 {
+    pub fn pupil_acceptance(&self) -> Option<f64> {
         const LATTICE: usize = 16;
         let wl = self.lens.primary_wavelength_nm();
         let (mut drawn, mut passed) = (0usize, 0usize);
@@ -125,11 +126,22 @@ impl ExactCamera {
                 }
             }
         }
-        if drawn == 0 {
-            0.0
-        } else {
-            passed as f64 / drawn as f64
+        (drawn > 0).then(|| passed as f64 / drawn as f64)
+    }
+
+    /// The share of the frame (a 17 × 17 lattice of film points) where no ray passes the lens:
+    /// the exit-pupil bounds are empty there (beyond the image circle, or vignetted whole).
+    pub fn share_outside_image(&self) -> f64 {
+        const LATTICE: usize = 16;
+        let mut outside = 0usize;
+        for i in 0..=LATTICE {
+            for j in 0..=LATTICE {
+                let uv = DVec2::new(i as f64, j as f64) / LATTICE as f64;
+                let p = self.sensor.film_point(uv, self.film_z_mm);
+                outside += usize::from(!(self.pupil.domain_area_at(DVec2::new(p.x, p.y)) > 0.0));
+            }
         }
+        outside as f64 / ((LATTICE + 1) * (LATTICE + 1)) as f64
     }
 
     /// Sensor.
