@@ -4,16 +4,23 @@
 //! | step | what |
 //! |---|---|
 //! | read | EXR (`R`,`G`,`B` or `Y` channels, first layer) or floating-point TIFF (grey or RGB; linear values, no clipping level), 16-bit PNG or TIFF (values 0…65535), 8-bit PNG, TIFF or JPEG (0…255) |
-//! | clip | pixels at or above `saturation` in any channel are masked (default: the integer format's maximum; none for EXR) |
+//! | clip | pixels at or above `saturation` in any channel are masked (default: the integer format's maximum, 65535 or 255; 245 for JPEG, whose ringing keeps a clipped core a few levels below 255; none for EXR and float TIFF) |
 //! | decode | `transfer = "srgb"`: the sRGB curve is undone on value / maximum (an 8-bit file left at the default transfer is read as linear, with a warning: [`transfer_warning`]) |
-//! | dark | the dark frame (same size) is subtracted |
-//! | hot pixels | a pixel over 8 noise σ above the largest of its 8 neighbours, which are themselves near the background, is masked |
+//! | dark | the dark frame (same size, and the same kind of file: 8-bit, 16-bit or floating point) is subtracted |
+//! | hot pixels | a pixel over 8 noise σ above the largest of its 8 neighbours, which are themselves near the background, is masked, however bright (a point source's image spreads over several pixels) |
+//!
+//! Errors name the manifest, the capture and the field (`image`, `dark_frame`, `mask`,
+//! `wavelength_nm`) as well as the file: `m.toml: capture[2] (p02.png).dark_frame: dark32.png: …`.
 //! | mask | the manifest's mask (same size): zero = masked |
 //! | mono | a single-wavelength capture of an RGB file uses the channels' mean |
 
 use crate::error::{Error, Result};
 use crate::manifest::{Capture, Transfer, Wavelength};
 use std::path::Path;
+
+/// The default clipping level of a lossy 8-bit file (JPEG): its ringing around a clipped core
+/// keeps the plateau a few levels below 255 (249 to 254 at quality 95), where 255 would mask part of it or nothing.
+pub const JPEG_SATURATION: f64 = 245.0;
 
 /// A loaded capture image.
 #[derive(Debug, Clone, PartialEq)]
@@ -41,19 +48,45 @@ struct Raw {
     planes: Vec<Vec<f64>>,
     max_value: Option<f64>,
     eight_bit: bool,
+    /// Lossy compression (JPEG).
+    lossy: bool,
 }
 
-fn image_err(path: &Path, message: impl Into<String>) -> Error {
-    Error::Image { path: path.to_path_buf(), message: message.into() }
+impl Raw {
+    /// What kind of values the file holds, for messages.
+    fn kind(&self) -> &'static str {
+        match (self.max_value, self.eight_bit) {
+            (None, _) => "floating point",
+            (Some(_), true) => "8-bit",
+            (Some(_), false) => "16-bit",
+        }
+    }
+
+    /// The clipping level when the manifest gives none.
+    fn default_saturation(&self) -> Option<f64> {
+        if self.lossy && self.eight_bit {
+            Some(JPEG_SATURATION)
+        } else {
+            self.max_value
+        }
+    }
 }
 
-fn read_raw(path: &Path) -> Result<Raw> {
+/// An error of one of a capture's files: the manifest, the capture, the field and the file.
+fn capture_err(capture: &Capture, field: &str, path: &Path, message: impl std::fmt::Display) -> Error {
+    Error::manifest(&capture.manifest, format!("{}.{field}", capture.label), format!("{}: {message}", path.display()))
+}
+
+fn read_raw(path: &Path) -> std::result::Result<Raw, String> {
     if !path.exists() {
-        return Err(image_err(path, "no such file"));
+        return Err("no such file".into());
+    }
+    if path.is_dir() {
+        return Err("is a folder, not an image".into());
     }
     let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
     if ext == "exr" {
-        let img = exr::prelude::read_first_flat_layer_from_file(path).map_err(|e| image_err(path, e.to_string()))?;
+        let img = exr::prelude::read_first_flat_layer_from_file(path).map_err(|e| e.to_string())?;
         let layer = img.layer_data;
         let (width, height) = (layer.size.width(), layer.size.height());
         let find = |name: &str| {
@@ -69,23 +102,24 @@ fn read_raw(path: &Path) -> Result<Raw> {
             (_, _, _, Some(y)) => vec![y],
             _ => {
                 let names: Vec<String> = layer.channel_data.list.iter().map(|c| c.name.to_string()).collect();
-                return Err(image_err(
-                    path,
-                    format!(
-                        "has neither R, G, B nor Y channels (its first layer has {}); write the capture's channels as R, G, B or Y",
-                        names.join(", ")
-                    ),
+                return Err(format!(
+                    "has neither R, G, B nor Y channels (its first layer has {}); write the capture's channels as R, G, B or Y",
+                    names.join(", ")
                 ));
             }
         };
-        return Ok(Raw { width, height, planes, max_value: None, eight_bit: false });
+        return Ok(Raw { width, height, planes, max_value: None, eight_bit: false, lossy: false });
     }
     if ext == "tif" || ext == "tiff" {
         if let Some(raw) = read_float_tiff(path)? {
             return Ok(raw);
         }
     }
-    let img = image::open(path).map_err(|e| image_err(path, e.to_string()))?;
+    if std::fs::metadata(path).is_ok_and(|m| m.len() == 0) {
+        return Err("is empty (0 bytes)".into());
+    }
+    let img = image::open(path).map_err(|e| e.to_string())?;
+    let lossy = matches!(ext.as_str(), "jpg" | "jpeg" | "jpe" | "jfif");
     let (width, height) = (img.width() as usize, img.height() as usize);
     let eight_bit = matches!(
         img.color(),
@@ -105,7 +139,7 @@ fn read_raw(path: &Path) -> Result<Raw> {
             ((0..3).map(|c| b.pixels().map(|p| p.0[c] as f64).collect()).collect(), 65535.0)
         }
     };
-    Ok(Raw { width, height, planes, max_value: Some(max_value), eight_bit })
+    Ok(Raw { width, height, planes, max_value: Some(max_value), eight_bit, lossy })
 }
 
 /// A warning for an 8-bit capture read as linear only because the manifest left `transfer` at
@@ -123,11 +157,11 @@ pub fn transfer_warning(capture: &Capture, image: &CaptureImage) -> Option<Strin
 /// A floating-point TIFF (16-, 32- or 64-bit samples; grey, grey + alpha, RGB or RGBA, alpha
 /// dropped), read as linear values with no clipping level, as an EXR is; None for an integer
 /// TIFF, which the `image` crate reads.
-fn read_float_tiff(path: &Path) -> Result<Option<Raw>> {
+fn read_float_tiff(path: &Path) -> std::result::Result<Option<Raw>, String> {
     use tiff::decoder::{Decoder, DecodingResult};
     use tiff::ColorType;
-    let file = std::fs::File::open(path).map_err(|e| image_err(path, e.to_string()))?;
-    let tiff_err = |e: tiff::TiffError| image_err(path, format!("TIFF: {e}"));
+    let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
+    let tiff_err = |e: tiff::TiffError| format!("TIFF: {e}");
     let mut decoder = Decoder::new(std::io::BufReader::new(file)).map_err(tiff_err)?;
     let (samples, keep) = match decoder.colortype().map_err(tiff_err)? {
         ColorType::Gray(_) => (1, 1),
@@ -146,10 +180,10 @@ fn read_float_tiff(path: &Path) -> Result<Option<Raw>> {
     };
     let (width, height) = (w as usize, h as usize);
     if values.len() < width * height * samples {
-        return Err(image_err(path, format!("TIFF: {} samples for {width}×{height}×{samples}", values.len())));
+        return Err(format!("TIFF: {} samples for {width}×{height}×{samples}", values.len()));
     }
     let planes = (0..keep).map(|c| (0..width * height).map(|k| values[k * samples + c]).collect()).collect();
-    Ok(Some(Raw { width, height, planes, max_value: None, eight_bit: false }))
+    Ok(Some(Raw { width, height, planes, max_value: None, eight_bit: false, lossy: false }))
 }
 
 fn srgb_to_linear(v: f64) -> f64 {
@@ -160,17 +194,18 @@ fn srgb_to_linear(v: f64) -> f64 {
     }
 }
 
-/// Loads a capture's image, dark frame and mask (see the module's table).
+/// Loads a capture's image, dark frame and mask (see the module's table); errors name the
+/// manifest, the capture, the field and the file.
 pub fn load(capture: &Capture) -> Result<CaptureImage> {
     let path = &capture.image;
-    let raw = read_raw(path)?;
+    let raw = read_raw(path).map_err(|m| capture_err(capture, "image", path, m))?;
     let (width, height, eight_bit) = (raw.width, raw.height, raw.eight_bit);
     let n = width * height;
     if n == 0 {
-        return Err(image_err(path, "is empty"));
+        return Err(capture_err(capture, "image", path, "is empty"));
     }
     // 1. Clipped pixels (before any decoding), in any channel.
-    let saturation = capture.saturation.or(raw.max_value);
+    let saturation = capture.saturation.or(raw.default_saturation());
     let mut mask = vec![true; n];
     let mut clipped = 0;
     if let Some(s) = saturation {
@@ -182,6 +217,7 @@ pub fn load(capture: &Capture) -> Result<CaptureImage> {
         }
     }
     // 2. Linear values.
+    let kind = raw.kind();
     let mut planes = raw.planes;
     if capture.transfer == Transfer::Srgb {
         let max = raw.max_value.unwrap_or(1.0);
@@ -193,11 +229,27 @@ pub fn load(capture: &Capture) -> Result<CaptureImage> {
     }
     // 3. Dark frame.
     if let Some(dark_path) = &capture.dark_frame {
-        let dark = read_raw(dark_path)?;
+        let dark = read_raw(dark_path).map_err(|m| capture_err(capture, "dark_frame", dark_path, m))?;
         if (dark.width, dark.height) != (width, height) {
-            return Err(image_err(
+            return Err(capture_err(
+                capture,
+                "dark_frame",
                 dark_path,
                 format!("dark frame is {}×{}, the capture {}×{}", dark.width, dark.height, width, height),
+            ));
+        }
+        // subtracted in the capture's units: an 8-bit dark under a 16-bit capture (or the
+        // reverse, or integers under floating point) would be off by the ratio of the ranges
+        if (dark.max_value, dark.eight_bit) != (raw.max_value, raw.eight_bit) {
+            return Err(capture_err(
+                capture,
+                "dark_frame",
+                dark_path,
+                format!(
+                    "dark frame is {}, the capture {}: it is subtracted in the capture's units, so it must be the same kind of file",
+                    dark.kind(),
+                    kind
+                ),
             ));
         }
         for (c, p) in planes.iter_mut().enumerate() {
@@ -209,9 +261,11 @@ pub fn load(capture: &Capture) -> Result<CaptureImage> {
     }
     // 4. The manifest's mask.
     if let Some(mask_path) = &capture.mask {
-        let m = read_raw(mask_path)?;
+        let m = read_raw(mask_path).map_err(|m| capture_err(capture, "mask", mask_path, m))?;
         if (m.width, m.height) != (width, height) {
-            return Err(image_err(
+            return Err(capture_err(
+                capture,
+                "mask",
                 mask_path,
                 format!("mask is {}×{}, the capture {}×{}", m.width, m.height, width, height),
             ));
@@ -224,7 +278,9 @@ pub fn load(capture: &Capture) -> Result<CaptureImage> {
     let channels = match (capture.wavelength, planes.len()) {
         (Wavelength::Rgb, 3) => planes,
         (Wavelength::Rgb, _) => {
-            return Err(image_err(
+            return Err(capture_err(
+                capture,
+                "wavelength_nm",
                 path,
                 "wavelength_nm = \"rgb\" needs a colour image (R, G, B), this one has one channel",
             ))
@@ -236,7 +292,8 @@ pub fn load(capture: &Capture) -> Result<CaptureImage> {
     };
     for (c, p) in channels.iter().enumerate() {
         if let Some(k) = p.iter().position(|v| !v.is_finite()) {
-            return Err(image_err(path, format!("pixel ({}, {}) of channel {c} is not finite", k % width, k / width)));
+            let (x, y) = (k % width, k / width);
+            return Err(capture_err(capture, "image", path, format!("pixel ({x}, {y}) of channel {c} is not finite")));
         }
     }
     // 6. Hot pixels.
@@ -245,30 +302,11 @@ pub fn load(capture: &Capture) -> Result<CaptureImage> {
 }
 
 /// Masks isolated hot pixels: far above all 8 neighbours while those are at the background,
-/// away from the source's image (the brightest 3×3 patch and 3 px around it are kept, since a
-/// sharply focused point may fill one pixel). Returns how many were masked.
+/// however bright (a hot pixel may outshine a faint spot's peak; a point source's image
+/// spreads over several pixels, so its peak's neighbours stand above the background). Returns
+/// how many were masked.
 fn reject_hot_pixels(channels: &[Vec<f64>], width: usize, height: usize, mask: &mut [bool]) -> usize {
     let mut count = 0;
-    // where the source is: the brightest 3×3 sum over all channels
-    let mut core = (0usize, 0usize);
-    let mut best = f64::NEG_INFINITY;
-    for y in 1..height.saturating_sub(1) {
-        for x in 1..width.saturating_sub(1) {
-            let mut sum = 0.0;
-            for p in channels {
-                for yy in y - 1..=y + 1 {
-                    for xx in x - 1..=x + 1 {
-                        sum += p[yy * width + xx];
-                    }
-                }
-            }
-            if sum > best {
-                best = sum;
-                core = (x, y);
-            }
-        }
-    }
-    let near_core = |x: usize, y: usize| x.abs_diff(core.0) <= 4 && y.abs_diff(core.1) <= 4;
     for p in channels {
         // background level and noise from the image's lower half of values
         let mut sorted: Vec<f64> = p.clone();
@@ -289,11 +327,7 @@ fn reject_hot_pixels(channels: &[Vec<f64>], width: usize, height: usize, mask: &
                     let kk = (y as i64 + dy) as usize * width + (x as i64 + dx) as usize;
                     neighbour_max = neighbour_max.max(p[kk]);
                 }
-                if v - neighbour_max > 8.0 * sigma
-                    && neighbour_max - median < 5.0 * sigma
-                    && mask[k]
-                    && !near_core(x, y)
-                {
+                if v - neighbour_max > 8.0 * sigma && neighbour_max - median < 5.0 * sigma && mask[k] {
                     mask[k] = false;
                     count += 1;
                 }

@@ -222,6 +222,17 @@ impl Problem {
         for (i, f) in manifest.free.iter().enumerate() {
             let field = format!("free[{}].param", i + 1);
             let v = start.get(&f.param).map_err(|m| Error::manifest(&file, &field, m))?;
+            // an explicit start is checked with the manifest; the lens's own value here
+            if f.start.is_none() && !(v >= f.min && v <= f.max) {
+                return Err(Error::manifest(
+                    &file,
+                    &field,
+                    format!(
+                        "'{}' starts at the start lens's value {v}, outside the bounds [{}, {}]: widen them or give a `start` inside",
+                        f.name, f.min, f.max
+                    ),
+                ));
+            }
             let v = f.start.unwrap_or(v);
             start.set(&f.param, v).map_err(|m| Error::manifest(&file, &field, m))?;
         }
@@ -252,8 +263,8 @@ impl Problem {
             };
         }
         let start_lens = problem.build_lens(&problem.start)?;
-        for (i, c) in manifest.captures.iter().enumerate() {
-            let field = |k: &str| format!("capture[{}] ({}).{k}", i + 1, c.image.display());
+        for c in &manifest.captures {
+            let field = |k: &str| format!("{}.{k}", c.label);
             let image = captures::load(c)?;
             let (w, h) = (image.width as i64, image.height as i64);
             let [ox, oy] = c.crop_origin_px;

@@ -36,9 +36,9 @@
 //! | `f_number` | f64, or `"open"` (the stop fully open) | — | required |
 //! | `wavelength_nm` | f64 in 380..780, or `"rgb"` (colour images: three wavelengths) | nm | required |
 //! | `exposure` | f64 > 0, relative (a free intensity scale is fitted anyway) | — | 1 |
-//! | `dark_frame` | image of the same size, subtracted | — | none |
+//! | `dark_frame` | image of the same size and format range (8-bit, 16-bit or floating point), subtracted | — | none |
 //! | `mask` | image of the same size; non-zero = use the pixel | — | all pixels |
-//! | `saturation` | f64: pixel values at or above it are clipped and masked | image units | 65535 for 16-bit PNG/TIFF, none for EXR |
+//! | `saturation` | f64: pixel values at or above it are clipped and masked | image units | 65535 for 16-bit PNG/TIFF, 255 for 8-bit PNG/TIFF, 245 for JPEG (its ringing keeps a clipped core below 255), none for EXR and float TIFF |
 //!
 //! Images are upright, as cameras write them: a source right of and above the axis shows right
 //! of and above the image centre.
@@ -142,6 +142,10 @@ pub enum Wavelength {
 /// One photograph of a point source.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Capture {
+    /// The manifest file (for messages).
+    pub manifest: String,
+    /// How messages name this capture: `capture[2] (p02.png)`, its number and image as written.
+    pub label: String,
     /// The image (resolved path).
     pub image: PathBuf,
     /// Pixel encoding.
@@ -305,6 +309,7 @@ impl Manifest {
         let mut captures = Vec::with_capacity(raw.capture.len());
         for (i, c) in raw.capture.iter().enumerate() {
             let field = |k: &str| format!("capture[{}] ({}).{k}", i + 1, c.image);
+            // (the same naming as `Capture::label`)
             if c.source_m.iter().any(|v| !v.is_finite()) {
                 return Err(err(field("source_m"), format!("must be finite, got {:?}", c.source_m)));
             }
@@ -352,6 +357,8 @@ impl Manifest {
                 return Err(err(field("image"), format!("the same image and crop as capture[{}]", j + 1)));
             }
             captures.push(Capture {
+                manifest: file.clone(),
+                label: format!("capture[{}] ({})", i + 1, c.image),
                 image: resolve(&c.image),
                 transfer: c.transfer.unwrap_or_default(),
                 transfer_given: c.transfer.is_some(),

@@ -285,3 +285,172 @@ fn a_float_tiff_capture_is_read_as_linear_values() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// GOOD with its first capture's image replaced, no dark frame or mask, and `extra` lines
+/// added to that capture; parsed as `dir/m.toml`.
+fn one_capture(dir: &Path, image: &str, extra: &str) -> Manifest {
+    let text = GOOD
+        .replacen("captures/c01.exr", image, 1)
+        .replacen("dark_frame = \"captures/dark.exr\"\n", "", 1)
+        .replacen("mask = \"captures/c01_mask.png\"\n", "", 1)
+        .replacen("exposure = 1.0\n", &format!("exposure = 1.0\n{extra}"), 1);
+    Manifest::parse(&text, &dir.join("m.toml")).unwrap()
+}
+
+fn temp_dir(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("petzval-fit-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A hot pixel (60 301) brighter than a faint, spread spot's peak (6 000; its best 3×3 sum
+/// below the hot pixel's) is masked, and the spot kept (the hot pixel was taken for the
+/// source and kept, the spot left as background).
+#[test]
+fn a_hot_pixel_brighter_than_a_faint_spot_is_masked_and_the_spot_kept() {
+    let dir = temp_dir("hot");
+    let (w, h) = (40u32, 32u32);
+    let (sx, sy, hx, hy) = (26u32, 12u32, 7u32, 22u32);
+    let mut seed = 12345u32;
+    let img = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(w, h, |x, y| {
+        seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        let noise = (seed >> 28) as f64; // 0..15
+        let r2 = (x as f64 - sx as f64).powi(2) + (y as f64 - sy as f64).powi(2);
+        let v = 100.0 + noise + 6000.0 * (-r2 / (2.0 * 1.6f64.powi(2))).exp();
+        image::Luma([if (x, y) == (hx, hy) { 60301 } else { v.round() as u16 }])
+    });
+    img.save(dir.join("hot.png")).unwrap();
+    let m = one_capture(&dir, "hot.png", "");
+    let c = petzval_fit::captures::load(&m.captures[0]).unwrap();
+    let at = |x: u32, y: u32| (y * w + x) as usize;
+    assert!(!c.mask[at(hx, hy)], "the hot pixel is masked");
+    assert_eq!(c.hot, 1);
+    for dy in 0..5 {
+        for dx in 0..5 {
+            assert!(c.mask[at(sx + dx - 2, sy + dy - 2)], "spot pixel ({}, {}) kept", sx + dx - 2, sy + dy - 2);
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A free parameter without `start` whose start-lens value lies outside its bounds is refused,
+/// naming the manifest, the [[free]] entry, its bounds and the lens's value (it was accepted,
+/// and the fit started outside its bounds).
+#[test]
+fn a_free_parameter_whose_lens_value_is_outside_its_bounds_is_refused() {
+    let text = GOOD.replacen("min = 20.5\nmax = 22.5", "min = 30.5\nmax = 31.5", 1);
+    let m = Manifest::parse(&text, Path::new("/shots/m.toml")).unwrap();
+    let lens = petzval_optics::load_lens("double-gauss-50mm").unwrap();
+    let value = Model::new(lens.prescription().clone()).get(&"surface.3.radius_mm".parse().unwrap()).unwrap();
+    let e = match petzval_fit::fit::Problem::new(&m, &petzval_fit::fit::FitOptions::default()) {
+        Ok(_) => panic!("a start outside the bounds was accepted"),
+        Err(e) => e.to_string(),
+    };
+    assert!(e.starts_with("/shots/m.toml: free[1]"), "{e}");
+    assert!(e.contains("30.5") && e.contains("31.5") && e.contains(&value.to_string()), "{e} (lens value {value})");
+}
+
+/// A JPEG's clipped core, which its ringing keeps a few levels below 255, is masked by the
+/// default saturation (245 for JPEG; 255 masked part of it only); an explicit saturation
+/// still wins.
+#[test]
+fn a_clipped_jpeg_core_is_masked_by_default() {
+    let dir = temp_dir("jpegclip");
+    let (w, h) = (48u32, 48u32);
+    // a spot 4× over the clipping level: a plateau of 255 with soft shoulders
+    let truth = |x: u32, y: u32| {
+        let r2 = (x as f64 - 23.5).powi(2) + (y as f64 - 23.5).powi(2);
+        20.0 + 1000.0 * (-r2 / (2.0 * 5.0f64.powi(2))).exp()
+    };
+    let img = image::GrayImage::from_fn(w, h, |x, y| image::Luma([truth(x, y).min(255.0) as u8]));
+    let file = std::fs::File::create(dir.join("clip.jpg")).unwrap();
+    img.write_with_encoder(image::codecs::jpeg::JpegEncoder::new_with_quality(file, 95)).unwrap();
+    let c = load_first(&one_capture(&dir, "clip.jpg", ""));
+    // the core: where the light was at least twice the clipping level
+    let core: Vec<usize> = (0..w * h).filter(|k| truth(k % w, k / w) > 510.0).map(|k| k as usize).collect();
+    assert!(core.len() > 50);
+    // the evidence: after compression part of the core is below 255 (a quality-95 file: 249 to 254)
+    assert!(core.iter().any(|&k| c.channels[0][k] < 255.0), "the core has values below 255");
+    assert!(core.iter().all(|&k| !c.mask[k]), "the clipped core is masked ({} clipped)", c.clipped);
+    let at_255 = load_first(&one_capture(&dir, "clip.jpg", "saturation = 255.0\n"));
+    assert!(at_255.clipped < c.clipped, "an explicit saturation wins: {} at 255", at_255.clipped);
+    let explicit = load_first(&one_capture(&dir, "clip.jpg", "saturation = 1000.0\n"));
+    assert_eq!(explicit.clipped, 0);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `load` of a manifest's first capture.
+fn load_first(m: &Manifest) -> petzval_fit::captures::CaptureImage {
+    petzval_fit::captures::load(&m.captures[0]).unwrap()
+}
+
+/// Errors of the images name the manifest, the capture and the field before the file, as
+/// manifest errors do (they named the file only).
+#[test]
+fn image_errors_name_the_manifest_the_capture_and_the_field() {
+    use exr::prelude::*;
+    let dir = temp_dir("imgerr");
+    image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(16, 16, |x, y| image::Luma([(x * 100 + y) as u16]))
+        .save(dir.join("grey.png"))
+        .unwrap();
+    image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_pixel(8, 8, image::Luma([7]))
+        .save(dir.join("small.png"))
+        .unwrap();
+    let bytes = std::fs::read(dir.join("grey.png")).unwrap();
+    std::fs::write(dir.join("trunc.png"), &bytes[..bytes.len() / 2]).unwrap();
+    std::fs::write(dir.join("empty.png"), b"").unwrap();
+    std::fs::write(dir.join("text.png"), b"not an image").unwrap();
+    std::fs::create_dir_all(dir.join("folder.png")).unwrap();
+    let mut values = vec![0.5f32; 16];
+    values[5] = f32::NAN;
+    let ch = AnyChannel::new("Y", FlatSamples::F32(values));
+    let layer = Layer::new(
+        (4, 4),
+        LayerAttributes::default(),
+        Encoding::FAST_LOSSLESS,
+        AnyChannels::sort(SmallVec::from_vec(vec![ch])),
+    );
+    Image::from_layer(layer).write().to_file(dir.join("nan.exr")).unwrap();
+    let m_file = dir.join("m.toml").display().to_string();
+    let cases = [
+        ("nope.png", "", "image", "nope.png"),
+        ("trunc.png", "", "image", "trunc.png"),
+        ("empty.png", "", "image", "empty.png"),
+        ("text.png", "", "image", "text.png"),
+        ("folder.png", "", "image", "folder.png"),
+        ("nan.exr", "", "image", "nan.exr"),
+        ("grey.png", "dark_frame = \"small.png\"\n", "dark_frame", "small.png"),
+        ("grey.png", "dark_frame = \"nodark.png\"\n", "dark_frame", "nodark.png"),
+        ("grey.png", "mask = \"small.png\"\n", "mask", "small.png"),
+    ];
+    for (image, extra, field, file) in cases {
+        let m = one_capture(&dir, image, extra);
+        let e = petzval_fit::captures::load(&m.captures[0]).expect_err(image).to_string();
+        let head = format!("{m_file}: capture[1] ({image}).{field}: ");
+        assert!(e.starts_with(&head) && e.contains(file), "{e} (expected {head}…{file})");
+    }
+    let rgb = one_capture(&dir, "grey.png", "").captures.remove(0);
+    let rgb = petzval_fit::Capture { wavelength: petzval_fit::manifest::Wavelength::Rgb, ..rgb };
+    let e = petzval_fit::captures::load(&rgb).expect_err("rgb on grey").to_string();
+    assert!(e.starts_with(&format!("{m_file}: capture[1] (grey.png).wavelength_nm: ")), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A dark frame of another bit depth than its capture (8-bit capture, 16-bit dark) is refused
+/// naming the capture and the field (it was subtracted in the wrong units); the same depth is
+/// subtracted.
+#[test]
+fn a_dark_frame_of_another_bit_depth_is_refused() {
+    let dir = temp_dir("darkdepth");
+    image::GrayImage::from_fn(16, 16, |x, y| image::Luma([(x * 10 + y) as u8])).save(dir.join("c8.png")).unwrap();
+    image::GrayImage::from_pixel(16, 16, image::Luma([3])).save(dir.join("d8.png")).unwrap();
+    image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_pixel(16, 16, image::Luma([800]))
+        .save(dir.join("d16.png"))
+        .unwrap();
+    let m = one_capture(&dir, "c8.png", "dark_frame = \"d16.png\"\n");
+    let e = petzval_fit::captures::load(&m.captures[0]).expect_err("16-bit dark under 8-bit").to_string();
+    assert!(e.contains("capture[1] (c8.png).dark_frame") && e.contains("8-bit") && e.contains("16-bit"), "{e}");
+    let c = load_first(&one_capture(&dir, "c8.png", "dark_frame = \"d8.png\"\n"));
+    assert_eq!(c.channels[0][1], 10.0 - 3.0);
+    std::fs::remove_dir_all(&dir).ok();
+}
