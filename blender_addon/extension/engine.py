@@ -111,10 +111,16 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
         entry["seconds_scene"] = time.perf_counter() - t_scene
         if pz_scene is None:
             entry["cancelled_before_render"] = True
+            # Blender expects a result from every render (writing a still without one crashes
+            # Blender 5.0): an empty, fully transparent image
+            self._empty_result(out_w, out_h, view_layer.name)
             return
         export_mod.add_world(pz_scene, scene.world, notes, None)
-        if r.film_transparent:
-            notes.warn("transparent film (the world is rendered)")
+        # Film > Transparent: the world lights the scene but the background is RGBA 0
+        # (premultiplied, as Cycles)
+        pz_scene.transparent_background = bool(r.film_transparent)
+        if r.film_transparent and getattr(getattr(scene, "cycles", None), "film_transparent_glass", False):
+            notes.warn("transparent film: Transparent Glass (glass rendered opaque)")
 
         want_depth = bool(view_layer.use_pass_z)
         entry["kwargs"] = {
@@ -288,6 +294,12 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
                 self.update_stats("", f"Petzval viewport | Sample {preview.spp_done}/{preview.spp}")
         if preview is not None and not preview.finished:
             self.tag_redraw()
+
+    def _empty_result(self, width: int, height: int, layer: str) -> None:
+        """Opens and closes a result of zeros (a render that stopped before it had pixels)."""
+        result = self.begin_result(0, 0, width, height, layer=layer)
+        if result is not None:
+            self.end_result(result)
 
     @staticmethod
     def _write(layer, rgba: np.ndarray, opaque: bool) -> None:

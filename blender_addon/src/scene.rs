@@ -773,6 +773,18 @@ impl PyScene {
     }
 
     /// Triangles so far, over all instances (a mesh counted once per placement).
+    /// Film > Transparent: camera rays that meet no surface carry no radiance (RGB and alpha 0);
+    /// the environment still lights the scene.
+    #[getter]
+    fn transparent_background(&self) -> bool {
+        self.scene.transparent_background
+    }
+
+    #[setter]
+    fn set_transparent_background(&mut self, on: bool) {
+        self.scene.transparent_background = on;
+    }
+
     #[getter]
     fn triangle_count(&self) -> usize {
         self.scene.instanced_triangle_count()

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -896,6 +897,161 @@ def test_render_visibility_and_light_settings_are_listed(addon, report):
     for rendered in ("'Soft'", "'Sphere'", "WideSun"):
         assert not any(rendered in u for u in unsupported), (rendered, unsupported)
     assert entry.get("complete") is True
+
+
+def test_linking_shadow_catcher_and_volumes_are_listed(addon, report):
+    """Light linking, shadow linking and a Shadow Catcher object, which petzval ignores, are
+    listed (they were ignored in silence: the linked-out cube 1.94x brighter than in Cycles); a
+    volume-only material (Volume output, no Surface) leaves its object invisible as in Cycles'
+    surfaces (it rendered as an opaque black object) and is listed, as is a volume beside a
+    surface."""
+    _depth_scene()
+    H.configure_petzval(4, seed=0, camera="DepthCam")
+    scene = bpy.context.scene
+    for name, x in (("FogCube", 0.0), ("CatcherCube", -0.8), ("SmokyCube", 0.8)):
+        bpy.ops.mesh.primitive_cube_add(size=0.6, location=(x, 2.0, 0.0))
+        bpy.context.active_object.name = name
+    for name, surface in (("Fog", False), ("Smoky", True)):
+        mat = bpy.data.materials.new(name)
+        nt = mat.node_tree
+        out = nt.nodes.get("Material Output")
+        vol = nt.nodes.new("ShaderNodeVolumePrincipled")
+        vol.inputs["Density"].default_value = 3.0
+        nt.links.new(vol.outputs[0], out.inputs["Volume"])
+        if not surface:
+            nt.links.remove(out.inputs["Surface"].links[0])
+        bpy.data.objects[f"{name}Cube"].data.materials.append(mat)
+    bpy.data.objects["CatcherCube"].is_shadow_catcher = True
+    receivers = bpy.data.collections.new("Receivers")
+    receivers.objects.link(bpy.data.objects["CatcherCube"])
+    for name, kind in (("LinkedLamp", "POINT"), ("BlockedSun", "SUN")):
+        obj = bpy.data.objects.new(name, bpy.data.lights.new(name, kind))
+        obj.data.energy = 1.0
+        scene.collection.objects.link(obj)
+        obj.location = (0.0, 1.0, 2.0)
+    bpy.data.objects["LinkedLamp"].light_linking.receiver_collection = receivers
+    bpy.data.objects["BlockedSun"].light_linking.blocker_collection = receivers
+    try:
+        _, entry = H.render_still(OUT / "linking.exr")
+    finally:
+        bpy.data.collections.remove(receivers)
+    unsupported = entry["notes"]["unsupported"]
+    report.line(f"linking, shadow catcher and volumes listed: {unsupported}")
+    for words in (
+        ("LinkedLamp", "light linking"),
+        ("BlockedSun", "shadow linking"),
+        ("CatcherCube", "shadow catcher"),
+        ("'Fog'", "volume", "invisible"),
+        ("'Smoky'", "volume", "ignored"),
+    ):
+        assert any(all(w in u for w in words) for u in unsupported), (words, unsupported)
+    assert entry.get("complete") is True
+    # the fog cube (in front of the white wall at the image's centre) is not there: the wall shows
+    rgb = B.read_rgb(OUT / "linking.exr")
+    h, w = rgb.shape[:2]
+    centre = float(rgb[h // 2 - 3 : h // 2 + 3, w // 2 - 3 : w // 2 + 3].mean())
+    report.line(f"volume-only cube in front of the emissive wall (1.0): the centre reads {centre:.3f}")
+    assert centre > 0.9, f"the volume-only cube hides the wall (centre {centre:.3f}; it rendered black before)"
+
+
+def test_negative_light_is_skipped_and_listed(addon, report):
+    """A light of negative Power (Cycles subtracts light) is skipped with a warning naming it:
+    it made the whole render fail (InvalidSceneError) before."""
+    _depth_scene()
+    H.configure_petzval(2, seed=0, camera="DepthCam")
+    for name, kind in (("Darkener", "POINT"), ("DarkSun", "SUN")):
+        obj = bpy.data.objects.new(name, bpy.data.lights.new(name, kind))
+        obj.data.energy = -300.0
+        bpy.context.scene.collection.objects.link(obj)
+        obj.location = (0.0, 1.0, 2.0)
+    _, entry = H.render_still(OUT / "negative_light.exr")
+    unsupported = entry["notes"]["unsupported"]
+    report.line(f"negative lights: rendered, listed {unsupported}")
+    for name in ("Darkener", "DarkSun"):
+        assert any(name in u and "negative" in u for u in unsupported), (name, unsupported)
+    assert entry.get("complete") is True
+    assert np.isfinite(B.read_rgb(OUT / "negative_light.exr")).all()
+
+
+def test_film_transparent_background_is_premultiplied(addon, report):
+    """Film > Transparent: the background is RGBA (0, 0, 0, 0) (Blender's premultiplied alpha, as
+    Cycles), while the world still lights the scene; before, the background kept the world's colour
+    under alpha 0 (and the render warned "transparent film (the world is rendered)")."""
+    _depth_scene()
+    H.set_world_colour((0.2, 0.3, 0.4))
+    H.configure_petzval(4, seed=0, camera="DepthCam")
+    bpy.ops.mesh.primitive_plane_add(size=1.0, location=(0.0, 2.0, 0.0), rotation=(math.radians(90), 0, 0))
+    bpy.context.active_object.data.materials.append(bpy.data.materials.new("Grey"))
+    bpy.context.scene.render.film_transparent = True
+    try:
+        _, entry = H.render_still(OUT / "transparent.exr")
+    finally:
+        bpy.context.scene.render.film_transparent = False
+    ch = B.read_exr(OUT / "transparent.exr")
+    rgba = np.stack([ch[c] for c in "RGBA"], axis=-1)
+    h, w = rgba.shape[:2]
+    corner = rgba[:4, :4].reshape(-1, 4)
+    centre = rgba[h // 2 - 2 : h // 2 + 2, w // 2 - 2 : w // 2 + 2].reshape(-1, 4)
+    report.line(
+        f"transparent film: background RGBA {corner.mean(axis=0).round(4).tolist()}, a grey plane lit only by "
+        f"the world RGBA {centre.mean(axis=0).round(3).tolist()}; notes {entry['notes']}"
+    )
+    assert np.abs(corner).max() == 0.0, f"background is not RGBA 0: {corner.mean(axis=0)}"
+    assert np.allclose(centre[:, 3], 1.0) and centre[:, :3].mean() > 0.05, centre.mean(axis=0)
+    # premultiplied: no pixel has more colour than its coverage allows (the wall's emission is 1)
+    assert (rgba[..., :3].max(axis=-1) <= rgba[..., 3] * 1.5 + 1e-6).all()
+    assert not any("transparent" in u for u in entry["notes"]["unsupported"]), entry["notes"]
+
+
+_CANCEL_SCRIPT = r"""
+import importlib, sys
+sys.path.insert(0, sys.argv[1])
+import bpy
+import addon_utils
+bpy.ops.wm.read_factory_settings(use_empty=True)
+addon_utils.enable("{module}", default_set=True, handle_error=None)
+mod = importlib.import_module("{module}")
+scene = bpy.context.scene
+scene.render.engine = "PETZVAL"
+scene.render.resolution_x, scene.render.resolution_y = 64, 48
+scene.render.resolution_percentage = 100
+im = scene.render.image_settings
+if hasattr(im, "media_type"):
+    im.media_type = "IMAGE"
+im.file_format, im.color_depth, im.color_mode = "OPEN_EXR", "32", "RGBA"
+bpy.ops.mesh.primitive_cube_add()
+cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+scene.collection.objects.link(cam)
+scene.camera = cam
+cam.location = (0.0, -6.0, 0.0)
+cam.rotation_euler = (1.5708, 0.0, 0.0)
+mod.engine.PetzvalRenderEngine._should_stop = lambda self: True  # Esc before the translation
+scene.render.filepath = sys.argv[2]
+bpy.ops.render.render(write_still=True)
+entry = mod.engine.RENDER_LOG[-1]
+print("CANCELLED_BEFORE_RENDER", entry.get("cancelled_before_render"), entry.get("error"))
+"""
+
+
+def test_cancel_during_translation_gives_blender_a_result(addon, report, tmp_path):
+    """Esc while the scene is being translated, then the still written to a 32-bit EXR: the
+    engine returned without a result and Blender 5.0.1 crashed (segmentation fault); it now
+    opens and closes an empty result. Run in a child process (a crash would take pytest along)."""
+    import subprocess
+    import sys
+
+    site = Path(addon.__file__).resolve().parents[2] / ".local"
+    wheels = list(site.glob("lib/python*/site-packages"))
+    assert wheels, f"no site-packages under {site}"
+    script = tmp_path / "cancel.py"
+    script.write_text(_CANCEL_SCRIPT.replace("{module}", H.ADDON_MODULE))
+    out = tmp_path / "cancelled.exr"
+    proc = subprocess.run([sys.executable, str(script), str(wheels[0]), str(out)], capture_output=True, text=True,
+                          timeout=600)
+    tail = (proc.stdout + proc.stderr)[-2000:]
+    report.line(f"cancel during translation + write_still: exit {proc.returncode}, file written {out.is_file()}")
+    assert proc.returncode == 0, f"Blender exited with {proc.returncode}:\n{tail}"
+    assert "CANCELLED_BEFORE_RENDER True None" in proc.stdout, tail
 
 
 def test_depsgraph_instances_reference_one_mesh(addon, report):

@@ -39,6 +39,19 @@ def _view_layer_flag(obj, method: str, depsgraph) -> bool:
         return False
 
 
+def _linking(obj, notes) -> None:
+    """Lists an object's (a light's or an emitter's) light and shadow linking, which petzval
+    ignores: it lights every object, and every object casts its shadows."""
+    linking = getattr(obj, "light_linking", None)
+    if linking is None:
+        return
+    what = "light" if obj.type == "LIGHT" else "object"
+    if getattr(linking, "receiver_collection", None) is not None:
+        notes.warn(f"{what} '{obj.name}': light linking (it lights every object)")
+    if getattr(linking, "blocker_collection", None) is not None:
+        notes.warn(f"{what} '{obj.name}': shadow linking (every object casts shadows of its light)")
+
+
 def build(petzval, depsgraph, notes, stop=None):
     """A ``petzval.Scene`` from the evaluated depsgraph. `stop()` (optional) is polled between
     objects; returns None when it asks to stop. Also returns counts for the status line."""
@@ -55,6 +68,8 @@ def build(petzval, depsgraph, notes, stop=None):
             return None, stats
         obj = inst.object
         t = obj.type
+        if inst.show_self and (t == "LIGHT" or t in GEOMETRY_TYPES):
+            _linking(obj, notes)
         if t == "LIGHT":
             if inst.show_self:
                 add_light(pz, obj, inst.matrix_world, notes, materials)
@@ -73,6 +88,8 @@ def build(petzval, depsgraph, notes, stop=None):
         if not all(getattr(obj, f"visible_{ray}", True) for ray in ("shadow", "diffuse", "glossy", "transmission")):
             notes.warn(f"object '{obj.name}': shadow, diffuse, glossy or transmission ray visibility off "
                        "(seen by those rays)")
+        if getattr(obj, "is_shadow_catcher", False):
+            notes.warn(f"object '{obj.name}': shadow catcher (rendered as an ordinary object)")
         for what, flag in (("holdout", "holdout_get"), ("indirect only", "indirect_only_get")):
             if _view_layer_flag(obj, flag, depsgraph) or (what == "holdout" and getattr(obj, "is_holdout", False)):
                 notes.warn(f"object '{obj.name}': {what} (rendered as an ordinary object)")

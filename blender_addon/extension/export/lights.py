@@ -50,6 +50,10 @@ def add_light(pz, obj, matrix_world, notes, materials) -> None:
     direction = axis / n if n > 0 else np.array([0.0, -1.0, 0.0])
     colour = light_colour(light)
     name = obj.name
+    if not float(light.energy) >= 0.0:
+        # petzval's lights only add light; Cycles' negative ones take it away
+        notes.warn(f"light '{name}': negative power {float(light.energy):g} W (light skipped)")
+        return
     lnt = node_tree_of(light) if hasattr(light, "node_tree") else None
     if lnt is not None and _light_nodes_do_something(lnt):
         notes.warn(f"light '{name}': light nodes")

@@ -20,7 +20,7 @@ import numpy as np
 
 from .bake import Baked, Evaluator, Unsupported
 from .images import MISSING_TEXTURE, image_pixels, srgb_byte_image
-from .nodes import forget_groups, node_tree_of, socket_value, source, surface_shader, value
+from .nodes import forget_groups, node_tree_of, socket_value, source, surface_shader, value, volume_shader
 
 DEFAULT_COLOUR = (0.8, 0.8, 0.8, 1.0)
 
@@ -300,6 +300,15 @@ class Materials:
                 specular=2.0 * float(mat.specular_intensity),
             )
         node = surface_shader(nt)
+        volume = volume_shader(nt)
+        if volume is not None:
+            if node is None:
+                # Cycles shows only the volume (no surface): the object is not there for
+                # surfaces, so it is rendered fully transparent rather than black
+                self.notes.warn(f"material '{mat.name}': volume shader (a volume-only material rendered invisible)")
+                return self.scene.add_material(mat.name, base_color=(0.0, 0.0, 0.0, 0.0), specular=0.0,
+                                               alpha_mode="blend")
+            self.notes.warn(f"material '{mat.name}': volume shader (ignored; the surface rendered)")
         if node is None:
             # Cycles renders a material with nothing connected as black
             return self.scene.add_material(mat.name, base_color=(0.0, 0.0, 0.0, 1.0), specular=0.0)

@@ -109,6 +109,17 @@ def surface_shader(node_tree, output_target="CYCLES"):
     return src[0] if src else None
 
 
+def volume_shader(node_tree, output_target="CYCLES"):
+    """The shader node feeding the active material output's Volume, or None."""
+    if node_tree is None:
+        return None
+    out = node_tree.get_output_node(output_target)
+    if out is None:
+        return None
+    src = source(out.inputs.get("Volume"))
+    return src[0] if src else None
+
+
 def value(node, name, default=None):
     """The unlinked value of `node`'s input `name` (see `socket_value`), or `default`."""
     return socket_value(node.inputs.get(name), default)

@@ -253,6 +253,10 @@ class Scene:
         ``rotation_rad`` turns the map about the world's up axis as a Blender Mapping node of
         type *Texture* with that Z rotation does (a *Point* mapping turns the other way: pass
         the negated angle)."""
+    transparent_background: bool
+    """Film > Transparent (default False): camera rays that meet no surface carry no radiance
+    (RGB 0 with alpha 0, premultiplied as Blender expects); the environment still lights the
+    scene and shows in reflections and refractions."""
     @property
     def triangle_count(self) -> int:
         """Triangles over all instances (a mesh counted once per placement)."""

@@ -327,7 +327,6 @@ impl Layers {
         let shaded = reachable(&frame, &depth_m, k_count, pupil_radius_m);
         // 3. Radiance: the same rays, each shading its hit on each layer's surface.
         let tracer = PathTracer { max_depth: settings.max_depth, ..PathTracer::default() };
-        let env = &scene.scene().environment;
         let radiance_rows: Vec<Vec<Vec3>> = (0..frame.height)
             .into_par_iter()
             .map(|row| {
@@ -346,7 +345,7 @@ impl Layers {
                             let surface = &surfaces[at(k)];
                             if surface.count == 0 {
                                 // The environment, behind every surface of the texel.
-                                sums[k] += crate::integrator::lights::env_radiance(env, d);
+                                sums[k] += crate::integrator::lights::camera_env_radiance(scene.scene(), d);
                                 counts[k] += 1;
                                 continue;
                             }
@@ -409,7 +408,7 @@ impl Layers {
     /// Radiance of the environment in camera-space direction `dir`.
     pub fn environment(&self, scene: &RenderScene, dir: DVec3) -> Vec3 {
         let d = self.to_world.transform_vector3(dir).normalize().as_vec3();
-        crate::integrator::lights::env_radiance(&scene.scene().environment, d)
+        crate::integrator::lights::camera_env_radiance(scene.scene(), d)
     }
 }
 

@@ -242,7 +242,7 @@ impl SampleShader for MultiviewShader<'_> {
             if t_far > t_near && d != Vec3::ZERO { self.scene.intersect_seen(start, d, t_far - t_near) } else { None };
         let Some(hit) = found else {
             self.counts[2].fetch_add(1, Ordering::Relaxed);
-            return PathSample::miss(crate::integrator::lights::env_radiance(&self.scene.scene().environment, d));
+            return PathSample::miss(crate::integrator::lights::camera_env_radiance(self.scene.scene(), d));
         };
         let p = self.to_camera.transform_point3(hit.position.as_dvec3());
         match self.lookup(p) {

@@ -29,7 +29,7 @@ use glam::Vec3;
 
 use super::accel::{RenderScene, SurfaceHit};
 use super::bsdf::{ensure_valid_specular_reflection, fresnel_dielectric, Bsdf, SurfaceBsdf};
-use super::lights::env_radiance;
+use super::lights::{camera_env_radiance, env_radiance};
 use crate::sampler::PixelSampler;
 use crate::scene::{AngleWeight, MaterialMix};
 
@@ -342,7 +342,7 @@ impl PathTracer {
                 }
             }
             let Some(hit) = found else {
-                let le = env_radiance(env, d);
+                let le = if depth == 0 { camera_env_radiance(scene.scene(), d) } else { env_radiance(env, d) };
                 if le != Vec3::ZERO {
                     let w = if depth == 0 {
                         1.0

@@ -580,6 +580,10 @@ pub struct Scene {
     pub lights: Vec<Light>,
     /// Environment.
     pub environment: Environment,
+    /// Transparent background (Blender's Film > Transparent): camera rays that meet no surface
+    /// carry no radiance (alpha 0, RGB 0: premultiplied), while the environment still lights
+    /// the scene and shows in reflections and refractions.
+    pub transparent_background: bool,
     /// Cameras from the file.
     pub cameras: Vec<SceneCamera>,
     /// Warnings collected while loading (shown to the user once).

@@ -77,6 +77,17 @@ pub fn env_radiance(env: &Environment, dir: Vec3) -> Vec3 {
     env.radiance(dir)
 }
 
+/// Environment radiance a camera ray that meets no surface sees toward `dir` (unit, world):
+/// none with [`crate::scene::Scene::transparent_background`].
+#[inline]
+pub fn camera_env_radiance(scene: &crate::scene::Scene, dir: Vec3) -> Vec3 {
+    if scene.transparent_background {
+        Vec3::ZERO
+    } else {
+        scene.environment.radiance(dir)
+    }
+}
+
 /// Samples a direction of the environment: (direction, radiance, solid-angle pdf).
 #[inline]
 pub fn env_sample(env: &Environment, u: Vec2) -> Option<(Vec3, Vec3, f32)> {
