@@ -27,7 +27,7 @@
 //!
 //! | name | type | unit | default |
 //! |---|---|---|---|
-//! | `image` | linear EXR (RGB or Y), 16-bit PNG or TIFF | — | required |
+//! | `image` | EXR (RGB or Y) or floating-point TIFF (linear), 16-bit PNG or TIFF, 8-bit PNG, TIFF or JPEG (see `transfer`) | — | required |
 //! | `transfer` | `"linear"` or `"srgb"` (decoded before fitting) | — | `"linear"` |
 //! | `crop_origin_px` | `[x, y]`: the image's top-left pixel on the full sensor (x right, y down) | px | required |
 //! | `source_m` | `[x, y, z]`: the point source, x right, y up, z forward | m | required |
