@@ -98,26 +98,25 @@ def socket_value(socket, default=None):
     return v
 
 
-def surface_shader(node_tree, output_target="CYCLES"):
-    """The shader node feeding the active material/world output's Surface, or None."""
+def _output_shader(node_tree, socket, output_target):
+    """The shader node feeding input `socket` of the active output node, or None."""
     if node_tree is None:
         return None
     out = node_tree.get_output_node(output_target)
     if out is None:
         return None
-    src = source(out.inputs.get("Surface"))
+    src = source(out.inputs.get(socket))
     return src[0] if src else None
+
+
+def surface_shader(node_tree, output_target="CYCLES"):
+    """The shader node feeding the active material/world output's Surface, or None."""
+    return _output_shader(node_tree, "Surface", output_target)
 
 
 def volume_shader(node_tree, output_target="CYCLES"):
     """The shader node feeding the active material output's Volume, or None."""
-    if node_tree is None:
-        return None
-    out = node_tree.get_output_node(output_target)
-    if out is None:
-        return None
-    src = source(out.inputs.get("Volume"))
-    return src[0] if src else None
+    return _output_shader(node_tree, "Volume", output_target)
 
 
 def value(node, name, default=None):
