@@ -1054,6 +1054,34 @@ def test_cancel_during_translation_gives_blender_a_result(addon, report, tmp_pat
     assert "CANCELLED_BEFORE_RENDER True None" in proc.stdout, tail
 
 
+def test_an_error_before_the_result_still_gives_blender_a_result(addon, report, tmp_path):
+    """An engine error before the result is opened (here raised on purpose as the render
+    starts), then the still written to a 32-bit EXR: unlike a cancel without a result (a
+    segmentation fault in Blender 5.0.1), Blender reports the engine's error and the render
+    operator fails with it; no crash. Run in a child process (a crash would take pytest along)."""
+    import subprocess
+    import sys
+
+    site = Path(addon.__file__).resolve().parents[2] / ".local"
+    wheels = list(site.glob("lib/python*/site-packages"))
+    assert wheels, f"no site-packages under {site}"
+    script = tmp_path / "error.py"
+    failing = "def _fail(self, depsgraph, entry):\n    raise RuntimeError('boom')\n"
+    text = _CANCEL_SCRIPT.replace("{module}", H.ADDON_MODULE).replace(
+        "mod.engine.PetzvalRenderEngine._should_stop = lambda self: True  # Esc before the translation",
+        failing + "mod.engine.PetzvalRenderEngine._render = _fail",
+    )
+    assert "_fail" in text
+    script.write_text(text)
+    out = tmp_path / "failed.exr"
+    proc = subprocess.run([sys.executable, str(script), str(wheels[0]), str(out)], capture_output=True, text=True,
+                          timeout=600)
+    tail = (proc.stdout + proc.stderr)[-2000:]
+    report.line(f"error before the result + write_still: exit {proc.returncode} (the operator's error)")
+    assert proc.returncode == 1, f"Blender exited with {proc.returncode}:\n{tail}"
+    assert "Error: Petzval: RuntimeError: boom" in proc.stdout + proc.stderr, tail
+
+
 def test_depsgraph_instances_reference_one_mesh(addon, report):
     """Vertex instancing (4 depsgraph instances of a cube) plus two linked duplicates of a
     sphere: petzval holds one mesh per evaluated data-block and one instance per placement."""
