@@ -102,46 +102,49 @@ impl ExactCamera {
         Ok(film_z_mm)
     }
 
-    /// The share of pupil samples drawn in the exit-pupil bounds that pass the lens, over a
-    /// lattice of film points (those the bounds cover; 4 × 4 stratified samples each; None when
-    /// they cover none). Near 1
-    /// for tight bounds; tiny where the stop is so small that its region is a speck the bounds
-    /// cannot follow (the image is still unbiased, but nearly all its samples are lost).
-    pub fn pupil_acceptance(&self) -> Option<f64> {
+    /// The film points of the build's checks: a 17 × 17 lattice over the frame (lens frame).
+    fn check_lattice(&self) -> impl Iterator<Item = DVec3> + '_ {
         const LATTICE: usize = 16;
+        (0..=LATTICE).flat_map(move |i| {
+            (0..=LATTICE).map(move |j| {
+                let uv = DVec2::new(i as f64, j as f64) / LATTICE as f64;
+                self.sensor.film_point(uv, self.film_z_mm)
+            })
+        })
+    }
+
+    /// The share of pupil samples drawn in the exit-pupil bounds that pass the lens, over
+    /// [`ExactCamera::check_lattice`]'s film points (those the bounds cover; 4 × 4 stratified
+    /// samples each; None when they cover none). Near 1 for tight bounds; tiny where the stop is
+    /// so small that its region is a speck the bounds cannot follow (the image is still
+    /// unbiased, but nearly all its samples are lost).
+    pub fn pupil_acceptance(&self) -> Option<f64> {
         let wl = self.lens.primary_wavelength_nm();
         let (mut drawn, mut passed) = (0usize, 0usize);
-        for i in 0..=LATTICE {
-            for j in 0..=LATTICE {
-                // 1. The film point, and each stratified sample of its bounds.
-                let uv = DVec2::new(i as f64, j as f64) / LATTICE as f64;
-                let p = self.sensor.film_point(uv, self.film_z_mm);
-                for k in 0..16 {
-                    let u = DVec2::new((k % 4) as f64 + 0.5, (k / 4) as f64 + 0.5) / 4.0;
-                    let Some(s) = self.pupil.sample_bounds(DVec2::new(p.x, p.y), u) else { continue };
-                    // 2. Whether its ray passes.
-                    drawn += 1;
-                    let ray = Ray::new(p, s.point - p);
-                    passed += usize::from(self.lens.trace(&ray, wl, TraceDirection::FilmToScene).is_some());
-                }
+        for p in self.check_lattice() {
+            // 1. Each stratified sample of the film point's bounds.
+            for k in 0..16 {
+                let u = DVec2::new((k % 4) as f64 + 0.5, (k / 4) as f64 + 0.5) / 4.0;
+                let Some(s) = self.pupil.sample_bounds(DVec2::new(p.x, p.y), u) else { continue };
+                // 2. Whether its ray passes.
+                drawn += 1;
+                let ray = Ray::new(p, s.point - p);
+                passed += usize::from(self.lens.trace(&ray, wl, TraceDirection::FilmToScene).is_some());
             }
         }
         (drawn > 0).then(|| passed as f64 / drawn as f64)
     }
 
-    /// The share of the frame (a 17 × 17 lattice of film points) where no ray passes the lens:
-    /// the exit-pupil bounds are empty there (beyond the image circle, or vignetted whole).
+    /// The share of the frame ([`ExactCamera::check_lattice`]'s film points) where no ray passes
+    /// the lens: the exit-pupil bounds are empty there (beyond the image circle, or vignetted
+    /// whole).
     pub fn share_outside_image(&self) -> f64 {
-        const LATTICE: usize = 16;
-        let mut outside = 0usize;
-        for i in 0..=LATTICE {
-            for j in 0..=LATTICE {
-                let uv = DVec2::new(i as f64, j as f64) / LATTICE as f64;
-                let p = self.sensor.film_point(uv, self.film_z_mm);
-                outside += usize::from(!(self.pupil.domain_area_at(DVec2::new(p.x, p.y)) > 0.0));
-            }
+        let (mut points, mut outside) = (0usize, 0usize);
+        for p in self.check_lattice() {
+            points += 1;
+            outside += usize::from(!(self.pupil.domain_area_at(DVec2::new(p.x, p.y)) > 0.0));
         }
-        outside as f64 / ((LATTICE + 1) * (LATTICE + 1)) as f64
+        outside as f64 / points as f64
     }
 
     /// Sensor.
