@@ -128,6 +128,13 @@ pub fn read_light(
         // stage it wrote, an unauthored temperature is Blender's default light (Temperature off,
         // white in Cycles), an authored one a temperature the user set.
         let k = r.f64(prim, "inputs:colorTemperature")?;
+        if let Some(kelvin) = k.filter(|k| !k.is_finite()) {
+            return Err(crate::value::attr_error(
+                prim,
+                "inputs:colorTemperature",
+                format!("must be finite, got {kelvin}"),
+            ));
+        }
         if k.is_some() || !units.blender_authored {
             tint = blackbody_rgb(k.unwrap_or(6500.0));
         }

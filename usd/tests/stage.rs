@@ -763,4 +763,13 @@ fn blender_stages_enable_colour_temperature_on_every_light() {
     assert!(close(blender[0], [1.0; 3]) && close(blender[1], warm), "{blender:?}");
     let other = tints(&stage("temperature_other.usda", "made by hand"));
     assert!(close(other[0], d65) && close(other[1], warm), "{other:?}");
+    // a non-finite temperature is an error naming the prim and the attribute
+    let bad = write(
+        "temperature_nan.usda",
+        &format!(
+            "#usda 1.0\ndef SphereLight \"Hot\"\n{{\n bool inputs:enableColorTemperature = 1\n float inputs:colorTemperature = nan\n}}\ndef Mesh \"M\"\n{{\n {TRI}\n}}\n"
+        ),
+    );
+    let e = load(&bad, None).err().expect("a NaN temperature was accepted").to_string();
+    assert!(e.contains("/Hot") && e.contains("inputs:colorTemperature"), "{e}");
 }
