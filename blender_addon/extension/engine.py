@@ -116,11 +116,7 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
             self._empty_result(out_w, out_h, view_layer.name)
             return
         export_mod.add_world(pz_scene, scene.world, notes, None)
-        # Film > Transparent: the world lights the scene but the background is RGBA 0
-        # (premultiplied, as Cycles)
-        pz_scene.transparent_background = bool(r.film_transparent)
-        if r.film_transparent and getattr(getattr(scene, "cycles", None), "film_transparent_glass", False):
-            notes.warn("transparent film: Transparent Glass (glass rendered opaque)")
+        _apply_film(pz_scene, scene, notes)
 
         want_depth = bool(view_layer.use_pass_z)
         entry["kwargs"] = {
@@ -220,6 +216,7 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
             pz_scene, _ = export_mod.build(pz, depsgraph, notes)
             if pz_scene is not None:
                 export_mod.add_world(pz_scene, depsgraph.scene_eval.world, notes, None)
+                _apply_film(pz_scene, depsgraph.scene_eval, notes)
             self._vp_scene = pz_scene
             self._vp_error = None
         except Exception as e:
@@ -281,8 +278,7 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
         rgba = preview.latest() if preview is not None else None
         if rgba is not None:
             hh, ww = rgba.shape[:2]
-            img = np.array(rgba[::-1], dtype=np.float32)
-            img[..., 3] = 1.0
+            img = viewport_mod.display_pixels(rgba, transparent=bool(scene.render.film_transparent))
             buf = gpu.types.Buffer("FLOAT", ww * hh * 4, img.ravel())
             texture = gpu.types.GPUTexture((ww, hh), format="RGBA16F", data=buf)
             gpu.state.blend_set("ALPHA_PREMULT")
@@ -307,6 +303,15 @@ class PetzvalRenderEngine(bpy.types.RenderEngine):
         if opaque:
             img[..., 3] = 1.0
         layer.passes["Combined"].rect.foreach_set(_to_rect(img))
+
+
+def _apply_film(pz_scene, scene, notes) -> None:
+    """Film settings shared by the final render and the viewport preview. Film > Transparent: the
+    world lights the scene but the background is RGBA 0 (premultiplied, as Cycles)."""
+    transparent = bool(scene.render.film_transparent)
+    pz_scene.transparent_background = transparent
+    if transparent and getattr(getattr(scene, "cycles", None), "film_transparent_glass", False):
+        notes.warn("transparent film: Transparent Glass (glass rendered opaque)")
 
 
 def _error_message(e: Exception) -> str:

@@ -6,6 +6,9 @@ resolution (``Scene.petzval.viewport_divisor``), whose newest pass ``view_draw``
 native render releases the GIL, so Blender stays responsive; a restart cancels the running
 render through its progress callback (within one progress interval, 50 ms).
 
+Film: Film > Transparent gives the preview the final render's transparent background
+(``display_pixels``); without it the preview is drawn opaque.
+
 Camera: looking through the scene camera, its Petzval lens and Blender camera settings (the
 frame fitted to the viewport's aspect); in a free view, a pinhole with the viewport's focal
 length on Blender's 72 mm viewport sensor and the view's clipping.
@@ -22,6 +25,17 @@ from . import camera as camera_mod
 
 # Blender's free 3D view: a 36 mm sensor at zoom 2, i.e. 72 mm across for the view's "lens".
 VIEWPORT_SENSOR_MM = 72.0
+
+
+def display_pixels(rgba, transparent: bool) -> np.ndarray:
+    """The texture ``view_draw`` uploads: the pass flipped to bottom row first (OpenGL's order),
+    float32. Without Film > Transparent every pixel is opaque; with it the pass's alpha is kept
+    (the background is RGBA 0, premultiplied), so the viewport's own background shows through as
+    in Cycles' Rendered shading."""
+    img = np.array(rgba[::-1], dtype=np.float32)
+    if not transparent:
+        img[..., 3] = 1.0
+    return img
 
 
 def free_view_kwargs(

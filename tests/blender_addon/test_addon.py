@@ -1003,6 +1003,46 @@ def test_film_transparent_background_is_premultiplied(addon, report):
     assert not any("transparent" in u for u in entry["notes"]["unsupported"]), entry["notes"]
 
 
+def test_viewport_preview_keeps_transparent_film(addon, report):
+    """Rendered shading with Film > Transparent: the preview's background is RGBA 0 and the texture
+    drawn keeps that alpha (the viewport's own background shows through, as in Cycles); without
+    it the texture is opaque. Before, the viewport drew the world's colour at alpha 1."""
+    import importlib
+    import time
+
+    import petzval
+
+    _depth_scene()
+    H.set_world_colour((0.2, 0.3, 0.4))
+    H.configure_petzval(4, seed=0, camera="DepthCam")
+    scene = bpy.context.scene
+    engine = importlib.import_module(H.ADDON_MODULE + ".engine")
+    for transparent in (True, False):
+        scene.render.film_transparent = transparent
+        try:
+            vp, cam_mod, pz_scene, render_kw, depsgraph, notes = _viewport_setup()
+            # what view_update does after translating the scene
+            engine._apply_film(pz_scene, depsgraph.scene_eval, notes)
+            cam_kw = cam_mod.camera_kwargs(scene, bpy.data.objects["DepthCam"], depsgraph, notes)
+            preview = vp.PreviewRender(petzval, pz_scene, cam_kw, render_kw, 40, 30, 4)
+            t0 = time.perf_counter()
+            while not preview.finished and time.perf_counter() - t0 < 60:
+                time.sleep(0.01)
+            assert preview.finished and preview.error is None, preview.error
+            shown = vp.display_pixels(preview.latest(), transparent=bool(scene.render.film_transparent))
+        finally:
+            scene.render.film_transparent = False
+        corner, centre = shown[:3, :3].reshape(-1, 4), shown[13:17, 18:22].reshape(-1, 4)
+        bg, wall = (np.round(a.mean(axis=0).astype(float), 3).tolist() for a in (corner, centre))
+        report.line(f"viewport, film transparent={transparent}: background RGBA {bg}, wall RGBA {wall}")
+        assert np.allclose(centre[:, 3], 1.0) and centre[:, :3].mean() > 0.5, centre.mean(axis=0)
+        if transparent:
+            assert np.abs(corner).max() == 0.0, corner.mean(axis=0)
+        else:
+            assert np.allclose(corner[:, 3], 1.0)
+            assert np.allclose(corner[:, :3].mean(axis=0), (0.2, 0.3, 0.4), rtol=0.05)
+
+
 _CANCEL_SCRIPT = r"""
 import importlib, sys
 sys.path.insert(0, sys.argv[1])
