@@ -14,10 +14,12 @@
 //!
 //! A binding taken replaces any taken nearer, so the outermost `strongerThanDescendants`
 //! binding wins. Collection membership (`UsdCollectionAPI`, relationship mode) is openusd's
-//! `MembershipQuery`: `includes`/`excludes` by the nearest authored ancestor, `expansionRule`
-//! `expandPrims` (the default; `expandPrimsAndProperties` is the same for prims) or
-//! `explicitOnly` (only the listed paths), `includeRoot`, and `includes` of other collections
-//! (merged; cycles broken). Prims of a native instance's prototype continue their chain through
+//! rule map (`Collection::compute_membership_query`: `includes` with the `expansionRule`,
+//! `excludes`, `includeRoot`, `includes` of other collections merged, cycles broken) read as
+//! pxr's `IsPathIncluded` reads it: the nearest opinion on the prim or an ancestor decides,
+//! `exclude` excludes, `expandPrims` (the default) and `expandPrimsAndProperties` include, and
+//! `explicitOnly` includes the listed prim itself only, an ancestor's being passed over for the
+//! next opinion up (openusd's own `is_path_included` stops there). Prims of a native instance's prototype continue their chain through
 //! the instance prim and its ancestors (instance proxies, [`InheritedBinding`]); a collection
 //! outside the instance is asked about the proxy's path. A `GeomSubset` resolves as any prim
 //! (its chain runs through its mesh).
@@ -196,10 +198,10 @@ impl Resolver {
         for purpose in [Purpose::Full, Purpose::All] {
             let mut walk = Walk::default();
             for (i, b) in inner.iter().enumerate() {
-                walk.step(i, b, purpose, &|q| q.is_path_included(prim.path()));
+                walk.step(i, b, purpose, &|q| includes(q, prim.path()));
             }
             for (j, (b, path)) in levels.iter().enumerate() {
-                walk.step(inner.len() + j, b, purpose, &|q| q.is_path_included(path));
+                walk.step(inner.len() + j, b, purpose, &|q| includes(q, path));
             }
             if walk.taken {
                 return Ok(walk.material);
@@ -300,11 +302,30 @@ impl Resolver {
     }
 }
 
-/// Whether the prims below `root` that the collection has no opinion on are members (the
-/// nearest opinion at or above `root` expands to descendants).
+/// Whether the collection includes the prim `path`, as pxr's `IsPathIncluded` decides: the
+/// nearest opinion on the prim or an ancestor, where an ancestor's `explicitOnly` opinion is
+/// passed over (openusd's `MembershipQuery::is_path_included` stops at it).
+fn includes(query: &MembershipQuery, path: &sdf::Path) -> bool {
+    included_from(query, path, true)
+}
+
+/// Whether the prims below `root` that the collection has no opinion on are members.
 fn descendants_included(query: &MembershipQuery, root: &sdf::Path) -> bool {
-    let rule = root.ancestors().find_map(|a| query.rule_map().get(&a).copied());
-    matches!(rule, Some(PathRule::ExpandPrims | PathRule::ExpandPrimsAndProperties))
+    included_from(query, root, false)
+}
+
+/// pxr's walk from `start` up: `Exclude` excludes, `explicitOnly` includes only the prim
+/// asked about (`start`, when `start_is_prim`), any other rule includes.
+fn included_from(query: &MembershipQuery, start: &sdf::Path, start_is_prim: bool) -> bool {
+    for p in start.ancestors() {
+        match query.rule_map().get(&p) {
+            Some(PathRule::Exclude) => return false,
+            Some(PathRule::ExplicitOnly) if !(start_is_prim && &p == start) => {}
+            Some(_) => return true,
+            None => {}
+        }
+    }
+    false
 }
 
 /// The collection's opinions on paths strictly below `root`, relative to it, sorted.

@@ -128,8 +128,8 @@ pub struct Walker<'a> {
     bindings: Resolver,
     materials: Materials,
     /// Meshes built, by prim and the materials of their faces (outside subsets, then each
-    /// subset's).
-    meshes_by_prim: HashMap<(String, u32, Vec<u32>), u32>,
+    /// subset with its own).
+    meshes_by_prim: HashMap<(String, u32, Vec<(String, u32)>), u32>,
     /// Skinned meshes, whose points are in world space already (their prims' transforms do
     /// not apply).
     world_space_meshes: BTreeSet<String>,
@@ -420,7 +420,8 @@ impl<'a> Walker<'a> {
             )?;
             subsets.push(Subset { faces, material: m, path: child.path().to_string() });
         }
-        let cache_key = (path.clone(), material, subsets.iter().map(|s| s.material).collect::<Vec<_>>());
+        let cache_key =
+            (path.clone(), material, subsets.iter().map(|s| (s.path.clone(), s.material)).collect::<Vec<_>>());
         if let Some(&m) = self.meshes_by_prim.get(&cache_key) {
             return Ok(m);
         }
