@@ -97,7 +97,7 @@ def assert_same(petzval: Path, path: Path) -> dict:
 
 def test_fixture_matches_pxr(petzval: Path) -> None:
     rep = assert_same(petzval, FIXTURE)
-    assert len(rep["instances"]) == 47
+    assert len(rep["instances"]) == 50
 
 
 class Tree:

@@ -19,10 +19,12 @@
 //! pxr's `IsPathIncluded` reads it: the nearest opinion on the prim or an ancestor decides,
 //! `exclude` excludes, `expandPrims` (the default) and `expandPrimsAndProperties` include, and
 //! `explicitOnly` includes the listed prim itself only, an ancestor's being passed over for the
-//! next opinion up (openusd's own `is_path_included` stops there). Prims of a native instance's prototype continue their chain through
-//! the instance prim and its ancestors (instance proxies, [`InheritedBinding`]); a collection
-//! outside the instance is asked about the proxy's path. A `GeomSubset` resolves as any prim
-//! (its chain runs through its mesh).
+//! next opinion up (openusd's own `is_path_included` stops there).
+//!
+//! Prims of a native instance's prototype continue their chain through the instance prim and
+//! its ancestors (instance proxies, [`InheritedBinding`]); a collection outside the instance is
+//! asked about the proxy's path. A prototype is walked once per [`BindingKey`]. A `GeomSubset`
+//! resolves as any prim (its chain runs through its mesh).
 //!
 //! | malformed binding | pxr | here |
 //! |---|---|---|
@@ -153,6 +155,7 @@ impl Walk {
         }
     }
 
+    /// Takes the binding to `material` on the prim at chain position `at`.
     fn take(&mut self, at: usize, material: &sdf::Path) {
         self.taken = true;
         self.material = Some(material.clone());
@@ -426,15 +429,11 @@ fn collection_binding(
         }
     };
     // the collection: an applied CollectionAPI instance
-    let applied = match is_collection_api_path(collection) {
-        Some((owner, name)) => {
-            let owner_prim = prim.stage().prim(owner.clone());
-            owner_prim.is_valid().unwrap_or(false)
-                && owner_prim.has_api_schema(format!("CollectionAPI:{name}")).unwrap_or(false)
-        }
-        None => false,
-    };
-    let Some((owner, name)) = is_collection_api_path(collection).filter(|_| applied) else {
+    let applied = is_collection_api_path(collection).filter(|(owner, name)| {
+        let owner = prim.stage().prim(owner.clone());
+        owner.is_valid().unwrap_or(false) && owner.has_api_schema(format!("CollectionAPI:{name}")).unwrap_or(false)
+    });
+    let Some((owner, name)) = applied else {
         warnings.push(format!(
             "{here}: {collection} is not a collection (a prim's applied CollectionAPI); the binding is ignored (as pxr does)"
         ));

@@ -97,6 +97,10 @@ pub struct StageInfo {
     pub native_instances: Vec<(String, String)>,
 }
 
+/// A built mesh's identity: prim path, the material of faces outside subsets, and each subset
+/// with a material of its own (subset path, material).
+type MeshKey = (String, u32, Vec<(String, u32)>);
+
 /// A placement found by the walk: mesh, stage-world transform, path.
 type Placement = (u32, DMat4, String);
 
@@ -129,7 +133,7 @@ pub struct Walker<'a> {
     materials: Materials,
     /// Meshes built, by prim and the materials of their faces (outside subsets, then each
     /// subset with its own).
-    meshes_by_prim: HashMap<(String, u32, Vec<(String, u32)>), u32>,
+    meshes_by_prim: HashMap<MeshKey, u32>,
     /// Skinned meshes, whose points are in world space already (their prims' transforms do
     /// not apply).
     world_space_meshes: BTreeSet<String>,

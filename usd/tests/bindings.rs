@@ -62,6 +62,9 @@ const PXR: &[(&str, Option<&str>)] = &[
     ("/Nested/N2/Holder/Inner/Plain", Some("M5")),
     ("/Nested/N2/Holder/Inner/Bound", Some("M2")),
     ("/Nested/N2/Holder/Inner/Collected", Some("M6")),
+    ("/PassOver/Grp/Geo", Some("M2")),
+    ("/SubsetInstances/A/Geo", Some("M1")),
+    ("/SubsetInstances/B/Geo", Some("M1")),
 ];
 
 /// The material of every placed gprim is pxr's; an unbound one gets its display colour.
@@ -84,7 +87,8 @@ fn bound_materials_are_pxrs() {
 
 /// GeomSubsets resolve as prims (their chain runs through the mesh): pxr's `first` M5 (its
 /// own binding), `second` M6 (a stronger collection on an ancestor includes it), `third` M1
-/// (the mesh's), `Other/sub` M2 (its full binding over the collection binding of the mesh).
+/// (the mesh's), `Other/sub` M2 (its full binding over the collection binding of the mesh);
+/// on the proxies of `SubsetInstances`, `A/Geo/s0` and `B/Geo/s1` M3, the others M1.
 #[test]
 fn subsets_resolve_as_pxr() {
     let shot = load(&fixture(), None).unwrap();
@@ -95,6 +99,21 @@ fn subsets_resolve_as_pxr() {
         pairs(&[("/Subsets/Quads/first", "/Looks/M5"), ("/Subsets/Quads/second", "/Looks/M6")])
     );
     assert_eq!(subsets("/Subsets/Other"), pairs(&[("/Subsets/Other/sub", "/Looks/M2")]));
+    // instance proxies: A's s0 and B's s1 are M3 (collections outside name them), so A and B
+    // need two meshes though their materials are the same
+    let placed = |path: &str| {
+        let k = shot.info.instance_paths.iter().position(|p| p == path).unwrap();
+        &shot.info.meshes[shot.scene.instances[k].mesh as usize]
+    };
+    let (a, b) = (placed("/SubsetInstances/A/Geo"), placed("/SubsetInstances/B/Geo"));
+    let names = |m: &petzval_usd::MeshInfo| {
+        m.subset_materials
+            .iter()
+            .map(|(s, m)| (s.rsplit('/').next().unwrap().to_string(), m.clone()))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(names(a), [("s0".to_string(), "/Looks/M3".to_string())]);
+    assert_eq!(names(b), [("s1".to_string(), "/Looks/M3".to_string())]);
     // the faces carry them: 2 triangles per quad, in face order
     let k = shot.info.meshes.iter().position(|m| m.prim == "/Subsets/Quads").unwrap();
     let names: Vec<&str> =
@@ -125,7 +144,9 @@ fn malformed_bindings_are_warned_and_ignored() {
 #[test]
 fn instances_share_meshes_by_material() {
     let shot = load(&fixture(), None).unwrap();
-    let proto: Vec<_> = shot.info.meshes.iter().filter(|m| m.prim.starts_with("/__Prototype")).collect();
+    let asset = |p: &str| ["/Plain", "/Bound", "/Collected"].iter().any(|leaf| p.ends_with(leaf));
+    let proto: Vec<_> =
+        shot.info.meshes.iter().filter(|m| m.prim.starts_with("/__Prototype") && asset(&m.prim)).collect();
     assert_eq!(proto.len(), 10);
     let placed = shot.info.instance_paths.iter().filter(|p| p.starts_with("/Instances") || p.starts_with("/Nested"));
     assert_eq!(placed.count(), 18);
