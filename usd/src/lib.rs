@@ -18,6 +18,7 @@
 //! recoverable composition error) and the rest of the stage still loads.
 
 pub mod author;
+pub mod binding;
 pub mod camera;
 #[doc(hidden)]
 pub mod fuzzing;

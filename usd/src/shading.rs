@@ -1,5 +1,7 @@
-//! UsdShade: `material:binding` (the prim's, else the nearest ancestor's) → a Material prim →
-//! its `outputs:surface` shader. `UsdPreviewSurface` maps onto the renderer's material; its
+//! UsdShade: the material bound to a gprim (resolved as pxr's `ComputeBoundMaterial` for
+//! purpose `full` does: `full` bindings before all-purpose ones, direct and collection bindings,
+//! `strongerThanDescendants`; see [`crate::binding`]) → a Material prim → its
+//! `outputs:surface` shader. `UsdPreviewSurface` maps onto the renderer's material; its
 //! inputs may be values or connections to a `UsdUVTexture`.
 //!
 //! | UsdPreviewSurface input | renderer | fallback |
@@ -49,83 +51,6 @@ pub struct Materials {
     filter_encoded: bool,
 }
 
-/// The material bindings a native instance prim and its ancestors pass to the prims of its
-/// prototype (pxr resolves an instance proxy's binding along the proxy's path, which runs
-/// through the instance prim): the outermost `strongerThanDescendants` binding, and the
-/// nearest binding.
-#[derive(Debug, Clone, Default, PartialEq, Eq, Hash)]
-pub struct InheritedBinding {
-    /// The outermost binding authored `bindMaterialAs = "strongerThanDescendants"`.
-    pub stronger: Option<sdf::Path>,
-    /// The nearest binding.
-    pub nearest: Option<sdf::Path>,
-}
-
-impl InheritedBinding {
-    /// The bindings the prototype of `instance` inherits: `instance`'s chain of ancestors (in
-    /// its own namespace) over `self`, what the instance itself inherits (nested instancing).
-    pub fn enter(&self, instance: &usd::Prim) -> InheritedBinding {
-        let chain = binding_chain(instance);
-        InheritedBinding {
-            stronger: self.stronger.clone().or(chain.stronger),
-            nearest: chain.nearest.or_else(|| self.nearest.clone()),
-        }
-    }
-}
-
-/// Whether the binding relationship `rel` on `prim` is authored `strongerThanDescendants`.
-fn stronger_than_descendants(prim: &usd::Prim, rel: &str) -> bool {
-    // the usda reader holds the token as a string
-    match prim.attribute(rel).get_metadata::<sdf::Value>("bindMaterialAs") {
-        Ok(Some(sdf::Value::Token(t))) => t.as_str() == "strongerThanDescendants",
-        Ok(Some(sdf::Value::String(s))) => s == "strongerThanDescendants",
-        _ => false,
-    }
-}
-
-/// The bindings on `prim` and its ancestors in its namespace (a prototype's prims stop at
-/// the prototype root): the nearest, and the outermost stronger than its descendants (as
-/// UsdShade's `ComputeBoundMaterial` walks; `material:binding:full` before
-/// `material:binding` at each prim).
-fn binding_chain(prim: &usd::Prim) -> InheritedBinding {
-    let stage = prim.stage();
-    let mut out = InheritedBinding::default();
-    let mut path = Some(prim.path().clone());
-    while let Some(p) = path {
-        if p.is_abs_root() {
-            break;
-        }
-        let here = stage.prim(p.clone());
-        for rel in ["material:binding:full", "material:binding"] {
-            let target = here.relationship(rel).targets().ok().and_then(|t| t.into_iter().next());
-            if let Some(first) = target {
-                if stronger_than_descendants(&here, rel) {
-                    out.stronger = Some(first.clone());
-                }
-                if out.nearest.is_none() {
-                    out.nearest = Some(first);
-                }
-                break;
-            }
-        }
-        path = p.parent();
-    }
-    out
-}
-
-/// The material bound to `prim`: its own `material:binding`, else its nearest ancestor's,
-/// unless an ancestor's is `strongerThanDescendants` (the outermost such wins).
-pub fn bound_material(prim: &usd::Prim) -> Option<sdf::Path> {
-    bound_material_in(prim, &InheritedBinding::default())
-}
-
-/// The material bound to `prim` inside a native prototype whose instance passes `outer`
-/// down (as [`bound_material`] with the instance prim's ancestors continuing the chain).
-pub fn bound_material_in(prim: &usd::Prim, outer: &InheritedBinding) -> Option<sdf::Path> {
-    let chain = binding_chain(prim);
-    outer.stronger.clone().or(chain.stronger).or(chain.nearest).or_else(|| outer.nearest.clone())
-}
-
 fn source_prim(stage: &usd::Stage, prim: &usd::Prim, input: &str) -> Option<(usd::Prim, String)> {
     let c = prim.attribute(input).connections().ok()?;
     let first = c.into_iter().next()?;
@@ -152,18 +77,17 @@ impl Materials {
         self.color_primvars.get(&id).map(|(n, c)| (n.as_str(), *c))
     }
 
-    /// The material id for a gprim: its bound material (with the bindings `outer` a native
-    /// instance passes down), else its display colour.
+    /// The material id for a gprim: the material `binding` bound to it ([`crate::binding`]),
+    /// else its display colour.
     pub fn material_for(
         &mut self,
         reader: &Reader,
         scene: &mut Scene,
         gprim: &usd::Prim,
-        outer: &InheritedBinding,
+        binding: Option<sdf::Path>,
         double_sided: bool,
         warnings: &mut Vec<String>,
     ) -> Result<u32, Error> {
-        let binding = bound_material_in(gprim, outer);
         let key = match &binding {
             Some(b) => b.to_string(),
             None => match display_color(reader, gprim)? {

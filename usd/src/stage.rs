@@ -18,10 +18,11 @@
 //! The renderer's world is metres with +y up: every instance transform is pre-multiplied by
 //! the stage's `upAxis`/`metersPerUnit` correction ([`StageUnits::to_renderer`]).
 
+use crate::binding::{InheritedBinding, Resolver};
 use crate::camera::{read_camera, UsdCamera};
 use crate::lights;
 use crate::mesh::{build_mesh, Subset};
-use crate::shading::{InheritedBinding, Materials};
+use crate::shading::Materials;
 use crate::skel::{skinned_points, Skinned};
 use crate::value::{attr_error, layer_of_prim, Reader};
 use crate::xform::{local_xform, StageUnits};
@@ -59,6 +60,13 @@ pub struct MeshInfo {
     /// The primvar read as vertex colours (absent: none).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub color_primvar: Option<String>,
+    /// The material of its faces outside material subsets, by name (a Material's prim path,
+    /// or `displayColor:…` for an unbound gprim; absent: an area light's emitter).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub material: Option<String>,
+    /// The face subsets with a material of their own: (subset prim, material name).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub subset_materials: Vec<(String, String)>,
 }
 
 fn bounds(m: &petzval_renderer::scene::Mesh) -> [[f32; 3]; 2] {
@@ -89,6 +97,10 @@ pub struct StageInfo {
     pub native_instances: Vec<(String, String)>,
 }
 
+/// A built mesh's identity: prim path, the material of faces outside subsets, and each subset
+/// with a material of its own (subset path, material).
+type MeshKey = (String, u32, Vec<(String, u32)>);
+
 /// A placement found by the walk: mesh, stage-world transform, path.
 type Placement = (u32, DMat4, String);
 
@@ -116,9 +128,12 @@ pub struct Walker<'a> {
     in_point_prototype: bool,
     /// The material bindings the native instances being expanded pass down.
     binding: InheritedBinding,
+    /// Material binding resolution.
+    bindings: Resolver,
     materials: Materials,
-    /// Meshes built, by prim and the instance bindings they were built with.
-    meshes_by_prim: HashMap<(String, InheritedBinding), u32>,
+    /// Meshes built, by prim and the materials of their faces (outside subsets, then each
+    /// subset with its own).
+    meshes_by_prim: HashMap<MeshKey, u32>,
     /// Skinned meshes, whose points are in world space already (their prims' transforms do
     /// not apply).
     world_space_meshes: BTreeSet<String>,
@@ -157,6 +172,7 @@ impl<'a> Walker<'a> {
             inherited_purpose: None,
             in_point_prototype: false,
             binding: InheritedBinding::default(),
+            bindings: Resolver::default(),
             reader: Reader { stage, time },
             units,
             scene: Scene::default(),
@@ -265,7 +281,7 @@ impl<'a> Walker<'a> {
                 let proto_s = proto.to_string();
                 self.info.native_instances.push((path.clone(), proto_s.clone()));
                 // the instance prim's and its ancestors' bindings reach the proxies
-                let inner = self.binding.enter(prim);
+                let inner = self.bindings.enter(&self.binding, prim, &proto, &mut self.warnings)?;
                 let outer = std::mem::replace(&mut self.binding, inner);
                 let placements = self.prototype_placements(&proto, false);
                 self.binding = outer;
@@ -330,7 +346,7 @@ impl<'a> Walker<'a> {
     /// (`/__Prototype_N`) contributes its descendants; a point-instancer prototype also its
     /// own root transform (`include_root`).
     fn prototype_placements(&mut self, proto: &sdf::Path, include_root: bool) -> Result<Vec<Placement>, Error> {
-        let key = format!("{proto}#{include_root}#{:?}", self.binding);
+        let key = format!("{proto}#{include_root}#{:?}", self.binding.key());
         if let Some(p) = self.prototypes.get(&key) {
             return Ok(p.clone());
         }
@@ -371,23 +387,15 @@ impl<'a> Walker<'a> {
 
     fn mesh(&mut self, prim: &usd::Prim, ty: &str) -> Result<u32, Error> {
         let path = prim.path().to_string();
-        // An instance's bindings matter only where the mesh has none of its own nearer, or
-        // one of them is stronger than descendants.
-        let outer = if self.binding.stronger.is_none() && crate::shading::bound_material(prim).is_some() {
-            InheritedBinding::default()
-        } else {
-            self.binding.clone()
-        };
-        let cache_key = (path.clone(), outer.clone());
-        if let Some(&m) = self.meshes_by_prim.get(&cache_key) {
-            return Ok(m);
-        }
+        // the materials of the mesh and of its face subsets (pxr's bound materials, through
+        // the native instance being expanded)
         let double_sided = self.reader.bool(prim, "doubleSided")?.unwrap_or(false);
+        let binding = self.bindings.bound_material(prim, &self.binding, &mut self.warnings)?;
         let material = self.materials.material_for(
             &self.reader,
             &mut self.scene,
             prim,
-            &outer,
+            binding.clone(),
             double_sided,
             &mut self.warnings,
         )?;
@@ -401,8 +409,8 @@ impl<'a> Walker<'a> {
             if et != "face" {
                 continue;
             }
-            let bound = crate::shading::bound_material_in(&child, &outer);
-            if bound.is_none() || bound == crate::shading::bound_material_in(prim, &outer) {
+            let bound = self.bindings.bound_material(&child, &self.binding, &mut self.warnings)?;
+            if bound.is_none() || bound == binding {
                 continue;
             }
             let faces = self.reader.ints(&child, "indices")?.unwrap_or_default();
@@ -410,11 +418,16 @@ impl<'a> Walker<'a> {
                 &self.reader,
                 &mut self.scene,
                 &child,
-                &outer,
+                bound,
                 double_sided,
                 &mut self.warnings,
             )?;
             subsets.push(Subset { faces, material: m, path: child.path().to_string() });
+        }
+        let cache_key =
+            (path.clone(), material, subsets.iter().map(|s| (s.path.clone(), s.material)).collect::<Vec<_>>());
+        if let Some(&m) = self.meshes_by_prim.get(&cache_key) {
+            return Ok(m);
         }
         // A subdivision surface (Blender writes its Subdivision modifier's cage with the scheme
         // when exporting "Best Match"): Catmull-Clark refined. Only an authored scheme counts
@@ -506,6 +519,11 @@ impl<'a> Walker<'a> {
             st_primvar: report.st_primvar.clone(),
             subdivision_level: report.subdivision_level,
             color_primvar: report.color_primvar.clone(),
+            material: Some(self.scene.materials[material as usize].name.clone()),
+            subset_materials: subsets
+                .iter()
+                .map(|s| (s.path.clone(), self.scene.materials[s.material as usize].name.clone()))
+                .collect(),
         });
         let id = self.scene.add_mesh(mesh);
         self.meshes_by_prim.insert(cache_key, id);
@@ -607,6 +625,8 @@ impl<'a> Walker<'a> {
             st_primvar: None,
             subdivision_level: None,
             color_primvar: None,
+            material: None,
+            subset_materials: Vec::new(),
         });
         let id = self.scene.add_mesh(mesh);
         self.scene.add_instance(id, Affine3A::from_mat4(m.as_mat4()));

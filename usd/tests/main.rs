@@ -1,5 +1,6 @@
 //! Integration tests of the USD crate (one binary; modules per area).
 
+mod bindings;
 mod fuzz;
 mod stage;
 mod subdiv;
