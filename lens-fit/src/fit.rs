@@ -318,7 +318,12 @@ impl Problem {
             if norms.iter().any(|n| !(*n > 0.0)) || image.mask.iter().all(|m| !m) {
                 return Err(Error::manifest(&file, field("image"), "the image has no signal in its unmasked pixels"));
             }
-            let centroid_px = centroid(&image.channels, &image.mask, image.width);
+            // a one-pixel spot is its pixel's centre (the percentile threshold below would be
+            // set by the noise, whose light would pull the centroid off it)
+            let centroid_px = match image.lone_spot {
+                Some((x, y)) => DVec2::new(x as f64 + 0.5, y as f64 + 0.5),
+                None => centroid(&image.channels, &image.mask, image.width),
+            };
             problem.captures.push(Prepared {
                 capture: c.clone(),
                 image,
@@ -524,7 +529,8 @@ fn rgb_wavelengths(lens: &Lens) -> Vec<f64> {
 /// the background: over the 10th percentile b by more than 2 % of (the 99.9th percentile − b),
 /// weighted by their value over b. (Weighting every pixel above the median let the background's
 /// noise pull the centroid towards the image centre, by ~0.1–1 px at 128² px; a threshold from
-/// the median fails when a defocused disc covers most of the image.)
+/// the median fails when a defocused disc covers most of the image.) A capture whose spot is one
+/// pixel (`CaptureImage::lone_spot`) takes that pixel's centre instead.
 fn centroid(channels: &[Vec<f64>], mask: &[bool], width: usize) -> DVec2 {
     let (mut s, mut w) = (DVec2::ZERO, 0.0);
     for p in channels {

@@ -224,7 +224,8 @@ fn run(args: &Args) -> petzval_fit::Result<()> {
         problem.source_label
     );
     for (c, p) in problem.captures.iter().enumerate() {
-        if let Some(w) = petzval_fit::captures::transfer_warning(&p.capture, &p.image) {
+        let transfer = petzval_fit::captures::transfer_warning(&p.capture, &p.image);
+        for w in transfer.into_iter().chain(petzval_fit::captures::undersampled_warning(&p.capture, &p.image)) {
             eprintln!("warning: capture {}: {w}", c + 1);
         }
         if p.image.clipped + p.image.hot > 0 {

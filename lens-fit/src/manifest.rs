@@ -28,7 +28,7 @@
 //! | name | type | unit | default |
 //! |---|---|---|---|
 //! | `image` | EXR (RGB or Y) or floating-point TIFF (linear), 16-bit PNG or TIFF, 8-bit PNG, TIFF or JPEG (see `transfer`) | — | required |
-//! | `transfer` | `"linear"` or `"srgb"` (decoded before fitting) | — | `"linear"` |
+//! | `transfer` | `"linear"` or `"srgb"` (decoded before fitting; the dark frame too) | — | `"linear"` |
 //! | `crop_origin_px` | `[x, y]`: the image's top-left pixel on the full sensor (x right, y down) | px | required |
 //! | `source_m` | `[x, y, z]`: the point source, x right, y up, z forward | m | required |
 //! | `focus_m` | f64 > 0: focus distance as set on the lens | m | required |
@@ -36,7 +36,7 @@
 //! | `f_number` | f64, or `"open"` (the stop fully open) | — | required |
 //! | `wavelength_nm` | f64 in 380..780, or `"rgb"` (colour images: three wavelengths) | nm | required |
 //! | `exposure` | f64 > 0, relative (a free intensity scale is fitted anyway) | — | 1 |
-//! | `dark_frame` | image of the same size and format range (8-bit, 16-bit or floating point), subtracted | — | none |
+//! | `dark_frame` | image of the same size and format range (8-bit, 16-bit or floating point), decoded by the capture's `transfer` and subtracted in linear light; its lone bright pixels mark hot ones (`captures`) | — | none |
 //! | `mask` | image of the same size; non-zero = use the pixel | — | all pixels |
 //! | `saturation` | f64: pixel values at or above it are clipped and masked | image units | 65535 for 16-bit PNG/TIFF, 255 for 8-bit PNG/TIFF, 245 for JPEG (its ringing keeps a clipped core below 255), none for EXR and float TIFF |
 //!

@@ -6,7 +6,7 @@
 //! before its end point had a Jacobian, whose `determined` is then null: unknown), `captures` (list of `{image, residual,
 //! shift_px, scale, background, clipped_pixels, hot_pixels}`), `warnings` (captures the
 //! fitted model does not explain: a non-positive intensity scale or a residual over 0.5; an
-//! interrupted fit; an 8-bit capture read as linear by default; the command also prints them), `seconds`, `iterations`
+//! interrupted fit; an 8-bit capture read as linear by default; a capture whose spot is one pixel, see `captures`; the command also prints them), `seconds`, `iterations`
 //! (objective evaluations per stage; a Jacobian counts one per parameter), `stage_seconds`
 //! (wall-clock per stage), `lm_stop` (`{reason, iterations, central_from_iteration}` of Levenberg–Marquardt: the last is the iteration from which its Jacobians were central differences, null for forward differences throughout), `correlations` (`{names, matrix}`), `history`
 //! (`[seconds, objective]` after each improvement), `camera` (the fitted camera parameters),
@@ -63,7 +63,8 @@ pub fn write_report(dir: &Path, problem: &Problem, result: &FitResult, model: &M
         ));
     }
     for (c, prep) in problem.captures.iter().enumerate() {
-        if let Some(w) = crate::captures::transfer_warning(&prep.capture, &prep.image) {
+        let transfer = crate::captures::transfer_warning(&prep.capture, &prep.image);
+        for w in transfer.into_iter().chain(crate::captures::undersampled_warning(&prep.capture, &prep.image)) {
             warnings.push(format!("capture {}: {w}", c + 1));
         }
     }

@@ -1,5 +1,6 @@
 //! Integration tests of lens-fit (one binary; modules per area).
 
+mod captures;
 mod correction;
 mod determinism;
 mod manifest;
