@@ -21,7 +21,8 @@ use crate::Result;
 use glam::{Quat, Vec3, Vec4};
 use gltf::accessor::Dimensions;
 use gltf::animation::{Interpolation, Property};
-use std::collections::HashMap;
+use std::cell::RefCell;
+use std::collections::{HashMap, HashSet};
 
 /// The animated parts of one node's TRS at the time asked.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -43,6 +44,9 @@ pub(super) struct Animated {
     pub weights: HashMap<usize, Vec<f32>>,
     /// JSON pointer (`KHR_animation_pointer`) → the value there.
     pub pointers: HashMap<String, Vec<f32>>,
+    /// The material pointers whose values the materials took (the others target a material or
+    /// texture the file lacks, and are reported).
+    pub used: RefCell<HashSet<String>>,
 }
 
 /// One `KHR_animation_pointer` channel as the file states it (read from the JSON before the
@@ -89,7 +93,7 @@ impl PointerChannel {
 }
 
 /// How many floats the property at a JSON `pointer` holds, where this loader applies it
-/// (cameras' and punctual lights' properties); None for any other pointer.
+/// (cameras', punctual lights' and materials' properties); None for any other pointer.
 fn pointer_width(pointer: &str) -> Option<usize> {
     let parts: Vec<&str> = pointer.trim_start_matches('/').split('/').collect();
     let index_ok = |s: &str| s.parse::<usize>().is_ok();
@@ -102,6 +106,41 @@ fn pointer_width(pointer: &str) -> Option<usize> {
             if index_ok(i) =>
         {
             Some(1)
+        }
+        ["materials", i, property @ ..] if index_ok(i) => material_property_width(property),
+        _ => None,
+    }
+}
+
+/// The textures whose `KHR_texture_transform` this loader applies (`materials.rs`, `info_ref`).
+pub(super) const TRANSFORMED_TEXTURES: [&str; 3] =
+    ["pbrMetallicRoughness/baseColorTexture", "pbrMetallicRoughness/metallicRoughnessTexture", "emissiveTexture"];
+
+/// How many floats a material's property (its pointer after `/materials/N/`) holds, where this
+/// loader applies it (`materials.rs`); None for any other.
+fn material_property_width(property: &[&str]) -> Option<usize> {
+    match property {
+        ["pbrMetallicRoughness", "baseColorFactor"] => Some(4),
+        ["pbrMetallicRoughness", "metallicFactor" | "roughnessFactor"] => Some(1),
+        ["emissiveFactor"] => Some(3),
+        ["alphaCutoff"] | ["normalTexture", "scale"] => Some(1),
+        ["extensions", "KHR_materials_emissive_strength", "emissiveStrength"]
+        | ["extensions", "KHR_materials_ior", "ior"]
+        | ["extensions", "KHR_materials_transmission", "transmissionFactor"]
+        | ["extensions", "KHR_materials_clearcoat", "clearcoatFactor" | "clearcoatRoughnessFactor"]
+        | ["extensions", "KHR_materials_specular", "specularFactor"]
+        | ["extensions", "KHR_materials_anisotropy", "anisotropyStrength" | "anisotropyRotation"] => Some(1),
+        ["extensions", "KHR_materials_specular", "specularColorFactor"] => Some(3),
+        [texture @ .., "extensions", "KHR_texture_transform", field] => {
+            let texture = texture.join("/");
+            if !TRANSFORMED_TEXTURES.contains(&texture.as_str()) {
+                return None;
+            }
+            match *field {
+                "offset" | "scale" => Some(2),
+                "rotation" => Some(1),
+                _ => None,
+            }
         }
         _ => None,
     }
@@ -273,7 +312,10 @@ impl Loader<'_> {
         let mut ignored = Vec::new();
         for ch in channels {
             let loc = &ch.loc;
-            let canonical = ch.pointer.as_deref().map(canonical_pointer);
+            // Blender 5.0's exporter writes `…/clearcoatRoughnessFactor ` (a trailing space,
+            // `exp/material/extensions/clearcoat.py`): its pointers are read trimmed.
+            let written = ch.pointer.as_deref().map(|p| if self.blender_written { p.trim_end() } else { p });
+            let canonical = written.map(canonical_pointer);
             let Some((pointer, n)) = canonical.as_deref().and_then(|p| Some((p, pointer_width(p)?))) else {
                 ignored.push(ch.pointer.clone().unwrap_or_else(|| format!("{loc} (no pointer)")));
                 continue;
@@ -292,6 +334,7 @@ impl Loader<'_> {
             let (input, output) = (accessor(ch.input, "input")?, accessor(ch.output, "output")?);
             let times = read_accessor(self, &input).map_err(|e| self.error(loc, format!("sampler input: {e}")))?;
             let values = read_accessor(self, &output).map_err(|e| self.error(loc, format!("sampler output: {e}")))?;
+            let values = self.pointer_output(values, output.dimensions().multiplicity(), n, pointer, loc)?;
             let per_key = n * if interpolation == Interpolation::CubicSpline { 3 } else { 1 };
             if input.dimensions() != Dimensions::Scalar || times.is_empty() || values.len() != times.len() * per_key {
                 return Err(self.error(
@@ -316,11 +359,33 @@ impl Loader<'_> {
             self.warn(
                 "",
                 format!(
-                    "KHR_animation_pointer: {} not supported (cameras' and punctual lights' properties are); ignored",
+                    "KHR_animation_pointer: {} not supported (the properties of cameras, punctual lights and materials that this loader reads are); ignored",
                     ignored.join(", ")
                 ),
             );
         }
         Ok(out)
+    }
+
+    /// A pointer sampler's output values, `width` floats per element where the accessor stores
+    /// `stored`: as they are when the two agree; else an error naming the channel, except in
+    /// files Blender wrote, whose animated `specularColorFactor` is a VEC4 (Blender 5.0's
+    /// Specular Tint is RGBA, `exp/animation/sampled/sampling_cache.py` keeps all four): its
+    /// fourth component dropped.
+    fn pointer_output(
+        &self,
+        values: Vec<f32>,
+        stored: usize,
+        width: usize,
+        pointer: &str,
+        loc: &str,
+    ) -> Result<Vec<f32>> {
+        if stored == width {
+            return Ok(values);
+        }
+        if self.blender_written && stored == 4 && pointer.ends_with("/specularColorFactor") {
+            return Ok(values.chunks_exact(4).flat_map(|c| c[..3].to_vec()).collect());
+        }
+        Err(self.error(loc, format!("sampler output has {stored} floats per element, {pointer} holds {width}")))
     }
 }

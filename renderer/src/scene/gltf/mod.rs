@@ -308,6 +308,7 @@ impl<'a> Loader<'a> {
             loader.animated.pointers = loader.animated_pointers(&pointer_channels, t as f32)?;
         }
         loader.load_materials();
+        loader.warn_unused_material_pointers();
         loader.walk_nodes()?;
         if loader.triangles_read > 0
             && loader.scene.meshes.iter().all(|m| m.indices.is_empty())
@@ -334,6 +335,28 @@ impl<'a> Loader<'a> {
 
     fn error(&self, location: &str, message: impl Into<String>) -> Error {
         Error::scene(&self.file, location, message)
+    }
+
+    /// Reports the animated material properties no material took (the material, or the texture
+    /// whose transform is animated, is not in the file).
+    fn warn_unused_material_pointers(&mut self) {
+        let mut unused: Vec<String> = self
+            .animated
+            .pointers
+            .keys()
+            .filter(|k| k.starts_with("/materials/") && !self.animated.used.borrow().contains(*k))
+            .cloned()
+            .collect();
+        unused.sort();
+        if !unused.is_empty() {
+            self.warn(
+                "",
+                format!(
+                    "KHR_animation_pointer: {} target a material or texture the file does not have; ignored",
+                    unused.join(", ")
+                ),
+            );
+        }
     }
 
     fn warn_extensions(&mut self) {
