@@ -211,8 +211,10 @@ impl Loader<'_> {
                 None => (None, 1.0),
             };
             let strength = m.emissive_strength().unwrap_or(1.0);
-            let strength = self.animated_or(&key("extensions/KHR_materials_emissive_strength/emissiveStrength"), strength);
-            let factor = self.animated_values(&key("emissiveFactor"), 3).map_or(m.emissive_factor(), |v| [v[0], v[1], v[2]]);
+            let strength =
+                self.animated_or(&key("extensions/KHR_materials_emissive_strength/emissiveStrength"), strength);
+            let factor =
+                self.animated_values(&key("emissiveFactor"), 3).map_or(m.emissive_factor(), |v| [v[0], v[1], v[2]]);
             let mut emissive = Vec3::from_array(factor) * strength;
             if !emissive.is_finite() || emissive.min_element() < 0.0 {
                 self.warn(&loc, "emission is negative or not finite; using none");
@@ -243,8 +245,11 @@ impl Loader<'_> {
                 transmission.map_or(0.0, |t| t.transmission_factor()),
             );
             let transmission = self.unit_factor(&loc, "transmissionFactor", transmission, 0.0);
-            let (coat, coat_roughness) =
-                self.clearcoat(&loc, m.extension_value("KHR_materials_clearcoat"), &key("extensions/KHR_materials_clearcoat"));
+            let (coat, coat_roughness) = self.clearcoat(
+                &loc,
+                m.extension_value("KHR_materials_clearcoat"),
+                &key("extensions/KHR_materials_clearcoat"),
+            );
             let anisotropy = self.anisotropy(
                 &loc,
                 m.extension_value("KHR_materials_anisotropy"),
@@ -375,8 +380,8 @@ impl Loader<'_> {
         }
         let strength = animated_strength.map_or(parsed.as_ref().map_or(0.0, |p| p.anisotropy_strength), |v| v[0]);
         let animated_unit = if self.blender_written { std::f32::consts::TAU } else { 1.0 };
-        let rotation = animated_rotation
-            .map_or(parsed.as_ref().map_or(0.0, |p| p.anisotropy_rotation), |v| v[0] * animated_unit);
+        let rotation =
+            animated_rotation.map_or(parsed.as_ref().map_or(0.0, |p| p.anisotropy_rotation), |v| v[0] * animated_unit);
         let strength = self.unit_factor(loc, "anisotropyStrength", strength, 0.0);
         let rotation = if rotation.is_finite() {
             rotation
