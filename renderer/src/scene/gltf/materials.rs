@@ -255,12 +255,11 @@ impl Loader<'_> {
                 m.extension_value("KHR_materials_anisotropy"),
                 &key("extensions/KHR_materials_anisotropy"),
             );
+            // (an animated cutoff is taken in every mode, as the spec's default is; MASK uses it)
+            let cutoff = self.animated_or(&key("alphaCutoff"), m.alpha_cutoff().unwrap_or(0.5));
             let alpha_mode = match m.alpha_mode() {
                 gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
-                gltf::material::AlphaMode::Mask => {
-                    let c = self.animated_or(&key("alphaCutoff"), m.alpha_cutoff().unwrap_or(0.5));
-                    AlphaMode::Mask(if c.is_finite() { c } else { 0.5 })
-                }
+                gltf::material::AlphaMode::Mask => AlphaMode::Mask(if cutoff.is_finite() { cutoff } else { 0.5 }),
                 gltf::material::AlphaMode::Blend => AlphaMode::Blend,
             };
             let name = m.name().map(str::to_string).unwrap_or_else(|| format!("material {index}"));

@@ -33,6 +33,7 @@
 //! | `KHR_lights_punctual` point, spot | [`Light::Point`], [`Light::Spot`]: `color × intensity / 683` W/sr | see below |
 //! | `KHR_lights_punctual` directional | [`Light::Directional`]: `color × intensity / 683` W/m² | |
 //! | node animation (`translation`, `rotation`, `scale` channels) | evaluated at the time asked ([`load_gltf_at`]; `petzval render --frame F` asks for F / `--fps`, as Blender's exporter writes frame F at F / fps seconds), else the nodes' own TRS | see `animation.rs` |
+//! | `KHR_animation_pointer` channels (cameras, punctual lights, materials: their factors, those of the material extensions above, `alphaCutoff`, texture transforms) | the animated properties' values at the time asked, in place of the stored ones (a material's BSDF is built from them) | see `animation.rs`; Blender 5.0's exporter slips compensated in files it wrote; other pointers warned about by name |
 //! | skins, morph targets (and their `weights` animation) | meshes deformed per node, as the spec defines it (linear blend skinning after the morph targets) | see `deform.rs` |
 //! | perspective and orthographic cameras | [`SceneCamera`] (rigid part of the node's world transform); orthographic: `ortho_scale_m` = 2·max(xmag, ymag), as Blender's importer reads it | node scale ignored |
 //!
