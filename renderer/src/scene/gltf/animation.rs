@@ -116,7 +116,7 @@ fn pointer_width(pointer: &str) -> Option<usize> {
 }
 
 /// The textures whose `KHR_texture_transform` this loader applies (`materials.rs`, `info_ref`).
-pub(super) const TRANSFORMED_TEXTURES: [&str; 3] =
+const TRANSFORMED_TEXTURES: [&str; 3] =
     ["pbrMetallicRoughness/baseColorTexture", "pbrMetallicRoughness/metallicRoughnessTexture", "emissiveTexture"];
 
 /// How many floats a material's property (its pointer after `/materials/N/`) holds, where this
