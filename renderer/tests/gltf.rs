@@ -835,6 +835,270 @@ fn pointer_animations_of_lights_and_cameras_follow_blender() {
     );
 }
 
+/// Every number of a material that a KHR_animation_pointer channel can animate, in one list:
+/// base colour and alpha, metallic, roughness, emission, specular level and tint, ior,
+/// transmission, coat weight and roughness, normal scale, alpha cutoff, the anisotropy's split
+/// of α and rotation, the base colour texture's UV transform.
+fn material_numbers(m: &Material) -> Vec<f32> {
+    use petzval_renderer::scene::AnisotropyKind;
+    let mut v = m.base_color.to_array().to_vec();
+    v.extend([m.metallic, m.roughness]);
+    v.extend(m.emissive.to_array());
+    v.push(m.specular);
+    v.extend(m.specular_tint.to_array());
+    v.extend([m.ior, m.transmission, m.coat, m.coat_roughness, m.normal_scale]);
+    v.push(if let AlphaMode::Mask(c) = m.alpha_mode { c } else { -1.0 });
+    match m.anisotropy {
+        Some(a) => {
+            let split = match a.kind {
+                AnisotropyKind::Scale(s) => s.to_array(),
+                AnisotropyKind::Khr(k) => [k, 0.0],
+            };
+            v.extend(split);
+            v.push(a.rotation_turns);
+        }
+        None => v.extend([0.0; 3]),
+    }
+    let t = m.base_color_texture.and_then(|t| t.transform);
+    v.extend(t.map_or([1.0, 0.0, 0.0, 1.0], |t| t.m.to_cols_array()));
+    v.extend(t.map_or([0.0; 2], |t| t.offset.to_array()));
+    v
+}
+
+/// The largest difference between two scenes' materials' numbers ([`material_numbers`]).
+fn worst_material_difference(a: &Scene, b: &Scene) -> f32 {
+    assert_eq!(a.materials.len(), b.materials.len());
+    let numbers = |s: &Scene| s.materials.iter().flat_map(material_numbers).collect::<Vec<f32>>();
+    numbers(a).iter().zip(&numbers(b)).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
+}
+
+fn close_vec(a: Vec3, b: Vec3) -> bool {
+    (a - b).abs().max_element() <= 1e-5
+}
+
+/// KHR_animation_pointer channels of materials (`pointer_materials*.glb`, Blender 5.0's export
+/// in Scene mode, `tests/scene/make_gltf_pointer_material_fixture.py`; 30 fps, linear keys from
+/// frame 10 to 40; the exporter samples every frame). At frames 10, 25, 25.5 and 40 petzval's
+/// material is the one Blender's evaluated node inputs describe (read back from Blender at each
+/// frame, `pointer_materials_blender.json`): base colour and alpha, metallic, roughness,
+/// emission colour × strength (also where only the strength is animated), ior, transmission,
+/// coat, specular level × 2, anisotropy and its rotation (Blender writes the animated rotation
+/// in turns and a pointer with a trailing space, `…/clearcoatRoughnessFactor `, and Specular
+/// Tint as a VEC4: compensated in files it wrote). At frames 25 and 40 every material number
+/// equals the one loaded from Blender's still export of that frame (its own conversion: the
+/// Mapping node as KHR_texture_transform, the level above 0.5 in specularColorFactor). The
+/// export with STEP sampling holds frame 25's values at 25.5. Before, every material channel
+/// was dropped with a warning (frame 40 rendered with frame 10's materials).
+#[test]
+fn pointer_animations_of_materials_follow_blender() {
+    use petzval_renderer::scene::{Anisotropy, AnisotropyKind, AnisotropyTangent};
+    let json = std::fs::read_to_string(data("animation/pointer_materials_blender.json")).unwrap();
+    let blender: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let at = |name: &str, frame: f64| {
+        let s = load_gltf_at(&data(&format!("animation/{name}")), Some(frame / 30.0)).unwrap();
+        assert!(s.warnings.is_empty(), "{name} at frame {frame}: {:?}", s.warnings);
+        s
+    };
+    let close = |a: f32, b: f32, what: &str, frame: &str| {
+        assert!((a - b).abs() <= 1e-5, "frame {frame}: {what} {a}, Blender {b}");
+    };
+    // the values Blender evaluated at `frame`, against the materials petzval loaded
+    let check = |s: &Scene, frame: &str, emission: bool| {
+        let b = &blender[frame];
+        let f = |m: &str, input: &str| b[m][input].as_f64().unwrap() as f32;
+        let rgb = |m: &str, input: &str| {
+            let c: Vec<f32> = b[m][input].as_array().unwrap().iter().map(|x| x.as_f64().unwrap() as f32).collect();
+            Vec3::new(c[0], c[1], c[2])
+        };
+        let p = &s.materials[0];
+        assert_eq!(p.name, "Principled");
+        let want_base = rgb("Principled", "Base Color").extend(f("Principled", "Alpha"));
+        assert!((p.base_color - want_base).abs().max_element() <= 1e-5, "frame {frame}: {}", p.base_color);
+        assert_eq!(p.alpha_mode, AlphaMode::Blend);
+        close(p.metallic, f("Principled", "Metallic"), "metallic", frame);
+        close(p.roughness, f("Principled", "Roughness"), "roughness", frame);
+        close(p.ior, f("Principled", "IOR"), "ior", frame);
+        close(p.transmission, f("Principled", "Transmission Weight"), "transmission", frame);
+        close(p.coat, f("Principled", "Coat Weight"), "coat", frame);
+        close(p.coat_roughness, f("Principled", "Coat Roughness"), "coat roughness", frame);
+        close(p.specular, 2.0 * f("Principled", "Specular IOR Level"), "specular", frame);
+        assert!(close_vec(p.specular_tint, Vec3::ONE), "frame {frame}: tint {}", p.specular_tint);
+        let want = Anisotropy::principled(
+            f("Principled", "Anisotropic"),
+            f("Principled", "Anisotropic Rotation"),
+            AnisotropyTangent::Radial(1),
+        )
+        .unwrap();
+        let got = p.anisotropy.unwrap();
+        assert_eq!(got.tangent, want.tangent);
+        close(got.rotation_turns, want.rotation_turns, "anisotropic rotation (turns)", frame);
+        let (AnisotropyKind::Scale(g), AnisotropyKind::Scale(w)) = (got.kind, want.kind) else {
+            panic!("frame {frame}: {:?}", got.kind)
+        };
+        assert!((g - w).abs().max_element() <= 1e-5, "frame {frame}: anisotropy {g} against {w}");
+        if emission {
+            for (i, m) in ["Principled", "Glow"].into_iter().enumerate() {
+                let want = rgb(m, "Emission Color") * f(m, "Emission Strength");
+                let got = s.materials[i].emissive;
+                assert!(
+                    (got - want).abs().max_element() <= 1e-5 * want.max_element(),
+                    "frame {frame}: {m} {got}, {want}"
+                );
+            }
+        }
+    };
+    for frame in ["10", "25", "40"] {
+        check(&at("pointer_materials.glb", frame.parse().unwrap()), frame, true);
+    }
+    // between two sampled frames: the linear quantities as Blender's curves (emission is
+    // colour × strength, a product the exporter samples per frame, so not linear in between)
+    let mid = at("pointer_materials.glb", 25.5);
+    check(&mid, "25.5", false);
+    // STEP sampling: frame 25's values until frame 26 (25.5 differs: roughness 0.51 vs 0.50)
+    let step = at("pointer_materials_step.glb", 25.5);
+    check(&step, "25", true);
+    assert!((mid.materials[0].roughness - step.materials[0].roughness).abs() > 5e-3);
+    for frame in ["10", "40"] {
+        check(&at("pointer_materials_step.glb", frame.parse().unwrap()), frame, true);
+    }
+    // Blender's still exports of frames 25 and 40: the same materials, texture transforms too
+    for frame in [25, 40] {
+        let still = load_gltf(&data(&format!("animation/pointer_materials_frame_{frame}.glb"))).unwrap();
+        let animated = at("pointer_materials.glb", frame as f64);
+        let d = worst_material_difference(&animated, &still);
+        assert!(d <= 1e-5, "frame {frame}: worst material difference {d} from the still export");
+        assert!(still.materials[2].base_color_texture.unwrap().transform.is_some());
+    }
+    // the texture transform moves (frame 10's is the identity, 40's is not), and without a
+    // time the file's own (frame 10) values are used
+    let transform = |frame: f64| at("pointer_materials.glb", frame).materials[2].base_color_texture.unwrap().transform;
+    let (t10, t40) = (transform(10.0).unwrap(), transform(40.0).unwrap());
+    assert!(t10.offset.length() < 1e-6 && t10.m.abs_diff_eq(glam::Mat2::IDENTITY, 1e-6), "{t10:?}");
+    assert!(t40.offset.length() > 1.0, "{t40:?}");
+    let still = load_gltf(&data("animation/pointer_materials.glb")).unwrap();
+    assert!(worst_material_difference(&still, &at("pointer_materials.glb", 10.0)) <= 1e-6);
+}
+
+/// Material pointers by hand: a CUBICSPLINE baseColorFactor (VEC4), a STEP roughnessFactor, a
+/// LINEAR alphaCutoff and emissiveFactor and an animated KHR_texture_transform offset on a
+/// texture without the extension, against the glTF spec's interpolations worked out by hand;
+/// the render scene's BSDF template (built once per material) has the roughness of the time
+/// asked. A pointer to a property this loader does not read, or to a material the file lacks,
+/// is a warning naming it; an output accessor of the wrong type is an error naming the channel
+/// and the pointer.
+#[test]
+fn material_pointer_interpolations() {
+    use petzval_renderer::integrator::RenderScene;
+    let floats: Vec<f32> = vec![
+        1.0, 3.0, // 0: times (byte 0)
+        // 1: cubic baseColorFactor (byte 8): key 0 (in, value, out), key 1 (in, value, out)
+        0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 2.0, 0.0, 0.0, 0.0, //
+        0.0, 0.0, 0.0, 0.0, 1.0, 0.5, 0.25, 0.5, 0.0, 0.0, 0.0, 0.0, //
+        0.2, 0.9, // 2: roughness (byte 104)
+        0.1, 0.7, // 3: alphaCutoff (byte 112)
+        0.0, 0.0, 0.0, 1.0, 0.5, 0.0, // 4: emissiveFactor (byte 120)
+        0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, // 5: triangle (byte 144)
+        0.0, 0.0, 0.5, -0.25, // 6: texture offset (byte 180)
+    ];
+    let bytes: Vec<u8> = floats.iter().flat_map(|x| x.to_le_bytes()).collect();
+    let uri = format!("data:application/octet-stream;base64,{}", crate::common::base64(&bytes));
+    // a 1×1 PNG
+    let png = "iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAYAAAAfFcSJAAAADUlEQVR42mP8/5+hHgAHggJ/PchI7wAAAABJRU5ErkJggg==";
+    let channel = |sampler: usize, pointer: &str| {
+        serde_json::json!({"sampler": sampler, "target": {"path": "pointer",
+            "extensions": {"KHR_animation_pointer": {"pointer": pointer}}}})
+    };
+    let offset = "/materials/0/pbrMetallicRoughness/baseColorTexture/extensions/KHR_texture_transform/offset";
+    let file = |color_output: usize| {
+        serde_json::json!({
+            "asset": {"version": "2.0"},
+            "extensionsUsed": ["KHR_animation_pointer"],
+            "scene": 0, "scenes": [{"nodes": [0]}],
+            "nodes": [{"mesh": 0}],
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 6}, "material": 0}]}],
+            "materials": [{"name": "Hand", "alphaMode": "MASK",
+                "pbrMetallicRoughness": {"metallicFactor": 0.0, "baseColorTexture": {"index": 0}}}],
+            "textures": [{"source": 0}],
+            "images": [{"uri": format!("data:image/png;base64,{png}")}],
+            "buffers": [{"byteLength": bytes.len(), "uri": uri}],
+            "bufferViews": [
+                {"buffer": 0, "byteOffset": 0, "byteLength": 8},
+                {"buffer": 0, "byteOffset": 8, "byteLength": 96},
+                {"buffer": 0, "byteOffset": 104, "byteLength": 8},
+                {"buffer": 0, "byteOffset": 112, "byteLength": 8},
+                {"buffer": 0, "byteOffset": 120, "byteLength": 24},
+                {"buffer": 0, "byteOffset": 144, "byteLength": 36},
+                {"buffer": 0, "byteOffset": 180, "byteLength": 16}
+            ],
+            "accessors": [
+                {"bufferView": 0, "componentType": 5126, "count": 2, "type": "SCALAR"},
+                {"bufferView": 1, "componentType": 5126, "count": 6, "type": "VEC4"},
+                {"bufferView": 2, "componentType": 5126, "count": 2, "type": "SCALAR"},
+                {"bufferView": 3, "componentType": 5126, "count": 2, "type": "SCALAR"},
+                {"bufferView": 4, "componentType": 5126, "count": 2, "type": "VEC3"},
+                {"bufferView": 1, "componentType": 5126, "count": 8, "type": "VEC3"},
+                {"bufferView": 5, "componentType": 5126, "count": 3, "type": "VEC3",
+                 "min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 0.0]},
+                {"bufferView": 6, "componentType": 5126, "count": 2, "type": "VEC2"}
+            ],
+            "animations": [{"name": "Looks",
+                "channels": [
+                    channel(0, "/materials/0/pbrMetallicRoughness/baseColorFactor"),
+                    channel(1, "/materials/0/pbrMetallicRoughness/roughnessFactor"),
+                    channel(2, "/materials/0/alphaCutoff"),
+                    channel(3, "/materials/0/emissiveFactor"),
+                    channel(4, offset),
+                    channel(2, "/materials/0/occlusionTexture/strength"),
+                    channel(2, "/materials/3/pbrMetallicRoughness/roughnessFactor")
+                ],
+                "samplers": [
+                    {"input": 0, "output": color_output, "interpolation": "CUBICSPLINE"},
+                    {"input": 0, "output": 2, "interpolation": "STEP"},
+                    {"input": 0, "output": 3, "interpolation": "LINEAR"},
+                    {"input": 0, "output": 4},
+                    {"input": 0, "output": 7, "interpolation": "LINEAR"}
+                ]}]
+        })
+        .to_string()
+    };
+    let json = file(1);
+    let at = |t: f64| load_gltf_slice_at(json.as_bytes(), None, "looks.gltf", Some(t)).unwrap();
+    let s = at(2.0);
+    let m = &s.materials[0];
+    // Hermite at s = 1/2 over an interval of 2: (p0 + p1)/2 + (2/8)·(m0 − m1), m0 = (2,0,0,0)
+    assert!((m.base_color - Vec4::new(1.0, 0.25, 0.125, 0.75)).abs().max_element() < 1e-6, "{}", m.base_color);
+    assert_eq!(m.roughness, 0.2, "STEP holds the first key");
+    assert!(matches!(m.alpha_mode, AlphaMode::Mask(c) if (c - 0.4).abs() < 1e-6), "{:?}", m.alpha_mode);
+    assert!(close_vec(m.emissive, Vec3::new(0.5, 0.25, 0.0)), "{}", m.emissive);
+    let t = m.base_color_texture.unwrap().transform.expect("the animated offset makes a transform");
+    assert!((t.offset - Vec2::new(0.25, -0.125)).length() < 1e-6 && t.m == glam::Mat2::IDENTITY, "{t:?}");
+    // the warnings name the pointers not applied
+    let unsupported = s.warnings.iter().find(|w| w.contains("/materials/0/occlusionTexture/strength"));
+    assert!(unsupported.is_some_and(|w| w.contains("not supported")), "{:?}", s.warnings);
+    let missing = s.warnings.iter().find(|w| w.contains("/materials/3/pbrMetallicRoughness/roughnessFactor"));
+    assert!(missing.is_some_and(|w| w.contains("does not have")), "{:?}", s.warnings);
+    assert_eq!(s.warnings.len(), 2, "{:?}", s.warnings);
+    // at the last key its values; the BSDF template built once per material has the roughness
+    // of the time asked (α = roughness²)
+    let end = at(3.0);
+    assert_eq!(end.materials[0].roughness, 0.9);
+    assert!((end.materials[0].base_color - Vec4::new(1.0, 0.5, 0.25, 0.5)).abs().max_element() < 1e-6);
+    for (scene, roughness) in [(s, 0.2f32), (end, 0.9)] {
+        let render = RenderScene::new(scene).unwrap();
+        let alpha = render.bsdf_template(0).expect("a dielectric material has a template").alpha();
+        assert!((alpha - roughness * roughness).abs() < 1e-6, "template α {alpha} for roughness {roughness}");
+    }
+    // baseColorFactor animated by a VEC3 output: an error naming the channel and the pointer
+    let wrong = file(5);
+    let e = load_gltf_slice_at(wrong.as_bytes(), None, "looks.gltf", Some(2.0)).unwrap_err().to_string();
+    assert!(
+        e.contains("looks.gltf")
+            && e.contains("animation 0 'Looks', channel 0")
+            && e.contains("baseColorFactor holds 4"),
+        "{e}"
+    );
+}
+
 /// A frame asked of a file without animations renders its nodes as they are, with a warning
 /// (before, silently); a file with animations says nothing.
 #[test]

@@ -7,7 +7,10 @@
 //! | sampler `STEP`, `LINEAR` (rotation: shortest-path slerp), `CUBICSPLINE` (Hermite, tangents × the key interval) | as the glTF spec defines them; before the first key the first value, after the last the last |
 //! | several animations | all applied at the same time (Blender writes one per object's action); where two target the same node and path, the later one wins, with a warning |
 //! | channel `weights` | the node's morph target weights at the time (as many per key as the sampler holds; see `deform.rs`) |
-//! | `KHR_animation_pointer` (a channel whose target is a JSON pointer, no node) | cameras' `perspective/yfov`, `znear`, `zfar` and `orthographic/xmag`, `ymag`; `KHR_lights_punctual` lights' `color`, `intensity`, `range`, `spot.innerConeAngle`, `spot.outerConeAngle` (the extension's spelling; `spot/…` read as well): their values at the time (Blender's exporter writes the focal length, a light's power and colour and a spot's size and blend so, with "Export Pointer Animation" in Scene mode; in files it wrote, its animated point and spot intensities are divided by 4π and suns' multiplied by 683, the conversions its static values have and its animated ones lack, and version 5.0's animated innerConeAngle, which holds the Spot Blend, is read as that). Other pointers (materials, textures) are ignored with a warning |
+//! | `KHR_animation_pointer` (a channel whose target is a JSON pointer, no node) | cameras' `perspective/yfov`, `znear`, `zfar` and `orthographic/xmag`, `ymag`; `KHR_lights_punctual` lights' `color`, `intensity`, `range`, `spot.innerConeAngle`, `spot.outerConeAngle` (the extension's spelling; `spot/…` read as well): their values at the time (Blender's exporter writes the focal length, a light's power and colour and a spot's size and blend so, with "Export Pointer Animation" in Scene mode; in files it wrote, its animated point and spot intensities are divided by 4π and suns' multiplied by 683, the conversions its static values have and its animated ones lack, and version 5.0's animated innerConeAngle, which holds the Spot Blend, is read as that) |
+//! | `KHR_animation_pointer` on a material (`/materials/N/…`) | at the time, in place of the stored value and checked as it is: `pbrMetallicRoughness/baseColorFactor` (VEC4, alpha included), `metallicFactor`, `roughnessFactor`, `emissiveFactor`, `alphaCutoff` (in MASK mode), `normalTexture/scale`; the `extensions/…` factors `KHR_materials_emissive_strength/emissiveStrength`, `KHR_materials_ior/ior`, `KHR_materials_transmission/transmissionFactor`, `KHR_materials_clearcoat/clearcoatFactor`, `clearcoatRoughnessFactor`, `KHR_materials_specular/specularFactor`, `specularColorFactor`, `KHR_materials_anisotropy/anisotropyStrength`, `anisotropyRotation`; `KHR_texture_transform` `offset`, `rotation`, `scale` of `pbrMetallicRoughness/baseColorTexture`, `metallicRoughnessTexture` and `emissiveTexture` (a texture without the extension takes its defaults for the parts not animated). An extension the material lacks is animated from its defaults (the spec calls such a pointer invalid; the value is what the writer meant) | Blender 5.0's exporter (Principled BSDF inputs, sampled every frame, LINEAR or STEP as its sampling fallback says) writes `…/clearcoatRoughnessFactor ` with a trailing space, Specular Tint's `specularColorFactor` as a VEC4 and `anisotropyRotation` in turns where its still value is in radians: in files it wrote pointers are read trimmed, the fourth component dropped and the rotation read as turns. Its emission is colour × strength split per frame into emissiveFactor ≤ 1 and emissiveStrength, whose product is used. It drops an Alpha that is 1 at the exported frame (the material is then OPAQUE with no alpha channel) and a Specular Tint animated without Specular IOR Level: nothing in the file to read |
+//! | other pointers (other material properties such as `occlusionTexture/strength` and the sheen, volume and iridescence extensions, textures' `texCoord`, meshes, nodes) | ignored with a warning naming each pointer; a material pointer to a material or texture the file lacks likewise |
+//! | a pointer sampler whose output type is not the property's (a VEC3 for baseColorFactor) | error naming the animation, channel and pointer |
 //! | an animated node with a `matrix` | the matrix kept, with a warning (the spec allows TRS only) |
 //! | malformed sampler (input not scalar floats, counts that differ, times not increasing) | error naming the animation and channel |
 //!
@@ -21,7 +24,8 @@ use crate::Result;
 use glam::{Quat, Vec3, Vec4};
 use gltf::accessor::Dimensions;
 use gltf::animation::{Interpolation, Property};
-use std::collections::HashMap;
+use std::cell::RefCell;
+use std::collections::{HashMap, HashSet};
 
 /// The animated parts of one node's TRS at the time asked.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -43,6 +47,9 @@ pub(super) struct Animated {
     pub weights: HashMap<usize, Vec<f32>>,
     /// JSON pointer (`KHR_animation_pointer`) → the value there.
     pub pointers: HashMap<String, Vec<f32>>,
+    /// The material pointers whose values the materials took (the others target a material or
+    /// texture the file lacks, and are reported).
+    pub used: RefCell<HashSet<String>>,
 }
 
 /// One `KHR_animation_pointer` channel as the file states it (read from the JSON before the
@@ -89,7 +96,7 @@ impl PointerChannel {
 }
 
 /// How many floats the property at a JSON `pointer` holds, where this loader applies it
-/// (cameras' and punctual lights' properties); None for any other pointer.
+/// (cameras', punctual lights' and materials' properties); None for any other pointer.
 fn pointer_width(pointer: &str) -> Option<usize> {
     let parts: Vec<&str> = pointer.trim_start_matches('/').split('/').collect();
     let index_ok = |s: &str| s.parse::<usize>().is_ok();
@@ -102,6 +109,41 @@ fn pointer_width(pointer: &str) -> Option<usize> {
             if index_ok(i) =>
         {
             Some(1)
+        }
+        ["materials", i, property @ ..] if index_ok(i) => material_property_width(property),
+        _ => None,
+    }
+}
+
+/// The textures whose `KHR_texture_transform` this loader applies (`materials.rs`, `info_ref`).
+const TRANSFORMED_TEXTURES: [&str; 3] =
+    ["pbrMetallicRoughness/baseColorTexture", "pbrMetallicRoughness/metallicRoughnessTexture", "emissiveTexture"];
+
+/// How many floats a material's property (its pointer after `/materials/N/`) holds, where this
+/// loader applies it (`materials.rs`); None for any other.
+fn material_property_width(property: &[&str]) -> Option<usize> {
+    match property {
+        ["pbrMetallicRoughness", "baseColorFactor"] => Some(4),
+        ["pbrMetallicRoughness", "metallicFactor" | "roughnessFactor"] => Some(1),
+        ["emissiveFactor"] => Some(3),
+        ["alphaCutoff"] | ["normalTexture", "scale"] => Some(1),
+        ["extensions", "KHR_materials_emissive_strength", "emissiveStrength"]
+        | ["extensions", "KHR_materials_ior", "ior"]
+        | ["extensions", "KHR_materials_transmission", "transmissionFactor"]
+        | ["extensions", "KHR_materials_clearcoat", "clearcoatFactor" | "clearcoatRoughnessFactor"]
+        | ["extensions", "KHR_materials_specular", "specularFactor"]
+        | ["extensions", "KHR_materials_anisotropy", "anisotropyStrength" | "anisotropyRotation"] => Some(1),
+        ["extensions", "KHR_materials_specular", "specularColorFactor"] => Some(3),
+        [texture @ .., "extensions", "KHR_texture_transform", field] => {
+            let texture = texture.join("/");
+            if !TRANSFORMED_TEXTURES.contains(&texture.as_str()) {
+                return None;
+            }
+            match *field {
+                "offset" | "scale" => Some(2),
+                "rotation" => Some(1),
+                _ => None,
+            }
         }
         _ => None,
     }
@@ -273,7 +315,10 @@ impl Loader<'_> {
         let mut ignored = Vec::new();
         for ch in channels {
             let loc = &ch.loc;
-            let canonical = ch.pointer.as_deref().map(canonical_pointer);
+            // Blender 5.0's exporter writes `…/clearcoatRoughnessFactor ` (a trailing space,
+            // `exp/material/extensions/clearcoat.py`): its pointers are read trimmed.
+            let written = ch.pointer.as_deref().map(|p| if self.blender_written { p.trim_end() } else { p });
+            let canonical = written.map(canonical_pointer);
             let Some((pointer, n)) = canonical.as_deref().and_then(|p| Some((p, pointer_width(p)?))) else {
                 ignored.push(ch.pointer.clone().unwrap_or_else(|| format!("{loc} (no pointer)")));
                 continue;
@@ -292,6 +337,7 @@ impl Loader<'_> {
             let (input, output) = (accessor(ch.input, "input")?, accessor(ch.output, "output")?);
             let times = read_accessor(self, &input).map_err(|e| self.error(loc, format!("sampler input: {e}")))?;
             let values = read_accessor(self, &output).map_err(|e| self.error(loc, format!("sampler output: {e}")))?;
+            let values = self.pointer_output(values, output.dimensions().multiplicity(), n, pointer, loc)?;
             let per_key = n * if interpolation == Interpolation::CubicSpline { 3 } else { 1 };
             if input.dimensions() != Dimensions::Scalar || times.is_empty() || values.len() != times.len() * per_key {
                 return Err(self.error(
@@ -316,11 +362,33 @@ impl Loader<'_> {
             self.warn(
                 "",
                 format!(
-                    "KHR_animation_pointer: {} not supported (cameras' and punctual lights' properties are); ignored",
+                    "KHR_animation_pointer: {} not supported (the properties of cameras, punctual lights and materials that this loader reads are); ignored",
                     ignored.join(", ")
                 ),
             );
         }
         Ok(out)
+    }
+
+    /// A pointer sampler's output values, `width` floats per element where the accessor stores
+    /// `stored`: as they are when the two agree; else an error naming the channel, except in
+    /// files Blender wrote, whose animated `specularColorFactor` is a VEC4 (Blender 5.0's
+    /// Specular Tint is RGBA, `exp/animation/sampled/sampling_cache.py` keeps all four): its
+    /// fourth component dropped.
+    fn pointer_output(
+        &self,
+        values: Vec<f32>,
+        stored: usize,
+        width: usize,
+        pointer: &str,
+        loc: &str,
+    ) -> Result<Vec<f32>> {
+        if stored == width {
+            return Ok(values);
+        }
+        if self.blender_written && stored == 4 && pointer.ends_with("/specularColorFactor") {
+            return Ok(values.chunks_exact(4).flat_map(|c| c[..3].to_vec()).collect());
+        }
+        Err(self.error(loc, format!("sampler output has {stored} floats per element, {pointer} holds {width}")))
     }
 }

@@ -33,6 +33,7 @@
 //! | `KHR_lights_punctual` point, spot | [`Light::Point`], [`Light::Spot`]: `color × intensity / 683` W/sr | see below |
 //! | `KHR_lights_punctual` directional | [`Light::Directional`]: `color × intensity / 683` W/m² | |
 //! | node animation (`translation`, `rotation`, `scale` channels) | evaluated at the time asked ([`load_gltf_at`]; `petzval render --frame F` asks for F / `--fps`, as Blender's exporter writes frame F at F / fps seconds), else the nodes' own TRS | see `animation.rs` |
+//! | `KHR_animation_pointer` channels (cameras, punctual lights, materials: their factors, those of the material extensions above, `alphaCutoff`, texture transforms) | the animated properties' values at the time asked, in place of the stored ones (a material's BSDF is built from them) | see `animation.rs`; Blender 5.0's exporter slips compensated in files it wrote; other pointers warned about by name |
 //! | skins, morph targets (and their `weights` animation) | meshes deformed per node, as the spec defines it (linear blend skinning after the morph targets) | see `deform.rs` |
 //! | perspective and orthographic cameras | [`SceneCamera`] (rigid part of the node's world transform); orthographic: `ortho_scale_m` = 2·max(xmag, ymag), as Blender's importer reads it | node scale ignored |
 //!
@@ -308,6 +309,7 @@ impl<'a> Loader<'a> {
             loader.animated.pointers = loader.animated_pointers(&pointer_channels, t as f32)?;
         }
         loader.load_materials();
+        loader.warn_unused_material_pointers();
         loader.walk_nodes()?;
         if loader.triangles_read > 0
             && loader.scene.meshes.iter().all(|m| m.indices.is_empty())
@@ -334,6 +336,28 @@ impl<'a> Loader<'a> {
 
     fn error(&self, location: &str, message: impl Into<String>) -> Error {
         Error::scene(&self.file, location, message)
+    }
+
+    /// Reports the animated material properties no material took (the material, or the texture
+    /// whose transform is animated, is not in the file).
+    fn warn_unused_material_pointers(&mut self) {
+        let mut unused: Vec<String> = self
+            .animated
+            .pointers
+            .keys()
+            .filter(|k| k.starts_with("/materials/") && !self.animated.used.borrow().contains(*k))
+            .cloned()
+            .collect();
+        unused.sort();
+        if !unused.is_empty() {
+            self.warn(
+                "",
+                format!(
+                    "KHR_animation_pointer: {} target a material or texture the file does not have; ignored",
+                    unused.join(", ")
+                ),
+            );
+        }
     }
 
     fn warn_extensions(&mut self) {
