@@ -18,7 +18,6 @@ material `petzval usd info --json --instances` reports is compared with
 from __future__ import annotations
 
 import json
-import os
 import random
 import subprocess
 from pathlib import Path
@@ -31,16 +30,6 @@ from pxr import Usd, UsdGeom, UsdShade  # noqa: E402
 REPO = Path(__file__).resolve().parents[2]
 FIXTURE = REPO / "usd" / "tests" / "data" / "bindings" / "bindings.usda"
 MATERIALS = [f"/Looks/M{i}" for i in range(6)]
-
-
-@pytest.fixture(scope="session")
-def petzval() -> Path:
-    env = os.environ.get("PETZVAL_BIN")
-    p = Path(env) if env else REPO / "target" / "release" / "petzval"
-    if not p.is_file():
-        r = subprocess.run(["cargo", "build", "--release", "-p", "petzval"], cwd=REPO, capture_output=True, text=True)
-        assert r.returncode == 0, r.stderr[-4000:]
-    return p
 
 
 def ours(petzval: Path, path: Path) -> tuple[dict[str, str | None], dict[str, dict[str, str]], dict]:

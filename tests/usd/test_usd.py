@@ -19,7 +19,6 @@ independently:
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 from pathlib import Path
 
@@ -31,16 +30,6 @@ from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT = Usd.TimeCode.Default()
-
-
-@pytest.fixture(scope="session")
-def petzval() -> Path:
-    env = os.environ.get("PETZVAL_BIN")
-    p = Path(env) if env else REPO / "target" / "release" / "petzval"
-    if not p.is_file():
-        r = subprocess.run(["cargo", "build", "--release", "-p", "petzval"], cwd=REPO, capture_output=True, text=True)
-        assert r.returncode == 0, r.stderr[-4000:]
-    return p
 
 
 def run(petzval: Path, *args: str, ok: bool = True) -> subprocess.CompletedProcess:
