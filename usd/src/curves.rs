@@ -28,7 +28,8 @@ use openusd::{sdf, usd};
 use petzval_renderer::scene::Mesh;
 
 /// Width of a curve that authors no `widths`: 1 scene unit, the constant fallback Hydra render
-/// delegates use (HdRPR: "Fallback value is 1.0f with a constant interpolation").
+/// delegates use (HdRPR: "Fallback value is 1.0f with a constant interpolation"). Blender 5.0's
+/// USD import leaves such curves without a radius, and Cycles renders them 0.01 m wide.
 pub const FALLBACK_WIDTH: f64 = 1.0;
 /// Rings per cubic span.
 pub const STEPS_PER_SPAN: usize = 4;
@@ -490,6 +491,14 @@ pub fn build_curves(
         sweep(&mut mesh, &s, sides, sp.closed, material);
         made += tris;
         report.tessellated += 1;
+    }
+    // Step 3: single precision as the renderer takes it (1e39 in points or widths is not)
+    if mesh.positions.iter().any(|p| !p.is_finite()) {
+        return Err(attr_error(
+            prim,
+            "widths",
+            "a tube vertex is not finite in single precision (points or widths too large)",
+        ));
     }
     Ok((mesh, report))
 }

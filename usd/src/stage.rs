@@ -43,7 +43,7 @@ pub struct MeshInfo {
     pub triangles: usize,
     /// Vertices stored.
     pub vertices: usize,
-    /// Faces authored.
+    /// Faces authored (a curves prim: its curves).
     pub faces: usize,
     /// Faces skipped with fewer than three vertices.
     pub degenerate_faces: usize,

@@ -246,6 +246,10 @@ fn widths_interpolations_fallback_and_colours() {
     let bad = load(&write(&dir.0, "b.usda", &format!("{head}{}", curve(" float[] widths = [0.1, 0.2]\n"))), None);
     let msg = bad.err().unwrap().to_string();
     assert!(msg.contains("/C") && msg.contains("widths") && msg.contains("needs 5"), "{msg}");
+    // a width too large for single precision
+    let huge = " float[] widths = [1e39] (interpolation = \"constant\")\n";
+    let msg = load(&write(&dir.0, "h.usda", &format!("{head}{}", curve(huge))), None).err().unwrap().to_string();
+    assert!(msg.contains("/C.widths") && msg.contains("not finite"), "{msg}");
     // points and counts that disagree
     let bad = "def BasisCurves \"C\"\n{\n int[] curveVertexCounts = [4]\n point3f[] points = [(0,0,0)]\n}\n";
     let msg = load(&write(&dir.0, "c.usda", &format!("{head}{bad}")), None).err().unwrap().to_string();
