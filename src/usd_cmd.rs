@@ -87,6 +87,23 @@ pub fn run(cmd: UsdCommand) -> Result<(), petzval_usd::Error> {
                     subdivided.iter().map(|m| m.triangles).sum::<usize>()
                 );
             }
+            for m in &s.info.meshes {
+                if let Some(c) = &m.curves {
+                    println!(
+                        "  curves {}: {} {} ({}), {} curves, {} tessellated ({} rings per span, {} sides): {} triangles{}",
+                        m.prim,
+                        if c.kind == "linear" { "linear".to_string() } else { format!("cubic {}", c.basis) },
+                        c.wrap,
+                        if c.widths_authored { "widths" } else { "no widths: 1 unit wide" },
+                        c.curves,
+                        c.tessellated,
+                        c.rings_per_span,
+                        c.sides,
+                        m.triangles,
+                        m.material.as_ref().map(|n| format!(", material {n}")).unwrap_or_default()
+                    );
+                }
+            }
             for c in &s.cameras {
                 println!(
                     "  camera {}: {:.2} mm, aperture {:.3} × {:.3} mm, f/{:.2}, focus {}{}",

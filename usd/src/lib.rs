@@ -9,7 +9,7 @@
 //! | `subdivision_level` | u32 | Catmull-Clark levels of `subdivisionScheme = catmullClark` meshes (`--subdivision-level`) | 2 |
 //!
 //! Modules: [`value`] (typed reads, errors naming layer/prim/attribute), [`xform`] (xform ops,
-//! up axis, units), [`mesh`] (UsdGeomMesh), [`skel`] (UsdSkel skinning and blend shapes), [`subdiv`] (Catmull-Clark), [`shapes`] (intrinsic shapes), [`stage`] (the walk, instancing),
+//! up axis, units), [`mesh`] (UsdGeomMesh), [`curves`] (UsdGeomBasisCurves as tubes), [`skel`] (UsdSkel skinning and blend shapes), [`subdiv`] (Catmull-Clark), [`shapes`] (intrinsic shapes), [`stage`] (the walk, instancing),
 //! [`camera`] (UsdGeomCamera + `PetzvalLensAPI`), [`lights`] (UsdLux), [`shading`]
 //! (UsdPreviewSurface), [`render_settings`] (UsdRender), [`author`] (`set-lens`). What is and is not read: `docs/usd.md`.
 //!
@@ -20,6 +20,7 @@
 pub mod author;
 pub mod binding;
 pub mod camera;
+pub mod curves;
 #[doc(hidden)]
 pub mod fuzzing;
 pub mod lights;

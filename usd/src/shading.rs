@@ -406,7 +406,10 @@ enum DisplayColor {
 
 fn display_color(reader: &Reader, prim: &usd::Prim) -> Result<DisplayColor, Error> {
     Ok(match reader.vec3s(prim, "primvars:displayColor")? {
-        Some(c) if c.len() > 1 && prim.type_name().ok().flatten().is_some_and(|t| t.as_str() == "Mesh") => {
+        Some(c)
+            if c.len() > 1
+                && prim.type_name().ok().flatten().is_some_and(|t| matches!(t.as_str(), "Mesh" | "BasisCurves")) =>
+        {
             DisplayColor::PerElement
         }
         Some(c) if !c.is_empty() => DisplayColor::One(c[0].as_vec3()),

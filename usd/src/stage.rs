@@ -13,7 +13,8 @@
 //! | `Camera` | a [`UsdCamera`] (cameras in prototypes are ignored) |
 //! | UsdLux lights | see [`crate::lights`] |
 //! | `Cube`, `Sphere`, `Cylinder`, `Cone`, `Capsule`, `Plane` | tessellated ([`crate::shapes`]), one instance |
-//! | other gprims (curves, points, volumes…) | listed once as unsupported |
+//! | `BasisCurves` | tessellated into round tubes ([`crate::curves`]), one instance |
+//! | other gprims (`Points`, `NurbsCurves`, `HermiteCurves`, `NurbsPatch`, `TetMesh`, `Volume`) | listed once as unsupported |
 //!
 //! The renderer's world is metres with +y up: every instance transform is pre-multiplied by
 //! the stage's `upAxis`/`metersPerUnit` correction ([`StageUnits::to_renderer`]).
@@ -42,7 +43,7 @@ pub struct MeshInfo {
     pub triangles: usize,
     /// Vertices stored.
     pub vertices: usize,
-    /// Faces authored.
+    /// Faces authored (a curves prim: its curves).
     pub faces: usize,
     /// Faces skipped with fewer than three vertices.
     pub degenerate_faces: usize,
@@ -67,6 +68,9 @@ pub struct MeshInfo {
     /// The face subsets with a material of their own: (subset prim, material name).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub subset_materials: Vec<(String, String)>,
+    /// A `BasisCurves` prim's curves and tessellation (absent: not curves).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub curves: Option<crate::curves::CurvesReport>,
 }
 
 fn bounds(m: &petzval_renderer::scene::Mesh) -> [[f32; 3]; 2] {
@@ -294,7 +298,7 @@ impl<'a> Walker<'a> {
             }
         }
         match ty.as_str() {
-            "Mesh" | "Cube" | "Sphere" | "Cylinder" | "Cone" | "Capsule" | "Plane"
+            "Mesh" | "BasisCurves" | "Cube" | "Sphere" | "Cylinder" | "Cone" | "Capsule" | "Plane"
                 if !default_purpose || self.purposes.default =>
             {
                 let mesh = self.mesh(prim, &ty)?;
@@ -326,7 +330,7 @@ impl<'a> Walker<'a> {
                 }
             }
             "" | "Xform" | "Scope" => {}
-            "Points" | "BasisCurves" | "NurbsCurves" | "NurbsPatch" | "HermiteCurves" | "TetMesh" | "Volume" => {
+            "Points" | "NurbsCurves" | "NurbsPatch" | "HermiteCurves" | "TetMesh" | "Volume" => {
                 self.unsupported.insert(ty.clone());
             }
             _ => {}
@@ -389,7 +393,8 @@ impl<'a> Walker<'a> {
         let path = prim.path().to_string();
         // the materials of the mesh and of its face subsets (pxr's bound materials, through
         // the native instance being expanded)
-        let double_sided = self.reader.bool(prim, "doubleSided")?.unwrap_or(false);
+        // tubes are open at their ends: seen from both sides
+        let double_sided = ty == "BasisCurves" || self.reader.bool(prim, "doubleSided")?.unwrap_or(false);
         let binding = self.bindings.bound_material(prim, &self.binding, &mut self.warnings)?;
         let material = self.materials.material_for(
             &self.reader,
@@ -400,9 +405,11 @@ impl<'a> Walker<'a> {
             &mut self.warnings,
         )?;
         let mut subsets = Vec::new();
+        // face subsets are a mesh's (a curves prim has no faces)
+        let is_curves = ty == "BasisCurves";
         for child in children(prim)? {
             let ty = child.type_name().ok().flatten().map(|t| t.as_str().to_string()).unwrap_or_default();
-            if ty != "GeomSubset" {
+            if ty != "GeomSubset" || is_curves {
                 continue;
             }
             let et = self.reader.token(&child, "elementType")?.unwrap_or_else(|| "face".into());
@@ -445,7 +452,24 @@ impl<'a> Walker<'a> {
                 None
             }
         };
-        let (mesh, report) = if ty == "Mesh" {
+        let mut curves_report = None;
+        let (mesh, report) = if ty == "BasisCurves" {
+            let color = self.materials.color_primvar(material).map(|(n, c)| (n.to_string(), c));
+            let (mesh, r) = crate::curves::build_curves(
+                &self.reader,
+                prim,
+                material,
+                color.as_ref().map(|(n, c)| (n.as_str(), *c)),
+            )?;
+            self.curve_warnings(prim, &r);
+            let report = crate::mesh::MeshReport {
+                faces: r.curves,
+                color_primvar: r.color_primvar.clone(),
+                ..Default::default()
+            };
+            curves_report = Some(r);
+            (mesh, report)
+        } else if ty == "Mesh" {
             let st = self.materials.st_name(material).map(str::to_string);
             let color = self.materials.color_primvar(material).map(|(n, c)| (n.to_string(), c));
             let build = |deform: Option<&Skinned>| {
@@ -524,10 +548,36 @@ impl<'a> Walker<'a> {
                 .iter()
                 .map(|s| (s.path.clone(), self.scene.materials[s.material as usize].name.clone()))
                 .collect(),
+            curves: curves_report,
         });
         let id = self.scene.add_mesh(mesh);
         self.meshes_by_prim.insert(cache_key, id);
         Ok(id)
+    }
+
+    /// The warnings a curves prim's tessellation leaves: curves skipped, coarser tessellation.
+    fn curve_warnings(&mut self, prim: &usd::Prim, r: &crate::curves::CurvesReport) {
+        let head = format!("{}: {}", layer_of_prim(prim), prim.path());
+        if r.bad_counts > 0 {
+            self.warnings.push(format!(
+                "{head}.curveVertexCounts: {} of {} curves have a vertex count {} {} curves ({}) cannot use and were skipped",
+                r.bad_counts, r.curves, r.kind, r.basis, r.wrap
+            ));
+        }
+        let limit = crate::curves::MAX_CURVE_TRIANGLES;
+        let default_rings = if r.basis == "linear" { 1 } else { crate::curves::STEPS_PER_SPAN };
+        if (r.rings_per_span, r.sides) != (default_rings, crate::curves::SIDES) {
+            self.warnings.push(format!(
+                "{head}: {} curves tessellated with {} rings per span and {} sides (not {} and {}) to stay under {limit} triangles",
+                r.curves, r.rings_per_span, r.sides, crate::curves::STEPS_PER_SPAN, crate::curves::SIDES
+            ));
+        }
+        if r.over_limit > 0 {
+            self.warnings.push(format!(
+                "{head}: {} of {} curves were left out: even at 1 ring per span and 3 sides they make more than {limit} triangles",
+                r.over_limit, r.curves
+            ));
+        }
     }
 
     fn point_instancer(&mut self, prim: &usd::Prim, world: DMat4, out: &mut Vec<Placement>) -> Result<(), Error> {
@@ -627,6 +677,7 @@ impl<'a> Walker<'a> {
             color_primvar: None,
             material: None,
             subset_materials: Vec::new(),
+            curves: None,
         });
         let id = self.scene.add_mesh(mesh);
         self.scene.add_instance(id, Affine3A::from_mat4(m.as_mat4()));

@@ -232,6 +232,36 @@ def skel() -> None:
     stage.GetRootLayer().Save()
 
 
+def curves() -> None:
+    """BasisCurves of every type, basis and wrap, with vertex, varying and uniform widths and a
+    uniform displayColor, and time-sampled points (usd/src/curves.rs)."""
+    stage = new("curves.usda")
+    cases = [
+        ("Lin", "linear", "bezier", "periodic", [3], "uniform"),
+        ("Bez", "cubic", "bezier", "nonperiodic", [4, 7], "vertex"),
+        ("Bsp", "cubic", "bspline", "pinned", [2, 5], "varying"),
+        ("Cat", "cubic", "catmullRom", "periodic", [4], "vertex"),
+    ]
+    k = 0
+    for name, ty, basis, wrap, counts, interp in cases:
+        c = UsdGeom.BasisCurves.Define(stage, f"/Hair/{name}")
+        n = sum(counts)
+        pts = [(0.1 * (k + i), 0.2 * (i % 3), 0.05 * i) for i in range(n)]
+        c.CreatePointsAttr().Set(pts, 1)
+        c.GetPointsAttr().Set([(x, y + 0.1, z) for x, y, z in pts], 2)
+        c.CreateCurveVertexCountsAttr(counts)
+        c.CreateTypeAttr(ty)
+        c.CreateBasisAttr(basis)
+        c.CreateWrapAttr(wrap)
+        widths = {"uniform": len(counts), "vertex": n, "varying": n}[interp]
+        c.CreateWidthsAttr([0.02] * widths)
+        c.SetWidthsInterpolation(interp)
+        c.CreateDisplayColorPrimvar(UsdGeom.Tokens.uniform).Set([(0.8, 0.3, 0.1)] * len(counts))
+        k += n
+    camera(stage, "/Cam")
+    stage.GetRootLayer().Save()
+
+
 def main() -> None:
     OUT.mkdir(exist_ok=True)
     shot("shot.usda")
@@ -239,6 +269,7 @@ def main() -> None:
     lights_materials()
     animated()
     skel()
+    curves()
     # the binary crate format: the first stage exported as .usdc
     Sdf.Layer.FindOrOpen(str(OUT / "shot.usda")).Export(str(OUT / "shot.usdc"))
 
