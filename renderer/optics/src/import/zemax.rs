@@ -41,7 +41,7 @@
 //!   from paraxial ray heights at a 160° field) is set to the rim, with a note: no ray can meet
 //!   the surface farther out anyway.
 //! - The image surface must lie behind the last lens surface: a negative last `DISZ` (an image
-//!   inside the lens, e.g. a microscope objective's specimen under its cover glass) is refused
+//!   inside the lens, as in optiland's Microscope20x) is refused
 //!   at that line. Image space may be glass or another medium (an eye's vitreous).
 //! - A surface with `DIAM 0` (or none) takes the larger semi-diameter of its nearest
 //!   neighbours that have one, with a note.
