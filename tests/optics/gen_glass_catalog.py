@@ -12,8 +12,9 @@ written, only re-arranged into one of the two formulas the renderer knows:
     - refractiveindex.info "formula 1" (denominator l^2 - C^2): C is squared.
 * ``schott``     n^2 = A0 + A1 l^2 + A2 l^-2 + A3 l^-4 + A4 l^-6 + A5 l^-8
     - refractiveindex.info "formula 3" (polynomial) whose exponents are a subset of
-      {2, -2, -4, -6, -8}; any other exponent must have a zero coefficient, otherwise the
-      glass is not expressible and the script stops with an error.
+      {2, -2, -4, -6, -8} (any other exponent with a zero coefficient is dropped).
+* ``polynomial`` n^2 = A0 + sum c_i l^e_i
+    - any other "formula 3" (e.g. HIKARI's, with an l^4 term): copied as is, A0 c1 e1 c2 e2 ...
 
 Usage (from the repository root):
 
@@ -93,6 +94,9 @@ _add("cdgm", "H-LAK52 H-ZLAF52A", OPTILAND)
 # HIKARI SK16 is listed above; SF15 and SF4 are also used by optiland from HIKARI but the
 # names are taken by the Schott originals (the lookup is by name only).
 _add("hikari", "BASF2 SK15 E-LLF6 E-SF1", OPTILAND)
+# HIKARI J- and Q- glasses of ObjectiveUS008879901 and Objective60x (formula 3 with an l^4
+# term: the "polynomial" formula).
+_add("hikari", "J-LASF015 Q-LAFPH1S J-LLF2", OPTILAND)
 # Calcium fluoride crystal of the TelescopeObjective48Inch sample (not a catalogue glass).
 MAIN_EXTRA = [("main/CaF2/Daimon-20.yml", "CaF2", "daimon", OPTILAND)]
 
@@ -158,6 +162,7 @@ HEADER = """\
 # Columns (tab separated): name  catalogue  formula  coefficients...
 #   sellmeier: B1 C1 B2 C2 ... ; n^2 = 1 + sum B_i l^2/(l^2 - C_i), l in um, C_i in um^2
 #   schott:    A0 A1 A2 A3 A4 A5 ; n^2 = A0 + A1 l^2 + A2 l^-2 + A3 l^-4 + A4 l^-6 + A5 l^-8
+#   polynomial: A0 c1 e1 c2 e2 ... ; n^2 = A0 + sum c_i l^e_i (refractiveindex.info formula 3)
 # Indices are relative to air, as in the manufacturers' catalogues.
 # Names are the manufacturers' spelling; lookup ignores case, '-', '_', ' ' and '.'.
 # range_um is the validity range stated in the source file; a NOTE says when it does not
@@ -203,7 +208,8 @@ def convert(block: dict) -> tuple[str, list[str], str]:
                 slots[SCHOTT_EXPONENTS.index(exp)] = coef_tok
                 seen.add(exp)
             elif vals[i] != 0.0:
-                raise ValueError(f"formula 3 term l^{exp:g} (coefficient {coef_tok}) not expressible")
+                # a term the Schott form lacks: keep the general polynomial, copied as written
+                return "polynomial", tokens, ""
         return "schott", slots, ""
     raise ValueError(f"{ftype} not expressible as sellmeier/schott")
 
@@ -214,6 +220,8 @@ def index(formula: str, coefs: list[float], wl_um: float) -> float:
         n2 = 1.0
         for b, c in zip(coefs[0::2], coefs[1::2], strict=False):
             n2 += b * l2 / (l2 - c)
+    elif formula == "polynomial":
+        n2 = coefs[0] + sum(c * wl_um**e for c, e in zip(coefs[1::2], coefs[2::2], strict=True))
     else:
         a = coefs
         n2 = a[0] + a[1] * l2 + a[2] / l2 + a[3] / l2**2 + a[4] / l2**3 + a[5] / l2**4

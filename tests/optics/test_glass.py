@@ -77,6 +77,9 @@ def index(formula: str, coefs: list[float], wavelength_nm: float) -> float:
         a = coefs
         il2 = 1.0 / l2
         return math.sqrt(a[0] + a[1] * l2 + il2 * (a[2] + il2 * (a[3] + il2 * (a[4] + il2 * a[5]))))
+    if formula == "polynomial":
+        assert len(coefs) % 2 == 1
+        return math.sqrt(coefs[0] + sum(c * l_um**e for c, e in zip(coefs[1::2], coefs[2::2], strict=True)))
     raise AssertionError(f"unknown formula {formula}")
 
 
@@ -120,7 +123,7 @@ def test_catalogue_is_not_empty_and_every_row_names_its_source():
     for row in ROWS:
         assert row["src"], f"{row['name']}: no '# src=' comment above the row"
         assert (DATA_NK / row["src"]).is_file(), row["src"]
-        assert row["formula"] in ("sellmeier", "schott")
+        assert row["formula"] in ("sellmeier", "schott", "polynomial")
         assert row["catalogue"] == row["catalogue"].lower()
 
 

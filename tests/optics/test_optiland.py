@@ -195,6 +195,8 @@ def pytest_generate_tests(metafunc):
         metafunc.parametrize("lens_name", _with_known_failures(name, select_lenses()))
     if "sample" in metafunc.fixturenames:
         metafunc.parametrize("sample", _with_known_failures(name, SAMPLE_NAMES))
+    if "more_sample" in metafunc.fixturenames:
+        metafunc.parametrize("more_sample", _with_known_failures(name, MORE_SAMPLE_NAMES))
 
 
 # --------------------------------------------------------------------------------------------
@@ -966,7 +968,16 @@ def _odd_asphere_singlet():
 
 
 def _samples():
-    from optiland.samples import objectives, simple
+    from optiland.samples import (
+        eyepieces,
+        infrared,
+        lithography,
+        microscopes,
+        miscellaneous,
+        objectives,
+        simple,
+        telescopes,
+    )
 
     return {
         "cooke-triplet": objectives.CookeTriplet,
@@ -979,6 +990,31 @@ def _samples():
         "aspheric-singlet-a4-stop-on-glass": _aspheric_singlet_a4_stop_on_glass,
         "cylinder-singlet": _cylinder_singlet,
         "odd-asphere-singlet": _odd_asphere_singlet,
+        # optiland's other objectives and simple lenses (camera-like: object at infinity)
+        "field-corrector": objectives.LensWithFieldCorrector,
+        "objective-us8879901": objectives.ObjectiveUS008879901,
+        "projection-120fov": objectives.ProjectionLens120FOV,
+        "projection-160fov": objectives.ProjectionLens160FOV,
+        "reverse-telephoto": objectives.ReverseTelephoto,
+        "telephoto": objectives.Telephoto,
+        "telescope-objective-48in": objectives.TelescopeObjective48Inch,
+        "triplet-telescope-objective": objectives.TripletTelescopeObjective,
+        "wide-angle-100fov": objectives.WideAngle100FOV,
+        "wide-angle-170fov": objectives.WideAngle170FOV,
+        "cemented-achromat": simple.CementedAchromat,
+        "edmund-49-847": simple.Edmund_49_847,
+        "singlet-stop-surf2": simple.SingletStopSurf2,
+        "telescope-doublet": simple.TelescopeDoublet,
+        # not camera lenses, or outside what we model (see UNSUPPORTED_SAMPLES)
+        "infrared-triplet": infrared.InfraredTriplet,
+        "infrared-triplet-f4": infrared.InfraredTripletF4,
+        "erfle-eyepiece": eyepieces.EyepieceErfle,
+        "microscope-20x": microscopes.Microscope20x,
+        "objective-60x": microscopes.Objective60x,
+        "uv-reflecting-microscope": microscopes.UVReflectingMicroscope,
+        "hubble": telescopes.HubbleTelescope,
+        "uv-projection-lens": lithography.UVProjectionLens,
+        "navarro-eye": miscellaneous.NavarroWideAngleEye,
     }
 
 
@@ -993,7 +1029,44 @@ SAMPLE_NAMES = [
     "aspheric-singlet-a4-stop-on-glass",
     "cylinder-singlet",
     "odd-asphere-singlet",
+    # 85 degree half field; optiland writes paraxial DIAMs far past the surfaces' rims, which
+    # the importer sets to the rims and cuts back where neighbouring edges cross
+    "wide-angle-170fov",
 ]
+
+# The other optiland objectives and simple lenses, and the non-camera samples that still are
+# refracting systems with the image in air (an eyepiece, an infinity-corrected microscope
+# objective, a UV lithography lens whose finite object distance is noted and not kept):
+# first-order data at the d line only, to keep the run short. The full real-ray comparison of
+# each was run once (docs/lens-import.md, "optiland samples").
+MORE_SAMPLE_NAMES = [
+    "field-corrector",
+    "objective-us8879901",
+    "projection-120fov",
+    "projection-160fov",
+    "reverse-telephoto",
+    "telephoto",
+    "telescope-objective-48in",
+    "triplet-telescope-objective",
+    "wide-angle-100fov",
+    "cemented-achromat",
+    "edmund-49-847",
+    "singlet-stop-surf2",
+    "telescope-doublet",
+    "erfle-eyepiece",
+    "objective-60x",
+    "uv-projection-lens",
+]
+
+# Samples outside what petzval models: the import must fail at the offending line, saying why.
+UNSUPPORTED_SAMPLES = {
+    "infrared-triplet": "infrared materials such as germanium are not supported",
+    "infrared-triplet-f4": "infrared materials such as germanium are not supported",
+    "uv-reflecting-microscope": "mirrors are not supported",
+    "hubble": "mirrors are not supported",
+    # its image lies 0.196 mm in front of the last surface, inside the last element's glass
+    "microscope-20x": "mm in front of the last lens surface",
+}
 
 
 def _set_primary(optic: Optic, wl_nm: float) -> None:
@@ -1015,6 +1088,38 @@ def _zemax_file(sample: str, tmpdir: str) -> str:
     return path
 
 
+@functools.cache
+def _our_glass_sources() -> dict[str, str]:
+    """Our catalogue: normalised glass name -> its refractiveindex.info file (the "# src=" line
+    above each row of renderer/optics/data/glass_catalog.tsv)."""
+    out, src = {}, None
+    for line in (pz.REPO / "renderer" / "optics" / "data" / "glass_catalog.tsv").read_text().splitlines():
+        if line.startswith("# src="):
+            src = line[len("# src=") :].split()[0]
+        elif line and not line.startswith("#") and src:
+            out[re.sub(r"[-_ .]", "", line.split("\t")[0]).upper()] = src
+            src = None
+    return out
+
+
+def _use_our_glass_files(optic: Optic) -> None:
+    """Where optiland resolves a bare glass name to another maker's file than our catalogue
+    does (SF15 and SF4: HIKARI there, Schott here; SF5: optiland picks N-SF5), give the reference
+    our file, so both sides trace the same glass and the comparison tests the import and the
+    tracer, not the name lookup (the two readings differ by ~1e-6 to 1e-5 in index)."""
+    import optiland.database
+    from optiland.materials import MaterialFile
+
+    root = os.path.join(os.path.dirname(optiland.database.__file__), "data-nk")
+    ours = _our_glass_sources()
+    for surf in optic.surfaces.surfaces:
+        mat = surf.material_post
+        name, filename = getattr(mat, "name", None), getattr(mat, "filename", None)
+        src = ours.get(re.sub(r"[-_ .]", "", str(name)).upper()) if name and filename else None
+        if src and os.path.realpath(filename) != os.path.realpath(os.path.join(root, src)):
+            surf.material_post = MaterialFile(os.path.join(root, src))
+
+
 def _sample_reference(sample: str, wl_nm: float) -> Optic:
     """optiland's own model of the sample (real glasses), at primary wavelength wl_nm, with the
     stop fixed at the size written to the file (float_by_stop_size) and the same clear
@@ -1023,6 +1128,7 @@ def _sample_reference(sample: str, wl_nm: float) -> Optic:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         optic.updater.update_paraxial()
+        _use_our_glass_files(optic)
     stop = optic.surfaces.surfaces[optic.surfaces.stop_index]
     stop_semi = float(_f(stop.semi_aperture))
     _set_primary(optic, wl_nm)
@@ -1079,6 +1185,49 @@ def _glass_names(optic: Optic) -> list[str]:
 
 @pytest.mark.parametrize("wavelength_nm", [D_NM, F_NM], ids=["d", "F"])
 def test_zemax_sample_paraxial(petzval_bin, zemax_dir, sample, wavelength_nm, deviation_log):
+    check_zemax_paraxial(sample, zemax_dir, wavelength_nm, deviation_log)
+
+
+def test_zemax_more_samples_paraxial(petzval_bin, zemax_dir, more_sample, deviation_log):
+    """The other optiland samples: imported, first-order data as optiland's at the d line."""
+    check_zemax_paraxial(more_sample, zemax_dir, D_NM, deviation_log)
+
+
+@pytest.mark.parametrize("unsupported", sorted(UNSUPPORTED_SAMPLES))
+def test_zemax_unsupported_samples_fail_clearly(petzval_bin, zemax_dir, unsupported):
+    """Mirrors, infrared materials and images inside a medium: `lens info` fails with the
+    file, the line of the offending keyword and the reason (no panic, no silent lens)."""
+    path = _zemax_file(unsupported, zemax_dir)
+    with pytest.raises(pz.PetzvalError) as err:
+        pz.lens_info(path, wavelength=D_NM)
+    msg = str(err.value)
+    want = UNSUPPORTED_SAMPLES[unsupported]
+    # the same for `lens trace` and `render` goes through the same import; one call suffices
+    assert "panicked" not in msg, msg
+    assert re.search(re.escape(path) + r":\d+: ", msg), f"{unsupported}: error does not name file:line:\n{msg}"
+    assert want in msg, f"{unsupported}: expected {want!r} in:\n{msg}"
+
+
+def test_zemax_eye_model_images_inside_the_eye(petzval_bin, zemax_dir, deviation_log):
+    """optiland's Navarro wide-angle eye: the image lies in the vitreous (n' = 1.3377), which
+    our lenses support. Our EFL is 1/power; optiland's f2 is the image-side focal length
+    n'/power. The retina's curvature is not kept (the sensor is flat), with a note."""
+    path = _zemax_file("navarro-eye", zemax_dir)
+    ref = _sample_reference("navarro-eye", D_NM)
+    exp = pz.lens_export(path, wavelength=D_NM)
+    info = pz.lens_info(path, wavelength=D_NM)
+    n_img = exp["surfaces"][-1]["index_after"]
+    assert abs(n_img - 1.3377) < 1e-12, n_img
+    f2 = _f(ref.paraxial.f2())
+    dev = abs(info["efl_mm"] * n_img - f2) / f2
+    deviation_log.add("zemax 587.562", "navarro-eye", "|n' efl - f2| / f2", dev)
+    assert dev < PARAXIAL_REL, f"n' x EFL {info['efl_mm'] * n_img} vs optiland f2 {f2}"
+    toml = pz.run(["lens", "export", path])
+    assert "curvature (SURF 6 CURV, radius -12.0000 mm) is not kept" in toml, f"curved retina not noted:\n{toml[:600]}"
+
+
+def check_zemax_paraxial(sample: str, zemax_dir: str, wavelength_nm: float, deviation_log) -> None:
+    """Imported sample against optiland's own model: track, glass indices, first-order data."""
     path = _zemax_file(sample, zemax_dir)
     ref_optic = _sample_reference(sample, wavelength_nm)
     exp = pz.lens_export(path, wavelength=wavelength_nm)
@@ -1151,7 +1300,7 @@ def test_zemax_sample_real_rays(petzval_bin, zemax_dir, sample, wavelength_nm, d
 def test_zemax_files_use_known_glasses(petzval_bin, zemax_dir):
     """Every glass name optiland writes is one our catalogue resolves (import must not fail)."""
     problems = []
-    for sample in SAMPLE_NAMES:
+    for sample in SAMPLE_NAMES + MORE_SAMPLE_NAMES:
         path = _zemax_file(sample, zemax_dir)
         try:
             pz.lens_export(path, wavelength=D_NM)

@@ -37,6 +37,14 @@ pub enum Dispersion {
         /// A0..A5.
         a: [f64; 6],
     },
+    /// n² = A0 + Σ cᵢ λ^eᵢ: refractiveindex.info "formula 3" in general, for glasses whose
+    /// polynomial has terms the Schott form lacks (HIKARI's λ⁴ term).
+    Polynomial {
+        /// Constant term A0.
+        a0: f64,
+        /// (coefficient, exponent) pairs.
+        terms: Vec<(f64, f64)>,
+    },
     /// n = nd + (nF − nC) · (λ⁻² − λd⁻²) / (λF⁻² − λC⁻²): the model glass.
     Cauchy {
         /// Index at the d line.
@@ -62,6 +70,9 @@ impl Dispersion {
             Dispersion::Schott { a } => {
                 let il2 = 1.0 / l2;
                 (a[0] + a[1] * l2 + il2 * (a[2] + il2 * (a[3] + il2 * (a[4] + il2 * a[5])))).sqrt()
+            }
+            Dispersion::Polynomial { a0, terms } => {
+                (a0 + terms.iter().map(|(c, e)| c * l_um.powf(*e)).sum::<f64>()).sqrt()
             }
             Dispersion::Cauchy { nd, vd } => {
                 let inv2 = |l_nm: f64| 1.0 / (l_nm * 1e-3).powi(2);
@@ -225,6 +236,9 @@ fn parse_catalog(text: &str) -> Vec<CatalogGlass> {
                 a.copy_from_slice(&nums);
                 Dispersion::Schott { a }
             }
+            "polynomial" if !nums.len().is_multiple_of(2) => {
+                Dispersion::Polynomial { a0: nums[0], terms: nums[1..].chunks(2).map(|p| (p[0], p[1])).collect() }
+            }
             _ => continue,
         };
         out.push(CatalogGlass { name: cols[0].to_string(), catalogue: cols[1].to_string(), dispersion });
@@ -246,6 +260,19 @@ mod tests {
                 assert!(n.is_finite() && n > 1.2 && n < 2.5, "{} at {wl} nm: {n}", g.name);
             }
         }
+    }
+
+    #[test]
+    fn polynomial_rows_give_the_makers_nd() {
+        // HIKARI J-LASF015 (formula 3 with a λ⁴ term): catalogue nd 1.80400, vd 46.6
+        let Ok(Material::Catalog { dispersion, .. }) = Material::from_catalog("J-LASF015") else {
+            panic!("J-LASF015 must be in the catalogue");
+        };
+        assert!(matches!(dispersion, Dispersion::Polynomial { ref terms, .. } if terms.len() == 6), "{dispersion:?}");
+        let nd = dispersion.index(WAVELENGTH_D_NM);
+        assert!((nd - 1.80400).abs() < 5e-6, "nd {nd}");
+        let vd = (nd - 1.0) / (dispersion.index(WAVELENGTH_F_NM) - dispersion.index(WAVELENGTH_C_NM));
+        assert!((vd - 46.6).abs() < 0.05, "vd {vd}");
     }
 
     #[test]

@@ -392,13 +392,38 @@ fn zemax_intersecting_elements_are_reported_at_the_disz_line() {
     assert_eq!(line, line_containing(&t, "DISZ 0.1"), "{msg}");
     assert!(line > line_containing(&t, "SURF 1") && line < line_containing(&t, "SURF 2"), "{msg}");
     assert_eq!(field, "surface[1].thickness_mm (DISZ)");
-    // a semi-diameter the surface cannot have: the DIAM line, and the radius in the message
+}
+
+/// A DIAM past the rim of its sphere (as optiland writes from paraxial ray heights at a very
+/// wide field) becomes the rim, with a note: no ray meets the surface farther out anyway.
+#[test]
+fn zemax_diam_past_the_rim_becomes_the_rim() {
+    let text = read("zmx/cooke_triplet.zmx");
     let first = text.find("SURF 1").unwrap();
     let t = format!("{}{}", &text[..first], text[first..].replacen("DIAM 9.1900830893933154E+00", "DIAM 40", 1));
-    let (line, field, msg) = lens_file_err(build(import_zemax(t.as_bytes(), "d.zmx")));
-    assert_eq!(line, line_containing(&t, "DIAM 40"), "{msg}");
-    assert_eq!(field, "surface[1].semi_diameter_mm (DIAM)");
-    assert!(msg.contains("radius of curvature"), "{msg}");
+    let (p, map) = import_zemax(t.as_bytes(), "d.zmx").unwrap();
+    let r = p.surfaces[0].radius_mm.abs();
+    let sd = p.surfaces[0].semi_diameter_mm;
+    assert!(sd < r && sd > r * (1.0 - 1e-8), "semi-diameter {sd} vs radius {r}");
+    assert!(p.lens.notes.contains("SURF 1: semi-diameter 40.0000 mm is beyond the surface's rim"), "{}", p.lens.notes);
+    Lens::new(p, &map, None).unwrap();
+}
+
+/// The image surface in front of the last lens surface (a negative last DISZ) is refused at
+/// its line, saying why.
+#[test]
+fn zemax_image_in_front_of_the_lens_is_refused() {
+    let text = read("zmx/cooke_triplet.zmx");
+    let last = text.rfind("SURF ").unwrap();
+    let before_image = text[..last].rfind("SURF ").unwrap();
+    let block = &text[before_image..last];
+    let disz = block.lines().find(|l| l.trim_start().starts_with("DISZ")).unwrap();
+    // the image surface in front of the last lens surface
+    let t = format!("{}{}{}", &text[..before_image], block.replacen(disz, "  DISZ -0.5", 1), &text[last..]);
+    let (line, field, msg) = lens_file_err(import_zemax(t.as_bytes(), "neg.zmx"));
+    assert_eq!(line, line_containing(&t, "DISZ -0.5"), "{msg}");
+    assert_eq!(field, "DISZ");
+    assert!(msg.contains("0.5 mm in front of the last lens surface"), "{msg}");
 }
 
 #[test]
@@ -806,8 +831,11 @@ fn unknown_glasses_get_near_suggestions_only() {
     let msg = |name: &str| petzval_optics::glass::Material::from_catalog(name).unwrap_err().to_string();
     assert!(msg("N-BK8").ends_with("did you mean N-BK7?"), "{}", msg("N-BK8"));
     assert!(msg("LAK9X").contains("LAK9"), "{}", msg("LAK9X"));
-    // J-LLF2 (a Hikari glass) contains "F2" but is not F2
-    assert!(!msg("J-LLF2").contains("did you mean"), "{}", msg("J-LLF2"));
+    // K-LLF2 (not a glass; Hikari's J-LLF2 is one edit away) contains "F2" but is not F2
+    let m = msg("K-LLF2");
+    let suggested: Vec<&str> =
+        m.split("did you mean ").nth(1).map(|l| l.trim_end_matches('?').split(", ").collect()).unwrap_or_default();
+    assert!(suggested.contains(&"J-LLF2") && !suggested.contains(&"F2"), "{m}");
 }
 
 /// Issue 12: every text format reads UTF-8 with a BOM and UTF-16 (as Windows tools write them),

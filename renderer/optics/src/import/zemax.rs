@@ -37,14 +37,23 @@
 //!   refused.
 //! - A glass name not in our catalogue falls back to the file's own nd/vd (fields 4 and 5 of
 //!   the `GLAS` line) as a model glass, with a note; without usable nd it is an error.
+//! - A semi-diameter beyond the rim of a sphere or conic (|R| / √(1 + k), e.g. an estimate
+//!   from paraxial ray heights at a 160° field) is set to the rim, with a note: no ray can meet
+//!   the surface farther out anyway.
+//! - The image surface must lie behind the last lens surface: a negative last `DISZ` (an image
+//!   inside the lens, as in optiland's Microscope20x) is refused
+//!   at that line. Image space may be glass or another medium (an eye's vitreous).
 //! - A surface with `DIAM 0` (or none) takes the larger semi-diameter of its nearest
 //!   neighbours that have one, with a note.
 //! - The stop is the Zemax stop surface itself, curved or not and with glass around it or not,
 //!   as in Zemax: the tracer clips by the opening where the ray meets that surface, then refracts.
-//! - Neighbouring surfaces whose edges cross are NOT adjusted (Zemax semi-diameters are
-//!   design data): validation reports them at the surface's `SURF` line.
+//! - Neighbouring surfaces whose edges cross inside their common aperture (a DIAM past the
+//!   real beam, as optiland writes for a 170° lens) are cut back to the height where they meet,
+//!   rounded down to 1 µm, with a note, as for pbrt tables; a cut below half the semi-diameter
+//!   is not made (the thickness is then more likely wrong than the DIAM) and validation reports
+//!   the crossing at the `DISZ` line.
 
-use super::pbrt::{join_sentences, short, MAX_LENGTH_MM};
+use super::pbrt::{fit_semi_diameters, join_sentences, short, MAX_LENGTH_MM};
 use crate::error::{Error, Result};
 use crate::glass::Material;
 use crate::prescription::{
@@ -81,6 +90,45 @@ struct ZSurf {
 enum GlassRef {
     Model { nd: f64, vd: f64 },
     Named { name: String, nd: Option<f64>, vd: Option<f64> },
+}
+
+/// The largest semi-diameter at which a sphere or conic (with any polynomial terms) exists, a hair
+/// inside its rim so the sag stays defined: |R| / √(1 + k) when 1 + k > 0, else none.
+fn conic_rim_mm(radius_mm: f64, conic: f64) -> Option<f64> {
+    let k1 = 1.0 + conic;
+    (radius_mm != 0.0 && k1 > 0.0).then(|| radius_mm.abs() / k1.sqrt() * (1.0 - 1e-9))
+}
+
+/// The image surface must lie behind the last lens surface (DISZ ≥ 0), where a sensor can be.
+fn check_image_behind_lens(file: &str, last: &ZSurf) -> Result<()> {
+    if let Some(d) = last.disz.filter(|d| d.is_finite() && *d < 0.0) {
+        let line = last.key_lines.iter().rev().find(|(k, _)| *k == "DISZ").map_or(last.line, |(_, l)| *l);
+        return Err(Error::lens_file(
+            file,
+            line,
+            "DISZ",
+            format!(
+                "the image surface is {} mm in front of the last lens surface (SURF {} DISZ < 0): petzval needs the image behind the lens, where the sensor goes",
+                Num(-d),
+                last.number
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The stop's housing: the larger semi-diameter of the stop and its neighbours.
+fn set_stop_housing(specs: &mut [SurfaceSpec]) {
+    if let Some(si) = specs.iter().position(|s| s.stop) {
+        let mut housing = specs[si].semi_diameter_mm;
+        if si > 0 {
+            housing = housing.max(specs[si - 1].semi_diameter_mm);
+        }
+        if si + 1 < specs.len() {
+            housing = housing.max(specs[si + 1].semi_diameter_mm);
+        }
+        specs[si].housing_semi_diameter_mm = Some(housing);
+    }
 }
 
 /// Imports a Zemax sequential file from its raw bytes. `file` names the file in errors.
@@ -279,6 +327,7 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
         }
     }
     let lens_surfs = &surfs[1..surfs.len() - 1];
+    check_image_behind_lens(file, &lens_surfs[lens_surfs.len() - 1])?;
     let mut notes: Vec<String> = Vec::new();
     // What a camera lens file does not carry, named rather than dropped in silence: the render
     // focuses with --focus, and the sensor is flat.
@@ -489,6 +538,19 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
                 ))
             }
         }
+        // A semi-diameter past the edge of a sphere or conic (an estimate from paraxial ray
+        // heights at a very wide field, e.g. optiland's DIAM): the surface ends at its rim.
+        if let Some(rim) = conic_rim_mm(spec.radius_mm, spec.conic).filter(|rim| spec.semi_diameter_mm > *rim) {
+            notes.push(format!(
+                "SURF {}: semi-diameter {:.4} mm is beyond the surface's rim (radius {:.4} mm, conic {}): set to {:.6} mm.",
+                s.number,
+                spec.semi_diameter_mm,
+                spec.radius_mm,
+                spec.conic,
+                rim
+            ));
+            spec.semi_diameter_mm = rim;
+        }
         // Glass.
         if let Some((gl, g)) = &s.glass {
             spec.material = match g {
@@ -539,17 +601,6 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
             lines.push(s.line);
         }
     }
-    // Stop housing: the larger neighbour.
-    if let Some(si) = specs.iter().position(|s| s.stop) {
-        let mut housing = specs[si].semi_diameter_mm;
-        if si > 0 {
-            housing = housing.max(specs[si - 1].semi_diameter_mm);
-        }
-        if si + 1 < specs.len() {
-            housing = housing.max(specs[si + 1].semi_diameter_mm);
-        }
-        specs[si].housing_semi_diameter_mm = Some(housing);
-    }
 
     // Wavelengths in range only (our renderer covers 380..780 nm).
     let nm: Vec<f64> = waves.iter().map(|(_, w)| w * 1000.0).collect();
@@ -570,13 +621,11 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
     if !name.is_empty() {
         source.push_str(&format!(" ({name})"));
     }
-    let mut all_notes = notes_in_file;
-    all_notes.extend(notes);
-    let p = Prescription {
+    let mut p = Prescription {
         lens: LensMeta {
             name: title,
             source,
-            notes: join_sentences(&all_notes),
+            notes: String::new(),
             focal_length_mm: None,
             f_number,
             wavelengths_nm,
@@ -586,5 +635,11 @@ pub fn import_zemax(bytes: &[u8], file: &str) -> Result<(Prescription, SourceMap
         aperture: Default::default(),
         surfaces: specs,
     };
+    // Neighbouring edges that cross (DIAM past the real beam): cut back to where they meet.
+    notes.extend(fit_semi_diameters(&mut p));
+    set_stop_housing(&mut p.surfaces);
+    let mut all_notes = notes_in_file;
+    all_notes.extend(notes);
+    p.lens.notes = join_sentences(&all_notes);
     Ok((p, SourceMap::new(file, lines).with_field_keywords(keywords)))
 }
