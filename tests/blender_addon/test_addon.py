@@ -1504,3 +1504,71 @@ def test_viewport_preview_with_a_fast_depth_of_field_method(main_scene, report):
     bad = run("raytrace")
     assert bad.finished and bad.error is not None and "method" in bad.error, bad.error
     report.line(f"viewport IBRT preview: mean {ratio:.4f} of Monte Carlo's at 64 spp; unknown method: {bad.error}")
+
+
+# ------------------------------------------------------------------------------------------
+# hair curves
+
+
+def _hair_scene(radius_scale: float = 1.0):
+    """tests/usd/blender_hair_scene.py's scene in the add-on: a Curves object of 24 thick
+    Catmull-Rom strands (5 points, tapering radii), diffuse red, a uniform white world, 160 ×
+    120. The radii are multiplied by `radius_scale`."""
+    H.reset_blender()
+    s = bpy.context.scene
+    s.render.resolution_x, s.render.resolution_y, s.render.resolution_percentage = 160, 120, 100
+    H.set_world_colour((1.0, 1.0, 1.0))
+    cu = bpy.data.hair_curves.new("Hair")
+    n, k = 24, 5
+    cu.add_curves([k] * n)
+    rng = np.random.default_rng(5)
+    for i in range(n):
+        x0, y0 = -0.75 + 0.3 * (i % 6) + rng.uniform(-0.05, 0.05), 0.3 * (i // 6) + rng.uniform(-0.05, 0.05)
+        for j in range(k):
+            p = cu.points[i * k + j]
+            p.position = (x0 + 0.12 * math.sin(1.3 * j + i), y0, 0.25 * j)
+            p.radius = (0.04 - 0.006 * j) * radius_scale
+    m = bpy.data.materials.new("HairRed")
+    bsdf = m.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Base Color"].default_value = (0.8, 0.2, 0.1, 1)
+    bsdf.inputs["Roughness"].default_value = 1.0
+    bsdf.inputs["Specular IOR Level"].default_value = 0.0
+    cu.materials.append(m)
+    hair = bpy.data.objects.new("Hair", cu)
+    s.collection.objects.link(hair)
+    H.add_camera("HairCam", (0.0, -4.0, 0.5), (math.radians(90), 0.0, 0.0), lens_mm=35.0, sensor_mm=36.0)
+    s.cycles_curves.shape = "THICK"
+
+
+def _hair_coverage(img: np.ndarray) -> float:
+    """The fraction of the image the red strands cover (the background is white)."""
+    return float((img[..., 1] < 0.6).mean())
+
+
+def test_hair_curves_render_as_cycles(addon, report):
+    """A Curves object (hair) rendered by the add-on as tubes against Cycles' 3D curves: the
+    strands' coverage within 3 % and the mean colour of the window around them within 1 % (the
+    tolerances of tests/usd/test_curves.py); the radii doubled is far off (negative control)."""
+    _hair_scene()
+    cyc_exr = OUT / "hair_cycles.exr"
+    S.render_cycles(S.CyclesSettings(samples=32, seed=1), "HairCam", cyc_exr)
+    cyc = B.read_rgb(cyc_exr)
+    H.configure_petzval(32, seed=0, camera="HairCam")
+    _, entry = H.render_still(OUT / "hair_petzval.exr")
+    ours = B.read_rgb(OUT / "hair_petzval.exr")
+    cov_o, cov_c = _hair_coverage(ours), _hair_coverage(cyc)
+    ys, xs = np.nonzero(cyc[..., 1] < 0.6)
+    win = np.s_[ys.min() : ys.max() + 1, xs.min() : xs.max() + 1]
+    mo, mc = ours[win].reshape(-1, 3).mean(0), cyc[win].reshape(-1, 3).mean(0)
+    # negative control: every radius doubled
+    _hair_scene(radius_scale=2.0)
+    H.configure_petzval(32, seed=0, camera="HairCam")
+    H.render_still(OUT / "hair_thick.exr")
+    cov_t = _hair_coverage(B.read_rgb(OUT / "hair_thick.exr"))
+    report.line(f"hair curves: coverage petzval {cov_o:.4f} Cycles {cov_c:.4f} (radii doubled {cov_t:.4f}); "
+                f"window mean petzval {np.round(mo, 4)} Cycles {np.round(mc, 4)}; stats {entry.get('stats')}")
+    assert not any("hair" in u for u in entry["notes"].get("unsupported", [])), entry["notes"]
+    assert cov_c > 0.03, "the strands are not in the picture"
+    assert abs(cov_o / cov_c - 1) < 0.03, (cov_o, cov_c)
+    assert np.all(np.abs(mo / mc - 1) < 0.01), (mo, mc)
+    assert cov_t / cov_c > 1.3, (cov_t, cov_c)
