@@ -1572,3 +1572,44 @@ def test_hair_curves_render_as_cycles(addon, report):
     assert abs(cov_o / cov_c - 1) < 0.03, (cov_o, cov_c)
     assert np.all(np.abs(mo / mc - 1) < 0.01), (mo, mc)
     assert cov_t / cov_c > 1.3, (cov_t, cov_c)
+
+
+def test_hair_curves_data_and_errors(addon, report):
+    """What the export reads from a Curves data-block as Cycles reads it (no ``radius``
+    attribute: 0.005; a POLY first curve: every curve straight), and ``Scene.add_curves``'s
+    results and errors: a one-point curve skipped with a warning, bad counts and radii raised."""
+    import importlib
+
+    import petzval
+
+    curves = importlib.import_module(addon.__name__ + ".export.curves")
+    H.reset_blender()
+    cu = bpy.data.hair_curves.new("Plain")
+    cu.add_curves([3, 4])
+    cu.curves[0].curve_type = "POLY"  # Blender 5 exposes the type per curve
+    d = curves.curves_data(cu)
+    assert d is not None
+    assert np.all(d["radii"] == curves.DEFAULT_RADIUS) and curves.DEFAULT_RADIUS == 0.005, d["radii"]
+    assert d["counts"].tolist() == [3, 4] and d["curve_types"].tolist() == [1, 1], d
+    pz = petzval.Scene()
+    pz.add_material("M")
+    pos = np.array([[0, 0, 0], [0, 0, 1], [0, 0, 2], [1, 0, 0], [1, 0, 1], [1, 0, 2], [1, 0, 3], [5, 5, 5]], float)
+    mesh = pz.add_curves(pos, np.full(8, 0.1), np.array([3, 4, 1]), name="H")
+    assert mesh == 0 and pz.mesh_count == 1
+    # 3 points pinned: 2 spans; 4 points: 3 spans; 4 rings per span, 8 sides, 2 triangles a quad
+    assert pz.triangle_count == (2 + 3) * 4 * 8 * 2, pz.triangle_count
+    assert any("'H'" in w and "1 with too few points" in w for w in pz.warnings), pz.warnings
+    straight = petzval.Scene()
+    straight.add_curves(pos[:7], np.full(7, 0.1), np.array([3, 4]), curve_types=np.array([1, 1]))
+    assert straight.triangle_count == (2 + 3) * 8 * 2, straight.triangle_count
+    assert petzval.Scene().add_curves(pos[7:], np.full(1, 0.1), np.array([1])) is None
+    for kwargs, field in (
+        ({"counts": np.array([3, 4])}, "counts"),
+        ({"radii": np.full(8, -0.1)}, "radii"),
+        ({"curve_types": np.array([0, 7, 0])}, "curve_types[1]"),
+        ({"material_ids": np.array([0, 0, 4])}, "material_ids"),
+    ):
+        args = {"positions": pos, "radii": np.full(8, 0.1), "counts": np.array([3, 4, 1]), **kwargs}
+        with pytest.raises(petzval.InvalidSceneError, match=field.replace("[", r"\[")):
+            pz.add_curves(**args, name="H")
+    report.line("hair curves: Cycles' default radius and POLY rule read; add_curves skips and raises as documented")
