@@ -1586,10 +1586,10 @@ def test_hair_curves_data_and_errors(addon, report):
     H.reset_blender()
     cu = bpy.data.hair_curves.new("Plain")
     cu.add_curves([3, 4])
-    cu.curves[0].curve_type = "POLY"  # Blender 5 exposes the type per curve
+    cu.set_types(type="POLY", indices=[0])
     d = curves.curves_data(cu)
     assert d is not None
-    assert np.all(d["radii"] == curves.DEFAULT_RADIUS) and curves.DEFAULT_RADIUS == 0.005, d["radii"]
+    assert np.all(d["radii"] == np.float32(curves.DEFAULT_RADIUS)) and curves.DEFAULT_RADIUS == 0.005, d["radii"]
     assert d["counts"].tolist() == [3, 4] and d["curve_types"].tolist() == [1, 1], d
     pz = petzval.Scene()
     pz.add_material("M")
@@ -1612,4 +1612,37 @@ def test_hair_curves_data_and_errors(addon, report):
         args = {"positions": pos, "radii": np.full(8, 0.1), "counts": np.array([3, 4, 1]), **kwargs}
         with pytest.raises(petzval.InvalidSceneError, match=field.replace("[", r"\[")):
             pz.add_curves(**args, name="H")
-    report.line("hair curves: Cycles' default radius and POLY rule read; add_curves skips and raises as documented")
+    # the export: a Curves object, a linked duplicate, a third copy and its 4 vertex instances
+    # hold one petzval mesh, placed once per object and instance; no "hair curves" note
+    export = importlib.import_module(addon.__name__ + ".export")
+    cu.points[0].position = (0.0, 0.0, 1.0)
+    first = bpy.data.objects.new("HairA", cu)
+    bpy.context.scene.collection.objects.link(first)
+    dup = first.copy()
+    dup.location = (1.0, 0.0, 0.0)
+    bpy.context.scene.collection.objects.link(dup)
+    bpy.ops.mesh.primitive_plane_add(size=1.0, location=(0.0, 3.0, 0.0))
+    plane = bpy.context.active_object
+    plane.instance_type = "VERTS"
+    plane.show_instancer_for_render = plane.show_instancer_for_viewport = False
+    child = first.copy()
+    child.parent = plane
+    bpy.context.scene.collection.objects.link(child)
+    warnings = []
+    notes = type("Notes", (), {"warn": lambda self, m: warnings.append(m)})()
+    built, stats = export.build(petzval, bpy.context.evaluated_depsgraph_get(), notes)
+    assert stats["instances"] == 4 and stats["objects"] >= 2, stats
+    assert stats["petzval_meshes"] == 1, stats
+    assert stats["petzval_instances"] == stats["objects"] + stats["instances"], stats
+    # straight (the first curve is POLY): 2 + 3 spans of 8 quads, per placement
+    assert built.triangle_count == stats["petzval_instances"] * (2 + 3) * 8 * 2, built.triangle_count
+    assert not any("hair" in w for w in warnings), warnings
+    # legacy particle hair on a mesh: listed, not rendered
+    bpy.ops.mesh.primitive_cube_add(size=0.5, location=(0.0, 5.0, 0.0))
+    bpy.ops.object.particle_system_add()
+    bpy.context.active_object.particle_systems[0].settings.type = "HAIR"
+    warnings.clear()
+    export.build(petzval, bpy.context.evaluated_depsgraph_get(), notes)
+    assert any(w.startswith("particle hair") and "Cube" in w for w in warnings), warnings
+    report.line(f"hair curves: Cycles' default radius and POLY rule read; add_curves skips and raises as "
+                f"documented; instanced Curves: {stats}")
