@@ -1,8 +1,9 @@
 //! `petzval.Scene`: a scene built from numpy buffers (meshes, materials, textures, lights,
 //! environment), validated with errors naming the object and field.
 
-use glam::{DAffine3, DMat4, DVec4, Vec2, Vec3, Vec4};
+use glam::{DAffine3, DMat4, DVec3, DVec4, Vec2, Vec3, Vec4};
 use numpy::{AllowTypeChange, PyArrayLike1, PyArrayLike2, PyArrayLike3};
+use petzval_renderer::scene::curves::{tube_mesh, Basis, TubeCurve, Wrap as CurveWrap, MAX_CURVE_TRIANGLES, SIDES};
 use petzval_renderer::scene::environment::EnvironmentMap;
 use petzval_renderer::scene::texture::Wrap;
 use petzval_renderer::scene::{
@@ -573,6 +574,104 @@ impl PyScene {
         })
     }
 
+    /// Adds curves (a Blender Curves object) as round tubes (see the stub); returns the mesh id,
+    /// or None when no curve makes a tube.
+    #[pyo3(signature = (positions, radii, counts, curve_types = None, material_ids = None, transform = None, name = ""))]
+    #[allow(clippy::too_many_arguments)]
+    fn add_curves(
+        &mut self,
+        positions: PyArrayLike2<'_, f64, AllowTypeChange>,
+        radii: PyArrayLike1<'_, f64, AllowTypeChange>,
+        counts: PyArrayLike1<'_, i64, AllowTypeChange>,
+        curve_types: Option<PyArrayLike1<'_, i64, AllowTypeChange>>,
+        material_ids: Option<PyArrayLike1<'_, i64, AllowTypeChange>>,
+        transform: Option<PyArrayLike2<'_, f64, AllowTypeChange>>,
+        name: &str,
+    ) -> PyResult<Option<usize>> {
+        guard(|| {
+            // 1. Shapes and values.
+            let points = vec3_rows(name, "positions", &positions.as_array())?;
+            let np = points.len();
+            let radii: Vec<f64> = radii.as_array().iter().copied().collect();
+            if radii.len() != np {
+                return Err(scene_err(name, "radii", format!("{} radii for {np} points", radii.len())));
+            }
+            if let Some(r) = radii.iter().find(|r| !(r.is_finite() && **r >= 0.0)) {
+                return Err(scene_err(name, "radii", format!("must be finite and non-negative, got {r}")));
+            }
+            let counts: Vec<i64> = counts.as_array().iter().copied().collect();
+            let nc = counts.len();
+            if let Some(c) = counts.iter().find(|&&c| c < 0) {
+                return Err(scene_err(name, "counts", format!("has a negative count {c}")));
+            }
+            let sum: i64 = counts.iter().sum();
+            if sum != np as i64 {
+                return Err(scene_err(name, "counts", format!("add up to {sum} points, but positions has {np}")));
+            }
+            let per_curve = |field: &str, v: Option<Vec<i64>>| -> PyResult<Vec<i64>> {
+                match v {
+                    Some(v) if v.len() != nc => {
+                        Err(scene_err(name, field, format!("{} values for {nc} curves", v.len())))
+                    }
+                    Some(v) => Ok(v),
+                    None => Ok(vec![0; nc]),
+                }
+            };
+            let types = per_curve("curve_types", curve_types.map(|a| a.as_array().iter().copied().collect()))?;
+            let mats = per_curve("material_ids", material_ids.map(|a| a.as_array().iter().copied().collect()))?;
+            if let Some(bad) = mats.iter().find(|&&i| i < 0 || i as usize >= self.scene.materials.len().max(1)) {
+                return Err(scene_err(
+                    name,
+                    "material_ids",
+                    format!("material {bad} does not exist ({} materials)", self.scene.materials.len()),
+                ));
+            }
+            let xf = match &transform {
+                Some(m) => affine_from_rows(name, "transform", &m.as_array())?,
+                None => DAffine3::IDENTITY,
+            };
+            // 2. Each curve's control points in its basis.
+            let mut curves = Vec::with_capacity(nc);
+            let mut first = 0usize;
+            for k in 0..nc {
+                let n = counts[k] as usize;
+                let range = first..first + n;
+                first += n;
+                let curve = blender_curve(&points[range.clone()], &radii[range], types[k])
+                    .map_err(|m| scene_err(name, &format!("curve_types[{k}]"), m))?;
+                curves.push(TubeCurve { material: mats[k] as u32, ..curve });
+            }
+            // 3. The tubes, one mesh placed by the transform.
+            let (mesh, report) = tube_mesh(&curves);
+            if report.bad_counts > 0 || report.over_limit > 0 || report.sides != SIDES {
+                self.scene.warnings.push(format!(
+                    "curves '{name}': {} of {nc} curves tessellated ({} with too few points, {} over the {} triangle \
+                     limit), {} rings per span and {} sides",
+                    report.tessellated,
+                    report.bad_counts,
+                    report.over_limit,
+                    MAX_CURVE_TRIANGLES,
+                    report.rings_per_span,
+                    report.sides
+                ));
+            }
+            if mesh.indices.is_empty() {
+                return Ok(None);
+            }
+            if mesh.positions.iter().any(|p| !p.is_finite()) {
+                return Err(scene_err(name, "positions", "a tube vertex is not finite in single precision".into()));
+            }
+            let mut mesh = mesh;
+            let nv = mesh.positions.len();
+            mesh.uv0 = vec![Vec2::ZERO; nv];
+            mesh.tangents = vec![Vec4::ZERO; nv];
+            self.all_tangents = false;
+            let id = self.scene.add_mesh(mesh);
+            self.scene.add_instance(id, affine_f32(&xf));
+            Ok(Some(id as usize))
+        })
+    }
+
     /// Places mesh `mesh_id` (from `add_mesh`) once more with a (4, 4) object-to-world matrix.
     #[pyo3(signature = (mesh_id, transform, name = ""))]
     fn add_instance(
@@ -808,6 +907,34 @@ pub(crate) fn face_normals(positions: &[Vec3], indices: &[[u32; 3]]) -> Vec<Vec3
         }
     }
     n.into_iter().map(|v| v.try_normalize().unwrap_or(Vec3::Z)).collect()
+}
+
+/// An (N, 3) array of finite values as points.
+fn vec3_rows(name: &str, field: &str, a: &numpy::ndarray::ArrayView2<'_, f64>) -> PyResult<Vec<DVec3>> {
+    if a.ncols() != 3 {
+        return Err(scene_err(name, field, format!("expected (N, 3), got {:?}", a.shape())));
+    }
+    if a.iter().any(|v| !v.is_finite()) {
+        return Err(scene_err(name, field, "contain non-finite values".into()));
+    }
+    Ok((0..a.nrows()).map(|i| DVec3::new(a[[i, 0]], a[[i, 1]], a[[i, 2]])).collect())
+}
+
+/// One Blender curve as Cycles renders it (material 0):
+///
+/// | `curve_type` | rendered as |
+/// |---|---|
+/// | 0 CATMULL_ROM | Catmull-Rom through the points, pinned (the end points repeated, as Cycles does) |
+/// | 1 POLY | straight spans (Cycles' linear thick curves) |
+/// | 2 BEZIER, 3 NURBS | as CATMULL_ROM through the control points (Cycles ignores handles, weights and knots) |
+/// | other | an error |
+fn blender_curve(p: &[DVec3], r: &[f64], kind: i64) -> Result<TubeCurve, String> {
+    let (basis, wrap) = match kind {
+        0 | 2 | 3 => (Basis::CatmullRom, CurveWrap::Pinned),
+        1 => (Basis::Linear, CurveWrap::Nonperiodic),
+        k => return Err(format!("unknown curve type {k} (0 Catmull-Rom, 1 poly, 2 Bézier, 3 NURBS)")),
+    };
+    Ok(TubeCurve { points: p.to_vec(), radii: r.to_vec(), basis, wrap, material: 0 })
 }
 
 /// A light's radius in metres: finite and ≥ 0.

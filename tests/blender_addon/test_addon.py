@@ -1504,3 +1504,145 @@ def test_viewport_preview_with_a_fast_depth_of_field_method(main_scene, report):
     bad = run("raytrace")
     assert bad.finished and bad.error is not None and "method" in bad.error, bad.error
     report.line(f"viewport IBRT preview: mean {ratio:.4f} of Monte Carlo's at 64 spp; unknown method: {bad.error}")
+
+
+# ------------------------------------------------------------------------------------------
+# hair curves
+
+
+def _hair_scene(radius_scale: float = 1.0):
+    """tests/usd/blender_hair_scene.py's scene in the add-on: a Curves object of 24 thick
+    Catmull-Rom strands (5 points, tapering radii), diffuse red, a uniform white world, 160 ×
+    120. The radii are multiplied by `radius_scale`."""
+    H.reset_blender()
+    s = bpy.context.scene
+    s.render.resolution_x, s.render.resolution_y, s.render.resolution_percentage = 160, 120, 100
+    H.set_world_colour((1.0, 1.0, 1.0))
+    cu = bpy.data.hair_curves.new("Hair")
+    n, k = 24, 5
+    cu.add_curves([k] * n)
+    rng = np.random.default_rng(5)
+    for i in range(n):
+        x0, y0 = -0.75 + 0.3 * (i % 6) + rng.uniform(-0.05, 0.05), 0.3 * (i // 6) + rng.uniform(-0.05, 0.05)
+        for j in range(k):
+            p = cu.points[i * k + j]
+            p.position = (x0 + 0.12 * math.sin(1.3 * j + i), y0, 0.25 * j)
+            p.radius = (0.04 - 0.006 * j) * radius_scale
+    m = bpy.data.materials.new("HairRed")
+    bsdf = m.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Base Color"].default_value = (0.8, 0.2, 0.1, 1)
+    bsdf.inputs["Roughness"].default_value = 1.0
+    bsdf.inputs["Specular IOR Level"].default_value = 0.0
+    cu.materials.append(m)
+    hair = bpy.data.objects.new("Hair", cu)
+    s.collection.objects.link(hair)
+    H.add_camera("HairCam", (0.0, -4.0, 0.5), (math.radians(90), 0.0, 0.0), lens_mm=35.0, sensor_mm=36.0)
+    s.cycles_curves.shape = "THICK"
+
+
+def _hair_coverage(img: np.ndarray) -> float:
+    """The fraction of the image the red strands cover (the background is white)."""
+    return float((img[..., 1] < 0.6).mean())
+
+
+def test_hair_curves_render_as_cycles(addon, report):
+    """A Curves object (hair) rendered by the add-on as tubes against Cycles' 3D curves: the
+    strands' coverage within 3 % and the mean colour of the window around them within 1 % (the
+    tolerances of tests/usd/test_curves.py); the radii doubled is far off (negative control)."""
+    _hair_scene()
+    cyc_exr = OUT / "hair_cycles.exr"
+    S.render_cycles(S.CyclesSettings(samples=32, seed=1), "HairCam", cyc_exr)
+    cyc = B.read_rgb(cyc_exr)
+    H.configure_petzval(32, seed=0, camera="HairCam")
+    _, entry = H.render_still(OUT / "hair_petzval.exr")
+    ours = B.read_rgb(OUT / "hair_petzval.exr")
+    cov_o, cov_c = _hair_coverage(ours), _hair_coverage(cyc)
+    ys, xs = np.nonzero(cyc[..., 1] < 0.6)
+    win = np.s_[ys.min() : ys.max() + 1, xs.min() : xs.max() + 1]
+    mo, mc = ours[win].reshape(-1, 3).mean(0), cyc[win].reshape(-1, 3).mean(0)
+    # negative control: every radius doubled
+    _hair_scene(radius_scale=2.0)
+    H.configure_petzval(32, seed=0, camera="HairCam")
+    H.render_still(OUT / "hair_thick.exr")
+    cov_t = _hair_coverage(B.read_rgb(OUT / "hair_thick.exr"))
+    report.line(f"hair curves: coverage petzval {cov_o:.4f} Cycles {cov_c:.4f} (radii doubled {cov_t:.4f}); "
+                f"window mean petzval {np.round(mo, 4)} Cycles {np.round(mc, 4)}; stats {entry.get('stats')}")
+    assert not any("hair" in u for u in entry["notes"].get("unsupported", [])), entry["notes"]
+    assert cov_c > 0.03, "the strands are not in the picture"
+    assert abs(cov_o / cov_c - 1) < 0.03, (cov_o, cov_c)
+    assert np.all(np.abs(mo / mc - 1) < 0.01), (mo, mc)
+    assert cov_t / cov_c > 1.3, (cov_t, cov_c)
+
+
+def test_hair_curves_data_and_errors(addon, report):
+    """What the export reads from a Curves data-block as Cycles reads it (no ``radius``
+    attribute: 0.005; a POLY first curve: every curve straight), and ``Scene.add_curves``'s
+    results and errors: a one-point curve skipped with a warning, bad counts and radii raised."""
+    import importlib
+
+    import petzval
+
+    curves = importlib.import_module(addon.__name__ + ".export.curves")
+    H.reset_blender()
+    cu = bpy.data.hair_curves.new("Plain")
+    cu.add_curves([3, 4])
+    cu.set_types(type="POLY", indices=[0])
+    d = curves.curves_data(cu)
+    assert d is not None
+    assert np.all(d["radii"] == np.float32(curves.DEFAULT_RADIUS)) and curves.DEFAULT_RADIUS == 0.005, d["radii"]
+    assert d["counts"].tolist() == [3, 4] and d["curve_types"].tolist() == [1, 1], d
+    pz = petzval.Scene()
+    pz.add_material("M")
+    pos = np.array([[0, 0, 0], [0, 0, 1], [0, 0, 2], [1, 0, 0], [1, 0, 1], [1, 0, 2], [1, 0, 3], [5, 5, 5]], float)
+    mesh = pz.add_curves(pos, np.full(8, 0.1), np.array([3, 4, 1]), name="H")
+    assert mesh == 0 and pz.mesh_count == 1
+    # 3 points pinned: 2 spans; 4 points: 3 spans; 4 rings per span, 8 sides, 2 triangles a quad
+    assert pz.triangle_count == (2 + 3) * 4 * 8 * 2, pz.triangle_count
+    assert any("'H'" in w and "1 with too few points" in w for w in pz.warnings), pz.warnings
+    straight = petzval.Scene()
+    straight.add_curves(pos[:7], np.full(7, 0.1), np.array([3, 4]), curve_types=np.array([1, 1]))
+    assert straight.triangle_count == (2 + 3) * 8 * 2, straight.triangle_count
+    assert petzval.Scene().add_curves(pos[7:], np.full(1, 0.1), np.array([1])) is None
+    for kwargs, field in (
+        ({"counts": np.array([3, 4])}, "counts"),
+        ({"radii": np.full(8, -0.1)}, "radii"),
+        ({"curve_types": np.array([0, 7, 0])}, "curve_types[1]"),
+        ({"material_ids": np.array([0, 0, 4])}, "material_ids"),
+    ):
+        args = {"positions": pos, "radii": np.full(8, 0.1), "counts": np.array([3, 4, 1]), **kwargs}
+        with pytest.raises(petzval.InvalidSceneError, match=field.replace("[", r"\[")):
+            pz.add_curves(**args, name="H")
+    # the export: a Curves object, a linked duplicate, a third copy and its 4 vertex instances
+    # hold one petzval mesh, placed once per object and instance; no "hair curves" note
+    export = importlib.import_module(addon.__name__ + ".export")
+    cu.points[0].position = (0.0, 0.0, 1.0)
+    first = bpy.data.objects.new("HairA", cu)
+    bpy.context.scene.collection.objects.link(first)
+    dup = first.copy()
+    dup.location = (1.0, 0.0, 0.0)
+    bpy.context.scene.collection.objects.link(dup)
+    bpy.ops.mesh.primitive_plane_add(size=1.0, location=(0.0, 3.0, 0.0))
+    plane = bpy.context.active_object
+    plane.instance_type = "VERTS"
+    plane.show_instancer_for_render = plane.show_instancer_for_viewport = False
+    child = first.copy()
+    child.parent = plane
+    bpy.context.scene.collection.objects.link(child)
+    warnings = []
+    notes = type("Notes", (), {"warn": lambda self, m: warnings.append(m)})()
+    built, stats = export.build(petzval, bpy.context.evaluated_depsgraph_get(), notes)
+    assert stats["instances"] == 4 and stats["objects"] >= 2, stats
+    assert stats["petzval_meshes"] == 1, stats
+    assert stats["petzval_instances"] == stats["objects"] + stats["instances"], stats
+    # straight (the first curve is POLY): 2 + 3 spans of 8 quads, per placement
+    assert built.triangle_count == stats["petzval_instances"] * (2 + 3) * 8 * 2, built.triangle_count
+    assert not any("hair" in w for w in warnings), warnings
+    # legacy particle hair on a mesh: listed, not rendered
+    bpy.ops.mesh.primitive_cube_add(size=0.5, location=(0.0, 5.0, 0.0))
+    bpy.ops.object.particle_system_add()
+    bpy.context.active_object.particle_systems[0].settings.type = "HAIR"
+    warnings.clear()
+    export.build(petzval, bpy.context.evaluated_depsgraph_get(), notes)
+    assert any(w.startswith("particle hair") and "Cube" in w for w in warnings), warnings
+    report.line(f"hair curves: Cycles' default radius and POLY rule read; add_curves skips and raises as "
+                f"documented; instanced Curves: {stats}")

@@ -4,7 +4,8 @@ Everything is passed in memory (numpy buffers), in petzval's conventions (see ``
 glTF axes (Blender (x, y, z) -> (x, z, -y), applied through each object's transform), UVs
 (u, 1 - v), image rows top first, linear colour.
 
-One module per concern: ``mesh`` (evaluated meshes as per-corner buffers), ``materials``
+One module per concern: ``mesh`` (evaluated meshes as per-corner buffers), ``curves`` (Curves
+objects, hair, as tubes), ``materials``
 (shaders and their Image Texture nodes), ``images`` (image pixels), ``lights``, ``world``, and
 ``nodes`` (node-tree helpers); :func:`build` here walks the depsgraph's object instances, and
 the engine adds the world with :func:`add_world`.
@@ -15,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..camera import to_gltf
+from .curves import curves_data, particle_hair_note
 from .lights import add_light
 from .materials import Materials
 from .mesh import mesh_data
@@ -22,8 +24,8 @@ from .world import add_world
 
 __all__ = ["GEOMETRY_TYPES", "UNSUPPORTED_TYPES", "add_world", "build"]
 
-GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
-UNSUPPORTED_TYPES = {"CURVES": "hair curves", "POINTCLOUD": "point clouds", "VOLUME": "volumes",
+GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES"}
+UNSUPPORTED_TYPES = {"POINTCLOUD": "point clouds", "VOLUME": "volumes",
                      "GREASEPENCIL": "Grease Pencil", "GPENCIL": "Grease Pencil"}
 
 
@@ -80,6 +82,9 @@ def build(petzval, depsgraph, notes, stop=None):
             continue
         if t not in GEOMETRY_TYPES or not inst.show_self:
             continue
+        hair = particle_hair_note(obj) if t == "MESH" and not inst.is_instance else None
+        if hair is not None:
+            notes.warn(hair)
         # Camera ray visibility off: the object's materials hidden from camera rays (reflections,
         # bounces and shadows still see it); the other ray types are not separated. The
         # shadow-terminator geometry offset is the object's too.
@@ -99,6 +104,9 @@ def build(petzval, depsgraph, notes, stop=None):
         else:
             table = np.array([materials.index(s.material) for s in slots], dtype=np.uint32)
         table = np.array([materials.for_object(int(k), visible_to_camera, offset) for k in table], dtype=np.uint32)
+        if t == "CURVES":
+            _add_curves(pz, obj, inst, table, mesh_ids, meshes, stats)
+            continue
         # the colour attribute the object's materials read (one per mesh: the first named)
         wanted = sorted({materials.colour_attribute[int(k)] for k in table if int(k) in materials.colour_attribute})
         if len(wanted) > 1:
@@ -142,3 +150,27 @@ def build(petzval, depsgraph, notes, stop=None):
     stats["petzval_meshes"] = pz.mesh_count
     stats["petzval_instances"] = pz.instance_count
     return pz, stats
+
+
+def _add_curves(pz, obj, inst, table, mesh_ids, cache, stats) -> None:
+    """A Curves object (hair) as tubes: added once per data-block and material table, placed
+    again for every further instance."""
+    data = obj.data
+    key = ("curves", data.as_pointer() if data is not None else obj.name_full)
+    cd = cache.get(key, False)
+    if cd is False:
+        cd = curves_data(data) if data is not None else None
+        cache[key] = cd
+        stats["meshes_converted"] += 1
+    if cd is None:
+        return
+    xf = to_gltf(inst.matrix_world)
+    id_key = (key, tuple(table.tolist()))
+    if id_key not in mesh_ids:
+        # every strand with the first slot's material, as Cycles
+        mat_ids = np.full(len(cd["counts"]), int(table[0]), dtype=np.int64)
+        mesh_ids[id_key] = pz.add_curves(**cd, material_ids=mat_ids, transform=xf, name=obj.name)
+    elif mesh_ids[id_key] is not None:
+        pz.add_instance(mesh_ids[id_key], xf, name=obj.name)
+    if mesh_ids[id_key] is not None:
+        stats["objects" if not inst.is_instance else "instances"] += 1

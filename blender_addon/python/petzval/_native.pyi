@@ -197,6 +197,27 @@ class Scene:
         read as 0).
         Indices out of range, non-finite values or a singular transform raise
         InvalidSceneError naming ``name``."""
+    def add_curves(
+        self,
+        positions: NDArray[np.float64],
+        radii: NDArray[np.float64],
+        counts: NDArray[np.int64],
+        curve_types: NDArray[np.int64] | None = None,
+        material_ids: NDArray[np.int64] | None = None,
+        transform: NDArray[np.float64] | None = None,
+        name: str = "",
+    ) -> int | None:
+        """Adds curves (a Blender Curves object: hair) as round tubes of triangles, as Cycles
+        renders them (8 sides, 4 rings per cubic span, smooth normals, mitred joints, open ends),
+        one mesh placed by ``transform`` as in :meth:`add_mesh`; returns its mesh id, or None
+        when no curve makes a tube. ``positions (N, 3)`` control points (object space),
+        ``radii (N,)`` tube radius per point (evaluated with the curve's basis), ``counts (C,)``
+        points per curve, ``curve_types (C,)`` Blender's ``curve_type``: 1 (poly) straight
+        spans; 0 (Catmull-Rom, the default), 2 (Bézier) and 3 (NURBS) a Catmull-Rom curve
+        through the points pinned to its end points (Cycles ignores handles, weights and
+        knots), ``material_ids (C,)`` per curve (default 0). A curve with too few points (one)
+        is skipped with a warning; bad shapes, negative or non-finite values, counts not adding
+        up to N, an unknown type or material raise InvalidSceneError naming ``name``."""
     def add_instance(self, mesh_id: int, transform: NDArray[np.float64], name: str = "") -> None:
         """Places mesh ``mesh_id`` (from :meth:`add_mesh`) once more with a ``(4, 4)``
         object-to-world matrix (as ``add_mesh``'s ``transform``); the mesh data is not copied.

@@ -35,6 +35,7 @@
 use glam::{Affine3A, Vec2, Vec3, Vec4};
 use std::sync::Arc;
 
+pub mod curves;
 pub mod demo;
 pub mod environment;
 pub mod gltf;
