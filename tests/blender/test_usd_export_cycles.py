@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -34,13 +35,14 @@ import blender_scenes as S
 # petzval's side at a quarter of the glTF comparison's samples (the image mean's seed noise is
 # still ~0.05 %, far inside the 1 % tolerance); Cycles' pair is at the glTF comparison's 256 spp
 SPP_USD = 64
+# tests/blender/conftest.py's OUT (not imported from there: with other suites' conftest.py
+# collected in the same run, `import conftest` may find one of theirs)
+OUT = Path(__file__).resolve().parents[1] / "out" / "blender"
 
 
 def _cycles_linear(seed: int) -> np.ndarray:
     """Cycles' MainCam render of the scene with the Linear checker (cached by this file and
     blender_scenes.py, beside the main scene's cache)."""
-    from conftest import OUT
-
     key = cache_key(bpy, "test_usd_export_cycles.py", "blender_scenes.py")
     cache_dir = OUT / f"cycles-usd-linear-{key}"
     cache_dir.mkdir(parents=True, exist_ok=True)

@@ -1518,24 +1518,13 @@ def _hair_scene(radius_scale: float = 1.0):
     s = bpy.context.scene
     s.render.resolution_x, s.render.resolution_y, s.render.resolution_percentage = 160, 120, 100
     H.set_world_colour((1.0, 1.0, 1.0))
-    cu = bpy.data.hair_curves.new("Hair")
-    n, k = 24, 5
-    cu.add_curves([k] * n)
-    rng = np.random.default_rng(5)
-    for i in range(n):
-        x0, y0 = -0.75 + 0.3 * (i % 6) + rng.uniform(-0.05, 0.05), 0.3 * (i // 6) + rng.uniform(-0.05, 0.05)
-        for j in range(k):
-            p = cu.points[i * k + j]
-            p.position = (x0 + 0.12 * math.sin(1.3 * j + i), y0, 0.25 * j)
-            p.radius = (0.04 - 0.006 * j) * radius_scale
-    m = bpy.data.materials.new("HairRed")
-    bsdf = m.node_tree.nodes["Principled BSDF"]
-    bsdf.inputs["Base Color"].default_value = (0.8, 0.2, 0.1, 1)
-    bsdf.inputs["Roughness"].default_value = 1.0
-    bsdf.inputs["Specular IOR Level"].default_value = 0.0
-    cu.materials.append(m)
-    hair = bpy.data.objects.new("Hair", cu)
-    s.collection.objects.link(hair)
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "usd" / "blender_hair_scene.py"
+    spec = importlib.util.spec_from_file_location("blender_hair_scene", path)
+    hair_scene = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hair_scene)
+    hair_scene.add_hair_strands(radius_scale)
     H.add_camera("HairCam", (0.0, -4.0, 0.5), (math.radians(90), 0.0, 0.0), lens_mm=35.0, sensor_mm=36.0)
     s.cycles_curves.shape = "THICK"
 

@@ -17,7 +17,7 @@
 //! sides, down to 1 ring per span and 3 sides), and beyond that only its first curves that fit
 //! are kept; both with a warning naming the prim.
 
-use crate::value::{attr_error, Reader};
+use crate::value::{attr_error, interpolation_token, Reader};
 use crate::Error;
 use glam::{DVec3, Vec3};
 use openusd::{sdf, usd};
@@ -47,16 +47,7 @@ struct CurvePrimvar {
 }
 
 fn interpolation(prim: &usd::Prim, name: &str, default: Interp) -> Result<Interp, Error> {
-    let v = prim
-        .attribute(name)
-        .get_metadata::<sdf::Value>("interpolation")
-        .map_err(|e| attr_error(prim, name, format!("interpolation cannot be read: {e:#}")))?;
-    let t = match v {
-        None => return Ok(default),
-        Some(sdf::Value::Token(t)) => t.as_str().to_string(),
-        Some(sdf::Value::String(s)) => s,
-        Some(v) => return Err(attr_error(prim, name, format!("interpolation must be a token, got {v:?}"))),
-    };
+    let Some(t) = interpolation_token(prim, name)? else { return Ok(default) };
     Ok(match t.as_str() {
         "constant" => Interp::Constant,
         "uniform" => Interp::Uniform,

@@ -296,3 +296,18 @@ pub fn vec3s_of(v: &sdf::Value) -> Option<Vec<DVec3>> {
         _ => return None,
     })
 }
+
+/// A primvar's `interpolation` metadata as its token (`None` when unauthored); each schema maps
+/// the token to its own element counts.
+pub(crate) fn interpolation_token(prim: &usd::Prim, name: &str) -> Result<Option<String>, Error> {
+    let v = prim
+        .attribute(name)
+        .get_metadata::<sdf::Value>("interpolation")
+        .map_err(|e| attr_error(prim, name, format!("interpolation cannot be read: {e:#}")))?;
+    match v {
+        None => Ok(None),
+        Some(sdf::Value::Token(t)) => Ok(Some(t.as_str().to_string())),
+        Some(sdf::Value::String(s)) => Ok(Some(s)),
+        Some(v) => Err(attr_error(prim, name, format!("interpolation must be a token, got {v:?}"))),
+    }
+}
